@@ -1,0 +1,38 @@
+#pragma once
+/// @file image_io.h
+/// Reading and writing depth, masks and pictures (PNG via OpenCV), and view descriptions (YAML).
+/// Every function throws std::runtime_error naming the file on failure.
+
+#include <string>
+
+#include "simstack/geometry/image.h"
+#include "simstack/geometry/pinhole_camera.h"
+#include "simstack/types.h"
+
+namespace simstack {
+
+/// 16-bit PNG in millimetres (0 = missing), the format of ROS 16UC1 depth.
+void writeDepthPng(const std::string& path, const DepthImage& depth);
+/// Reads a 16-bit PNG (units of `depth_scale_m`, default mm) or a 32-bit float TIFF in metres.
+DepthImage readDepthImage(const std::string& path, double depth_scale_m = 0.001);
+/// 8-bit PNG of an instance mask.
+void writeMaskPng(const std::string& path, const InstanceImage& mask);
+InstanceImage readMaskPng(const std::string& path);
+/// Depth as a colour picture (near = warm, missing = black) for people to look at.
+void writeDepthPicture(const std::string& path, const DepthImage& depth);
+/// Shaded picture: one colour per instance, Lambertian light from the camera.
+void writeShadedPicture(const std::string& path, const InstanceImage& instances,
+                        const Image<Vec3f>& normals_table, const Transform& T_table_camera);
+/// RGB colour of instance k (0 = table) used by every picture and marker.
+Eigen::Vector3f instanceColour(int k);
+
+/// A rendered view: intrinsics and camera pose, as written beside the PNGs by --views.
+struct ViewDescription {
+  PinholeCamera camera;
+  Transform T_table_camera = Transform::Identity();
+  double depth_scale_m = 0.001;
+};
+void writeViewYaml(const std::string& path, const ViewDescription& view);
+ViewDescription readViewYaml(const std::string& path);
+
+}  // namespace simstack

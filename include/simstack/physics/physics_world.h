@@ -1,0 +1,65 @@
+#pragma once
+/// @file physics_world.h
+/// A Bullet rigid-body world with the table plane z = 0 and convex objects. Used to settle
+/// generated piles, to test the stability of estimated scenes and to simulate suction pulls.
+/// Not thread-safe; use one world per thread.
+
+#include <memory>
+#include <utility>
+#include <vector>
+
+#include "simstack/types.h"
+
+namespace simstack {
+
+struct PhysicsConfig {
+  double gravity_mps2 = 9.81;       ///< along -z of the table frame
+  double timestep_s = 1.0 / 240.0;  ///< fixed step
+  double friction = 0.8;            ///< objects and table
+  double rolling_friction = 0.001;  ///< without it rounded shapes never come to rest
+  double spinning_friction = 0.001;
+  double restitution = 0.0;
+  double linear_damping = 0.04;  ///< PyBullet's default, as the paper's generator used
+  double angular_damping = 0.04;
+  double collision_margin_m = 0.001;  ///< Bullet's 4 cm default is far too big for 5 cm objects
+  double density_kgpm3 = 500.0;       ///< uniform density of every object
+  double rest_linear_mps = 0.005;     ///< an object below both thresholds is at rest
+  double rest_angular_radps = 0.05;
+  int rest_steps = 20;  ///< consecutive steps at rest that end settle()
+  bool allow_sleeping = true;
+  int solver_iterations = 10;  ///< Bullet's default; more reduce creep on slopes
+};
+
+class PhysicsWorld {
+ public:
+  explicit PhysicsWorld(const PhysicsConfig& config = PhysicsConfig());
+  ~PhysicsWorld();
+  PhysicsWorld(const PhysicsWorld&) = delete;
+  PhysicsWorld& operator=(const PhysicsWorld&) = delete;
+
+  /// Adds a convex object (hull of `hull_points_object`, object frame with origin at its
+  /// centroid) of the given volume; returns its index (0, 1, ...).
+  int addConvexObject(const std::vector<Vec3>& hull_points_object, double volume_m3,
+                      const Transform& T_table_object);
+  int objectCount() const;
+  /// Advances `steps` fixed time steps.
+  void step(int steps = 1);
+  /// Steps until every object has been at rest for `rest_steps` steps; returns the number of
+  /// steps taken, or -1 when `max_steps` passed first.
+  int settle(int max_steps);
+  bool atRest() const;
+  Transform pose(int index) const;
+  void setPose(int index, const Transform& T_table_object);
+  Vec3 linearVelocity(int index) const;
+  void setVelocity(int index, const Vec3& linear_mps, const Vec3& angular_radps);
+  /// Applies a force (N) at a table-frame point for the next step.
+  void applyForce(int index, const Vec3& force_n, const Vec3& point_table);
+  /// Pairs of objects in contact (distance below 2 margins); index -1 is the table.
+  std::vector<std::pair<int, int>> contacts() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace simstack

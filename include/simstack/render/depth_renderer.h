@@ -1,0 +1,81 @@
+#pragma once
+/// @file depth_renderer.h
+/// Depth and instance images of a scene by ray casting with Embree. The table is a finite
+/// square at z = 0 (instance 0) as a real sensor sees it; objects are instances 1..K.
+
+#include <cstdint>
+#include <memory>
+#include <random>
+
+#include "simstack/geometry/image.h"
+#include "simstack/geometry/pinhole_camera.h"
+#include "simstack/scene/scene.h"
+
+namespace simstack {
+
+/// Sensor imperfections. The defaults are a clean sensor.
+struct SensorNoiseConfig {
+  /// Axial noise sigma(z) = sigma_base_m + sigma_quadratic_per_m * (z - 0.4 m)^2, the Kinect
+  /// model of Nguyen et al. (2012) with 0.0012 and 0.0019; 0 disables.
+  double sigma_base_m = 0.0;
+  double sigma_quadratic_per_m = 0.0;
+  /// Probability that a pixel is missing (depth 0).
+  double dropout_probability = 0.0;
+  /// Pixels seen at a larger angle between ray and surface normal are missing (degrees;
+  /// >= 90 disables).
+  double max_incidence_deg = 90.0;
+  uint64_t seed = 0;
+
+  /// The Kinect-like preset used by the tools' --noise flag.
+  static SensorNoiseConfig kinect(uint64_t seed);
+};
+
+struct RenderConfig {
+  double table_half_size_m = 0.6;  ///< the table is the square |x|, |y| <= this, at z = 0
+  bool with_table = true;
+  double max_range_m = 10.0;
+};
+
+/// What render() produces. `normals_table` is filled only when asked for.
+struct RenderResult {
+  DepthImage depth;            ///< metres along the optical axis, 0 = no return
+  InstanceImage instances;     ///< 0 table, k object k, kNoSurface none
+  Image<Vec3f> normals_table;  ///< unit normals facing the camera, table frame
+};
+
+/// Builds the acceleration structure once; render() is const and thread-safe.
+class DepthRenderer {
+ public:
+  DepthRenderer(const Scene& scene, const RenderConfig& config = RenderConfig());
+  ~DepthRenderer();
+  DepthRenderer(const DepthRenderer&) = delete;
+  DepthRenderer& operator=(const DepthRenderer&) = delete;
+
+  RenderResult render(const PinholeCamera& camera, const Transform& T_table_camera,
+                      const SensorNoiseConfig& noise = SensorNoiseConfig(),
+                      bool with_normals = false) const;
+  /// Distance along a table-frame ray to the first surface (inf when none); `instance`
+  /// receives what was hit (kNoSurface when none).
+  double castRay(const Vec3& origin_table, const Vec3& direction_table,
+                 int* instance = nullptr) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Ranges of random viewpoints (paper section 3.1.1 / 4.1): camera x, y relative to the scene
+/// centre, camera height above the table, minimum camera-to-centre distance.
+struct ViewpointRange {
+  double lateral_min_m = -1.0;
+  double lateral_max_m = 1.0;
+  double height_min_m = 0.1;
+  double height_max_m = 1.0;
+  double min_distance_m = 0.5;
+};
+
+/// A random T_table_camera in `range`, looking at `centre_table`.
+Transform sampleViewpoint(const Vec3& centre_table, const ViewpointRange& range,
+                          std::mt19937_64& rng);
+
+}  // namespace simstack

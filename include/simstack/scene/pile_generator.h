@@ -1,0 +1,88 @@
+#pragma once
+/// @file pile_generator.h
+/// Random piles settled under physics (paper section 3.1.4): objects are dropped one by one
+/// onto the growing pile and Bullet settles each. A drop that sends an object off the table
+/// or out of the scene grid is undone and drawn again; piles that are not one stack are
+/// drawn again whole.
+
+#include <cstdint>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "simstack/physics/physics_world.h"
+#include "simstack/scene/scene.h"
+
+namespace simstack {
+
+struct PileConfig {
+  int min_objects = 3;
+  int max_objects = 4;
+  double min_exponent = 2.0;  ///< exponents r, s, t drawn log-uniformly in [min, max]
+  double max_exponent = 100.0;
+  double min_size_m = 0.05;  ///< full extent 2 a_i of each axis, uniform in [min, max]
+  double max_size_m = 0.30;
+  double drop_radius_m = 0.05;  ///< horizontal scatter of each drop about the pile centre
+  /// Each object falls with a face down, a random yaw and a random tilt up to this angle;
+  /// 180 (the default) drops it in a uniformly random orientation.
+  double max_tilt_deg = 180.0;
+  double drop_gap_m = 0.01;        ///< height of each drop above the top of the pile
+  double grid_extent_m = 0.64;     ///< the scene grid that the pile must fit
+  double grid_margin_m = 0.04;     ///< free border kept inside the grid
+  double table_half_size_m = 0.5;  ///< an object whose centre leaves this square fell off
+  bool require_stack = true;       ///< one connected pile with at least one object not on the table
+  int max_settle_steps = 4000;
+  int rest_check_steps = 240;       ///< re-simulation (from zero velocities) of a finished pile
+  double rest_tolerance_m = 0.005;  ///< largest centre motion during it for the pile to be at rest
+  int rest_check_rounds = 4;        ///< re-simulations before a creeping pile is drawn again
+  int max_drops_per_object = 8;     ///< drops of one object before the pile is drawn again
+  int max_attempts = 100;
+  PhysicsConfig physics = generationPhysics();
+
+  /// Friction 1 (as the paper's stability test) and rolling friction 0.01, so that rounded
+  /// shapes stop rolling within a second.
+  static PhysicsConfig generationPhysics() {
+    PhysicsConfig p;
+    p.friction = 1.0;
+    p.rolling_friction = 0.01;
+    p.spinning_friction = 0.01;
+    p.allow_sleeping = false;  // a sleeping object hides its creep from the rest check
+    return p;
+  }
+};
+
+/// What generate() returns: the settled scene and bookkeeping.
+struct Pile {
+  Scene scene;
+  int attempts = 0;      ///< piles drawn until this one was accepted
+  int drops = 0;         ///< object drops simulated in all attempts
+  int settle_steps = 0;  ///< physics steps of the accepted pile
+};
+
+class PileGenerator {
+ public:
+  /// Superquadric piles.
+  explicit PileGenerator(const PileConfig& config);
+  /// Piles of the given mesh shapes (e.g. the YCB catalogue), drawn with replacement.
+  PileGenerator(const PileConfig& config,
+                std::vector<std::shared_ptr<const ObjectShape>> catalogue);
+
+  /// One accepted pile, deterministic for `seed`. Throws std::runtime_error when no pile was
+  /// accepted within max_attempts (the message says which rule rejected them).
+  Pile generate(uint64_t seed) const;
+  /// Whether a settled scene satisfies the acceptance rules; `why` receives the reason.
+  bool accept(const Scene& scene, const PhysicsWorld& world, std::string* why) const;
+  /// Re-simulates the finished pile from rest (updating its poses) until it stays put; false
+  /// when it keeps moving.
+  bool verifyRest(Scene* scene) const;
+  /// Whether every object is on the table and the pile fits the scene grid.
+  bool fits(const Scene& scene, std::string* why) const;
+  /// A random superquadric shape of this config's ranges.
+  Superquadric randomSuperquadric(std::mt19937_64& rng) const;
+
+ private:
+  PileConfig config_;
+  std::vector<std::shared_ptr<const ObjectShape>> catalogue_;
+};
+
+}  // namespace simstack

@@ -1,0 +1,96 @@
+#pragma once
+/// @file scene.h
+/// A pile of rigid objects on the table (z = 0): shapes and their poses.
+
+#include <memory>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "simstack/geometry/convex_hull.h"
+#include "simstack/geometry/superquadric.h"
+#include "simstack/geometry/triangle_mesh.h"
+#include "simstack/types.h"
+
+namespace simstack {
+
+/// The shape of one object in its own frame (origin at its centroid). Immutable once built,
+/// so one shape may be shared by many scenes and threads.
+class ObjectShape {
+ public:
+  enum class Kind { kSuperquadric, kMesh };
+
+  /// A superquadric shape; the pose of `sq` is ignored.
+  static std::shared_ptr<const ObjectShape> fromSuperquadric(const Superquadric& sq);
+  /// A mesh shape (e.g. a YCB object), re-centred on its volume centroid. `catalogue_index`
+  /// identifies the mesh in a dataset's mesh list. Throws std::invalid_argument for a mesh
+  /// that encloses no volume.
+  static std::shared_ptr<const ObjectShape> fromMesh(const std::string& name, int catalogue_index,
+                                                     const TriangleMesh& mesh);
+
+  Kind kind() const { return kind_; }
+  const std::string& name() const { return name_; }
+  int catalogueIndex() const { return catalogue_index_; }
+  /// Superquadric parameters (pose = identity); only for Kind::kSuperquadric.
+  const Superquadric& superquadric() const { return superquadric_; }
+  /// Render mesh, object frame.
+  const TriangleMesh& mesh() const { return mesh_; }
+  /// At most a few hundred points whose convex hull is the physics shape.
+  const std::vector<Vec3>& hullPoints() const { return hull_points_; }
+  /// Dense surface samples (about `kSampleSpacing` apart) with outward normals.
+  const std::vector<SurfacePoint>& surfaceSamples() const { return samples_; }
+  /// Mean spacing of surfaceSamples() in metres.
+  double sampleSpacing() const { return sample_spacing_m_; }
+  /// Exact inside test for superquadrics; convex-hull test for meshes (the YCB objects used
+  /// here are close to convex, and their scans have small holes that defeat parity tests).
+  bool containsObject(const Vec3& p_object) const;
+  double volume() const { return volume_; }
+  /// Radius of the bounding sphere about the origin.
+  double boundingRadius() const { return bounding_radius_; }
+
+ private:
+  ObjectShape() = default;
+  void finish();
+
+  Kind kind_ = Kind::kSuperquadric;
+  std::string name_;
+  int catalogue_index_ = -1;
+  Superquadric superquadric_;
+  TriangleMesh mesh_;
+  std::vector<Vec3> hull_points_;
+  std::vector<SurfacePoint> samples_;
+  std::optional<ConvexHull> hull_;
+  double sample_spacing_m_ = 0.003;
+  double volume_ = 0.0;
+  double bounding_radius_ = 0.0;
+};
+
+/// One object placed on the table.
+struct SceneObject {
+  std::shared_ptr<const ObjectShape> shape;
+  Transform T_table_object = Transform::Identity();
+
+  bool contains(const Vec3& p_table) const {
+    return shape->containsObject(T_table_object.inverse() * p_table);
+  }
+  /// The object as a superquadric in the table frame (Kind::kSuperquadric only).
+  Superquadric superquadricTable() const {
+    Superquadric sq = shape->superquadric();
+    sq.T_table_object = T_table_object;
+    return sq;
+  }
+};
+
+/// A pile: objects in the table frame, the table being the plane z = 0.
+struct Scene {
+  std::vector<SceneObject> objects;
+
+  /// Area-weighted centroid of all object surfaces: the x/y centre of the scene grid.
+  Vec3 surfaceCentroid() const;
+  /// Surface samples of every object in the table frame; `object_index` (if given) receives the
+  /// object of each sample.
+  std::vector<SurfacePoint> surfaceSamplesTable(std::vector<int>* object_index = nullptr) const;
+};
+
+}  // namespace simstack

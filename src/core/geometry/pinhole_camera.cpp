@@ -1,0 +1,34 @@
+#include "simstack/geometry/pinhole_camera.h"
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace simstack {
+
+void PinholeCamera::validate() const {
+  std::ostringstream err;
+  if (width <= 0 || height <= 0) err << "image size " << width << "x" << height << " is empty; ";
+  if (!(std::isfinite(fx) && fx > 0.0)) err << "fx = " << fx << " must be > 0; ";
+  if (!(std::isfinite(fy) && fy > 0.0)) err << "fy = " << fy << " must be > 0; ";
+  if (!std::isfinite(cx) || !std::isfinite(cy)) err << "principal point is not finite; ";
+  const std::string s = err.str();
+  if (!s.empty())
+    throw std::invalid_argument("invalid camera intrinsics: " + s.substr(0, s.size() - 2));
+}
+
+Transform lookAt(const Vec3& eye_table, const Vec3& target_table) {
+  const Vec3 z = (target_table - eye_table).normalized();
+  Vec3 x = z.cross(Vec3::UnitZ());         // image x: to the right when table +z is up
+  if (x.norm() < 1e-6) x = Vec3::UnitX();  // looking straight down or up
+  x.normalize();
+  const Vec3 y = z.cross(x);  // image y: down
+  Transform T = Transform::Identity();
+  T.linear().col(0) = x;
+  T.linear().col(1) = y;
+  T.linear().col(2) = z;
+  T.translation() = eye_table;
+  return T;
+}
+
+}  // namespace simstack

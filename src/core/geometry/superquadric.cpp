@@ -1,0 +1,136 @@
+#include "simstack/geometry/superquadric.h"
+
+#include <cmath>
+#include <limits>
+
+namespace simstack {
+namespace {
+
+// log f(lambda * d) for f of eq. 4, as a log-sum-exp of the three terms; terms whose
+// direction component is zero are skipped (log c = -inf).
+struct RayTerms {
+  double log_c[3];
+  double e[3];
+  bool used[3];
+};
+
+}  // namespace
+
+double Superquadric::insideOutsideObject(const Vec3& p) const {
+  double f = 0.0;
+  for (int i = 0; i < 3; ++i) f += std::pow(std::abs(p[i] / scale_m[i]), exponents[i]);
+  return f;
+}
+
+double Superquadric::insideOutside(const Vec3& p_table) const {
+  return insideOutsideObject(T_table_object.inverse() * p_table);
+}
+
+double Superquadric::radialDistance(const Vec3& p_table) const {
+  const Vec3 p = T_table_object.inverse() * p_table;
+  const double f = insideOutsideObject(p);
+  if (f <= std::numeric_limits<double>::min()) return -scale_m.minCoeff();
+  return p.norm() * (f - 1.0) / f;
+}
+
+Vec3 Superquadric::surfacePointAlong(const Vec3& direction_object) const {
+  // Solve f(lambda d) = 1. With u = log(lambda), h(u) = log sum_i c_i exp(e_i u) is convex and
+  // increasing, so Newton started where h >= 0 decreases monotonically onto the root.
+  RayTerms t;
+  double u = -std::numeric_limits<double>::infinity();
+  for (int i = 0; i < 3; ++i) {
+    const double q = std::abs(direction_object[i] / scale_m[i]);
+    t.used[i] = q > 0.0;
+    t.e[i] = exponents[i];
+    t.log_c[i] = t.used[i] ? exponents[i] * std::log(q) : 0.0;
+    if (t.used[i]) u = std::max(u, -t.log_c[i] / t.e[i]);  // term i alone reaches 1 here
+  }
+  if (!std::isfinite(u)) return Vec3::Zero();
+  for (int iter = 0; iter < 60; ++iter) {
+    double m = -std::numeric_limits<double>::infinity();
+    double z[3];
+    for (int i = 0; i < 3; ++i) {
+      z[i] = t.used[i] ? t.log_c[i] + t.e[i] * u : -std::numeric_limits<double>::infinity();
+      m = std::max(m, z[i]);
+    }
+    double s = 0.0, ds = 0.0;
+    for (int i = 0; i < 3; ++i) {
+      if (!t.used[i]) continue;
+      const double w = std::exp(z[i] - m);
+      s += w;
+      ds += t.e[i] * w;
+    }
+    const double h = m + std::log(s);
+    const double dh = ds / s;
+    const double step = h / dh;
+    u -= step;
+    if (std::abs(step) < 1e-13) break;
+  }
+  return std::exp(u) * direction_object;
+}
+
+Vec3 Superquadric::normalObject(const Vec3& p) const {
+  Vec3 g;
+  for (int i = 0; i < 3; ++i) {
+    const double q = std::abs(p[i] / scale_m[i]);
+    const double s = p[i] >= 0.0 ? 1.0 : -1.0;
+    g[i] = exponents[i] * std::pow(q, exponents[i] - 1.0) * s / scale_m[i];
+  }
+  const double n = g.norm();
+  return n > 0.0 ? Vec3(g / n) : Vec3(p.normalized());
+}
+
+double Superquadric::volume() const {
+  const double r = 1.0 / exponents[0], s = 1.0 / exponents[1], t = 1.0 / exponents[2];
+  return 8.0 * scale_m.prod() *
+         std::exp(std::lgamma(1.0 + r) + std::lgamma(1.0 + s) + std::lgamma(1.0 + t) -
+                  std::lgamma(1.0 + r + s + t));
+}
+
+TriangleMesh Superquadric::meshObject(int n) const {
+  // Six cube faces, each an (n+1)^2 vertex lattice; shared edge vertices are duplicated,
+  // which keeps the code simple and does not change area, volume or rendering.
+  TriangleMesh mesh;
+  mesh.vertices.reserve(6 * (n + 1) * (n + 1));
+  mesh.triangles.reserve(12 * n * n);
+  for (int axis = 0; axis < 3; ++axis) {
+    for (int sign = -1; sign <= 1; sign += 2) {
+      const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+      const int base = static_cast<int>(mesh.vertices.size());
+      for (int j = 0; j <= n; ++j) {
+        for (int i = 0; i <= n; ++i) {
+          Vec3 c;
+          c[axis] = sign;
+          c[a1] = -1.0 + 2.0 * i / n;
+          c[a2] = -1.0 + 2.0 * j / n;
+          mesh.vertices.push_back(surfacePointAlong(c.cwiseProduct(scale_m)));
+        }
+      }
+      for (int j = 0; j < n; ++j) {
+        for (int i = 0; i < n; ++i) {
+          const int v00 = base + j * (n + 1) + i, v10 = v00 + 1, v01 = v00 + n + 1, v11 = v01 + 1;
+          // (a1, a2, axis) is right-handed, so (i, j) counter-clockwise faces +axis.
+          if (sign > 0) {
+            mesh.triangles.emplace_back(v00, v10, v11);
+            mesh.triangles.emplace_back(v00, v11, v01);
+          } else {
+            mesh.triangles.emplace_back(v00, v11, v10);
+            mesh.triangles.emplace_back(v00, v01, v11);
+          }
+        }
+      }
+    }
+  }
+  return mesh;
+}
+
+std::vector<SurfacePoint> Superquadric::sampleSurfaceObject(int count, std::mt19937_64& rng) const {
+  std::vector<SurfacePoint> samples = meshObject(32).sampleSurface(count, rng);
+  for (auto& s : samples) {
+    s.position = surfacePointAlong(s.position);
+    s.normal = normalObject(s.position);
+  }
+  return samples;
+}
+
+}  // namespace simstack

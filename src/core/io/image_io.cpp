@@ -1,0 +1,185 @@
+#include "simstack/io/image_io.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+namespace simstack {
+namespace {
+
+void writeOrThrow(const std::string& path, const cv::Mat& m) {
+  bool ok = false;
+  try {
+    ok = cv::imwrite(path, m);
+  } catch (const cv::Exception& e) {
+    throw std::runtime_error("cannot write " + path + ": " + e.what());
+  }
+  if (!ok) throw std::runtime_error("cannot write " + path);
+}
+
+}  // namespace
+
+void writeDepthPng(const std::string& path, const DepthImage& depth) {
+  cv::Mat m(depth.height, depth.width, CV_16UC1);
+  for (int v = 0; v < depth.height; ++v) {
+    for (int u = 0; u < depth.width; ++u) {
+      const float d = depth.at(u, v);
+      m.at<uint16_t>(v, u) =
+          validDepth(d) ? static_cast<uint16_t>(std::min(65535.0f, std::round(d * 1000.0f))) : 0;
+    }
+  }
+  writeOrThrow(path, m);
+}
+
+DepthImage readDepthImage(const std::string& path, double depth_scale_m) {
+  const cv::Mat m = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE);
+  if (m.empty()) throw std::runtime_error("cannot read a depth image from " + path);
+  if (m.channels() != 1)
+    throw std::runtime_error(path + ": a depth image has one channel, this one has " +
+                             std::to_string(m.channels()));
+  DepthImage depth(m.cols, m.rows, 0.0f);
+  if (m.type() == CV_16UC1) {
+    for (int v = 0; v < m.rows; ++v)
+      for (int u = 0; u < m.cols; ++u)
+        depth.at(u, v) = static_cast<float>(m.at<uint16_t>(v, u) * depth_scale_m);
+  } else if (m.type() == CV_32FC1) {
+    for (int v = 0; v < m.rows; ++v)
+      for (int u = 0; u < m.cols; ++u) depth.at(u, v) = m.at<float>(v, u);
+  } else {
+    throw std::runtime_error(path +
+                             ": depth must be 16-bit (mm) or 32-bit float (m); found OpenCV type " +
+                             std::to_string(m.type()));
+  }
+  return depth;
+}
+
+void writeMaskPng(const std::string& path, const InstanceImage& mask) {
+  cv::Mat m(mask.height, mask.width, CV_8UC1, const_cast<uint8_t*>(mask.pixels.data()));
+  writeOrThrow(path, m);
+}
+
+InstanceImage readMaskPng(const std::string& path) {
+  const cv::Mat m = cv::imread(path, cv::IMREAD_UNCHANGED);
+  if (m.empty() || m.type() != CV_8UC1)
+    throw std::runtime_error("cannot read an 8-bit mask from " + path);
+  InstanceImage mask(m.cols, m.rows, 0);
+  for (int v = 0; v < m.rows; ++v)
+    for (int u = 0; u < m.cols; ++u) mask.at(u, v) = m.at<uint8_t>(v, u);
+  return mask;
+}
+
+void writeDepthPicture(const std::string& path, const DepthImage& depth) {
+  float lo = 1e9f, hi = 0.0f;
+  for (float d : depth.pixels) {
+    if (validDepth(d)) {
+      lo = std::min(lo, d);
+      hi = std::max(hi, d);
+    }
+  }
+  cv::Mat grey(depth.height, depth.width, CV_8UC1, cv::Scalar(0));
+  cv::Mat valid(depth.height, depth.width, CV_8UC1, cv::Scalar(0));
+  const float range = std::max(hi - lo, 1e-6f);
+  for (int v = 0; v < depth.height; ++v) {
+    for (int u = 0; u < depth.width; ++u) {
+      const float d = depth.at(u, v);
+      if (!validDepth(d)) continue;
+      grey.at<uint8_t>(v, u) = static_cast<uint8_t>(255.0f * (1.0f - (d - lo) / range));
+      valid.at<uint8_t>(v, u) = 255;
+    }
+  }
+  cv::Mat colour;
+  cv::applyColorMap(grey, colour, cv::COLORMAP_TURBO);
+  colour.setTo(cv::Scalar(0, 0, 0), valid == 0);
+  writeOrThrow(path, colour);
+}
+
+Eigen::Vector3f instanceColour(int k) {
+  if (k == 0) return {0.62f, 0.60f, 0.56f};
+  static const float palette[][3] = {
+      {0.90f, 0.33f, 0.25f}, {0.25f, 0.55f, 0.90f}, {0.35f, 0.75f, 0.35f}, {0.95f, 0.75f, 0.20f},
+      {0.65f, 0.40f, 0.85f}, {0.20f, 0.80f, 0.80f}, {0.95f, 0.55f, 0.75f}, {0.55f, 0.45f, 0.30f}};
+  const float* c = palette[(k - 1) % 8];
+  return {c[0], c[1], c[2]};
+}
+
+void writeShadedPicture(const std::string& path, const InstanceImage& instances,
+                        const Image<Vec3f>& normals_table, const Transform& T_table_camera) {
+  if (normals_table.width != instances.width || normals_table.height != instances.height) {
+    throw std::invalid_argument("shaded picture needs normals of the mask's size");
+  }
+  // Light from the camera, raised a little, so that faces pointing up are brighter.
+  const Vec3f light =
+      (-T_table_camera.linear().col(2) + Vec3(0, 0, 0.6)).normalized().cast<float>();
+  cv::Mat img(instances.height, instances.width, CV_8UC3, cv::Scalar(40, 40, 40));
+  for (int v = 0; v < instances.height; ++v) {
+    for (int u = 0; u < instances.width; ++u) {
+      const int k = instances.at(u, v);
+      if (k == kNoSurface) continue;
+      const float shade = 0.25f + 0.75f * std::max(0.0f, normals_table.at(u, v).dot(light));
+      const Eigen::Vector3f c = instanceColour(k) * shade * 255.0f;
+      img.at<cv::Vec3b>(v, u) =
+          cv::Vec3b(cv::saturate_cast<uint8_t>(c.z()), cv::saturate_cast<uint8_t>(c.y()),
+                    cv::saturate_cast<uint8_t>(c.x()));
+    }
+  }
+  writeOrThrow(path, img);
+}
+
+void writeViewYaml(const std::string& path, const ViewDescription& view) {
+  YAML::Emitter out;
+  const Quat q(view.T_table_camera.linear());
+  const Vec3 t = view.T_table_camera.translation();
+  out << YAML::BeginMap;
+  out << YAML::Key << "width" << YAML::Value << view.camera.width;
+  out << YAML::Key << "height" << YAML::Value << view.camera.height;
+  out << YAML::Key << "intrinsics" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
+      << "fx" << YAML::Value << view.camera.fx << YAML::Key << "fy" << YAML::Value << view.camera.fy
+      << YAML::Key << "cx" << YAML::Value << view.camera.cx << YAML::Key << "cy" << YAML::Value
+      << view.camera.cy << YAML::EndMap;
+  out << YAML::Key << "depth_scale_m" << YAML::Value << view.depth_scale_m;
+  out << YAML::Key << "T_table_camera" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "translation" << YAML::Value << YAML::Flow << YAML::BeginSeq << t.x() << t.y()
+      << t.z() << YAML::EndSeq;
+  out << YAML::Key << "rotation_xyzw" << YAML::Value << YAML::Flow << YAML::BeginSeq << q.x()
+      << q.y() << q.z() << q.w() << YAML::EndSeq;
+  out << YAML::EndMap << YAML::EndMap;
+  std::ofstream f(path);
+  if (!f) throw std::runtime_error("cannot write " + path);
+  f << "# simstack view: intrinsics (pixels) and T_table_camera (camera-frame points to the table "
+       "frame)\n"
+    << out.c_str() << "\n";
+  if (!f) throw std::runtime_error("cannot write " + path);
+}
+
+ViewDescription readViewYaml(const std::string& path) {
+  ViewDescription view;
+  try {
+    const YAML::Node n = YAML::LoadFile(path);
+    view.camera.width = n["width"].as<int>();
+    view.camera.height = n["height"].as<int>();
+    view.camera.fx = n["intrinsics"]["fx"].as<double>();
+    view.camera.fy = n["intrinsics"]["fy"].as<double>();
+    view.camera.cx = n["intrinsics"]["cx"].as<double>();
+    view.camera.cy = n["intrinsics"]["cy"].as<double>();
+    if (n["depth_scale_m"]) view.depth_scale_m = n["depth_scale_m"].as<double>();
+    const auto t = n["T_table_camera"]["translation"].as<std::vector<double>>();
+    const auto q = n["T_table_camera"]["rotation_xyzw"].as<std::vector<double>>();
+    if (t.size() != 3 || q.size() != 4)
+      throw std::runtime_error("translation needs 3 values and rotation_xyzw 4");
+    view.T_table_camera = Transform::Identity();
+    view.T_table_camera.linear() = Quat(q[3], q[0], q[1], q[2]).normalized().toRotationMatrix();
+    view.T_table_camera.translation() = Vec3(t[0], t[1], t[2]);
+  } catch (const YAML::Exception& e) {
+    throw std::runtime_error("cannot read view description " + path + ": " + e.what());
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error("cannot read view description " + path + ": " + e.what());
+  }
+  view.camera.validate();
+  return view;
+}
+
+}  // namespace simstack

@@ -1,0 +1,177 @@
+#include "simstack/render/depth_renderer.h"
+
+#include <embree3/rtcore.h>
+
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace simstack {
+
+SensorNoiseConfig SensorNoiseConfig::kinect(uint64_t seed) {
+  SensorNoiseConfig c;
+  c.sigma_base_m = 0.0012;
+  c.sigma_quadratic_per_m = 0.0019;
+  c.dropout_probability = 0.01;
+  c.max_incidence_deg = 80.0;
+  c.seed = seed;
+  return c;
+}
+
+struct DepthRenderer::Impl {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  std::vector<int> instance_of_geometry;
+  RenderConfig config;
+
+  ~Impl() {
+    if (scene) rtcReleaseScene(scene);
+    if (device) rtcReleaseDevice(device);
+  }
+
+  void addMesh(const TriangleMesh& mesh, int instance) {
+    RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
+                                                           RTC_FORMAT_FLOAT3, 3 * sizeof(float),
+                                                           mesh.vertices.size()));
+    auto* ib = static_cast<unsigned*>(
+        rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                3 * sizeof(unsigned), mesh.triangles.size()));
+    for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+      for (int k = 0; k < 3; ++k) vb[3 * i + k] = static_cast<float>(mesh.vertices[i][k]);
+    }
+    for (size_t i = 0; i < mesh.triangles.size(); ++i) {
+      for (int k = 0; k < 3; ++k) ib[3 * i + k] = static_cast<unsigned>(mesh.triangles[i][k]);
+    }
+    rtcCommitGeometry(geom);
+    const unsigned id = rtcAttachGeometry(scene, geom);
+    rtcReleaseGeometry(geom);
+    if (instance_of_geometry.size() <= id) instance_of_geometry.resize(id + 1, kNoSurface);
+    instance_of_geometry[id] = instance;
+  }
+
+  // Returns the hit distance in units of `dir` (inf when none).
+  float intersect(const Vec3& org, const Vec3& dir, float tfar, int* instance,
+                  Vec3f* normal) const {
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    RTCRayHit rh;
+    rh.ray.org_x = static_cast<float>(org.x());
+    rh.ray.org_y = static_cast<float>(org.y());
+    rh.ray.org_z = static_cast<float>(org.z());
+    rh.ray.dir_x = static_cast<float>(dir.x());
+    rh.ray.dir_y = static_cast<float>(dir.y());
+    rh.ray.dir_z = static_cast<float>(dir.z());
+    rh.ray.tnear = 0.0f;
+    rh.ray.tfar = tfar;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.flags = 0;
+    rh.ray.time = 0.0f;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(scene, &context, &rh);
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
+      if (instance) *instance = kNoSurface;
+      return std::numeric_limits<float>::infinity();
+    }
+    if (instance) *instance = instance_of_geometry[rh.hit.geomID];
+    if (normal) *normal = Vec3f(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z).normalized();
+    return rh.ray.tfar;
+  }
+};
+
+DepthRenderer::DepthRenderer(const Scene& scene, const RenderConfig& config)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->config = config;
+  impl_->device = rtcNewDevice("threads=1");
+  if (!impl_->device)
+    throw std::runtime_error("Embree: cannot create a device (error " +
+                             std::to_string(rtcGetDeviceError(nullptr)) + ")");
+  impl_->scene = rtcNewScene(impl_->device);
+  rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_MEDIUM);
+  if (config.with_table) {
+    const double h = config.table_half_size_m;
+    TriangleMesh table;
+    table.vertices = {Vec3(-h, -h, 0), Vec3(h, -h, 0), Vec3(h, h, 0), Vec3(-h, h, 0)};
+    table.triangles = {Eigen::Vector3i(0, 1, 2), Eigen::Vector3i(0, 2, 3)};
+    impl_->addMesh(table, 0);
+  }
+  for (size_t k = 0; k < scene.objects.size(); ++k) {
+    const auto& o = scene.objects[k];
+    impl_->addMesh(o.shape->mesh().transformed(o.T_table_object), static_cast<int>(k + 1));
+  }
+  rtcCommitScene(impl_->scene);
+}
+
+DepthRenderer::~DepthRenderer() = default;
+
+double DepthRenderer::castRay(const Vec3& origin, const Vec3& direction, int* instance) const {
+  const double len = direction.norm();
+  const float t = impl_->intersect(
+      origin, direction / len, static_cast<float>(impl_->config.max_range_m), instance, nullptr);
+  return t;
+}
+
+RenderResult DepthRenderer::render(const PinholeCamera& camera, const Transform& T_table_camera,
+                                   const SensorNoiseConfig& noise, bool with_normals) const {
+  camera.validate();
+  RenderResult out;
+  out.depth = DepthImage(camera.width, camera.height, 0.0f);
+  out.instances = InstanceImage(camera.width, camera.height, kNoSurface);
+  if (with_normals) out.normals_table = Image<Vec3f>(camera.width, camera.height, Vec3f::Zero());
+  const Mat3 R = T_table_camera.linear();
+  const Vec3 org = T_table_camera.translation();
+  const double cos_max = std::cos(noise.max_incidence_deg * M_PI / 180.0);
+  const bool noisy = noise.sigma_base_m > 0.0 || noise.sigma_quadratic_per_m > 0.0 ||
+                     noise.dropout_probability > 0.0 || noise.max_incidence_deg < 90.0;
+#pragma omp parallel for schedule(dynamic, 8)
+  for (int v = 0; v < camera.height; ++v) {
+    // One generator per row keeps noise identical for any thread count.
+    std::mt19937_64 rng(noise.seed * 1000003ull + static_cast<uint64_t>(v));
+    std::normal_distribution<double> gauss(0.0, 1.0);
+    std::uniform_real_distribution<double> uni(0.0, 1.0);
+    for (int u = 0; u < camera.width; ++u) {
+      const Vec3 ray_camera = camera.ray(u, v);  // z = 1, so distance along it is depth
+      const Vec3 dir = R * ray_camera;
+      int instance = kNoSurface;
+      Vec3f n;
+      const float t =
+          impl_->intersect(org, dir, static_cast<float>(impl_->config.max_range_m), &instance, &n);
+      if (!std::isfinite(t)) continue;
+      // Orient the normal towards the camera.
+      const Vec3f dir_f = dir.cast<float>();
+      if (n.dot(dir_f) > 0.0f) n = -n;
+      double depth = t;
+      if (noisy) {
+        const double cos_inc = -n.dot(dir_f.normalized());
+        if (cos_inc < cos_max || uni(rng) < noise.dropout_probability) continue;
+        const double sigma =
+            noise.sigma_base_m + noise.sigma_quadratic_per_m * (depth - 0.4) * (depth - 0.4);
+        depth += sigma * gauss(rng);
+      }
+      out.depth.at(u, v) = static_cast<float>(depth);
+      out.instances.at(u, v) = static_cast<uint8_t>(instance);
+      if (with_normals) out.normals_table.at(u, v) = n;
+    }
+  }
+  return out;
+}
+
+Transform sampleViewpoint(const Vec3& centre_table, const ViewpointRange& range,
+                          std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> lateral(range.lateral_min_m, range.lateral_max_m);
+  std::uniform_real_distribution<double> height(range.height_min_m, range.height_max_m);
+  for (int attempt = 0; attempt < 10000; ++attempt) {
+    const Vec3 eye(centre_table.x() + lateral(rng), centre_table.y() + lateral(rng), height(rng));
+    const double dist = (eye - centre_table).norm();
+    if (dist < range.min_distance_m) continue;
+    // Keep away from looking straight down, where lookAt's "up" is undefined.
+    if ((eye - centre_table).head<2>().norm() < 1e-3) continue;
+    return lookAt(eye, centre_table);
+  }
+  throw std::invalid_argument("viewpoint range admits no camera at the minimum distance");
+}
+
+}  // namespace simstack

@@ -1,0 +1,261 @@
+#include "simstack/scene/pile_generator.h"
+
+#include <cmath>
+#include <functional>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+
+#include "simstack/geometry/voxel_grid.h"
+
+namespace simstack {
+namespace {
+
+// One of the 24 axis-aligned orientations (a face down), a uniform yaw, and a tilt of at most
+// max_tilt_deg about a random horizontal axis; max_tilt_deg >= 180 gives a uniform rotation.
+Quat randomDropRotation(double max_tilt_deg, std::mt19937_64& rng) {
+  if (max_tilt_deg >= 180.0) {
+    std::normal_distribution<double> n(0.0, 1.0);
+    return Quat(n(rng), n(rng), n(rng), n(rng)).normalized();
+  }
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  static const Vec3 kAxes[6] = {Vec3::UnitX(),  -Vec3::UnitX(), Vec3::UnitY(),
+                                -Vec3::UnitY(), Vec3::UnitZ(),  -Vec3::UnitZ()};
+  const Vec3 down = kAxes[std::min(5, static_cast<int>(6 * uni(rng)))];
+  const Quat face = Quat::FromTwoVectors(down, -Vec3::UnitZ());
+  const Quat yaw(Eigen::AngleAxisd(2.0 * M_PI * uni(rng), Vec3::UnitZ()));
+  const double a = 2.0 * M_PI * uni(rng);
+  const Quat tilt(Eigen::AngleAxisd(max_tilt_deg * M_PI / 180.0 * uni(rng),
+                                    Vec3(std::cos(a), std::sin(a), 0.0)));
+  return (tilt * yaw * face).normalized();
+}
+
+// Lowest point of the object's hull in the table frame.
+double minZ(const SceneObject& o) {
+  double z = 1e9;
+  for (const auto& p : o.shape->hullPoints()) z = std::min(z, (o.T_table_object * p).z());
+  return z;
+}
+
+}  // namespace
+
+PileGenerator::PileGenerator(const PileConfig& config) : config_(config) {
+  if (config.min_objects < 1 || config.max_objects < config.min_objects) {
+    throw std::invalid_argument("object count range must satisfy 1 <= min <= max");
+  }
+  if (!(config.min_exponent > 0.0) || config.max_exponent < config.min_exponent) {
+    throw std::invalid_argument("exponent range must satisfy 0 < min <= max");
+  }
+  if (!(config.min_size_m > 0.0) || config.max_size_m < config.min_size_m) {
+    throw std::invalid_argument("size range must satisfy 0 < min <= max");
+  }
+}
+
+PileGenerator::PileGenerator(const PileConfig& config,
+                             std::vector<std::shared_ptr<const ObjectShape>> catalogue)
+    : PileGenerator(config) {
+  if (catalogue.empty()) throw std::invalid_argument("mesh catalogue is empty");
+  catalogue_ = std::move(catalogue);
+}
+
+Superquadric PileGenerator::randomSuperquadric(std::mt19937_64& rng) const {
+  std::uniform_real_distribution<double> size(config_.min_size_m, config_.max_size_m);
+  std::uniform_real_distribution<double> log_e(std::log(config_.min_exponent),
+                                               std::log(config_.max_exponent));
+  Superquadric sq;
+  for (int i = 0; i < 3; ++i) {
+    sq.scale_m[i] = 0.5 * size(rng);
+    sq.exponents[i] = std::exp(log_e(rng));
+  }
+  return sq;
+}
+
+bool PileGenerator::accept(const Scene& scene, const PhysicsWorld& world, std::string* why) const {
+  const int n = static_cast<int>(scene.objects.size());
+  if (!fits(scene, why)) return false;
+  if (!config_.require_stack || n < 2) return true;
+  // One connected pile, and at least one object that does not touch the table.
+  std::vector<int> parent(n);
+  for (int i = 0; i < n; ++i) parent[i] = i;
+  std::function<int(int)> find = [&](int i) {
+    return parent[i] == i ? i : parent[i] = find(parent[i]);
+  };
+  std::vector<bool> on_table(n, false);
+  for (const auto& [a, b] : world.contacts()) {
+    if (a < 0) {
+      if (b >= 0) on_table[b] = true;
+      continue;
+    }
+    parent[find(a)] = find(b);
+  }
+  for (int i = 1; i < n; ++i) {
+    if (find(i) != find(0)) {
+      *why = "the objects do not form one stack";
+      return false;
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    if (!on_table[i]) return true;
+  }
+  *why = "every object stands on the table (nothing is stacked)";
+  return false;
+}
+
+bool PileGenerator::fits(const Scene& scene, std::string* why) const {
+  for (const auto& o : scene.objects) {
+    const Vec3 c = o.T_table_object.translation();
+    if (std::abs(c.x()) > config_.table_half_size_m ||
+        std::abs(c.y()) > config_.table_half_size_m || minZ(o) < -0.01) {
+      *why = "an object left the table";
+      return false;
+    }
+  }
+  const Vec3 centre = scene.surfaceCentroid();
+  const GridSpec grid = GridSpec::sceneGrid(centre.head<2>(), config_.grid_extent_m, 8);
+  const Vec3 lo = grid.origin_table + Vec3(config_.grid_margin_m, config_.grid_margin_m, -0.01);
+  const Vec3 hi = grid.origin_table + Vec3::Constant(config_.grid_extent_m - config_.grid_margin_m);
+  for (const auto& o : scene.objects) {
+    for (const auto& p : o.shape->hullPoints()) {
+      const Vec3 q = o.T_table_object * p;
+      if (q.z() > hi.z()) {
+        *why = "the pile is taller than the scene grid";
+        return false;
+      }
+      if ((q.array() < lo.array()).any() || (q.array() > hi.array()).any()) {
+        *why = "the pile is wider than the scene grid";
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+bool PileGenerator::verifyRest(Scene* scene) const {
+  // Velocity thresholds can call a pile at rest while an object creeps down a slope or only
+  // starts to tip. The pile is rebuilt from its poses with zero velocities (as anyone loading
+  // it will) and simulated for rest_check_steps; it is at rest when no centre moves more than
+  // rest_tolerance_m, else the moved poses are tried again.
+  for (int round = 0; round < config_.rest_check_rounds; ++round) {
+    PhysicsWorld world(config_.physics);
+    for (const auto& o : scene->objects)
+      world.addConvexObject(o.shape->hullPoints(), o.shape->volume(), o.T_table_object);
+    world.step(config_.rest_check_steps);
+    double moved = 0.0;
+    for (size_t k = 0; k < scene->objects.size(); ++k) {
+      const Transform T = world.pose(static_cast<int>(k));
+      moved = std::max(moved,
+                       (T.translation() - scene->objects[k].T_table_object.translation()).norm());
+      scene->objects[k].T_table_object = T;
+    }
+    if (moved < config_.rest_tolerance_m) return true;
+  }
+  return false;
+}
+
+Pile PileGenerator::generate(uint64_t seed) const {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  std::map<std::string, int> rejections;
+  int drops = 0;
+  for (int attempt = 1; attempt <= config_.max_attempts; ++attempt) {
+    std::uniform_int_distribution<int> count(config_.min_objects, config_.max_objects);
+    const int n = count(rng);
+    // Objects are dropped one at a time from just above the pile and settle before the next
+    // one falls. A drop that knocks the pile out of bounds is undone and tried again from the
+    // settled state before it (the world is rebuilt from the resting poses), so that one
+    // rolling object does not cost the whole pile.
+    Scene scene;
+    std::unique_ptr<PhysicsWorld> world;
+    int steps = 0;
+    std::string why;
+    for (int i = 0; i < n; ++i) {
+      SceneObject o;
+      if (catalogue_.empty()) {
+        o.shape = ObjectShape::fromSuperquadric(randomSuperquadric(rng));
+      } else {
+        std::uniform_int_distribution<size_t> pick(0, catalogue_.size() - 1);
+        o.shape = catalogue_[pick(rng)];
+      }
+      Vec2 centre = Vec2::Zero();
+      double top = 0.0;
+      for (const auto& p : scene.objects) {
+        centre +=
+            p.T_table_object.translation().head<2>() / static_cast<double>(scene.objects.size());
+        for (const auto& h : p.shape->hullPoints()) top = std::max(top, (p.T_table_object * h).z());
+      }
+      bool placed = false;
+      for (int drop = 0; drop < config_.max_drops_per_object && !placed; ++drop) {
+        ++drops;
+        auto trial = std::make_unique<PhysicsWorld>(config_.physics);
+        for (const auto& p : scene.objects)
+          trial->addConvexObject(p.shape->hullPoints(), p.shape->volume(), p.T_table_object);
+        const double r = config_.drop_radius_m * std::sqrt(uni(rng));
+        const double phi = 2.0 * M_PI * uni(rng);
+        o.T_table_object = Transform::Identity();
+        o.T_table_object.linear() =
+            randomDropRotation(config_.max_tilt_deg, rng).toRotationMatrix();
+        const double bottom = minZ(o);  // of the rotated shape at the origin
+        o.T_table_object.translation() =
+            Vec3(centre.x() + r * std::cos(phi), centre.y() + r * std::sin(phi),
+                 top - bottom + config_.drop_gap_m);
+        trial->addConvexObject(o.shape->hullPoints(), o.shape->volume(), o.T_table_object);
+        // Settle in short runs and give up early on a drop that rolls out of the grid.
+        int s = 0;
+        bool escaped = false;
+        const int index = static_cast<int>(scene.objects.size());
+        while (s < config_.max_settle_steps) {
+          const int run = trial->settle(60);
+          s += run < 0 ? 60 : run;
+          if (run >= 0) break;
+          if ((trial->pose(index).translation().head<2>() - centre).norm() >
+              0.5 * config_.grid_extent_m) {
+            escaped = true;
+            break;
+          }
+        }
+        if (escaped || s >= config_.max_settle_steps) {
+          why = escaped ? "the pile is wider than the scene grid" : "the pile did not come to rest";
+          continue;
+        }
+        if (index > 0 && config_.require_stack) {
+          bool touches = false;
+          for (const auto& [a, b] : trial->contacts())
+            touches |= (b == index && a >= 0) || (a == index && b >= 0);
+          if (!touches) {
+            why = "the objects do not form one stack";
+            continue;
+          }
+        }
+        Scene candidate = scene;
+        candidate.objects.push_back(o);
+        for (size_t k = 0; k < candidate.objects.size(); ++k)
+          candidate.objects[k].T_table_object = trial->pose(static_cast<int>(k));
+        if (!fits(candidate, &why)) continue;
+        scene = std::move(candidate);
+        world = std::move(trial);
+        steps += s;
+        placed = true;
+      }
+      if (!placed) break;
+    }
+    if (static_cast<int>(scene.objects.size()) < n) {
+      ++rejections[why];
+      continue;
+    }
+    if (!verifyRest(&scene)) {
+      ++rejections["the pile did not come to rest"];
+      continue;
+    }
+    if (!accept(scene, *world, &why)) {
+      ++rejections[why];
+      continue;
+    }
+    return {scene, attempt, drops, steps};
+  }
+  std::ostringstream msg;
+  msg << "no pile accepted in " << config_.max_attempts << " attempts (seed " << seed << "):";
+  for (const auto& [reason, k] : rejections) msg << " " << k << "x " << reason << ";";
+  throw std::runtime_error(msg.str());
+}
+
+}  // namespace simstack

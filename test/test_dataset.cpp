@@ -1,0 +1,74 @@
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "simstack/dataset/dataset.h"
+#include "simstack/scene/pile_generator.h"
+
+using namespace simstack;
+
+TEST(Dataset, WriteReadRoundTrip) {
+  const std::string path =
+      (std::filesystem::temp_directory_path() / "simstack_test_dataset.h5").string();
+  const PileGenerator gen{PileConfig()};
+  DatasetInfo info;
+  info.num_scenes = 3;
+  info.resolution = 16;
+  info.extent_m = 0.64;
+  info.truncation_m = 0.12;
+  info.seed = 77;
+  std::vector<Scene> scenes;
+  std::vector<GroundTruthGrids> gts;
+  {
+    DatasetWriter writer(path, info);
+    for (int i = 2; i >= 0; --i) {  // any order
+      const Scene s = gen.generate(100 + i).scene;
+      const GridSpec g =
+          GridSpec::sceneGrid(s.surfaceCentroid().head<2>(), info.extent_m, info.resolution);
+      writer.write(i, s, computeGroundTruth(s, g, info.truncation_m));
+    }
+  }
+  const DatasetReader reader(path);
+  EXPECT_EQ(reader.size(), 3);
+  EXPECT_EQ(reader.info().resolution, 16);
+  EXPECT_EQ(reader.info().seed, 77u);
+  EXPECT_EQ(reader.info().generator_version, kGeneratorVersion);
+  for (int i = 0; i < 3; ++i) {
+    const Scene s = gen.generate(100 + i).scene;
+    const GridSpec g =
+        GridSpec::sceneGrid(s.surfaceCentroid().head<2>(), info.extent_m, info.resolution);
+    const GroundTruthGrids gt = computeGroundTruth(s, g, info.truncation_m);
+    const SceneRecord rec = reader.read(i);
+    ASSERT_EQ(rec.scene.objects.size(), s.objects.size());
+    EXPECT_TRUE(rec.grid == g);
+    for (size_t k = 0; k < s.objects.size(); ++k) {
+      EXPECT_TRUE(rec.scene.objects[k].T_table_object.isApprox(s.objects[k].T_table_object, 1e-12));
+      EXPECT_EQ(rec.scene.objects[k].shape->superquadric().scale_m,
+                s.objects[k].shape->superquadric().scale_m);
+      EXPECT_EQ(rec.scene.objects[k].shape->superquadric().exponents,
+                s.objects[k].shape->superquadric().exponents);
+    }
+    EXPECT_EQ(rec.ground_truth.tsdf.data, gt.tsdf.data);
+    EXPECT_EQ(rec.ground_truth.labels.data, gt.labels.data);
+    for (size_t v = 0; v < gt.votes.data.size(); ++v)
+      ASSERT_EQ(rec.ground_truth.votes.data[v], gt.votes.data[v]);
+  }
+  EXPECT_THROW(reader.read(3), std::out_of_range);
+  std::filesystem::remove(path);
+}
+
+TEST(Dataset, ClearErrorsNameTheFile) {
+  try {
+    DatasetReader reader("/nonexistent/simstack.h5");
+    FAIL() << "opening a missing file must throw";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/simstack.h5"), std::string::npos)
+        << e.what();
+  }
+  const std::string path =
+      (std::filesystem::temp_directory_path() / "simstack_not_hdf5.h5").string();
+  { std::ofstream(path) << "not a dataset"; }
+  EXPECT_THROW(DatasetReader{path}, std::runtime_error);
+  std::filesystem::remove(path);
+}

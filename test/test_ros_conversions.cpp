@@ -1,0 +1,67 @@
+#include <gtest/gtest.h>
+#include <sensor_msgs/image_encodings.h>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include "simstack_ros/conversions.h"
+
+using namespace simstack;
+
+namespace {
+sensor_msgs::Image image(const std::string& encoding, int w, int h, int bytes) {
+  sensor_msgs::Image m;
+  m.encoding = encoding;
+  m.width = w;
+  m.height = h;
+  m.step = w * bytes;
+  m.data.assign(static_cast<size_t>(m.step) * h, 0);
+  return m;
+}
+}  // namespace
+
+TEST(Conversions, Depth16UC1IsMillimetres) {
+  auto m = image(sensor_msgs::image_encodings::TYPE_16UC1, 4, 2, 2);
+  const uint16_t mm = 1234;
+  std::memcpy(&m.data[2 * 5], &mm, 2);  // pixel (1, 1)
+  const DepthImage d = depthFromImage(m);
+  EXPECT_FLOAT_EQ(d.at(1, 1), 1.234f);
+  EXPECT_EQ(d.at(0, 0), 0.0f);
+}
+
+TEST(Conversions, Depth32FC1NanBecomesMissing) {
+  auto m = image(sensor_msgs::image_encodings::TYPE_32FC1, 2, 1, 4);
+  const float vals[2] = {std::numeric_limits<float>::quiet_NaN(), 0.75f};
+  std::memcpy(m.data.data(), vals, 8);
+  const DepthImage d = depthFromImage(m);
+  EXPECT_EQ(d.at(0, 0), 0.0f);
+  EXPECT_FLOAT_EQ(d.at(1, 0), 0.75f);
+}
+
+TEST(Conversions, BadImagesAreRejectedWithAReason) {
+  auto rgb = image(sensor_msgs::image_encodings::RGB8, 4, 4, 3);
+  try {
+    depthFromImage(rgb);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("rgb8"), std::string::npos);
+  }
+  auto short_data = image(sensor_msgs::image_encodings::TYPE_16UC1, 4, 4, 2);
+  short_data.data.resize(10);
+  EXPECT_THROW(depthFromImage(short_data), std::invalid_argument);
+  auto empty = image(sensor_msgs::image_encodings::TYPE_16UC1, 0, 0, 2);
+  EXPECT_THROW(depthFromImage(empty), std::invalid_argument);
+}
+
+TEST(Conversions, CameraInfo) {
+  sensor_msgs::CameraInfo info;
+  info.width = 640;
+  info.height = 480;
+  info.K = {525, 0, 319.5, 0, 525, 239.5, 0, 0, 1};
+  const PinholeCamera c = cameraFromInfo(info);
+  EXPECT_DOUBLE_EQ(c.fx, 525);
+  EXPECT_DOUBLE_EQ(c.cy, 239.5);
+  info.K[0] = 0;
+  EXPECT_THROW(cameraFromInfo(info), std::invalid_argument);
+}

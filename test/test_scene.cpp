@@ -1,0 +1,128 @@
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "simstack/physics/physics_world.h"
+#include "simstack/scene/mesh_catalogue.h"
+#include "simstack/scene/pile_generator.h"
+
+using namespace simstack;
+
+namespace {
+double lowestPoint(const SceneObject& o) {
+  double z = 1e9;
+  for (const auto& v : o.shape->mesh().vertices) z = std::min(z, (o.T_table_object * v).z());
+  return z;
+}
+
+// Re-simulates a scene from rest and returns the largest centre displacement.
+double displacementAfter(const Scene& scene, int steps) {
+  PhysicsWorld world(PileConfig::generationPhysics());
+  for (const auto& o : scene.objects)
+    world.addConvexObject(o.shape->hullPoints(), o.shape->volume(), o.T_table_object);
+  world.step(steps);
+  double worst = 0.0;
+  for (size_t i = 0; i < scene.objects.size(); ++i) {
+    worst = std::max(worst, (world.pose(static_cast<int>(i)).translation() -
+                             scene.objects[i].T_table_object.translation())
+                                .norm());
+  }
+  return worst;
+}
+}  // namespace
+
+TEST(Physics, BoxComesToRestOnTheTable) {
+  Superquadric box;
+  box.scale_m = Vec3(0.08, 0.05, 0.03);
+  box.exponents = Vec3::Constant(100);
+  const auto shape = ObjectShape::fromSuperquadric(box);
+  PhysicsWorld world;
+  Transform T = Transform::Identity();
+  T.translation() = Vec3(0.1, -0.2, 0.04);
+  world.addConvexObject(shape->hullPoints(), shape->volume(), T);
+  ASSERT_GT(world.settle(4000), 0);
+  // Resting on its largest face: centre at a3 above the table (1 mm collision margin).
+  EXPECT_NEAR(world.pose(0).translation().z(), 0.03, 0.002);
+  EXPECT_LT((world.pose(0).translation().head<2>() - Vec2(0.1, -0.2)).norm(), 0.002);
+  EXPECT_LT(Quat(world.pose(0).linear()).angularDistance(Quat::Identity()), 0.01);
+}
+
+TEST(PileGenerator, SettledPileIsAtRestAndAboveTheTable) {
+  PileGenerator gen{PileConfig()};
+  for (uint64_t seed : {1u, 2u, 3u, 4u, 5u}) {
+    const Pile pile = gen.generate(seed);
+    const Scene& scene = pile.scene;
+    ASSERT_GE(scene.objects.size(), 3u) << "seed " << seed;
+    ASSERT_LE(scene.objects.size(), 4u) << "seed " << seed;
+    for (const auto& o : scene.objects) {
+      EXPECT_GT(lowestPoint(o), -0.01) << "seed " << seed;
+      const Vec3 a = o.shape->superquadric().scale_m;
+      const Vec3 e = o.shape->superquadric().exponents;
+      EXPECT_TRUE((a.array() >= 0.025).all() && (a.array() <= 0.15).all()) << "seed " << seed;
+      EXPECT_TRUE((e.array() >= 2.0).all() && (e.array() <= 100.0).all()) << "seed " << seed;
+    }
+    EXPECT_LT(displacementAfter(scene, 240), 0.01)
+        << "seed " << seed << ": pile moved within 1 s of re-simulation";
+  }
+}
+
+TEST(PileGenerator, DeterministicForASeed) {
+  PileGenerator gen{PileConfig()};
+  const Pile a = gen.generate(11), b = gen.generate(11);
+  ASSERT_EQ(a.scene.objects.size(), b.scene.objects.size());
+  for (size_t i = 0; i < a.scene.objects.size(); ++i) {
+    EXPECT_TRUE(a.scene.objects[i].T_table_object.isApprox(b.scene.objects[i].T_table_object, 0.0));
+  }
+}
+
+TEST(PileGenerator, RejectsScatteredObjects) {
+  PileConfig config;
+  PileGenerator gen(config);
+  Superquadric sq;
+  sq.scale_m = Vec3::Constant(0.04);
+  sq.exponents = Vec3::Constant(50);
+  Scene scene;
+  PhysicsWorld world;
+  for (int i = 0; i < 2; ++i) {
+    SceneObject o;
+    o.shape = ObjectShape::fromSuperquadric(sq);
+    o.T_table_object.translation() = Vec3(0.15 * i, 0, 0.04);
+    world.addConvexObject(o.shape->hullPoints(), o.shape->volume(), o.T_table_object);
+    scene.objects.push_back(o);
+  }
+  world.settle(500);
+  std::string why;
+  EXPECT_FALSE(gen.accept(scene, world, &why));
+  EXPECT_NE(why.find("stack"), std::string::npos) << why;
+  config.require_stack = false;
+  EXPECT_TRUE(PileGenerator(config).accept(scene, world, &why)) << why;
+}
+
+TEST(PileGenerator, RespectsObjectRangeAndBadConfig) {
+  PileConfig config;
+  config.min_objects = 5;
+  config.max_objects = 5;
+  config.max_size_m = 0.12;
+  const Pile pile = PileGenerator(config).generate(9);
+  EXPECT_EQ(pile.scene.objects.size(), 5u);
+  config.min_objects = 6;
+  EXPECT_THROW(PileGenerator{config}, std::invalid_argument);
+}
+
+TEST(YcbPiles, LoadCatalogueAndGenerate) {
+  const std::string dir = std::string(SIMSTACK_SHARED_DATA) + "/ycb";
+  if (!std::filesystem::exists(dir + "/003_cracker_box/nontextured.stl")) {
+    GTEST_SKIP() << "YCB meshes not found in " << dir << " (see ../shared/data/README.md)";
+  }
+  const auto catalogue = loadMeshCatalogue(dir);
+  ASSERT_EQ(catalogue.size(), 10u);
+  // The cracker box is about 6 x 16 x 21 cm.
+  EXPECT_NEAR(catalogue[1]->volume(), 0.06 * 0.158 * 0.21, 0.2 * 0.06 * 0.158 * 0.21);
+  EXPECT_TRUE(catalogue[1]->containsObject(Vec3::Zero()));
+  EXPECT_FALSE(catalogue[1]->containsObject(Vec3(0.2, 0.0, 0.0)));
+  const Pile pile = PileGenerator(PileConfig(), catalogue).generate(4);
+  ASSERT_GE(pile.scene.objects.size(), 3u);
+  for (const auto& o : pile.scene.objects) EXPECT_GT(lowestPoint(o), -0.01);
+  EXPECT_LT(displacementAfter(pile.scene, 240), 0.01);
+  EXPECT_THROW(loadMeshCatalogue("/nonexistent"), std::runtime_error);
+}
