@@ -66,7 +66,7 @@ void writeViews(const Options& o, const fs::path& dir, int index, const Scene& s
     view.T_table_camera = sampleViewpoint(centre, ViewpointRange(), rng);
     const SensorNoiseConfig noise =
         o.noise ? SensorNoiseConfig::kinect(seed + v) : SensorNoiseConfig();
-    const RenderResult r = renderer.render(camera, view.T_table_camera, noise, o.pictures);
+    const RenderResult r = renderer.render(camera, view.T_table_camera, noise);
     char stem[64];
     std::snprintf(stem, sizeof(stem), "scene_%06d_view_%d", index, v);
     const std::string base = (dir / stem).string();
@@ -75,7 +75,11 @@ void writeViews(const Options& o, const fs::path& dir, int index, const Scene& s
     writeViewYaml(base + ".yaml", view);
     if (o.pictures) {
       writeDepthPicture(base + "_depth_colour.png", r.depth);
-      writeShadedPicture(base + "_shaded.png", r.instances, r.normals_table, view.T_table_camera);
+      // The ground-truth picture shows the objects, not the sensor: render it without noise.
+      const RenderResult clean =
+          renderer.render(camera, view.T_table_camera, SensorNoiseConfig(), true);
+      writeShadedPicture(base + "_shaded.png", clean.instances, clean.normals_table,
+                         view.T_table_camera);
     }
   }
 }
