@@ -4,18 +4,11 @@
 
 #include "simstack/render/depth_renderer.h"
 
+#include "test_scenes.h"
+
 using namespace simstack;
 
-namespace {
-Scene sphereScene(double radius, const Vec3& centre) {
-  Superquadric sq;
-  sq.scale_m = Vec3::Constant(radius);
-  SceneObject o;
-  o.shape = ObjectShape::fromSuperquadric(sq);
-  o.T_table_object.translation() = centre;
-  return Scene{{o}};
-}
-}  // namespace
+using test::sphereScene;
 
 TEST(DepthRenderer, TablePlaneMatchesAnalyticDepth) {
   const DepthRenderer renderer(Scene{});

@@ -9,18 +9,11 @@
 #include "simstack/tsdf/ground_truth.h"
 #include "simstack/tsdf/projective_tsdf.h"
 
+#include "test_scenes.h"
+
 using namespace simstack;
 
-namespace {
-Scene sphereScene(double radius, const Vec3& centre) {
-  Superquadric sq;
-  sq.scale_m = Vec3::Constant(radius);
-  SceneObject o;
-  o.shape = ObjectShape::fromSuperquadric(sq);
-  o.T_table_object.translation() = centre;
-  return Scene{{o}};
-}
-}  // namespace
+using test::sphereScene;
 
 TEST(ProjectiveTsdf, ZeroAtTheObservedSurfaceAndPositiveInFront) {
   const PileGenerator gen{PileConfig()};

@@ -51,7 +51,7 @@ class ObjectShape {
 
  private:
   ObjectShape() = default;
-  void finish();
+  void finish(std::mt19937_64& rng);
 
   Kind kind_ = Kind::kSuperquadric;
   std::string name_;

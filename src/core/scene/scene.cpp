@@ -32,12 +32,7 @@ std::shared_ptr<const ObjectShape> ObjectShape::fromSuperquadric(const Superquad
                     static_cast<int>(sq.scale_m.z() * 1e6),
                     static_cast<int>(sq.exponents.sum() * 1e3)};
   std::mt19937_64 rng(seq);
-  const double area = s->mesh_.area();
-  const int n =
-      std::clamp(static_cast<int>(area / (kSampleSpacing * kSampleSpacing)), 500, kMaxSamples);
-  s->samples_ = s->superquadric_.sampleSurfaceObject(n, rng);
-  s->sample_spacing_m_ = std::sqrt(area / n);
-  s->finish();
+  s->finish(rng);
   return s;
 }
 
@@ -62,16 +57,18 @@ std::shared_ptr<const ObjectShape> ObjectShape::fromMesh(const std::string& name
   s->hull_.emplace(s->mesh_.vertices);
   s->hull_points_ = s->hull_->vertices();
   std::mt19937_64 rng(static_cast<uint64_t>(catalogue_index + 1) * 7919u);
-  const double area = s->mesh_.area();
-  const int n =
-      std::clamp(static_cast<int>(area / (kSampleSpacing * kSampleSpacing)), 500, kMaxSamples);
-  s->samples_ = s->mesh_.sampleSurface(n, rng);
-  s->sample_spacing_m_ = std::sqrt(area / n);
-  s->finish();
+  s->finish(rng);
   return s;
 }
 
-void ObjectShape::finish() {
+void ObjectShape::finish(std::mt19937_64& rng) {
+  // Dense samples about kSampleSpacing apart; superquadric samples sit on the exact surface.
+  const double area = mesh_.area();
+  const int n =
+      std::clamp(static_cast<int>(area / (kSampleSpacing * kSampleSpacing)), 500, kMaxSamples);
+  samples_ = kind_ == Kind::kSuperquadric ? superquadric_.sampleSurfaceObject(n, rng)
+                                          : mesh_.sampleSurface(n, rng);
+  sample_spacing_m_ = std::sqrt(area / n);
   bounding_radius_ = 0.0;
   for (const auto& v : mesh_.vertices) bounding_radius_ = std::max(bounding_radius_, v.norm());
 }
