@@ -21,7 +21,7 @@ std::shared_ptr<const ObjectShape> ObjectShape::fromSuperquadric(const Superquad
   s->superquadric_.T_table_object = Transform::Identity();
   s->mesh_ = s->superquadric_.meshObject(24);
   // A coarse lattice (duplicates on cube edges removed) keeps Bullet's GJK fast.
-  for (const Vec3& v : s->superquadric_.meshObject(5).vertices) {
+  for (const Vec3& v : s->superquadric_.meshObject(4).vertices) {
     bool seen = false;
     for (const Vec3& h : s->hull_points_) seen |= (h - v).squaredNorm() < 1e-14;
     if (!seen) s->hull_points_.push_back(v);
