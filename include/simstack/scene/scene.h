@@ -3,6 +3,7 @@
 /// A pile of rigid objects on the table (z = 0): shapes and their poses.
 
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <random>
 #include <string>
@@ -38,10 +39,14 @@ class ObjectShape {
   const TriangleMesh& mesh() const { return mesh_; }
   /// At most a few hundred points whose convex hull is the physics shape.
   const std::vector<Vec3>& hullPoints() const { return hull_points_; }
-  /// Dense surface samples (about `kSampleSpacing` apart) with outward normals.
-  const std::vector<SurfacePoint>& surfaceSamples() const { return samples_; }
+  /// Dense surface samples (about 4 mm apart) with outward normals; made on first use
+  /// (thread-safe), since only ground truth and metrics need them.
+  const std::vector<SurfacePoint>& surfaceSamples() const;
   /// Mean spacing of surfaceSamples() in metres.
-  double sampleSpacing() const { return sample_spacing_m_; }
+  double sampleSpacing() const;
+  /// Surface area (m^2) and area-weighted surface centroid (object frame) of the mesh.
+  double surfaceArea() const { return area_m2_; }
+  const Vec3& surfaceCentroidObject() const { return surface_centroid_; }
   /// Exact inside test for superquadrics; convex-hull test for meshes (the YCB objects used
   /// here are close to convex, and their scans have small holes that defeat parity tests).
   bool containsObject(const Vec3& p_object) const;
@@ -51,7 +56,8 @@ class ObjectShape {
 
  private:
   ObjectShape() = default;
-  void finish(std::mt19937_64& rng);
+  void finish(uint64_t sample_seed);
+  void makeSamples() const;
 
   Kind kind_ = Kind::kSuperquadric;
   std::string name_;
@@ -59,9 +65,13 @@ class ObjectShape {
   Superquadric superquadric_;
   TriangleMesh mesh_;
   std::vector<Vec3> hull_points_;
-  std::vector<SurfacePoint> samples_;
+  uint64_t sample_seed_ = 0;
+  mutable std::once_flag samples_once_;
+  mutable std::vector<SurfacePoint> samples_;
   std::optional<ConvexHull> hull_;
-  double sample_spacing_m_ = 0.003;
+  mutable double sample_spacing_m_ = 0.004;
+  double area_m2_ = 0.0;
+  Vec3 surface_centroid_ = Vec3::Zero();
   double volume_ = 0.0;
   double bounding_radius_ = 0.0;
 };

@@ -31,8 +31,9 @@ std::shared_ptr<const ObjectShape> ObjectShape::fromSuperquadric(const Superquad
   std::seed_seq seq{static_cast<int>(sq.scale_m.x() * 1e6), static_cast<int>(sq.scale_m.y() * 1e6),
                     static_cast<int>(sq.scale_m.z() * 1e6),
                     static_cast<int>(sq.exponents.sum() * 1e3)};
-  std::mt19937_64 rng(seq);
-  s->finish(rng);
+  uint64_t seed = 0;
+  seq.generate(reinterpret_cast<uint32_t*>(&seed), reinterpret_cast<uint32_t*>(&seed) + 2);
+  s->finish(seed);
   return s;
 }
 
@@ -56,21 +57,45 @@ std::shared_ptr<const ObjectShape> ObjectShape::fromMesh(const std::string& name
   s->volume_ = std::abs(volume);
   s->hull_.emplace(s->mesh_.vertices);
   s->hull_points_ = s->hull_->vertices();
-  std::mt19937_64 rng(static_cast<uint64_t>(catalogue_index + 1) * 7919u);
-  s->finish(rng);
+  s->finish(static_cast<uint64_t>(catalogue_index + 1) * 7919u);
   return s;
 }
 
-void ObjectShape::finish(std::mt19937_64& rng) {
-  // Dense samples about kSampleSpacing apart; superquadric samples sit on the exact surface.
-  const double area = mesh_.area();
-  const int n =
-      std::clamp(static_cast<int>(area / (kSampleSpacing * kSampleSpacing)), 500, kMaxSamples);
-  samples_ = kind_ == Kind::kSuperquadric ? superquadric_.sampleSurfaceObject(n, rng)
-                                          : mesh_.sampleSurface(n, rng);
-  sample_spacing_m_ = std::sqrt(area / n);
+void ObjectShape::finish(uint64_t sample_seed) {
+  sample_seed_ = sample_seed;
+  area_m2_ = 0.0;
+  surface_centroid_ = Vec3::Zero();
+  for (const auto& t : mesh_.triangles) {
+    const Vec3& a = mesh_.vertices[t[0]];
+    const Vec3& b = mesh_.vertices[t[1]];
+    const Vec3& c = mesh_.vertices[t[2]];
+    const double area = 0.5 * (b - a).cross(c - a).norm();
+    area_m2_ += area;
+    surface_centroid_ += area * (a + b + c) / 3.0;
+  }
+  if (area_m2_ > 0.0) surface_centroid_ /= area_m2_;
   bounding_radius_ = 0.0;
   for (const auto& v : mesh_.vertices) bounding_radius_ = std::max(bounding_radius_, v.norm());
+}
+
+void ObjectShape::makeSamples() const {
+  // Dense samples about kSampleSpacing apart; superquadric samples sit on the exact surface.
+  std::mt19937_64 rng(sample_seed_);
+  const int n =
+      std::clamp(static_cast<int>(area_m2_ / (kSampleSpacing * kSampleSpacing)), 500, kMaxSamples);
+  samples_ = kind_ == Kind::kSuperquadric ? superquadric_.sampleSurfaceObject(n, rng)
+                                          : mesh_.sampleSurface(n, rng);
+  sample_spacing_m_ = std::sqrt(area_m2_ / n);
+}
+
+const std::vector<SurfacePoint>& ObjectShape::surfaceSamples() const {
+  std::call_once(samples_once_, [this] { makeSamples(); });
+  return samples_;
+}
+
+double ObjectShape::sampleSpacing() const {
+  std::call_once(samples_once_, [this] { makeSamples(); });
+  return sample_spacing_m_;
 }
 
 bool ObjectShape::containsObject(const Vec3& p_object) const {
@@ -82,15 +107,8 @@ Vec3 Scene::surfaceCentroid() const {
   Vec3 sum = Vec3::Zero();
   double weight = 0.0;
   for (const auto& o : objects) {
-    const auto& samples = o.shape->surfaceSamples();
-    if (samples.empty()) continue;
-    Vec3 c = Vec3::Zero();
-    for (const auto& s : samples) c += s.position;
-    c /= static_cast<double>(samples.size());
-    // Weight each object by its area (samples are spaced evenly, so the count is the area).
-    const double area = samples.size() * o.shape->sampleSpacing() * o.shape->sampleSpacing();
-    sum += area * (o.T_table_object * c);
-    weight += area;
+    sum += o.shape->surfaceArea() * (o.T_table_object * o.shape->surfaceCentroidObject());
+    weight += o.shape->surfaceArea();
   }
   return weight > 0.0 ? Vec3(sum / weight) : Vec3::Zero();
 }
