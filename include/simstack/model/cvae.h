@@ -1,0 +1,134 @@
+#pragma once
+/// @file cvae.h
+/// The depth-conditioned VAE of the paper (section 3.1.1, Appendix C) and its FC ablation, in
+/// libtorch. One definition serves training and inference. Heavy header: include it only in
+/// the model's own translation units (inference users take cvae_inference.h).
+///
+/// Tensors are [B, C, D, H, W] = [B, C, z, y, x] on the scene grid; TSDFs are divided by tau.
+///   partial  [B, 2, R, R, R]  channel 0: partial TSDF / tau, channel 1: observed (0/1)
+///   tsdf     [B, 1, R, R, R]  full TSDF / tau in [-1, 1]
+///   votes    [B, 3, R, R, R]  unit vectors to object centroids, 0 outside objects
+
+#include <torch/torch.h>
+
+#include <string>
+
+#include "simstack/model/cvae_config.h"
+
+namespace simstack {
+
+/// Conv3d(3x3x3) + BatchNorm + PReLU. At inference (no grad) the convolution calls oneDNN
+/// directly: libtorch 1.13's CPU build skips it for 3D convolutions otherwise (6-7x slower).
+class ConvBlockImpl : public torch::nn::Module {
+ public:
+  ConvBlockImpl(int in, int out, int stride);
+  torch::Tensor forward(const torch::Tensor& x);
+
+ private:
+  torch::nn::Conv3d conv{nullptr};
+  torch::nn::BatchNorm3d bn{nullptr};
+  torch::nn::PReLU act{nullptr};
+  int stride_;
+};
+TORCH_MODULE(ConvBlock);
+
+/// Residual block with squeeze-and-excitation (He et al. 2016; Hu et al. 2018).
+class ResSEBlockImpl : public torch::nn::Module {
+ public:
+  ResSEBlockImpl(int in, int out, int stride);
+  torch::Tensor forward(const torch::Tensor& x);
+
+ private:
+  ConvBlock a{nullptr};
+  torch::nn::Conv3d b{nullptr};
+  torch::nn::BatchNorm3d bn{nullptr};
+  torch::nn::Linear se1{nullptr}, se2{nullptr};
+  torch::nn::Conv3d skip{nullptr};
+  torch::nn::PReLU act{nullptr};
+};
+TORCH_MODULE(ResSEBlock);
+
+/// 2x upsampling by "voxel shuffle": a 1x1x1 convolution to 8x the channels rearranged into
+/// the doubled grid, exactly a ConvTranspose3d(kernel 2, stride 2) but on oneDNN's fast path.
+class UpsampleImpl : public torch::nn::Module {
+ public:
+  UpsampleImpl(int in, int out);
+  torch::Tensor forward(const torch::Tensor& x);
+
+ private:
+  torch::nn::Conv3d conv{nullptr};
+  int out_;
+};
+TORCH_MODULE(Upsample);
+
+/// What one forward pass gives.
+struct CvaeOutput {
+  torch::Tensor tsdf;           ///< [B, 1, R, R, R], tanh
+  torch::Tensor votes;          ///< [B, 3, R, R, R]
+  torch::Tensor partial_recon;  ///< [B, 1, R, R, R], the conditioning autoencoder's output
+  torch::Tensor mu, logvar, z;  ///< [B, latent] (undefined for the FC baseline)
+};
+
+class CvaeImpl : public torch::nn::Module {
+ public:
+  explicit CvaeImpl(const CvaeConfig& config);
+  /// Training pass: encodes (tsdf, votes) with the condition, samples z by reparametrisation.
+  CvaeOutput forward(const torch::Tensor& partial, const torch::Tensor& tsdf,
+                     const torch::Tensor& votes);
+  /// Generation: decodes codes z [B, latent] conditioned on `partial` [B, 2, R, R, R]
+  /// (the FC baseline ignores z).
+  CvaeOutput generate(const torch::Tensor& partial, const torch::Tensor& z);
+  const CvaeConfig& config() const { return config_; }
+
+ private:
+  std::vector<torch::Tensor> encodeCondition(const torch::Tensor& partial);
+  torch::Tensor decodeCondition(const torch::Tensor& features);
+  CvaeOutput decode(const torch::Tensor& bottleneck, const std::vector<torch::Tensor>& cond);
+
+  CvaeConfig config_;
+  std::vector<int> widths_;  // per stage: R, R/2, R/4, R/8, R/16
+  int bottom_ = 2;           // side of the deepest grid
+  // Conditioning autoencoder.
+  std::vector<ConvBlock> cond_enc_;
+  torch::nn::Linear cond_fc1{nullptr}, cond_fc2{nullptr}, cond_dfc1{nullptr}, cond_dfc2{nullptr};
+  std::vector<Upsample> cond_up_;
+  std::vector<ConvBlock> cond_dec_;
+  torch::nn::Conv3d cond_head{nullptr};
+  // VAE encoder (training only).
+  ConvBlock enc_tsdf1{nullptr}, enc_tsdf2{nullptr}, enc_votes1{nullptr}, enc_votes2{nullptr};
+  std::vector<ResSEBlock> enc_joint_;
+  torch::nn::Linear enc_mu{nullptr}, enc_logvar{nullptr};
+  // Decoder.
+  torch::nn::Linear dec_fc1{nullptr}, dec_fc2{nullptr};
+  std::vector<ResSEBlock> dec_joint_;
+  std::vector<Upsample> dec_up_;
+  ConvBlock head_tsdf{nullptr}, head_votes{nullptr};
+  torch::nn::Conv3d out_tsdf{nullptr}, out_votes{nullptr};
+};
+TORCH_MODULE(Cvae);
+
+/// Eq. 1: sum over voxels of |v - v_hat| / (|v| + eps), averaged over the batch.
+torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Tensor& target,
+                                      double eps);
+/// Eq. 2: sum over voxels of the Euclidean norm of the vote error, averaged over the batch.
+torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target);
+/// Maximum mean discrepancy between codes z [B, d] and prior samples [N, d] with the Gaussian
+/// kernel exp(-|a - b|^2 / d) (InfoVAE, Zhao et al. 2019).
+torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior);
+
+struct CvaeLosses {
+  torch::Tensor total, tsdf, partial, votes, mmd;
+};
+/// The weighted sum of the paper's section 3.1.3 (MMD is 0 for the FC baseline).
+CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
+                         const torch::Tensor& tsdf, const torch::Tensor& votes,
+                         const CvaeConfig& config);
+
+/// Saves weights, buffers and the config (YAML) in one archive, plus `metadata` YAML text.
+void saveCvae(const std::string& path, Cvae& model, const std::string& metadata = "");
+/// Rebuilds a model from a file written by saveCvae. Throws std::runtime_error naming the file
+/// and the problem (missing, not a simstack model, config invalid or not matching `expect`).
+Cvae loadCvae(const std::string& path, const CvaeConfig* expect = nullptr,
+              std::string* metadata = nullptr);
+
+}  // namespace simstack

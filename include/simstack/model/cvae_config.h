@@ -1,0 +1,64 @@
+#pragma once
+/// @file cvae_config.h
+/// Plain configuration of the network (architecture and losses) and of its training. No torch
+/// here: tools and the ROS layer read and validate configs without the heavy headers.
+
+#include <cstdint>
+#include <string>
+
+namespace simstack {
+
+/// Architecture and loss weights (paper section 3.1 and Appendix C). Stored inside every model
+/// file, so that a file rebuilds its own network.
+struct CvaeConfig {
+  std::string architecture = "cvae";  ///< "cvae" (the paper's model) or "fc" (section 4.1 ablation)
+  int resolution = 32;                ///< R; the paper's 64 is a configuration
+  double extent_m = 0.64;             ///< side of the scene grid
+  double truncation_vox = 3.0;        ///< tau in voxels; the network sees tsdf / tau
+  int base_channels = 8;              ///< width of the first stage; doubles per stage
+  int max_channels = 64;              ///< cap of the deepest widths (they hold most parameters)
+  int latent_size = 96;               ///< VAE latent z
+  int condition_size = 96;            ///< bottleneck of the conditioning autoencoder
+  int hidden_size = 128;              ///< width of the hidden linear layer on either side
+  // Loss weights of L = alpha L_tsdf + beta L_ptsdf + gamma L_votes + delta MMD.
+  double alpha = 1.0;
+  double beta = 1.0;
+  double gamma = 1.0;
+  double delta = 1e5;
+  /// epsilon of eq. 1 in units of tau. The paper's 1e-9 gives voxels that happen to lie on the
+  /// surface weights up to 1e9; 0.01 caps them at 100x.
+  double tsdf_epsilon = 0.01;
+
+  /// Throws std::invalid_argument naming the bad field.
+  void validate() const;
+  std::string toYaml() const;
+  /// Parses YAML text (fields absent keep their defaults); throws std::invalid_argument.
+  static CvaeConfig fromYaml(const std::string& text);
+  double voxelSize() const { return extent_m / resolution; }
+  double truncation_m() const { return truncation_vox * voxelSize(); }
+};
+
+/// How the trainer runs (simstack_train --config FILE.yaml holds both, under `model:` and
+/// `training:`).
+struct TrainConfig {
+  int batch_size = 8;
+  double learning_rate = 1e-3;
+  int64_t steps = 20000;  ///< optimiser steps
+  int threads = 2;        ///< torch intra-op threads
+  uint64_t seed = 1;
+  int checkpoint_every = 200;  ///< steps between checkpoints (and CSV flushes)
+  int validate_every = 500;    ///< steps between validations
+  int validation_scenes = 32;  ///< the last scenes of the dataset, never trained on
+  int image_width = 320;       ///< rendered training views (intrinsics scale with it)
+  int image_height = 240;
+  bool sensor_noise = true;  ///< Kinect-like noise in training views
+
+  void validate() const;
+  std::string toYaml() const;
+  static TrainConfig fromYaml(const std::string& text);
+};
+
+/// Reads `model:` and `training:` of a YAML file; throws std::runtime_error naming the file.
+void loadTrainingYaml(const std::string& path, CvaeConfig* model, TrainConfig* training);
+
+}  // namespace simstack

@@ -1,0 +1,290 @@
+#include "simstack/model/cvae.h"
+
+#include <ATen/ops/mkldnn_convolution.h>
+
+#include <filesystem>
+#include <stdexcept>
+
+namespace simstack {
+namespace {
+
+namespace F = torch::nn::functional;
+
+constexpr int64_t kFormatVersion = 1;
+
+// A 3D convolution that takes oneDNN's path at inference (see ConvBlock).
+torch::Tensor conv3d(torch::nn::Conv3d conv, const torch::Tensor& x, int stride, int padding) {
+  if (!torch::GradMode::is_enabled() && x.is_contiguous()) {
+    return at::mkldnn_convolution(x, conv->weight, conv->bias, {padding, padding, padding},
+                                  {stride, stride, stride}, {1, 1, 1}, 1);
+  }
+  return conv->forward(x);
+}
+
+torch::nn::Conv3d makeConv(int in, int out, int kernel, int stride, bool bias) {
+  return torch::nn::Conv3d(
+      torch::nn::Conv3dOptions(in, out, kernel).stride(stride).padding(kernel / 2).bias(bias));
+}
+
+}  // namespace
+
+ConvBlockImpl::ConvBlockImpl(int in, int out, int stride) : stride_(stride) {
+  conv = register_module("conv", makeConv(in, out, 3, stride, false));
+  bn = register_module("bn", torch::nn::BatchNorm3d(out));
+  act = register_module("act", torch::nn::PReLU());
+}
+
+torch::Tensor ConvBlockImpl::forward(const torch::Tensor& x) {
+  return act(bn(conv3d(conv, x.contiguous(), stride_, 1)));
+}
+
+ResSEBlockImpl::ResSEBlockImpl(int in, int out, int stride) {
+  a = register_module("a", ConvBlock(in, out, stride));
+  b = register_module("b", makeConv(out, out, 3, 1, false));
+  bn = register_module("bn", torch::nn::BatchNorm3d(out));
+  const int squeeze = std::max(4, out / 4);
+  se1 = register_module("se1", torch::nn::Linear(out, squeeze));
+  se2 = register_module("se2", torch::nn::Linear(squeeze, out));
+  if (in != out || stride != 1) skip = register_module("skip", makeConv(in, out, 1, stride, false));
+  act = register_module("act", torch::nn::PReLU());
+}
+
+torch::Tensor ResSEBlockImpl::forward(const torch::Tensor& x) {
+  torch::Tensor y = bn(conv3d(b, a(x).contiguous(), 1, 1));
+  // Squeeze: global average; excite: per-channel gates.
+  const torch::Tensor gates = torch::sigmoid(se2(torch::relu(se1(y.mean({2, 3, 4})))));
+  y = y * gates.unsqueeze(2).unsqueeze(3).unsqueeze(4);
+  const torch::Tensor shortcut =
+      skip ? conv3d(skip, x.contiguous(), skip->options.stride()->at(0), 0) : x;
+  return act(y + shortcut);
+}
+
+UpsampleImpl::UpsampleImpl(int in, int out) : out_(out) {
+  conv = register_module("conv", makeConv(in, 8 * out, 1, 1, true));
+}
+
+torch::Tensor UpsampleImpl::forward(const torch::Tensor& x) {
+  const auto b = x.size(0), d = x.size(2), h = x.size(3), w = x.size(4);
+  const torch::Tensor y = conv3d(conv, x.contiguous(), 1, 0);
+  return y.view({b, out_, 2, 2, 2, d, h, w})
+      .permute({0, 1, 5, 2, 6, 3, 7, 4})
+      .reshape({b, out_, 2 * d, 2 * h, 2 * w});
+}
+
+CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
+  config_.validate();
+  for (int i = 0; i < 5; ++i)
+    widths_.push_back(std::min(config.base_channels << i, config.max_channels));
+  bottom_ = config.resolution / 16;
+  const auto& w = widths_;
+  const int flat = w[4] * bottom_ * bottom_ * bottom_;
+  // Conditioning autoencoder: 5 convolutions, 2 linear layers each way (Appendix C).
+  for (int i = 0; i < 5; ++i) {
+    cond_enc_.push_back(register_module("cond_enc" + std::to_string(i),
+                                        ConvBlock(i == 0 ? 2 : w[i - 1], w[i], i == 0 ? 1 : 2)));
+  }
+  cond_fc1 = register_module("cond_fc1", torch::nn::Linear(flat, config.hidden_size));
+  cond_fc2 =
+      register_module("cond_fc2", torch::nn::Linear(config.hidden_size, config.condition_size));
+  cond_dfc1 =
+      register_module("cond_dfc1", torch::nn::Linear(config.condition_size, config.hidden_size));
+  cond_dfc2 = register_module("cond_dfc2", torch::nn::Linear(config.hidden_size, flat));
+  for (int i = 4; i >= 1; --i) {
+    cond_up_.push_back(register_module("cond_up" + std::to_string(i), Upsample(w[i], w[i - 1])));
+    cond_dec_.push_back(
+        register_module("cond_dec" + std::to_string(i), ConvBlock(w[i - 1], w[i - 1], 1)));
+  }
+  cond_head = register_module("cond_head", makeConv(w[0], 1, 1, 1, true));
+  // Decoder, shared by the C-VAE and the FC baseline.
+  dec_fc1 = register_module("dec_fc1", torch::nn::Linear(config.latent_size, config.hidden_size));
+  dec_fc2 = register_module("dec_fc2", torch::nn::Linear(config.hidden_size, flat));
+  for (int i = 4; i >= 0; --i) {
+    if (i < 4)
+      dec_up_.push_back(register_module("dec_up" + std::to_string(i), Upsample(w[i + 1], w[i])));
+    dec_joint_.push_back(
+        register_module("dec_joint" + std::to_string(i), ResSEBlock(2 * w[i], w[i], 1)));
+  }
+  head_tsdf = register_module("head_tsdf", ConvBlock(w[0], w[0], 1));
+  head_votes = register_module("head_votes", ConvBlock(w[0], w[0], 1));
+  out_tsdf = register_module("out_tsdf", makeConv(w[0], 1, 1, 1, true));
+  out_votes = register_module("out_votes", makeConv(w[0], 3, 1, 1, true));
+  if (config.architecture == "cvae") {
+    // Task-specific first layers, then 5 joint residual-SE layers to the latent code.
+    enc_tsdf1 = register_module("enc_tsdf1", ConvBlock(1, w[0], 1));
+    enc_tsdf2 = register_module("enc_tsdf2", ConvBlock(w[0], w[0], 1));
+    enc_votes1 = register_module("enc_votes1", ConvBlock(3, w[0], 1));
+    enc_votes2 = register_module("enc_votes2", ConvBlock(w[0], w[0], 1));
+    enc_joint_.push_back(register_module("enc_joint0", ResSEBlock(3 * w[0], w[1], 2)));
+    for (int i = 1; i < 4; ++i) {
+      enc_joint_.push_back(
+          register_module("enc_joint" + std::to_string(i), ResSEBlock(2 * w[i], w[i + 1], 2)));
+    }
+    enc_joint_.push_back(register_module("enc_joint4", ResSEBlock(2 * w[4], w[4], 1)));
+    enc_mu = register_module("enc_mu", torch::nn::Linear(flat, config.latent_size));
+    enc_logvar = register_module("enc_logvar", torch::nn::Linear(flat, config.latent_size));
+  }
+}
+
+std::vector<torch::Tensor> CvaeImpl::encodeCondition(const torch::Tensor& partial) {
+  std::vector<torch::Tensor> features;
+  torch::Tensor x = partial;
+  for (auto& block : cond_enc_) {
+    x = block(x);
+    features.push_back(x);
+  }
+  return features;
+}
+
+torch::Tensor CvaeImpl::decodeCondition(const torch::Tensor& deepest) {
+  const auto b = deepest.size(0);
+  torch::Tensor x = cond_fc2(torch::relu(cond_fc1(deepest.flatten(1))));
+  x = cond_dfc2(torch::relu(cond_dfc1(x))).view({b, widths_[4], bottom_, bottom_, bottom_});
+  for (size_t i = 0; i < cond_up_.size(); ++i) x = cond_dec_[i](cond_up_[i](x));
+  return torch::tanh(conv3d(cond_head, x.contiguous(), 1, 0));
+}
+
+CvaeOutput CvaeImpl::decode(const torch::Tensor& bottleneck,
+                            const std::vector<torch::Tensor>& cond) {
+  torch::Tensor x = bottleneck;
+  for (int level = 4, k = 0; level >= 0; --level, ++k) {
+    if (level < 4) x = dec_up_[k - 1](x);
+    x = dec_joint_[k](torch::cat({x, cond[level]}, 1));
+  }
+  CvaeOutput out;
+  out.tsdf = torch::tanh(conv3d(out_tsdf, head_tsdf(x).contiguous(), 1, 0));
+  out.votes = conv3d(out_votes, head_votes(x).contiguous(), 1, 0);
+  return out;
+}
+
+CvaeOutput CvaeImpl::forward(const torch::Tensor& partial, const torch::Tensor& tsdf,
+                             const torch::Tensor& votes) {
+  const std::vector<torch::Tensor> cond = encodeCondition(partial);
+  const torch::Tensor partial_recon = decodeCondition(cond[4]);
+  if (config_.architecture == "fc") {
+    CvaeOutput out = decode(cond[4], cond);
+    out.partial_recon = partial_recon;
+    return out;
+  }
+  torch::Tensor x =
+      torch::cat({enc_tsdf2(enc_tsdf1(tsdf)), enc_votes2(enc_votes1(votes)), cond[0]}, 1);
+  for (int i = 0; i < 5; ++i) {
+    x = enc_joint_[i](x);
+    if (i < 4) x = torch::cat({x, cond[i + 1]}, 1);
+  }
+  const torch::Tensor mu = enc_mu(x.flatten(1));
+  const torch::Tensor logvar = enc_logvar(x.flatten(1)).clamp(-10.0, 10.0);
+  const torch::Tensor z = mu + torch::randn_like(mu) * torch::exp(0.5 * logvar);
+  CvaeOutput out = generate(partial, z);
+  out.partial_recon = partial_recon;
+  out.mu = mu;
+  out.logvar = logvar;
+  out.z = z;
+  return out;
+}
+
+CvaeOutput CvaeImpl::generate(const torch::Tensor& partial, const torch::Tensor& z) {
+  const std::vector<torch::Tensor> cond = encodeCondition(partial);
+  if (config_.architecture == "fc") return decode(cond[4], cond);
+  const auto b = partial.size(0);
+  const torch::Tensor bottleneck =
+      dec_fc2(torch::relu(dec_fc1(z))).view({b, widths_[4], bottom_, bottom_, bottom_});
+  CvaeOutput out = decode(bottleneck, cond);
+  out.z = z;
+  return out;
+}
+
+torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Tensor& target,
+                                      double eps) {
+  return ((pred - target).abs() / (target.abs() + eps)).flatten(1).sum(1).mean();
+}
+
+torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target) {
+  // sqrt(. + 1e-12): the norm's gradient is undefined where prediction and target agree.
+  return ((pred - target).pow(2).sum(1) + 1e-12).sqrt().flatten(1).sum(1).mean();
+}
+
+torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior) {
+  const double d = static_cast<double>(z.size(1));
+  auto kernel = [d](const torch::Tensor& a, const torch::Tensor& b) {
+    return torch::exp(-(a.unsqueeze(1) - b.unsqueeze(0)).pow(2).sum(2) / d).mean();
+  };
+  return kernel(z, z) + kernel(prior, prior) - 2.0 * kernel(z, prior);
+}
+
+CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
+                         const torch::Tensor& tsdf, const torch::Tensor& votes,
+                         const CvaeConfig& c) {
+  CvaeLosses l;
+  l.tsdf = inverseTsdfWeightedLoss(out.tsdf, tsdf, c.tsdf_epsilon);
+  l.partial = inverseTsdfWeightedLoss(out.partial_recon, partial.narrow(1, 0, 1), c.tsdf_epsilon);
+  l.votes = voteLoss(out.votes, votes);
+  l.mmd =
+      out.z.defined() ? mmdLoss(out.z, torch::randn_like(out.z)) : torch::zeros({}, tsdf.options());
+  l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + c.delta * l.mmd;
+  return l;
+}
+
+void saveCvae(const std::string& path, Cvae& model, const std::string& metadata) {
+  torch::serialize::OutputArchive archive;
+  model->save(archive);
+  archive.write("simstack_format", torch::IValue(kFormatVersion));
+  archive.write("simstack_config", torch::IValue(model->config().toYaml()));
+  archive.write("simstack_metadata", torch::IValue(metadata));
+  const std::string tmp = path + ".tmp";
+  try {
+    archive.save_to(tmp);
+  } catch (const c10::Error& e) {
+    throw std::runtime_error("cannot write model " + path + ": " + e.what_without_backtrace());
+  }
+  std::filesystem::rename(tmp, path);  // a crash never leaves half a file behind
+}
+
+Cvae loadCvae(const std::string& path, const CvaeConfig* expect, std::string* metadata) {
+  if (!std::filesystem::exists(path)) throw std::runtime_error("model file not found: " + path);
+  torch::serialize::InputArchive archive;
+  try {
+    archive.load_from(path);
+  } catch (const c10::Error& e) {
+    throw std::runtime_error("model file " + path +
+                             " is not a libtorch archive (corrupt or wrong file)");
+  }
+  torch::IValue format, yaml, meta;
+  if (!archive.try_read("simstack_format", format) || !archive.try_read("simstack_config", yaml)) {
+    throw std::runtime_error("model file " + path +
+                             " is not a simstack model (no simstack_config)");
+  }
+  if (format.toInt() != kFormatVersion) {
+    throw std::runtime_error("model file " + path + " has format " +
+                             std::to_string(format.toInt()) + ", this build reads " +
+                             std::to_string(kFormatVersion));
+  }
+  CvaeConfig config;
+  try {
+    config = CvaeConfig::fromYaml(yaml.toStringRef());
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error("model file " + path + ": invalid config: " + e.what());
+  }
+  if (expect) {
+    auto mismatch = [&](const std::string& field, const std::string& a, const std::string& b) {
+      throw std::runtime_error("model file " + path + ": " + field + " is " + a + " but " + b +
+                               " was expected");
+    };
+    if (config.resolution != expect->resolution)
+      mismatch("resolution", std::to_string(config.resolution), std::to_string(expect->resolution));
+    if (config.architecture != expect->architecture)
+      mismatch("architecture", config.architecture, expect->architecture);
+    if (std::abs(config.extent_m - expect->extent_m) > 1e-9)
+      mismatch("extent_m", std::to_string(config.extent_m), std::to_string(expect->extent_m));
+  }
+  Cvae model(config);
+  try {
+    model->load(archive);
+  } catch (const c10::Error& e) {
+    throw std::runtime_error("model file " + path +
+                             ": weights do not match its config: " + e.what_without_backtrace());
+  }
+  if (metadata && archive.try_read("simstack_metadata", meta)) *metadata = meta.toStringRef();
+  return model;
+}
+
+}  // namespace simstack

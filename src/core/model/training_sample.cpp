@@ -1,0 +1,116 @@
+#include "simstack/model/training_sample.h"
+
+#include <cmath>
+#include <stdexcept>
+
+#include "simstack/render/depth_renderer.h"
+#include "simstack/tsdf/projective_tsdf.h"
+
+namespace simstack {
+
+Vec2 visiblePileCentre(const DepthImage& depth, const PinholeCamera& camera,
+                       const Transform& T_table_camera, const Vec2& near_xy, double radius_m,
+                       double min_height_m) {
+  Vec2 sum = Vec2::Zero();
+  long n = 0;
+  for (int v = 0; v < depth.height; ++v) {
+    for (int u = 0; u < depth.width; ++u) {
+      const float d = depth.at(u, v);
+      if (!validDepth(d)) continue;
+      const Vec3 p = T_table_camera * camera.backproject(u, v, d);
+      if (p.z() < min_height_m || (p.head<2>() - near_xy).norm() > radius_m) continue;
+      sum += p.head<2>();
+      ++n;
+    }
+  }
+  return n > 0 ? Vec2(sum / static_cast<double>(n)) : near_xy;
+}
+
+std::vector<float> partialChannels(const Grid3<float>& tsdf_m, const Grid3<float>& weight,
+                                   double truncation_m) {
+  const size_t n = tsdf_m.data.size();
+  std::vector<float> out(2 * n);
+  const float inv_tau = static_cast<float>(1.0 / truncation_m);
+  for (size_t i = 0; i < n; ++i) {
+    out[i] = std::clamp(tsdf_m.data[i] * inv_tau, -1.0f, 1.0f);
+    out[n + i] = weight.data[i] > 0.0f ? 1.0f : 0.0f;
+  }
+  return out;
+}
+
+PinholeCamera scaledKinect(int width, int height) {
+  PinholeCamera c;
+  const double s = width / 640.0;
+  c.width = width;
+  c.height = height;
+  c.fx = 525.0 * s;
+  c.fy = 525.0 * height / 480.0;
+  c.cx = (width - 1) / 2.0;
+  c.cy = (height - 1) / 2.0;
+  return c;
+}
+
+TrainingSampleBuilder::TrainingSampleBuilder(const CvaeConfig& config, const PinholeCamera& camera,
+                                             bool sensor_noise)
+    : config_(config), camera_(camera), noise_(sensor_noise) {
+  config_.validate();
+  camera_.validate();
+}
+
+TrainingSample TrainingSampleBuilder::build(const SceneRecord& record, std::mt19937_64& rng) const {
+  const Transform T = sampleViewpoint(record.scene.surfaceCentroid(), ViewpointRange(), rng);
+  return build(record, T, rng());
+}
+
+TrainingSample TrainingSampleBuilder::build(const SceneRecord& rec, const Transform& T_table_camera,
+                                            uint64_t noise_seed) const {
+  const GridSpec& stored = rec.grid;
+  if (stored.resolution != config_.resolution ||
+      std::abs(stored.extent_m() - config_.extent_m) > 1e-9) {
+    throw std::invalid_argument(
+        "dataset grid (" + std::to_string(stored.resolution) + "^3, " +
+        std::to_string(stored.extent_m()) + " m) does not match the model (" +
+        std::to_string(config_.resolution) + "^3, " + std::to_string(config_.extent_m) + " m)");
+  }
+  const DepthRenderer renderer(rec.scene);
+  const RenderResult view =
+      renderer.render(camera_, T_table_camera,
+                      noise_ ? SensorNoiseConfig::kinect(noise_seed) : SensorNoiseConfig());
+  // Re-centre on what the camera sees, snapped to the stored lattice so GT shifts exactly.
+  const double voxel = stored.voxel_size_m;
+  const Vec2 stored_centre =
+      stored.origin_table.head<2>() + Vec2::Constant(0.5 * stored.extent_m());
+  const Vec2 centre = visiblePileCentre(view.depth, camera_, T_table_camera, stored_centre,
+                                        0.5 * stored.extent_m());
+  const int sx = static_cast<int>(std::lround((centre.x() - stored_centre.x()) / voxel));
+  const int sy = static_cast<int>(std::lround((centre.y() - stored_centre.y()) / voxel));
+  TrainingSample s;
+  s.T_table_camera = T_table_camera;
+  s.grid = stored;
+  s.grid.origin_table += Vec3(sx * voxel, sy * voxel, 0.0);
+  ProjectiveTsdfConfig tc;
+  tc.truncation_m = config_.truncation_m();
+  ProjectiveTsdf partial(s.grid, tc);
+  partial.integrate(view.depth, camera_, T_table_camera);
+  s.partial = partialChannels(partial.tsdf(), partial.weight(), tc.truncation_m);
+  const int r = stored.resolution;
+  const size_t n = static_cast<size_t>(r) * r * r;
+  s.tsdf.assign(n, 1.0f);
+  s.votes.assign(3 * n, 0.0f);
+  const float inv_tau = static_cast<float>(1.0 / config_.truncation_m());
+  for (int z = 0; z < r; ++z) {
+    for (int y = 0; y < r; ++y) {
+      for (int x = 0; x < r; ++x) {
+        const int ox = x + sx, oy = y + sy;
+        if (ox < 0 || oy < 0 || ox >= r || oy >= r) continue;  // outside the stored grid: free
+        const size_t i = static_cast<size_t>(stored.linear(x, y, z));
+        const size_t j = static_cast<size_t>(stored.linear(ox, oy, z));
+        s.tsdf[i] = std::clamp(rec.ground_truth.tsdf.data[j] * inv_tau, -1.0f, 1.0f);
+        for (int c = 0; c < 3; ++c) s.votes[c * n + i] = rec.ground_truth.votes.data[j][c];
+      }
+    }
+  }
+  return s;
+}
+
+}  // namespace simstack

@@ -1,0 +1,66 @@
+// simstack_train: trains the C-VAE (or the FC baseline) on a dataset from simstack_generate.
+#include <malloc.h>
+#include <CLI/CLI.hpp>
+
+#include <iostream>
+
+#include "simstack/model/cvae_trainer.h"
+
+using namespace simstack;
+
+int main(int argc, char** argv) {
+  std::string dataset, config_path, output;
+  bool resume = false;
+  int threads = 0;
+  std::string architecture;
+  int64_t steps = 0;
+  CLI::App app{
+      "Train the depth-conditioned VAE of SIMstack (or its FC ablation) on a generated dataset. "
+      "Views and "
+      "partial TSDFs are rendered on the fly; checkpoints in OUTPUT resume with --resume."};
+  app.add_option("--dataset", dataset, "HDF5 dataset from simstack_generate")
+      ->required()
+      ->check(CLI::ExistingFile);
+  app.add_option("--config", config_path,
+                 "YAML with `model:` and `training:` sections (see config/train_r32.yaml)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  app.add_option("--output", output,
+                 "output directory (model.pt, model.yaml, checkpoints, train_log.csv)")
+      ->required();
+  app.add_flag("--resume", resume, "continue from OUTPUT/checkpoint.pt");
+  app.add_option("--threads", threads, "torch threads (overrides training.threads)")
+      ->check(CLI::Range(1, 256));
+  app.add_option("--architecture", architecture, "cvae or fc (overrides model.architecture)")
+      ->check(CLI::IsMember({"cvae", "fc"}));
+  app.add_option("--steps", steps, "optimiser steps (overrides training.steps)")
+      ->check(CLI::PositiveNumber);
+  CLI11_PARSE(app, argc, argv);
+
+  // libtorch's CPU allocator does not cache: every large tensor would be a fresh mmap that
+  // page-faults. Keeping freed memory in the heap made training 1.45x faster here.
+  mallopt(M_MMAP_MAX, 0);
+  mallopt(M_TRIM_THRESHOLD, -1);
+  try {
+    CvaeConfig model;
+    TrainConfig training;
+    loadTrainingYaml(config_path, &model, &training);
+    if (threads > 0) training.threads = threads;
+    if (!architecture.empty()) model.architecture = architecture;
+    if (steps > 0) training.steps = steps;
+    std::string command;
+    for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
+    CvaeTrainer trainer(dataset, model, training, output, command);
+    const TrainingReport r = trainer.run(resume);
+    std::cout << "trained " << model.architecture << " for " << r.steps << " steps ("
+              << r.samples_per_second << " samples/s)\n  final losses: total " << r.total
+              << ", tsdf " << r.tsdf << ", partial " << r.partial << ", votes " << r.votes
+              << ", mmd " << r.mmd << "\n  validation: IoU " << r.validation_iou << ", BCE "
+              << r.validation_bce << "\n  model: " << output
+              << "/model.pt (provenance in model.yaml)\n";
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "simstack_train: error: " << e.what() << "\n";
+    return 1;
+  }
+}

@@ -1,0 +1,195 @@
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+
+#include "simstack/model/cvae.h"
+#include "simstack/model/cvae_inference.h"
+#include "simstack/model/training_sample.h"
+#include "simstack/render/depth_renderer.h"
+#include "simstack/tsdf/ground_truth.h"
+#include "simstack/tsdf/projective_tsdf.h"
+#include "test_scenes.h"
+
+using namespace simstack;
+namespace fs = std::filesystem;
+
+namespace {
+CvaeConfig tiny(const std::string& architecture = "cvae") {
+  CvaeConfig c;
+  c.architecture = architecture;
+  c.resolution = 16;
+  c.base_channels = 4;
+  c.max_channels = 16;
+  c.latent_size = 8;
+  c.condition_size = 8;
+  c.hidden_size = 16;
+  return c;
+}
+
+std::string tempPath(const std::string& name) {
+  return (fs::temp_directory_path() / name).string();
+}
+}  // namespace
+
+TEST(Cvae, OutputShapesAreRightAndFinite) {
+  torch::manual_seed(0);
+  for (const std::string arch : {"cvae", "fc"}) {
+    Cvae model(tiny(arch));
+    const auto partial = torch::rand({2, 2, 16, 16, 16}) * 2 - 1;
+    const auto tsdf = torch::rand({2, 1, 16, 16, 16}) * 2 - 1;
+    const auto votes = torch::randn({2, 3, 16, 16, 16});
+    const CvaeOutput o = model->forward(partial, tsdf, votes);
+    EXPECT_EQ(o.tsdf.sizes(), torch::IntArrayRef({2, 1, 16, 16, 16})) << arch;
+    EXPECT_EQ(o.votes.sizes(), torch::IntArrayRef({2, 3, 16, 16, 16})) << arch;
+    EXPECT_EQ(o.partial_recon.sizes(), torch::IntArrayRef({2, 1, 16, 16, 16})) << arch;
+    EXPECT_TRUE(torch::isfinite(o.tsdf).all().item<bool>()) << arch;
+    EXPECT_TRUE(torch::isfinite(o.votes).all().item<bool>()) << arch;
+    if (arch == "cvae") EXPECT_EQ(o.z.sizes(), torch::IntArrayRef({2, 8}));
+    const CvaeLosses l = computeLosses(o, partial, tsdf, votes, model->config());
+    EXPECT_TRUE(std::isfinite(l.total.item<double>())) << arch;
+  }
+}
+
+TEST(Cvae, LossesMatchHandComputedValues) {
+  // Two voxels, batch of one.
+  const auto pred = torch::tensor({0.5f, -0.2f}).view({1, 1, 2, 1, 1});
+  const auto target = torch::tensor({0.25f, -0.5f}).view({1, 1, 2, 1, 1});
+  // |0.5 - 0.25| / (0.25 + 0.01) + |-0.2 + 0.5| / (0.5 + 0.01)
+  EXPECT_NEAR(inverseTsdfWeightedLoss(pred, target, 0.01).item<double>(), 0.25 / 0.26 + 0.3 / 0.51,
+              1e-6);
+  // Batch mean: a second identical sample leaves it unchanged.
+  EXPECT_NEAR(inverseTsdfWeightedLoss(torch::cat({pred, pred}), torch::cat({target, target}), 0.01)
+                  .item<double>(),
+              0.25 / 0.26 + 0.3 / 0.51, 1e-6);
+  // Votes: errors (1, 2, 2) and (0, 0, 0): norms 3 and 0.
+  const auto vp = torch::tensor({1.0f, 0.0f, 2.0f, 0.0f, 2.0f, 0.0f}).view({1, 3, 2, 1, 1});
+  const auto vt = torch::zeros({1, 3, 2, 1, 1});
+  EXPECT_NEAR(voteLoss(vp, vt).item<double>(), 3.0, 1e-5);
+}
+
+TEST(Cvae, MmdSeparatesPriorFromShiftedCodes) {
+  torch::manual_seed(3);
+  const auto prior = torch::randn({256, 8});
+  EXPECT_LT(mmdLoss(torch::randn({256, 8}), prior).item<double>(), 0.02);
+  EXPECT_GT(mmdLoss(torch::randn({256, 8}) + 2.0, prior).item<double>(), 0.3);
+}
+
+TEST(Cvae, SaveLoadGivesIdenticalOutputs) {
+  torch::manual_seed(1);
+  Cvae model(tiny());
+  model->eval();
+  const std::string path = tempPath("simstack_test_model.pt");
+  saveCvae(path, model, "note: test");
+  std::string meta;
+  Cvae loaded = loadCvae(path, nullptr, &meta);
+  loaded->eval();
+  EXPECT_EQ(meta, "note: test");
+  torch::NoGradGuard no_grad;
+  const auto partial = torch::rand({2, 2, 16, 16, 16});
+  const auto z = torch::randn({2, 8});
+  EXPECT_TRUE(torch::equal(model->generate(partial, z).tsdf, loaded->generate(partial, z).tsdf));
+  // The inference API reads the same file.
+  const CvaeInference net(path, 1);
+  EXPECT_EQ(net.config().resolution, 16);
+  fs::remove(path);
+}
+
+TEST(Cvae, BadModelFilesGiveClearErrors) {
+  auto message = [](const std::string& path, const CvaeConfig* expect) {
+    try {
+      loadCvae(path, expect);
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message("/nonexistent/model.pt", nullptr).find("/nonexistent/model.pt"),
+            std::string::npos);
+  const std::string corrupt = tempPath("simstack_corrupt.pt");
+  std::ofstream(corrupt) << "definitely not a model";
+  const std::string m = message(corrupt, nullptr);
+  EXPECT_NE(m.find(corrupt), std::string::npos) << m;
+  fs::remove(corrupt);
+  Cvae model(tiny());
+  const std::string path = tempPath("simstack_mismatch.pt");
+  saveCvae(path, model);
+  CvaeConfig expect = tiny();
+  expect.resolution = 32;
+  const std::string mm = message(path, &expect);
+  EXPECT_NE(mm.find("resolution"), std::string::npos) << mm;
+  EXPECT_NE(mm.find(path), std::string::npos) << mm;
+  EXPECT_THROW(CvaeInference("/nonexistent/model.pt"), std::runtime_error);
+  fs::remove(path);
+}
+
+TEST(Cvae, TinyModelOverfitsOneScene) {
+  torch::manual_seed(5);
+  CvaeConfig c = tiny();
+  c.delta = 1.0;
+  const Scene scene = test::sphereScene(0.1, Vec3(0, 0, 0.1));
+  const GridSpec grid = GridSpec::sceneGrid(Vec2::Zero(), c.extent_m, c.resolution);
+  const GroundTruthGrids gt = computeGroundTruth(scene, grid, c.truncation_m());
+  const PinholeCamera camera = scaledKinect(160, 120);
+  const Transform T = lookAt(Vec3(0.6, -0.3, 0.5), Vec3(0, 0, 0.1));
+  ProjectiveTsdfConfig tc;
+  tc.truncation_m = c.truncation_m();
+  ProjectiveTsdf partial(grid, tc);
+  partial.integrate(DepthRenderer(scene).render(camera, T).depth, camera, T);
+  const std::vector<float> in = partialChannels(partial.tsdf(), partial.weight(), c.truncation_m());
+  const int n = grid.voxelCount();
+  auto p = torch::from_blob(const_cast<float*>(in.data()), {1, 2, 16, 16, 16})
+               .clone()
+               .repeat({2, 1, 1, 1, 1});
+  auto t = torch::empty({1, 1, 16, 16, 16});
+  auto v = torch::empty({1, 3, 16, 16, 16});
+  for (int i = 0; i < n; ++i) {
+    t.data_ptr<float>()[i] = gt.tsdf.data[i] / static_cast<float>(c.truncation_m());
+    for (int k = 0; k < 3; ++k) v.data_ptr<float>()[k * n + i] = gt.votes.data[i][k];
+  }
+  t = t.repeat({2, 1, 1, 1, 1});
+  v = v.repeat({2, 1, 1, 1, 1});
+  Cvae model(c);
+  torch::optim::Adam opt(model->parameters(), torch::optim::AdamOptions(3e-3));
+  double first = 0, last = 0;
+  const auto start = std::chrono::steady_clock::now();
+  for (int step = 0; step < 300; ++step) {
+    opt.zero_grad();
+    const CvaeLosses l = computeLosses(model->forward(p, t, v), p, t, v, c);
+    l.total.backward();
+    opt.step();
+    const double fit = (l.tsdf + l.votes).item<double>();
+    if (step == 0) first = fit;
+    last = fit;
+  }
+  std::cout << "overfit: tsdf + votes loss " << first << " -> " << last << " in 300 steps, "
+            << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()
+            << " s\n";
+  EXPECT_LT(last, first / 10.0);
+}
+
+TEST(TrainingSample, GridFollowsTheVisiblePile) {
+  const Scene scene = test::sphereScene(0.08, Vec3(0.05, 0.0, 0.08));
+  DatasetInfo info;
+  SceneRecord rec;
+  rec.scene = scene;
+  CvaeConfig c = tiny();
+  c.resolution = 32;
+  rec.grid = GridSpec::sceneGrid(Vec2(-0.1, 0.0), c.extent_m, c.resolution);  // stored off-centre
+  rec.ground_truth = computeGroundTruth(scene, rec.grid, c.truncation_m());
+  const TrainingSampleBuilder builder(c, scaledKinect(320, 240), false);
+  const TrainingSample s = builder.build(rec, lookAt(Vec3(0.6, 0.0, 0.4), Vec3(0.05, 0, 0.08)), 0);
+  // The visible centre lies near the sphere: the grid moved by whole voxels towards +x.
+  const double shift = s.grid.origin_table.x() - rec.grid.origin_table.x();
+  EXPECT_GT(shift, 0.08);
+  EXPECT_NEAR(std::remainder(shift, rec.grid.voxel_size_m), 0.0, 1e-9);
+  // Shifted ground truth still has the sphere where it is: occupied at its centre.
+  const Vec3i idx = s.grid.voxelIndex(Vec3(0.05, 0.0, 0.08));
+  EXPECT_LT(s.tsdf[s.grid.linear(idx.x(), idx.y(), idx.z())], 0.0f);
+  int occupied = 0;
+  for (float x : s.tsdf) occupied += x <= 0.0f;
+  int occupied_stored = 0;
+  for (float x : rec.ground_truth.tsdf.data) occupied_stored += x <= 0.0f;
+  EXPECT_EQ(occupied, occupied_stored);
+}
