@@ -3,8 +3,10 @@
 #include <omp.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cctype>
 #include <chrono>
 #include <condition_variable>
+#include <cstdio>
 #include <deque>
 #include <filesystem>
 #include <fstream>
@@ -254,6 +256,23 @@ TrainingReport CvaeTrainer::run(bool resume) {
   finish_worker();
   save_checkpoint(tc.steps);
   report.steps = tc.steps;
+  if (trained == 0) {
+    // Nothing left to train (a resumed run that had reached its steps): still report the
+    // figures of the model being written, from the log and a fresh validation.
+    validate(&report);
+    std::ifstream previous((out / "train_log.csv").string());
+    std::string line, last;
+    while (std::getline(previous, line)) {
+      if (!line.empty() && std::isdigit(static_cast<unsigned char>(line[0]))) last = line;
+    }
+    std::array<double, 5> row{};
+    double rate = 0.0;
+    if (std::sscanf(last.c_str(), "%*lld,%lf,%lf,%lf,%lf,%lf,%lf", &row[0], &row[1], &row[2],
+                    &row[3], &row[4], &rate) == 6) {
+      recent.push_back(row);
+      report.samples_per_second = rate;
+    }
+  }
   if (!recent.empty()) {
     std::array<double, 5> mean{};
     for (const auto& a : recent)
