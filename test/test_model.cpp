@@ -193,3 +193,34 @@ TEST(TrainingSample, GridFollowsTheVisiblePile) {
   for (float x : rec.ground_truth.tsdf.data) occupied_stored += x <= 0.0f;
   EXPECT_EQ(occupied, occupied_stored);
 }
+
+TEST(ShippedModel, LoadsAndPredictsThreeSamplesInOnePass) {
+  const std::string path = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
+  ASSERT_TRUE(fs::exists(path)) << path;
+  const CvaeInference net(path, 2);
+  EXPECT_EQ(net.config().resolution, 32);
+  EXPECT_EQ(net.config().architecture, "cvae");
+  EXPECT_NE(net.metadata().find("dataset_seed"), std::string::npos);
+  const Scene scene = test::sphereScene(0.08, Vec3(0, 0, 0.08));
+  const GridSpec grid = GridSpec::sceneGrid(Vec2::Zero(), 0.64, 32);
+  const PinholeCamera camera = scaledKinect(320, 240);
+  const Transform T = lookAt(Vec3(0.6, -0.2, 0.5), Vec3(0, 0, 0.08));
+  ProjectiveTsdfConfig tc;
+  tc.truncation_m = net.config().truncation_m();
+  ProjectiveTsdf partial(grid, tc);
+  partial.integrate(DepthRenderer(scene).render(camera, T).depth, camera, T);
+  const auto preds = net.predict(partial.tsdf(), partial.weight(), 3, 11, true);
+  ASSERT_EQ(preds.size(), 3u);
+  for (const auto& p : preds) {
+    for (float v : p.tsdf_m.data) ASSERT_TRUE(std::isfinite(v));
+  }
+  // The sphere's centre is seen as solid; far empty space stays free.
+  const Vec3i c = grid.voxelIndex(Vec3(0, 0, 0.08));
+  EXPECT_LT(preds[0].tsdf_m.at(c.x(), c.y(), c.z()), 0.0f);
+  const Vec3i far = grid.voxelIndex(Vec3(0.25, 0.25, 0.5));
+  EXPECT_GT(preds[0].tsdf_m.at(far.x(), far.y(), far.z()), 0.0f);
+  // A grid of another resolution is refused with the reason.
+  const GridSpec small = GridSpec::sceneGrid(Vec2::Zero(), 0.64, 16);
+  EXPECT_THROW(net.predict(Grid3<float>(small, 0.0f), Grid3<float>(small, 0.0f), 1),
+               std::invalid_argument);
+}
