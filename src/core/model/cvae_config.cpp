@@ -17,6 +17,48 @@ void get(const YAML::Node& n, const char* key, T* value) {
   }
 }
 
+YAML::Node parse(const std::string& text, const std::string& section) {
+  try {
+    return YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw std::invalid_argument(section + " config is not YAML: " + e.what());
+  }
+}
+
+// Every field once, with its YAML name: serialisation and parsing both walk these lists.
+template <class C, class F>
+void cvaeFields(C& c, F&& f) {
+  f("architecture", c.architecture);
+  f("resolution", c.resolution);
+  f("extent_m", c.extent_m);
+  f("truncation_vox", c.truncation_vox);
+  f("base_channels", c.base_channels);
+  f("max_channels", c.max_channels);
+  f("latent_size", c.latent_size);
+  f("condition_size", c.condition_size);
+  f("hidden_size", c.hidden_size);
+  f("alpha", c.alpha);
+  f("beta", c.beta);
+  f("gamma", c.gamma);
+  f("delta", c.delta);
+  f("tsdf_epsilon", c.tsdf_epsilon);
+}
+
+template <class C, class F>
+void trainFields(C& c, F&& f) {
+  f("batch_size", c.batch_size);
+  f("learning_rate", c.learning_rate);
+  f("steps", c.steps);
+  f("threads", c.threads);
+  f("seed", c.seed);
+  f("checkpoint_every", c.checkpoint_every);
+  f("validate_every", c.validate_every);
+  f("validation_scenes", c.validation_scenes);
+  f("image_width", c.image_width);
+  f("image_height", c.image_height);
+  f("sensor_noise", c.sensor_noise);
+}
+
 void require(bool ok, const std::string& what) {
   if (!ok) throw std::invalid_argument(what);
 }
@@ -41,46 +83,17 @@ void CvaeConfig::validate() const {
 std::string CvaeConfig::toYaml() const {
   YAML::Emitter e;
   e << YAML::BeginMap;
-  e << YAML::Key << "architecture" << YAML::Value << architecture;
-  e << YAML::Key << "resolution" << YAML::Value << resolution;
-  e << YAML::Key << "extent_m" << YAML::Value << extent_m;
-  e << YAML::Key << "truncation_vox" << YAML::Value << truncation_vox;
-  e << YAML::Key << "base_channels" << YAML::Value << base_channels;
-  e << YAML::Key << "max_channels" << YAML::Value << max_channels;
-  e << YAML::Key << "latent_size" << YAML::Value << latent_size;
-  e << YAML::Key << "condition_size" << YAML::Value << condition_size;
-  e << YAML::Key << "hidden_size" << YAML::Value << hidden_size;
-  e << YAML::Key << "alpha" << YAML::Value << alpha;
-  e << YAML::Key << "beta" << YAML::Value << beta;
-  e << YAML::Key << "gamma" << YAML::Value << gamma;
-  e << YAML::Key << "delta" << YAML::Value << delta;
-  e << YAML::Key << "tsdf_epsilon" << YAML::Value << tsdf_epsilon;
+  cvaeFields(*this, [&](const char* key, const auto& value) {
+    e << YAML::Key << key << YAML::Value << value;
+  });
   e << YAML::EndMap;
   return e.c_str();
 }
 
 CvaeConfig CvaeConfig::fromYaml(const std::string& text) {
   CvaeConfig c;
-  YAML::Node n;
-  try {
-    n = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    throw std::invalid_argument(std::string("model config is not YAML: ") + e.what());
-  }
-  get(n, "architecture", &c.architecture);
-  get(n, "resolution", &c.resolution);
-  get(n, "extent_m", &c.extent_m);
-  get(n, "truncation_vox", &c.truncation_vox);
-  get(n, "base_channels", &c.base_channels);
-  get(n, "max_channels", &c.max_channels);
-  get(n, "latent_size", &c.latent_size);
-  get(n, "condition_size", &c.condition_size);
-  get(n, "hidden_size", &c.hidden_size);
-  get(n, "alpha", &c.alpha);
-  get(n, "beta", &c.beta);
-  get(n, "gamma", &c.gamma);
-  get(n, "delta", &c.delta);
-  get(n, "tsdf_epsilon", &c.tsdf_epsilon);
+  const YAML::Node n = parse(text, "model");
+  cvaeFields(c, [&](const char* key, auto& value) { get(n, key, &value); });
   c.validate();
   return c;
 }
@@ -99,35 +112,17 @@ void TrainConfig::validate() const {
 std::string TrainConfig::toYaml() const {
   YAML::Emitter e;
   e << YAML::BeginMap;
-  e << YAML::Key << "batch_size" << YAML::Value << batch_size;
-  e << YAML::Key << "learning_rate" << YAML::Value << learning_rate;
-  e << YAML::Key << "steps" << YAML::Value << steps;
-  e << YAML::Key << "threads" << YAML::Value << threads;
-  e << YAML::Key << "seed" << YAML::Value << seed;
-  e << YAML::Key << "checkpoint_every" << YAML::Value << checkpoint_every;
-  e << YAML::Key << "validate_every" << YAML::Value << validate_every;
-  e << YAML::Key << "validation_scenes" << YAML::Value << validation_scenes;
-  e << YAML::Key << "image_width" << YAML::Value << image_width;
-  e << YAML::Key << "image_height" << YAML::Value << image_height;
-  e << YAML::Key << "sensor_noise" << YAML::Value << sensor_noise;
+  trainFields(*this, [&](const char* key, const auto& value) {
+    e << YAML::Key << key << YAML::Value << value;
+  });
   e << YAML::EndMap;
   return e.c_str();
 }
 
 TrainConfig TrainConfig::fromYaml(const std::string& text) {
   TrainConfig c;
-  const YAML::Node n = YAML::Load(text);
-  get(n, "batch_size", &c.batch_size);
-  get(n, "learning_rate", &c.learning_rate);
-  get(n, "steps", &c.steps);
-  get(n, "threads", &c.threads);
-  get(n, "seed", &c.seed);
-  get(n, "checkpoint_every", &c.checkpoint_every);
-  get(n, "validate_every", &c.validate_every);
-  get(n, "validation_scenes", &c.validation_scenes);
-  get(n, "image_width", &c.image_width);
-  get(n, "image_height", &c.image_height);
-  get(n, "sensor_noise", &c.sensor_noise);
+  const YAML::Node n = parse(text, "training");
+  trainFields(c, [&](const char* key, auto& value) { get(n, key, &value); });
   c.validate();
   return c;
 }
