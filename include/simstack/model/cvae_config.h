@@ -42,8 +42,9 @@ struct CvaeConfig {
 /// `training:`).
 struct TrainConfig {
   int batch_size = 8;
-  double learning_rate = 1e-3;
-  int64_t steps = 20000;  ///< optimiser steps
+  double learning_rate = 1e-3;        ///< Adam step size at step 0
+  double final_learning_rate = 1e-4;  ///< reached at `steps` along a cosine (= learning_rate: constant)
+  int64_t steps = 6000;               ///< optimiser steps
   int threads = 2;        ///< torch intra-op threads
   uint64_t seed = 1;
   int checkpoint_every = 200;  ///< steps between checkpoints (and CSV flushes)

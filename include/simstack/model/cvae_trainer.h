@@ -19,6 +19,10 @@ struct TrainingReport {
   double samples_per_second = 0;
 };
 
+/// Adam's step size at optimiser step `step`: a cosine from learning_rate at 0 down to
+/// final_learning_rate at training.steps.
+double learningRate(const TrainConfig& training, int64_t step);
+
 class CvaeTrainer {
  public:
   /// Throws std::runtime_error naming the dataset or output directory when they are unusable

@@ -48,6 +48,7 @@ template <class C, class F>
 void trainFields(C& c, F&& f) {
   f("batch_size", c.batch_size);
   f("learning_rate", c.learning_rate);
+  f("final_learning_rate", c.final_learning_rate);
   f("steps", c.steps);
   f("threads", c.threads);
   f("seed", c.seed);
@@ -101,6 +102,8 @@ CvaeConfig CvaeConfig::fromYaml(const std::string& text) {
 void TrainConfig::validate() const {
   require(batch_size >= 2, "batch_size must be >= 2 (BatchNorm and MMD need a batch)");
   require(learning_rate > 0.0, "learning_rate must be > 0");
+  require(final_learning_rate > 0.0 && final_learning_rate <= learning_rate,
+          "final_learning_rate must be > 0 and <= learning_rate");
   require(steps >= 1, "steps must be >= 1");
   require(threads >= 1, "threads must be >= 1");
   require(checkpoint_every >= 1 && validate_every >= 1,

@@ -3,7 +3,9 @@
 #include <omp.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -52,6 +54,12 @@ Batch toBatch(const std::vector<TrainingSample>& samples, int r) {
 }
 
 }  // namespace
+
+double learningRate(const TrainConfig& tc, int64_t step) {
+  const double progress = std::clamp(static_cast<double>(step) / tc.steps, 0.0, 1.0);
+  return tc.final_learning_rate +
+         0.5 * (tc.learning_rate - tc.final_learning_rate) * (1.0 + std::cos(M_PI * progress));
+}
 
 struct CvaeTrainer::Impl {
   std::string dataset_path, output_dir, command_line;
@@ -223,6 +231,8 @@ TrainingReport CvaeTrainer::run(bool resume) {
       queue.pop_front();
       cv.notify_all();
     }
+    for (auto& group : optimizer.param_groups())
+      static_cast<torch::optim::AdamOptions&>(group.options()).lr(learningRate(tc, step));
     optimizer.zero_grad();
     const CvaeOutput o = model->forward(batch.partial, batch.tsdf, batch.votes);
     const CvaeLosses l = computeLosses(o, batch.partial, batch.tsdf, batch.votes, mc);

@@ -1,0 +1,44 @@
+#pragma once
+/// @file hough_voting.h
+/// Class-agnostic instances from the network's centre-vote field (paper section 3.2.1).
+/// Every occupied voxel casts a ray along its vote; the ray is marched through a grid
+/// `refinement` times finer than the scene grid and stops where the TSDF says the object ends.
+/// Fine cells crossed by more than `min_traversals` rays are centre votes; mean shift merges
+/// them into centres, and each occupied voxel joins the centre minimising
+///   |arccos(v . u_n)| + gamma * d_n / voxel_size,
+/// with v its vote, u_n the unit vector towards centre n and d_n the distance to it.
+/// Fine cells are counted in a hash table, so memory grows with the rays, not with R^3.
+
+#include <vector>
+
+#include "simstack/geometry/voxel_grid.h"
+
+namespace simstack {
+
+struct HoughConfig {
+  int refinement = 10;        ///< fine cells per voxel along each axis (the paper: 10)
+  int min_traversals = 10;    ///< mu: a fine cell with more traversals is a centre vote
+  double gamma = 0.1;         ///< weight of the distance (in voxels) in the assignment rule
+  double bandwidth_vox = 1.5; ///< mean-shift radius, in voxels of the scene grid
+  int min_instance_voxels = 4;  ///< smaller instances are dropped (their voxels unlabelled)
+  /// Rays may leave the occupied region for this many voxels (noisy TSDF borders).
+  int outside_tolerance_vox = 1;
+  int threads = 2;
+};
+
+struct InstanceSegmentation {
+  std::vector<Vec3> centres_table;  ///< one per instance, table frame
+  Grid3<int> labels;                ///< instance index per voxel, -1 = free space / none
+  std::vector<int> voxel_counts;    ///< occupied voxels per instance
+  int candidate_cells = 0;          ///< fine cells above the traversal threshold
+  size_t traversals = 0;            ///< fine-cell visits counted (all rays)
+  int size() const { return static_cast<int>(centres_table.size()); }
+};
+
+/// Instances of one scene hypothesis. `tsdf_m` and `votes` must share a grid
+/// (std::invalid_argument otherwise); occupied = tsdf <= 0. Votes need not be unit length
+/// (the network's are normalised here); near-zero votes are assigned by distance alone.
+InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
+                                    const HoughConfig& config = HoughConfig());
+
+}  // namespace simstack

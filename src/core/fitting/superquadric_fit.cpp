@@ -1,0 +1,295 @@
+#include "simstack/fitting/superquadric_fit.h"
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <stdexcept>
+
+namespace simstack {
+namespace {
+
+// Parameter block of one shape: scale a1..a3, exponents r s t, translation, angle-axis
+// (object -> table).
+constexpr int kParams = 12;
+using Params = std::array<double, kParams>;
+
+/// Signed distance from the shape's surface along the ray centre -> p (see the header).
+template <typename T>
+T rayDistance(const T* x, const T* p) {
+  const T d[3] = {p[0] - x[6], p[1] - x[7], p[2] - x[8]};
+  const T inverse[3] = {-x[9], -x[10], -x[11]};
+  T q[3];
+  ceres::AngleAxisRotatePoint(inverse, d, q);
+  T w[3];
+  T f(0.0);
+  for (int i = 0; i < 3; ++i) {
+    w[i] = pow(q[i] * q[i] / (x[i] * x[i]) + T(1e-18), x[3 + i] * T(0.5));  // |q_i / a_i|^e_i
+    f += w[i];
+  }
+  const T norm = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + T(1e-18));
+  if (f < T(1e-12)) return -norm;  // at the centre: deep inside, any finite value will do
+  // Solve sum_i w_i exp(mu e_i) = 1 for mu = log(lambda): Newton on the convex log-sum-exp,
+  // started from the equal-exponent solution.
+  T mu = -log(f) / ((x[3] + x[4] + x[5]) / T(3.0));
+  for (int it = 0; it < 5; ++it) {
+    T s(0.0), ds(0.0);
+    for (int i = 0; i < 3; ++i) {
+      const T term = w[i] * exp(mu * x[3 + i]);
+      s += term;
+      ds += x[3 + i] * term;
+    }
+    mu -= log(s) * s / ds;
+  }
+  return norm * (T(1.0) - exp(mu));
+}
+
+/// Table-frame point of the unit-scale sample q of shape x.
+template <typename T>
+void placeSample(const T* x, const Vec3& q, T* p) {
+  const T local[3] = {x[0] * T(q.x()), x[1] * T(q.y()), x[2] * T(q.z())};
+  const T aa[3] = {x[9], x[10], x[11]};
+  ceres::AngleAxisRotatePoint(aa, local, p);
+  for (int i = 0; i < 3; ++i) p[i] += x[6 + i];
+}
+
+struct DistortionResidual {
+  Vec3 point;
+  double weight;  // sqrt(lambda / N)
+  template <typename T>
+  bool operator()(const T* x, T* r) const {
+    const T p[3] = {T(point.x()), T(point.y()), T(point.z())};
+    r[0] = T(weight) * pow(x[0] * x[1] * x[2], 0.25) * rayDistance(x, p);
+    return true;
+  }
+};
+
+struct CollisionResidual {  // sample q of shape j penetrating shape i
+  Vec3 q;
+  double weight;
+  template <typename T>
+  bool operator()(const T* xi, const T* xj, T* r) const {
+    T p[3];
+    placeSample(xj, q, p);
+    const T d = rayDistance(xi, p);
+    r[0] = d < T(0.0) ? T(weight) * d : T(0.0);
+    return true;
+  }
+};
+
+struct FloorResidual {
+  Vec3 q;
+  double weight;
+  template <typename T>
+  bool operator()(const T* x, T* r) const {
+    T p[3];
+    placeSample(x, q, p);
+    r[0] = p[2] < T(0.0) ? T(weight) * p[2] : T(0.0);
+    return true;
+  }
+};
+
+Params toParams(const Superquadric& sq) {
+  Params x;
+  for (int i = 0; i < 3; ++i) {
+    x[i] = sq.scale_m[i];
+    x[3 + i] = sq.exponents[i];
+    x[6 + i] = sq.T_table_object.translation()[i];
+  }
+  const Eigen::AngleAxisd aa(sq.T_table_object.linear());
+  const Vec3 v = aa.angle() * aa.axis();
+  for (int i = 0; i < 3; ++i) x[9 + i] = v[i];
+  return x;
+}
+
+Superquadric fromParams(const Params& x) {
+  Superquadric sq;
+  sq.scale_m = Vec3(x[0], x[1], x[2]);
+  sq.exponents = Vec3(x[3], x[4], x[5]);
+  const Vec3 v(x[9], x[10], x[11]);
+  sq.T_table_object = Transform::Identity();
+  if (v.norm() > 1e-12) sq.T_table_object.linear() = Eigen::AngleAxisd(v.norm(), v / v.norm()).toRotationMatrix();
+  sq.T_table_object.translation() = Vec3(x[6], x[7], x[8]);
+  return sq;
+}
+
+void clampToBounds(Params* x, const FitConfig& c) {
+  for (int i = 0; i < 3; ++i) {
+    (*x)[i] = std::clamp((*x)[i], c.min_scale_m, c.max_scale_m);
+    (*x)[3 + i] = std::clamp((*x)[3 + i], c.min_exponent, c.max_exponent);
+  }
+}
+
+void setBounds(ceres::Problem* problem, double* x, const FitConfig& c) {
+  for (int i = 0; i < 3; ++i) {
+    problem->SetParameterLowerBound(x, i, c.min_scale_m);
+    problem->SetParameterUpperBound(x, i, c.max_scale_m);
+    problem->SetParameterLowerBound(x, 3 + i, c.min_exponent);
+    problem->SetParameterUpperBound(x, 3 + i, c.max_exponent);
+  }
+}
+
+void addDistortion(ceres::Problem* problem, double* x, const Points3& points, double lambda,
+                   int max_points) {
+  const size_t n = points.size();
+  const size_t stride = std::max<size_t>(1, (n + max_points - 1) / std::max(1, max_points));
+  const size_t used = (n + stride - 1) / stride;
+  const double weight = std::sqrt(lambda / used);
+  for (size_t k = 0; k < n; k += stride) {
+    problem->AddResidualBlock(
+        new ceres::AutoDiffCostFunction<DistortionResidual, 1, kParams>(
+            new DistortionResidual{points[k], weight}),
+        nullptr, x);
+  }
+}
+
+ceres::Solver::Options solverOptions(const FitConfig& c) {
+  ceres::Solver::Options o;
+  o.trust_region_strategy_type = ceres::DOGLEG;
+  o.linear_solver_type = ceres::DENSE_QR;
+  o.max_num_iterations = c.max_iterations;
+  o.num_threads = std::max(1, c.threads);
+  o.logging_type = ceres::SILENT;
+  o.minimizer_progress_to_stdout = false;
+  return o;
+}
+
+/// Surface samples of the unit-scale shape with the given exponents.
+std::vector<Vec3> unitSamples(const Vec3& exponents, int count, uint64_t seed) {
+  Superquadric unit;
+  unit.scale_m = Vec3::Ones();
+  unit.exponents = exponents;
+  std::mt19937_64 rng(seed);
+  std::vector<Vec3> out;
+  for (const SurfacePoint& s : unit.sampleSurfaceObject(count, rng)) out.push_back(s.position);
+  return out;
+}
+
+void checkPoints(const Points3& points) {
+  if (points.size() < 4)
+    throw std::invalid_argument("superquadric fitting needs at least 4 points, got " +
+                                std::to_string(points.size()));
+  for (const Vec3& p : points)
+    if (!p.allFinite()) throw std::invalid_argument("superquadric fitting: non-finite point");
+}
+
+}  // namespace
+
+double surfaceDistance(const Superquadric& sq, const Vec3& p_table) {
+  const Params x = toParams(sq);
+  const double p[3] = {p_table.x(), p_table.y(), p_table.z()};
+  return rayDistance(x.data(), p);
+}
+
+double meanDistortion(const Superquadric& sq, const Points3& points_table) {
+  if (points_table.empty()) return 0.0;
+  double sum = 0;
+  for (const Vec3& p : points_table) {
+    const double d = surfaceDistance(sq, p);
+    sum += d * d;
+  }
+  return std::sqrt(sq.scale_m.prod()) * sum / points_table.size();
+}
+
+Superquadric initialGuess(const Points3& points, double initial_exponent) {
+  checkPoints(points);
+  Vec3 mean = Vec3::Zero();
+  for (const Vec3& p : points) mean += p;
+  mean /= points.size();
+  Mat3 cov = Mat3::Zero();
+  for (const Vec3& p : points) cov += (p - mean) * (p - mean).transpose();
+  Mat3 axes = Eigen::SelfAdjointEigenSolver<Mat3>(cov).eigenvectors();
+  if (axes.determinant() < 0) axes.col(0) = -axes.col(0);
+  Vec3 lo = Vec3::Constant(1e9), hi = Vec3::Constant(-1e9);
+  for (const Vec3& p : points) {
+    const Vec3 l = axes.transpose() * (p - mean);
+    lo = lo.cwiseMin(l);
+    hi = hi.cwiseMax(l);
+  }
+  Superquadric sq;
+  sq.scale_m = (0.5 * (hi - lo)).cwiseMax(1e-3);
+  sq.exponents = Vec3::Constant(initial_exponent);
+  sq.T_table_object = Transform::Identity();
+  sq.T_table_object.linear() = axes;
+  sq.T_table_object.translation() = mean + axes * (0.5 * (hi + lo));
+  return sq;
+}
+
+Superquadric fitSuperquadric(const Points3& points, const FitConfig& c) {
+  checkPoints(points);
+  Params x = toParams(initialGuess(points, c.initial_exponent));
+  clampToBounds(&x, c);
+  ceres::Problem problem;
+  addDistortion(&problem, x.data(), points, 1.0, c.max_points);
+  setBounds(&problem, x.data(), c);
+  ceres::Solver::Summary summary;
+  ceres::Solve(solverOptions(c), &problem, &summary);
+  return fromParams(x);
+}
+
+std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
+                                        const std::vector<Superquadric>& shapes,
+                                        const FitConfig& c) {
+  if (points.size() != shapes.size())
+    throw std::invalid_argument("refineJointly: one point set per shape is required");
+  const size_t n = shapes.size();
+  std::vector<Params> x(n);
+  for (size_t i = 0; i < n; ++i) {
+    x[i] = toParams(shapes[i]);
+    clampToBounds(&x[i], c);
+  }
+  for (int round = 0; round < std::max(1, c.joint_rounds); ++round) {
+    ceres::Problem problem;
+    std::vector<std::vector<Vec3>> samples(n);
+    for (size_t i = 0; i < n; ++i) {
+      problem.AddParameterBlock(x[i].data(), kParams);
+      if (!points[i].empty()) addDistortion(&problem, x[i].data(), points[i], c.lambda_dist, c.max_points);
+      samples[i] = unitSamples(Vec3(x[i][3], x[i][4], x[i][5]), c.shape_samples, 977 * round + i);
+    }
+    for (size_t i = 0; i < n; ++i) {
+      const double floor_w = std::sqrt(c.lambda_floor);  // eq. 9 sums, it has no 1/N
+      for (const Vec3& q : samples[i])
+        problem.AddResidualBlock(
+            new ceres::AutoDiffCostFunction<FloorResidual, 1, kParams>(new FloorResidual{q, floor_w}),
+            nullptr, x[i].data());
+      for (size_t j = 0; j < n; ++j) {
+        if (i == j) continue;
+        // Only pairs whose bounding spheres meet can collide.
+        const double reach_i = std::max({x[i][0], x[i][1], x[i][2]}) * std::sqrt(3.0);
+        const double reach_j = std::max({x[j][0], x[j][1], x[j][2]}) * std::sqrt(3.0);
+        const Vec3 ti(x[i][6], x[i][7], x[i][8]), tj(x[j][6], x[j][7], x[j][8]);
+        if ((ti - tj).norm() > reach_i + reach_j) continue;
+        const double w = std::sqrt(c.lambda_coll / samples[j].size());
+        for (const Vec3& q : samples[j])
+          problem.AddResidualBlock(new ceres::AutoDiffCostFunction<CollisionResidual, 1, kParams, kParams>(
+                                       new CollisionResidual{q, w}),
+                                   nullptr, x[i].data(), x[j].data());
+      }
+    }
+    for (size_t i = 0; i < n; ++i) setBounds(&problem, x[i].data(), c);
+    ceres::Solver::Options options = solverOptions(c);
+    ceres::Solver::Summary summary;
+    ceres::Solve(options, &problem, &summary);
+  }
+  std::vector<Superquadric> out;
+  for (const Params& p : x) out.push_back(fromParams(p));
+  return out;
+}
+
+double collisionCost(const Superquadric& a, const Superquadric& b, int samples) {
+  const Params xb = toParams(b);
+  double sum = 0;
+  const std::vector<Vec3> q = unitSamples(b.exponents, samples, 12345);
+  for (const Vec3& s : q) {
+    double p[3];
+    placeSample(xb.data(), s, p);
+    const double d = surfaceDistance(a, Vec3(p[0], p[1], p[2]));
+    if (d < 0) sum += d * d;
+  }
+  return q.empty() ? 0.0 : sum / q.size();
+}
+
+}  // namespace simstack

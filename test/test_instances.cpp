@@ -1,0 +1,118 @@
+// Hough voting against synthetic vote fields whose centres are known exactly.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "simstack/instances/hough_voting.h"
+
+namespace simstack {
+namespace {
+
+struct Ball {
+  Vec3 centre;
+  double radius;
+};
+
+/// TSDF (min over balls) and the ideal vote field of non-overlapping balls.
+void ballFields(const GridSpec& g, const std::vector<Ball>& balls, Grid3<float>* tsdf,
+                Grid3<Vec3f>* votes) {
+  *tsdf = Grid3<float>(g, 0.06f);
+  *votes = Grid3<Vec3f>(g, Vec3f::Zero());
+  for (int z = 0; z < g.resolution; ++z)
+    for (int y = 0; y < g.resolution; ++y)
+      for (int x = 0; x < g.resolution; ++x) {
+        const Vec3 p = g.voxelCentre(x, y, z);
+        for (const Ball& b : balls) {
+          const double d = (p - b.centre).norm() - b.radius;
+          if (d < tsdf->at(x, y, z)) {
+            tsdf->at(x, y, z) = static_cast<float>(d);
+            if (d <= 0) votes->at(x, y, z) = (b.centre - p).normalized().cast<float>();
+          }
+        }
+      }
+}
+
+/// k balls of 2.5-4 voxels radius at random non-touching places in a 32^3 grid.
+std::vector<Ball> randomBalls(const GridSpec& g, int k, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> pos(0.15, 0.85), rad(2.5, 4.0);
+  std::vector<Ball> balls;
+  while (static_cast<int>(balls.size()) < k) {
+    Ball b{g.origin_table + g.extent_m() * Vec3(pos(rng), pos(rng), pos(rng)),
+           rad(rng) * g.voxel_size_m};
+    bool ok = true;
+    for (const Ball& o : balls)
+      ok = ok && (o.centre - b.centre).norm() > o.radius + b.radius + 1.5 * g.voxel_size_m;
+    if (ok) balls.push_back(b);
+  }
+  return balls;
+}
+
+TEST(HoughVoting, RecoversOneToEightCentresWithinOneVoxel) {
+  const GridSpec g = GridSpec::sceneGrid(Vec2(0.1, -0.2), 0.64, 32);
+  std::mt19937_64 rng(3);
+  for (int k = 1; k <= 8; ++k) {
+    const std::vector<Ball> balls = randomBalls(g, k, rng);
+    Grid3<float> tsdf;
+    Grid3<Vec3f> votes;
+    ballFields(g, balls, &tsdf, &votes);
+    const InstanceSegmentation seg = houghInstances(tsdf, votes);
+    ASSERT_EQ(seg.size(), k) << "k = " << k;
+    for (const Ball& b : balls) {
+      double best = 1e9;
+      for (const Vec3& c : seg.centres_table) best = std::min(best, (c - b.centre).norm());
+      EXPECT_LT(best, g.voxel_size_m) << "k = " << k;
+    }
+    // Every occupied voxel gets the instance whose centre is its ball's.
+    for (int i = 0; i < g.voxelCount(); ++i) {
+      if (tsdf.data[i] > 0) {
+        EXPECT_EQ(seg.labels.data[i], -1);
+        continue;
+      }
+      const Vec3i v = g.unravel(i);
+      const Vec3 p = g.voxelCentre(v.x(), v.y(), v.z());
+      ASSERT_GE(seg.labels.data[i], 0);
+      const Vec3 c = seg.centres_table[seg.labels.data[i]];
+      double owner = 1e9;
+      for (const Ball& b : balls)
+        if ((p - b.centre).norm() <= b.radius) owner = (c - b.centre).norm();
+      EXPECT_LT(owner, g.voxel_size_m);
+    }
+  }
+}
+
+TEST(HoughVoting, WorksAtR64AndIsSparse) {
+  const GridSpec g = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 64);
+  std::mt19937_64 rng(5);
+  const std::vector<Ball> balls = randomBalls(g, 4, rng);
+  Grid3<float> tsdf;
+  Grid3<Vec3f> votes;
+  ballFields(g, balls, &tsdf, &votes);
+  const InstanceSegmentation seg = houghInstances(tsdf, votes);
+  EXPECT_EQ(seg.size(), 4);
+  EXPECT_GT(seg.traversals, 0u);
+  EXPECT_LT(static_cast<double>(seg.candidate_cells), 0.001 * 640.0 * 640 * 640);
+}
+
+TEST(HoughVoting, EmptySceneAndBadInput) {
+  const GridSpec g = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 16);
+  const InstanceSegmentation empty =
+      houghInstances(Grid3<float>(g, 0.06f), Grid3<Vec3f>(g, Vec3f::Zero()));
+  EXPECT_EQ(empty.size(), 0);
+  GridSpec other = g;
+  other.resolution = 8;
+  EXPECT_THROW(houghInstances(Grid3<float>(g, 0.06f), Grid3<Vec3f>(other, Vec3f::Zero())),
+               std::invalid_argument);
+}
+
+TEST(HoughVoting, ZeroVotesDoNotCrash) {
+  // Occupied voxels whose votes are all zero: no centre can be found; nothing is labelled.
+  const GridSpec g = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 16);
+  Grid3<float> tsdf(g, 0.06f);
+  for (int i = 0; i < 50; ++i) tsdf.data[2000 + i] = -0.01f;
+  const InstanceSegmentation seg = houghInstances(tsdf, Grid3<Vec3f>(g, Vec3f::Zero()));
+  EXPECT_EQ(seg.size(), 0);
+  for (int l : seg.labels.data) EXPECT_EQ(l, -1);
+}
+
+}  // namespace
+}  // namespace simstack
