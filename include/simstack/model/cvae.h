@@ -110,8 +110,10 @@ TORCH_MODULE(Cvae);
 /// Eq. 1: sum over voxels of |v - v_hat| / (|v| + eps), averaged over the batch.
 torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Tensor& target,
                                       double eps);
-/// Eq. 2: sum over voxels of the Euclidean norm of the vote error, averaged over the batch.
-torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target);
+/// Eq. 2: sum over voxels of the Euclidean norm of the vote error, averaged over the batch;
+/// with `occupied_only`, only over voxels whose target vote is non-zero (inside an object).
+torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target,
+                       bool occupied_only = false);
 /// Maximum mean discrepancy between codes z [B, d] and prior samples [N, d] with the Gaussian
 /// kernel exp(-|a - b|^2 / d) (InfoVAE, Zhao et al. 2019).
 torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior);

@@ -28,6 +28,11 @@ struct CvaeConfig {
   /// epsilon of eq. 1 in units of tau. The paper's 1e-9 gives voxels that happen to lie on the
   /// surface weights up to 1e9; 0.01 caps them at 100x.
   double tsdf_epsilon = 0.01;
+  /// Voxels where eq. 2 is summed: "occupied" (ground-truth occupied voxels, whose votes the
+  /// Hough step reads) or "all" (the paper: every voxel, target zero outside objects). With
+  /// "all" the ~30,000 free voxels pull every vote to zero with unit-size gradients, and our
+  /// models learned zero votes everywhere (loss = number of occupied voxels).
+  std::string vote_loss = "occupied";
 
   /// Throws std::invalid_argument naming the bad field.
   void validate() const;

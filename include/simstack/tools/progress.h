@@ -12,9 +12,12 @@ namespace simstack {
 
 class ProgressBar {
  public:
-  ProgressBar(std::string label, long total)
+  /// `first`: the count already done when the bar starts (a resumed job), so that the time
+  /// left is estimated from this run's pace.
+  ProgressBar(std::string label, long total, long first = 0)
       : label_(std::move(label)),
         total_(total),
+        first_(first),
         tty_(isatty(fileno(stderr))),
         start_(std::chrono::steady_clock::now()) {}
   /// Shows `done` of `total`, with an optional suffix (e.g. current losses).
@@ -31,7 +34,7 @@ class ProgressBar {
     last_decile_ = done * 10 / total_;
     const int width = 30;
     const int filled = total_ > 0 ? static_cast<int>(width * done / total_) : width;
-    const double eta = done > 0 ? elapsed * (total_ - done) / done : 0.0;
+    const double eta = done > first_ ? elapsed * (total_ - done) / (done - first_) : 0.0;
     std::fprintf(stderr, "%s%s [%s%s] %ld/%ld  %.0fs elapsed, %.0fs left %s%s", tty_ ? "\r" : "",
                  label_.c_str(), std::string(filled, '#').c_str(),
                  std::string(width - filled, '.').c_str(), done, total_, elapsed, eta,
@@ -45,6 +48,7 @@ class ProgressBar {
  private:
   std::string label_;
   long total_;
+  long first_;
   bool tty_;
   std::chrono::steady_clock::time_point start_;
   std::chrono::steady_clock::time_point last_{};

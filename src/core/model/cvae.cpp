@@ -198,9 +198,11 @@ torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Te
   return ((pred - target).abs() / (target.abs() + eps)).flatten(1).sum(1).mean();
 }
 
-torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target) {
+torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target, bool occupied_only) {
   // sqrt(. + 1e-12): the norm's gradient is undefined where prediction and target agree.
-  return ((pred - target).pow(2).sum(1) + 1e-12).sqrt().flatten(1).sum(1).mean();
+  torch::Tensor per_voxel = ((pred - target).pow(2).sum(1) + 1e-12).sqrt();
+  if (occupied_only) per_voxel = per_voxel * (target.pow(2).sum(1) > 0.25).to(per_voxel.dtype());
+  return per_voxel.flatten(1).sum(1).mean();
 }
 
 torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior) {
@@ -217,7 +219,7 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
   CvaeLosses l;
   l.tsdf = inverseTsdfWeightedLoss(out.tsdf, tsdf, c.tsdf_epsilon);
   l.partial = inverseTsdfWeightedLoss(out.partial_recon, partial.narrow(1, 0, 1), c.tsdf_epsilon);
-  l.votes = voteLoss(out.votes, votes);
+  l.votes = voteLoss(out.votes, votes, c.vote_loss == "occupied");
   l.mmd =
       out.z.defined() ? mmdLoss(out.z, torch::randn_like(out.z)) : torch::zeros({}, tsdf.options());
   l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + c.delta * l.mmd;

@@ -42,6 +42,7 @@ void cvaeFields(C& c, F&& f) {
   f("gamma", c.gamma);
   f("delta", c.delta);
   f("tsdf_epsilon", c.tsdf_epsilon);
+  f("vote_loss", c.vote_loss);
 }
 
 template <class C, class F>
@@ -79,6 +80,8 @@ void CvaeConfig::validate() const {
           "latent, condition and hidden sizes must be >= 1");
   require(alpha >= 0 && beta >= 0 && gamma >= 0 && delta >= 0, "loss weights must be >= 0");
   require(tsdf_epsilon > 0.0, "tsdf_epsilon must be > 0");
+  require(vote_loss == "occupied" || vote_loss == "all",
+          "vote_loss must be 'occupied' or 'all', got '" + vote_loss + "'");
 }
 
 std::string CvaeConfig::toYaml() const {

@@ -212,7 +212,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
 
   TrainingReport report;
   std::deque<std::array<double, 5>> recent;
-  ProgressBar bar(mc.architecture == "fc" ? "training FC" : "training C-VAE", tc.steps);
+  ProgressBar bar(mc.architecture == "fc" ? "training FC" : "training C-VAE", tc.steps, start);
   auto t0 = std::chrono::steady_clock::now();
   int64_t trained = 0;
   model->train();

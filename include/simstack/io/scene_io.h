@@ -1,0 +1,46 @@
+#pragma once
+/// @file scene_io.h
+/// Files of a reconstruction: superquadric scenes (YAML), meshes (PLY) and labelled clouds
+/// (PCD) through PCL, predicted grids (HDF5). Every function throws std::runtime_error
+/// naming the file on failure.
+
+#include <string>
+#include <vector>
+
+#include "simstack/geometry/image.h"
+#include "simstack/geometry/pinhole_camera.h"
+#include "simstack/geometry/superquadric.h"
+#include "simstack/geometry/triangle_mesh.h"
+#include "simstack/geometry/voxel_grid.h"
+
+namespace simstack {
+
+/// `objects:` list of {id, scale [a1,a2,a3], exponents [r,s,t], position [x,y,z],
+/// orientation [qw,qx,qy,qz]} in `frame` (the table frame).
+void writeSuperquadricsYaml(const std::string& path, const std::vector<Superquadric>& shapes,
+                            const std::string& frame = "table");
+std::vector<Superquadric> readSuperquadricsYaml(const std::string& path);
+
+void writeMeshPly(const std::string& path, const TriangleMesh& mesh);
+TriangleMesh readMeshPly(const std::string& path);
+
+/// PCD of x y z label (pcl::PointXYZL), binary.
+void writeLabelledCloudPcd(const std::string& path, const Points3& points,
+                           const std::vector<int>& labels);
+
+/// Depth (metres) from an organized PCD: z of each point, NaN where invalid. The size comes
+/// from the cloud, which must be organized.
+DepthImage readDepthPcd(const std::string& path);
+
+/// Grids of one prediction, all on `grid`: datasets tsdf, occupancy_probability, labels,
+/// partial_tsdf, partial_weight ([z][y][x]), with attributes origin_table, voxel_size_m,
+/// resolution and T_table_camera (4x4 row-major).
+struct PredictionGrids {
+  GridSpec grid;
+  Transform T_table_camera = Transform::Identity();
+  Grid3<float> tsdf_m, occupancy_probability, partial_tsdf_m, partial_weight;
+  Grid3<int> labels;
+};
+void writePredictionH5(const std::string& path, const PredictionGrids& grids);
+
+}  // namespace simstack

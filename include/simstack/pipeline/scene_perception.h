@@ -1,0 +1,119 @@
+#pragma once
+/// @file scene_perception.h
+/// The one entry point from depth to superquadrics (DESIGN.md section 1), used by the ROS
+/// nodelet, the tools and the evaluation:
+///   depth (+ table pose, or a RANSAC table) -> partial TSDF -> C-VAE samples ->
+///   Hough-voting instances -> marching cubes -> superquadric fits.
+/// No torch and no ROS in this header.
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "simstack/fitting/superquadric_fit.h"
+#include "simstack/geometry/image.h"
+#include "simstack/geometry/pinhole_camera.h"
+#include "simstack/geometry/triangle_mesh.h"
+#include "simstack/geometry/voxel_grid.h"
+#include "simstack/instances/hough_voting.h"
+#include "simstack/model/cvae_config.h"
+#include "simstack/pipeline/table_plane.h"
+
+namespace simstack {
+
+struct PerceptionConfig {
+  std::string model_path;        ///< a model written by simstack_train (required)
+  int samples = 3;               ///< S latent samples per frame
+  bool zero_code_first = true;   ///< hypothesis 0 is the mean scene (z = 0)
+  uint64_t seed = 0;             ///< latent codes; the same seed gives the same hypotheses
+  int decompose_samples = 1;     ///< hypotheses split into instances and fitted (the first ones)
+  int points_per_instance = 1000;  ///< mesh samples handed to the fitter
+  int min_instance_points = 30;  ///< instances with a smaller surface are dropped
+  bool joint_refinement = true;  ///< eqs. 7-9 after the per-instance fits
+  double min_pile_height_m = 0.01;  ///< depth points lower than this are table
+  int threads = 2;
+  HoughConfig hough;
+  FitConfig fit;
+  TablePlaneConfig table;
+};
+
+/// One depth image with its camera and, when known, its pose. Views after the first must
+/// carry a pose (they are fused into the first view's table frame).
+struct DepthView {
+  DepthImage depth;  ///< metres; NaN / 0 = missing
+  PinholeCamera camera;
+  std::optional<Transform> T_table_camera;
+};
+
+struct InstanceEstimate {
+  Superquadric superquadric;  ///< table frame
+  TriangleMesh mesh;          ///< this instance's part of the predicted surface
+  Points3 points;             ///< surface samples of `mesh` (what was fitted)
+  Vec3 vote_centre = Vec3::Zero();  ///< Hough centre
+  int voxels = 0;
+};
+
+/// One generated scene: the network's grids and, when decomposed, its instances.
+struct SceneHypothesis {
+  Grid3<float> tsdf_m;
+  Grid3<Vec3f> votes;
+  Grid3<int> labels;          ///< instance per voxel, -1 free (empty unless decomposed)
+  TriangleMesh surface;       ///< marching cubes of tsdf_m
+  std::vector<InstanceEstimate> instances;
+  bool decomposed = false;
+};
+
+struct StageTimings {
+  double table_ms = 0, tsdf_ms = 0, network_ms = 0, instances_ms = 0, mesh_ms = 0,
+         fitting_ms = 0, total_ms = 0;
+};
+
+struct SceneEstimate {
+  Transform T_table_camera = Transform::Identity();  ///< of the first view
+  bool table_estimated = false;  ///< true when the table came from RANSAC, not the caller
+  GridSpec grid;
+  Grid3<float> partial_tsdf_m, partial_weight;  ///< the network's input
+  Grid3<float> occupancy_probability;  ///< share of hypotheses with tsdf <= 0, per voxel
+  std::vector<SceneHypothesis> hypotheses;  ///< S of them; the decomposed ones first
+  StageTimings timings;
+  /// Instances of hypothesis 0 (the mean scene by default).
+  const std::vector<InstanceEstimate>& instances() const { return hypotheses.front().instances; }
+};
+
+/// Splits one hypothesis into instances and fits them (Hough voting, marching cubes, Ceres).
+/// Adds the time spent to `timings` when given.
+void decompose(SceneHypothesis* hypothesis, const PerceptionConfig& config,
+               StageTimings* timings = nullptr);
+
+/// Fits superquadrics to point sets (one per instance) with the configured fitter: per-instance
+/// fits, then the joint refinement when enabled. Sets with too few points are skipped (their
+/// entry in the result is std::nullopt).
+std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>& points,
+                                                      const PerceptionConfig& config);
+
+class ScenePerception {
+ public:
+  /// Loads the model; throws std::runtime_error naming the file when it cannot, and
+  /// std::invalid_argument for a bad config value.
+  explicit ScenePerception(const PerceptionConfig& config);
+  ~ScenePerception();
+  ScenePerception(const ScenePerception&) = delete;
+  ScenePerception& operator=(const ScenePerception&) = delete;
+
+  /// Throws std::invalid_argument for unusable input (no view, image and camera sizes differ,
+  /// a later view without pose) and std::runtime_error when no table pose is given and none
+  /// can be estimated. A scene with nothing on the table gives hypotheses without instances.
+  /// Not thread-safe (one model state): use one ScenePerception per thread.
+  SceneEstimate perceive(const std::vector<DepthView>& views) const;
+  SceneEstimate perceive(const DepthView& view) const { return perceive(std::vector<DepthView>{view}); }
+
+  const PerceptionConfig& config() const;
+  const CvaeConfig& modelConfig() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace simstack

@@ -1,0 +1,192 @@
+#include "simstack/io/scene_io.h"
+
+#include <H5Cpp.h>
+#include <pcl/PolygonMesh.h>
+#include <pcl/conversions.h>
+#include <pcl/io/pcd_io.h>
+#include <pcl/io/ply_io.h>
+#include <pcl/point_types.h>
+#include <yaml-cpp/yaml.h>
+
+#include <fstream>
+#include <stdexcept>
+
+namespace simstack {
+namespace {
+
+std::vector<double> seq(const YAML::Node& n, size_t size, const std::string& what,
+                        const std::string& path) {
+  if (!n || !n.IsSequence() || n.size() != size)
+    throw std::runtime_error(path + ": '" + what + "' must be a list of " + std::to_string(size) +
+                             " numbers");
+  std::vector<double> v;
+  for (const auto& x : n) v.push_back(x.as<double>());
+  return v;
+}
+
+}  // namespace
+
+void writeSuperquadricsYaml(const std::string& path, const std::vector<Superquadric>& shapes,
+                            const std::string& frame) {
+  YAML::Emitter out;
+  out << YAML::BeginMap << YAML::Key << "frame" << YAML::Value << frame;
+  out << YAML::Key << "objects" << YAML::Value << YAML::BeginSeq;
+  for (size_t i = 0; i < shapes.size(); ++i) {
+    const Superquadric& s = shapes[i];
+    const Quat q(s.T_table_object.linear());
+    const Vec3 t = s.T_table_object.translation();
+    out << YAML::BeginMap << YAML::Key << "id" << YAML::Value << i;
+    out << YAML::Key << "scale" << YAML::Value << YAML::Flow
+        << std::vector<double>{s.scale_m.x(), s.scale_m.y(), s.scale_m.z()};
+    out << YAML::Key << "exponents" << YAML::Value << YAML::Flow
+        << std::vector<double>{s.exponents.x(), s.exponents.y(), s.exponents.z()};
+    out << YAML::Key << "position" << YAML::Value << YAML::Flow
+        << std::vector<double>{t.x(), t.y(), t.z()};
+    out << YAML::Key << "orientation" << YAML::Value << YAML::Flow
+        << std::vector<double>{q.w(), q.x(), q.y(), q.z()};
+    out << YAML::EndMap;
+  }
+  out << YAML::EndSeq << YAML::EndMap;
+  std::ofstream f(path);
+  if (!f) throw std::runtime_error("cannot write " + path);
+  f << "# superquadrics (SIMstack eq. 4): scale = semi-axes a1..a3 in m, exponents r s t,\n"
+       "# pose T_table_object as position + orientation quaternion [w, x, y, z]\n"
+    << out.c_str() << "\n";
+  if (!f) throw std::runtime_error("cannot write " + path);
+}
+
+std::vector<Superquadric> readSuperquadricsYaml(const std::string& path) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const std::exception& e) {
+    throw std::runtime_error("cannot read superquadrics from " + path + ": " + e.what());
+  }
+  if (!root["objects"] || !root["objects"].IsSequence())
+    throw std::runtime_error(path + ": no 'objects' list");
+  std::vector<Superquadric> out;
+  for (const auto& o : root["objects"]) {
+    const auto a = seq(o["scale"], 3, "scale", path), e = seq(o["exponents"], 3, "exponents", path),
+               p = seq(o["position"], 3, "position", path),
+               q = seq(o["orientation"], 4, "orientation", path);
+    Superquadric s;
+    s.scale_m = Vec3(a[0], a[1], a[2]);
+    s.exponents = Vec3(e[0], e[1], e[2]);
+    if ((s.scale_m.array() <= 0).any() || (s.exponents.array() <= 0).any())
+      throw std::runtime_error(path + ": scales and exponents must be positive");
+    Quat quat(q[0], q[1], q[2], q[3]);
+    if (quat.norm() < 1e-9) throw std::runtime_error(path + ": zero orientation quaternion");
+    s.T_table_object = Transform::Identity();
+    s.T_table_object.linear() = quat.normalized().toRotationMatrix();
+    s.T_table_object.translation() = Vec3(p[0], p[1], p[2]);
+    out.push_back(s);
+  }
+  return out;
+}
+
+void writeMeshPly(const std::string& path, const TriangleMesh& mesh) {
+  pcl::PointCloud<pcl::PointXYZ> cloud;
+  for (const Vec3& v : mesh.vertices) cloud.push_back(pcl::PointXYZ(v.x(), v.y(), v.z()));
+  pcl::PolygonMesh pm;
+  pcl::toPCLPointCloud2(cloud, pm.cloud);
+  for (const auto& t : mesh.triangles) {
+    pcl::Vertices f;
+    f.vertices = {static_cast<uint32_t>(t[0]), static_cast<uint32_t>(t[1]),
+                  static_cast<uint32_t>(t[2])};
+    pm.polygons.push_back(f);
+  }
+  if (pcl::io::savePLYFileBinary(path, pm) != 0) throw std::runtime_error("cannot write " + path);
+}
+
+TriangleMesh readMeshPly(const std::string& path) {
+  pcl::PolygonMesh pm;
+  if (pcl::io::loadPLYFile(path, pm) != 0) throw std::runtime_error("cannot read mesh " + path);
+  pcl::PointCloud<pcl::PointXYZ> cloud;
+  pcl::fromPCLPointCloud2(pm.cloud, cloud);
+  TriangleMesh mesh;
+  for (const auto& p : cloud) mesh.vertices.emplace_back(p.x, p.y, p.z);
+  for (const auto& f : pm.polygons) {
+    if (f.vertices.size() != 3) throw std::runtime_error(path + ": only triangle meshes are read");
+    for (uint32_t i : f.vertices)
+      if (i >= mesh.vertices.size()) throw std::runtime_error(path + ": vertex index out of range");
+    mesh.triangles.emplace_back(f.vertices[0], f.vertices[1], f.vertices[2]);
+  }
+  return mesh;
+}
+
+void writeLabelledCloudPcd(const std::string& path, const Points3& points,
+                           const std::vector<int>& labels) {
+  if (labels.size() != points.size())
+    throw std::invalid_argument("writeLabelledCloudPcd: one label per point is required");
+  pcl::PointCloud<pcl::PointXYZL> cloud;
+  for (size_t i = 0; i < points.size(); ++i) {
+    pcl::PointXYZL p;
+    p.x = points[i].x();
+    p.y = points[i].y();
+    p.z = points[i].z();
+    p.label = static_cast<uint32_t>(std::max(labels[i], 0));
+    cloud.push_back(p);
+  }
+  if (cloud.empty()) {  // PCL refuses to write an empty cloud; an empty file is still valid
+    cloud.width = 0;
+    cloud.height = 1;
+    std::ofstream f(path);
+    f << "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z label\n"
+         "SIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 0\nHEIGHT 1\n"
+         "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 0\nDATA ascii\n";
+    if (!f) throw std::runtime_error("cannot write " + path);
+    return;
+  }
+  if (pcl::io::savePCDFileBinary(path, cloud) != 0) throw std::runtime_error("cannot write " + path);
+}
+
+DepthImage readDepthPcd(const std::string& path) {
+  pcl::PointCloud<pcl::PointXYZ> cloud;
+  if (pcl::io::loadPCDFile(path, cloud) != 0) throw std::runtime_error("cannot read cloud " + path);
+  if (!cloud.isOrganized() || cloud.width < 2 || cloud.height < 2)
+    throw std::runtime_error(path + " is not an organized cloud (height " +
+                             std::to_string(cloud.height) + "); a depth image needs one");
+  DepthImage depth(cloud.width, cloud.height, std::numeric_limits<float>::quiet_NaN());
+  for (uint32_t v = 0; v < cloud.height; ++v)
+    for (uint32_t u = 0; u < cloud.width; ++u) {
+      const float z = cloud.at(u, v).z;
+      if (std::isfinite(z) && z > 0) depth.at(u, v) = z;
+    }
+  return depth;
+}
+
+void writePredictionH5(const std::string& path, const PredictionGrids& g) {
+  try {
+    H5::H5File file(path, H5F_ACC_TRUNC);
+    const hsize_t r = g.grid.resolution;
+    const hsize_t dims[3] = {r, r, r};
+    H5::DataSpace space(3, dims);
+    auto put = [&](const char* name, const Grid3<float>& grid) {
+      if (grid.data.size() != r * r * r) return;
+      file.createDataSet(name, H5::PredType::NATIVE_FLOAT, space)
+          .write(grid.data.data(), H5::PredType::NATIVE_FLOAT);
+    };
+    put("tsdf", g.tsdf_m);
+    put("occupancy_probability", g.occupancy_probability);
+    put("partial_tsdf", g.partial_tsdf_m);
+    put("partial_weight", g.partial_weight);
+    if (g.labels.data.size() == r * r * r)
+      file.createDataSet("labels", H5::PredType::NATIVE_INT32, space)
+          .write(g.labels.data.data(), H5::PredType::NATIVE_INT);
+    H5::Group root = file.openGroup("/");
+    const hsize_t three = 3, sixteen = 16;
+    root.createAttribute("origin_table", H5::PredType::NATIVE_DOUBLE, H5::DataSpace(1, &three))
+        .write(H5::PredType::NATIVE_DOUBLE, g.grid.origin_table.data());
+    root.createAttribute("voxel_size_m", H5::PredType::NATIVE_DOUBLE, H5::DataSpace())
+        .write(H5::PredType::NATIVE_DOUBLE, &g.grid.voxel_size_m);
+    root.createAttribute("resolution", H5::PredType::NATIVE_INT, H5::DataSpace())
+        .write(H5::PredType::NATIVE_INT, &g.grid.resolution);
+    Eigen::Matrix<double, 4, 4, Eigen::RowMajor> T = g.T_table_camera.matrix();
+    root.createAttribute("T_table_camera", H5::PredType::NATIVE_DOUBLE, H5::DataSpace(1, &sixteen))
+        .write(H5::PredType::NATIVE_DOUBLE, T.data());
+  } catch (const H5::Exception& e) {
+    throw std::runtime_error("cannot write " + path + ": " + e.getDetailMsg());
+  }
+}
+
+}  // namespace simstack

@@ -1,0 +1,201 @@
+#include "simstack/pipeline/scene_perception.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <random>
+#include <stdexcept>
+
+#include "simstack/mesh/marching_cubes.h"
+#include "simstack/model/cvae_inference.h"
+#include "simstack/model/training_sample.h"
+#include "simstack/tsdf/projective_tsdf.h"
+
+namespace simstack {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+void checkView(const DepthView& v, size_t index) {
+  v.camera.validate();
+  if (v.depth.width != v.camera.width || v.depth.height != v.camera.height ||
+      v.depth.pixels.size() != static_cast<size_t>(v.depth.width) * v.depth.height)
+    throw std::invalid_argument("view " + std::to_string(index) + ": the depth image is " +
+                                std::to_string(v.depth.width) + "x" +
+                                std::to_string(v.depth.height) + " but its camera is " +
+                                std::to_string(v.camera.width) + "x" +
+                                std::to_string(v.camera.height));
+}
+
+/// x/y centre of the visible pile: the median of above-table points, then the centroid of
+/// those within half the grid of it (as the trainer centres its grids).
+Vec2 pileCentre(const DepthView& view, const Transform& T_table_camera, double extent_m,
+                double min_height_m) {
+  std::vector<double> xs, ys;
+  for (int v = 0; v < view.depth.height; v += 2)
+    for (int u = 0; u < view.depth.width; u += 2) {
+      const float d = view.depth.at(u, v);
+      if (!validDepth(d)) continue;
+      const Vec3 p = T_table_camera * view.camera.backproject(u, v, d);
+      if (p.z() < min_height_m || p.z() > extent_m) continue;
+      xs.push_back(p.x());
+      ys.push_back(p.y());
+    }
+  Vec2 near = (T_table_camera.translation()).head<2>();
+  if (!xs.empty()) {
+    std::nth_element(xs.begin(), xs.begin() + xs.size() / 2, xs.end());
+    std::nth_element(ys.begin(), ys.begin() + ys.size() / 2, ys.end());
+    near = Vec2(xs[xs.size() / 2], ys[ys.size() / 2]);
+  }
+  return visiblePileCentre(view.depth, view.camera, T_table_camera, near, 0.5 * extent_m,
+                           min_height_m);
+}
+
+}  // namespace
+
+std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>& points,
+                                                      const PerceptionConfig& config) {
+  const int n = static_cast<int>(points.size());
+  std::vector<std::optional<Superquadric>> fits(n);
+#pragma omp parallel for schedule(dynamic) num_threads(std::max(1, config.threads))
+  for (int i = 0; i < n; ++i) {
+    if (static_cast<int>(points[i].size()) < std::max(4, config.min_instance_points)) continue;
+    fits[i] = fitSuperquadric(points[i], config.fit);
+  }
+  if (!config.joint_refinement) return fits;
+  std::vector<Points3> pts;
+  std::vector<Superquadric> shapes;
+  std::vector<int> index;
+  for (int i = 0; i < n; ++i) {
+    if (!fits[i]) continue;
+    pts.push_back(points[i]);
+    shapes.push_back(*fits[i]);
+    index.push_back(i);
+  }
+  if (shapes.empty()) return fits;
+  FitConfig joint = config.fit;
+  joint.threads = std::max(1, config.threads);
+  const std::vector<Superquadric> refined = refineJointly(pts, shapes, joint);
+  for (size_t k = 0; k < index.size(); ++k) fits[index[k]] = refined[k];
+  return fits;
+}
+
+void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings* timings) {
+  auto t = Clock::now();
+  HoughConfig hough = config.hough;
+  hough.threads = std::max(1, config.threads);
+  const InstanceSegmentation seg = houghInstances(h->tsdf_m, h->votes, hough);
+  h->labels = seg.labels;
+  if (timings) timings->instances_ms += msSince(t);
+
+  t = Clock::now();
+  if (h->surface.empty()) h->surface = extractSurface(h->tsdf_m);
+  const std::vector<TriangleMesh> parts =
+      splitByLabel(h->surface, triangleLabels(h->surface, h->labels), seg.size());
+  std::vector<Points3> points(parts.size());
+  for (size_t k = 0; k < parts.size(); ++k) {
+    if (parts[k].empty()) continue;
+    std::mt19937_64 rng(config.seed * 7919 + k);
+    for (const SurfacePoint& s : parts[k].sampleSurface(config.points_per_instance, rng))
+      points[k].push_back(s.position);
+  }
+  if (timings) timings->mesh_ms += msSince(t);
+
+  t = Clock::now();
+  const std::vector<std::optional<Superquadric>> fits = fitInstances(points, config);
+  h->instances.clear();
+  for (size_t k = 0; k < parts.size(); ++k) {
+    if (!fits[k]) continue;
+    InstanceEstimate e;
+    e.superquadric = *fits[k];
+    e.mesh = parts[k];
+    e.points = points[k];
+    e.vote_centre = seg.centres_table[k];
+    e.voxels = seg.voxel_counts[k];
+    h->instances.push_back(std::move(e));
+  }
+  h->decomposed = true;
+  if (timings) timings->fitting_ms += msSince(t);
+}
+
+struct ScenePerception::Impl {
+  PerceptionConfig config;
+  std::unique_ptr<CvaeInference> model;
+};
+
+ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Impl) {
+  if (config.samples < 1) throw std::invalid_argument("samples must be >= 1");
+  if (config.decompose_samples < 0 || config.decompose_samples > config.samples)
+    throw std::invalid_argument("decompose_samples must lie in [0, samples]");
+  if (config.points_per_instance < 10) throw std::invalid_argument("points_per_instance must be >= 10");
+  if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
+  impl_->config = config;
+  impl_->model = std::make_unique<CvaeInference>(config.model_path, config.threads);
+}
+
+ScenePerception::~ScenePerception() = default;
+const PerceptionConfig& ScenePerception::config() const { return impl_->config; }
+const CvaeConfig& ScenePerception::modelConfig() const { return impl_->model->config(); }
+
+SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views) const {
+  const PerceptionConfig& c = impl_->config;
+  const CvaeConfig& mc = impl_->model->config();
+  if (views.empty()) throw std::invalid_argument("perceive: no depth view given");
+  for (size_t i = 0; i < views.size(); ++i) {
+    checkView(views[i], i);
+    if (i > 0 && !views[i].T_table_camera)
+      throw std::invalid_argument("perceive: view " + std::to_string(i) +
+                                  " has no pose; only the first view may leave the table to RANSAC");
+  }
+  const auto start = Clock::now();
+  SceneEstimate out;
+  auto t = Clock::now();
+  if (views[0].T_table_camera) {
+    out.T_table_camera = *views[0].T_table_camera;
+  } else {
+    out.T_table_camera = estimateTablePlane(views[0].depth, views[0].camera, c.table).T_table_camera;
+    out.table_estimated = true;
+  }
+  out.timings.table_ms = msSince(t);
+
+  t = Clock::now();
+  const Vec2 centre = pileCentre(views[0], out.T_table_camera, mc.extent_m, c.min_pile_height_m);
+  out.grid = GridSpec::sceneGrid(centre, mc.extent_m, mc.resolution);
+  ProjectiveTsdfConfig tc;
+  tc.truncation_m = mc.truncation_m();
+  ProjectiveTsdf partial(out.grid, tc);
+  for (size_t i = 0; i < views.size(); ++i)
+    partial.integrate(views[i].depth, views[i].camera,
+                      i == 0 ? out.T_table_camera : *views[i].T_table_camera);
+  out.partial_tsdf_m = partial.tsdf();
+  out.partial_weight = partial.weight();
+  out.timings.tsdf_ms = msSince(t);
+
+  t = Clock::now();
+  std::vector<CvaePrediction> predictions = impl_->model->predict(
+      out.partial_tsdf_m, out.partial_weight, c.samples, c.seed, c.zero_code_first);
+  out.timings.network_ms = msSince(t);
+
+  out.occupancy_probability = Grid3<float>(out.grid, 0.0f);
+  for (CvaePrediction& p : predictions) {
+    for (size_t i = 0; i < p.tsdf_m.data.size(); ++i)
+      if (p.tsdf_m.data[i] <= 0.0f) out.occupancy_probability.data[i] += 1.0f / predictions.size();
+    SceneHypothesis h;
+    h.tsdf_m = std::move(p.tsdf_m);
+    h.votes = std::move(p.votes);
+    h.labels = Grid3<int>(out.grid, -1);
+    out.hypotheses.push_back(std::move(h));
+  }
+  t = Clock::now();
+  for (SceneHypothesis& h : out.hypotheses) h.surface = extractSurface(h.tsdf_m);
+  out.timings.mesh_ms += msSince(t);
+  for (int k = 0; k < c.decompose_samples; ++k) decompose(&out.hypotheses[k], c, &out.timings);
+  out.timings.total_ms = msSince(start);
+  return out;
+}
+
+}  // namespace simstack

@@ -1,0 +1,173 @@
+// The perception pipeline: table estimation, decomposition of known grids, and
+// ScenePerception end to end with the shipped model.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "simstack/pipeline/scene_perception.h"
+#include "simstack/render/depth_renderer.h"
+#include "simstack/scene/pile_generator.h"
+#include "simstack/tsdf/ground_truth.h"
+
+namespace simstack {
+namespace {
+
+const std::string kModel = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
+
+struct RenderedPile {
+  Scene scene;
+  PinholeCamera camera;
+  Transform T_table_camera;
+  RenderResult view;
+};
+
+RenderedPile renderPile(uint64_t seed) {
+  RenderedPile p;
+  p.scene = PileGenerator(PileConfig()).generate(seed).scene;
+  const Vec3 centre = p.scene.surfaceCentroid();
+  p.T_table_camera = lookAt(centre + Vec3(0.55, -0.35, 0.55), Vec3(centre.x(), centre.y(), 0.05));
+  const DepthRenderer renderer(p.scene);
+  p.view = renderer.render(p.camera, p.T_table_camera);
+  return p;
+}
+
+TEST(TablePlane, RecoversTheTableOfARenderedScene) {
+  const RenderedPile p = renderPile(11);
+  const TablePlane plane = estimateTablePlane(p.view.depth, p.camera);
+  // Table points (instance 0) land on z = 0 of the estimated frame.
+  double worst = 0;
+  for (int v = 0; v < p.camera.height; v += 7)
+    for (int u = 0; u < p.camera.width; u += 7) {
+      if (p.view.instances.at(u, v) != 0) continue;
+      const Vec3 q = plane.T_table_camera * p.camera.backproject(u, v, p.view.depth.at(u, v));
+      worst = std::max(worst, std::abs(q.z()));
+    }
+  EXPECT_LT(worst, 0.002);
+  // Its z axis is the true one.
+  const Vec3 z_true = p.T_table_camera.linear().transpose() * Vec3::UnitZ();  // in the camera frame
+  const Vec3 z_est = plane.T_table_camera.linear().transpose() * Vec3::UnitZ();
+  EXPECT_GT(z_true.dot(z_est), std::cos(M_PI / 180.0));
+  // Objects are above it.
+  const Vec3 top = plane.T_table_camera * p.T_table_camera.inverse() * p.scene.surfaceCentroid();
+  EXPECT_GT(top.z(), 0.0);
+}
+
+TEST(TablePlane, FailsClearlyWithoutDepth) {
+  PinholeCamera camera;
+  const DepthImage empty(camera.width, camera.height, std::nanf(""));
+  EXPECT_THROW(estimateTablePlane(empty, camera), std::runtime_error);
+  EXPECT_THROW(estimateTablePlane(DepthImage(10, 10, 1.0f), camera), std::invalid_argument);
+}
+
+TEST(Decompose, GroundTruthGridsGiveOneFittedShapePerObject) {
+  PerceptionConfig config;
+  for (uint64_t seed : {1, 2, 3, 4, 5}) {
+    const Scene scene = PileGenerator(PileConfig()).generate(seed).scene;
+    const GridSpec grid = GridSpec::sceneGrid(scene.surfaceCentroid().head<2>(), 0.64, 32);
+    const GroundTruthGrids gt = computeGroundTruth(scene, grid, 3 * grid.voxel_size_m);
+    SceneHypothesis h;
+    h.tsdf_m = gt.tsdf;
+    h.votes = gt.votes;
+    StageTimings timings;
+    decompose(&h, config, &timings);
+    ASSERT_TRUE(h.decomposed);
+    ASSERT_EQ(h.instances.size(), scene.objects.size()) << "seed " << seed;
+    for (const SceneObject& o : scene.objects) {
+      double best = 1e9;
+      for (const InstanceEstimate& e : h.instances)
+        best = std::min(best, (e.superquadric.centroid() - o.T_table_object.translation()).norm());
+      EXPECT_LT(best, grid.voxel_size_m) << "seed " << seed;
+    }
+    for (const InstanceEstimate& e : h.instances) {
+      EXPECT_GE(e.superquadric.exponents.minCoeff(), config.fit.min_exponent);
+      EXPECT_GT(e.superquadric.scale_m.minCoeff(), 0.0);
+    }
+    EXPECT_GT(timings.fitting_ms, 0.0);
+  }
+}
+
+TEST(ScenePerception, PerceivesARenderedPile) {
+  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  PerceptionConfig config;
+  config.model_path = kModel;
+  const ScenePerception perception(config);
+  const RenderedPile p = renderPile(12);
+  for (bool known_table : {true, false}) {
+    DepthView view{p.view.depth, p.camera, std::nullopt};
+    if (known_table) view.T_table_camera = p.T_table_camera;
+    const SceneEstimate est = perception.perceive(view);
+    EXPECT_EQ(est.table_estimated, !known_table);
+    ASSERT_EQ(est.hypotheses.size(), 3u);
+    EXPECT_EQ(est.grid.resolution, 32);
+    EXPECT_EQ(est.occupancy_probability.data.size(), 32u * 32 * 32);
+    int occupied = 0;
+    for (float q : est.occupancy_probability.data) {
+      ASSERT_GE(q, 0.0f);
+      ASSERT_LE(q, 1.0f);
+      occupied += q >= 0.5f;
+    }
+    EXPECT_GT(occupied, 100);
+    EXPECT_TRUE(est.hypotheses[0].decomposed);
+    EXPECT_FALSE(est.hypotheses[1].decomposed);
+    EXPECT_FALSE(est.hypotheses[0].surface.empty());
+    for (const InstanceEstimate& e : est.instances()) {
+      EXPECT_TRUE(e.superquadric.scale_m.allFinite());
+      EXPECT_FALSE(e.points.empty());
+    }
+    EXPECT_GT(est.timings.network_ms, 0.0);
+    EXPECT_GE(est.timings.total_ms, est.timings.network_ms);
+  }
+}
+
+TEST(ScenePerception, BadInputGetsClearErrors) {
+  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  PerceptionConfig config;
+  config.model_path = kModel;
+  const ScenePerception perception(config);
+  PinholeCamera camera;
+  EXPECT_THROW(perception.perceive(std::vector<DepthView>{}), std::invalid_argument);
+  EXPECT_THROW(perception.perceive(DepthView{DepthImage(320, 240, 1.0f), camera, Transform::Identity()}),
+               std::invalid_argument);
+  // Nothing valid and no table pose: no table to be found.
+  const DepthImage nan_depth(camera.width, camera.height, std::nanf(""));
+  EXPECT_THROW(perception.perceive(DepthView{nan_depth, camera, std::nullopt}), std::runtime_error);
+  // Nothing valid with a pose: an answer, not a crash.
+  const RenderedPile p = renderPile(13);
+  const SceneEstimate est = perception.perceive(DepthView{nan_depth, camera, p.T_table_camera});
+  EXPECT_EQ(est.hypotheses.size(), 3u);
+  // A second view without a pose.
+  const DepthView good{p.view.depth, p.camera, p.T_table_camera};
+  EXPECT_THROW(perception.perceive({good, DepthView{p.view.depth, p.camera, std::nullopt}}),
+               std::invalid_argument);
+  PerceptionConfig missing = config;
+  missing.model_path = "/nonexistent/model.pt";
+  try {
+    ScenePerception bad(missing);
+    ADD_FAILURE() << "a missing model must throw";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/model.pt"), std::string::npos);
+  }
+}
+
+TEST(ScenePerception, TwoViewsFuse) {
+  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  PerceptionConfig config;
+  config.model_path = kModel;
+  config.decompose_samples = 0;
+  const ScenePerception perception(config);
+  const RenderedPile p = renderPile(14);
+  const Vec3 centre = p.scene.surfaceCentroid();
+  const Transform second = lookAt(centre + Vec3(-0.5, 0.45, 0.5), Vec3(centre.x(), centre.y(), 0.05));
+  const RenderResult r2 = DepthRenderer(p.scene).render(p.camera, second);
+  const SceneEstimate one = perception.perceive(DepthView{p.view.depth, p.camera, p.T_table_camera});
+  const SceneEstimate two = perception.perceive(
+      {DepthView{p.view.depth, p.camera, p.T_table_camera}, DepthView{r2.depth, p.camera, second}});
+  int seen_one = 0, seen_two = 0;
+  for (float w : one.partial_weight.data) seen_one += w > 0;
+  for (float w : two.partial_weight.data) seen_two += w > 0;
+  EXPECT_GT(seen_two, seen_one);
+}
+
+}  // namespace
+}  // namespace simstack
