@@ -1,126 +1,269 @@
-// simstack_evaluate: the paper's single-view protocol (DESIGN.md section 5) for one or more
-// trained models on a test dataset. Today: expected occupancy (BCE, eq. 8) and IoU at 0.5.
+// simstack_evaluate: the paper's single-view protocol (DESIGN.md section 5, Table 1) for
+// trained models and the classical baseline, in one run on the same rendered views:
+// visible and full Chamfer distance, expected occupancy (BCE, IoU), stability under physics
+// and object counts, binned by the visible share of the pile's surface.
 #include <CLI/CLI.hpp>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
+#include <iomanip>
 #include <iostream>
+#include <map>
 #include <nlohmann/json.hpp>
 
 #include "simstack/dataset/dataset.h"
 #include "simstack/eval/occupancy.h"
-#include "simstack/model/cvae_inference.h"
+#include "simstack/eval/scene_metrics.h"
 #include "simstack/model/training_sample.h"
+#include "simstack/pipeline/classical_baseline.h"
+#include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/tools/progress.h"
+#include "simstack/tsdf/ground_truth.h"
 
 using namespace simstack;
+using nlohmann::json;
 
 namespace {
-struct Stats {
-  std::vector<double> iou, bce;
-  static double mean(const std::vector<double>& v) {
-    double s = 0;
-    for (double x : v) s += x;
-    return v.empty() ? 0.0 : s / v.size();
-  }
-  static double stddev(const std::vector<double>& v) {
-    const double m = mean(v);
-    double s = 0;
-    for (double x : v) s += (x - m) * (x - m);
-    return v.size() > 1 ? std::sqrt(s / (v.size() - 1)) : 0.0;
-  }
+
+const std::vector<double> kBinEdges = {0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 1.01};
+const std::vector<std::string> kMetrics = {
+    "chamfer_visible_m", "chamfer_full_m", "chamfer_full_sq_m", "iou", "bce",
+    "displacement_m",    "stable",         "count_error",       "count_exact"};
+
+struct Method {
+  std::string name;
+  std::unique_ptr<ScenePerception> perception;  // null for the classical baseline
+  std::vector<std::map<std::string, double>> rows;
 };
+
+double mean(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return v.empty() ? std::nan("") : s / v.size();
+}
+double stddev(const std::vector<double>& v) {
+  const double m = mean(v);
+  double s = 0;
+  for (double x : v) s += (x - m) * (x - m);
+  return v.size() > 1 ? std::sqrt(s / (v.size() - 1)) : 0.0;
+}
+
+json summarise(const std::vector<std::map<std::string, double>>& rows) {
+  json out;
+  for (const auto& m : kMetrics) {
+    std::vector<double> v;
+    for (const auto& r : rows)
+      if (r.count(m) && std::isfinite(r.at(m))) v.push_back(r.at(m));
+    out[m] = {{"mean", mean(v)}, {"std", stddev(v)}, {"n", v.size()}};
+  }
+  json bins = json::array();
+  for (size_t b = 0; b + 1 < kBinEdges.size(); ++b) {
+    std::vector<std::map<std::string, double>> in;
+    for (const auto& r : rows)
+      if (r.at("visible_ratio") >= kBinEdges[b] && r.at("visible_ratio") < kBinEdges[b + 1])
+        in.push_back(r);
+    json bin = {{"visible_from", kBinEdges[b]}, {"visible_to", std::min(kBinEdges[b + 1], 1.0)},
+                {"views", in.size()}};
+    for (const auto& m : kMetrics) {
+      std::vector<double> v;
+      for (const auto& r : in)
+        if (r.count(m) && std::isfinite(r.at(m))) v.push_back(r.at(m));
+      bin[m] = mean(v);
+    }
+    bins.push_back(bin);
+  }
+  out["by_visible_ratio"] = bins;
+  return out;
+}
+
+std::string defaultModel() {
+  const std::filesystem::path p = std::filesystem::path(SIMSTACK_SOURCE_DIR) / "models/simstack_r32.pt";
+  return p.string();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::vector<std::string> models;
   std::string dataset, output, mesh_dir;
-  int views = 3, samples = 3, scenes = 0, threads = 2;
+  int views = 3, samples = 3, scenes = 0, threads = 2, chamfer_points = 1000;
   uint64_t seed = 7;
-  bool noise = false;
+  bool noise = false, no_classical = false, no_stability = false;
   CLI::App app{
-      "Evaluate trained models on a test dataset: every scene from random viewpoints in the "
-      "paper's ranges, "
-      "S latent samples per view (1 for the FC baseline); writes JSON."};
-  app.add_option("--model", models, "model file(s), e.g. models/simstack_r32.pt models/fc_r32.pt")
-      ->required()
+      "Evaluate trained models and the classical baseline on a test dataset (DESIGN.md section "
+      "5): every scene from random viewpoints in the paper's ranges, S latent samples per view "
+      "(1 for the FC baseline); writes JSON and prints the table."};
+  app.add_option("--model", models, "model file(s), e.g. models/simstack_r32.pt runs/fc/model.pt")
       ->check(CLI::ExistingFile);
   app.add_option("--dataset", dataset, "test dataset (a seed never used for training)")
       ->required()
       ->check(CLI::ExistingFile);
   app.add_option("--output", output, "results JSON")->required();
-  app.add_option("--views", views, "viewpoints per scene")
-      ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+  app.add_option("--views", views, "viewpoints per scene")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--samples", samples, "latent samples per viewpoint")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
   app.add_option("--scenes", scenes, "evaluate only the first N scenes (0 = all)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--seed", seed, "viewpoint and code seed")->capture_default_str();
-  app.add_option("--ycb", mesh_dir, "mesh directory for YCB datasets");
+  app.add_option("--ycb", mesh_dir, "mesh directory for YCB datasets")->check(CLI::ExistingDirectory);
   app.add_flag("--noise", noise, "Kinect-like sensor noise in the rendered views");
-  app.add_option("--threads", threads, "torch threads")->capture_default_str();
+  app.add_flag("--no-classical", no_classical, "skip the classical baseline");
+  app.add_flag("--no-stability", no_stability, "skip the physics stability test");
+  app.add_option("--chamfer-points", chamfer_points, "surface samples per Chamfer set")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  app.add_option("--threads", threads, "threads")->capture_default_str()->check(CLI::PositiveNumber);
   CLI11_PARSE(app, argc, argv);
+  if (models.empty()) models.push_back(defaultModel());
   try {
     const DatasetReader reader(dataset, mesh_dir);
     const int n = scenes > 0 ? std::min(scenes, reader.size()) : reader.size();
-    nlohmann::json results;
+    std::vector<Method> methods;
+    for (const auto& path : models) {
+      PerceptionConfig pc;
+      pc.model_path = path;
+      pc.threads = threads;
+      pc.zero_code_first = false;  // random codes, as the paper evaluates
+      Method m;
+      m.perception = std::make_unique<ScenePerception>(pc);
+      const std::string arch = m.perception->modelConfig().architecture;
+      pc.samples = arch == "fc" ? 1 : samples;
+      m.perception = std::make_unique<ScenePerception>(pc);
+      m.name = arch == "fc" ? "fc" : "cvae";
+      for (const auto& other : methods)
+        if (other.name == m.name) m.name += "_" + std::to_string(methods.size());
+      methods.push_back(std::move(m));
+    }
+    if (!no_classical) methods.push_back(Method{"classical", nullptr, {}});
+
+    const PinholeCamera camera = scaledKinect(640, 480);
+    const double truncation = reader.info().truncation_m;
+    ProgressBar bar("evaluating " + std::to_string(methods.size()) + " methods", n);
+    for (int k = 0; k < n; ++k) {
+      const SceneRecord rec = reader.read(k);
+      const DepthRenderer renderer(rec.scene);
+      TriangleMesh gt_mesh;
+      for (const SceneObject& o : rec.scene.objects)
+        gt_mesh.append(o.shape->mesh().transformed(o.T_table_object));
+      std::mt19937_64 rng(seed * 1000003ull + static_cast<uint64_t>(k));
+      const Points3 gt_full = samplePoints(gt_mesh, chamfer_points, rng);
+      for (int v = 0; v < views; ++v) {
+        const Transform T = sampleViewpoint(rec.scene.surfaceCentroid(), ViewpointRange(), rng);
+        const uint64_t view_seed = rng();
+        const RenderResult r = renderer.render(
+            camera, T, noise ? SensorNoiseConfig::kinect(view_seed) : SensorNoiseConfig());
+        const std::vector<bool> vis = visibleTriangles(gt_mesh, camera, T);
+        const TriangleMesh gt_visible = subMesh(gt_mesh, vis);
+        const Points3 gt_vis_pts = samplePoints(gt_visible, chamfer_points, rng);
+        const double visible_ratio = gt_visible.area() / gt_mesh.area();
+        const DepthView view{r.depth, camera, T};
+        GridSpec grid;
+        GroundTruthGrids gt;
+        bool have_gt = false;
+        for (Method& m : methods) {
+          std::map<std::string, double> row{{"scene", k}, {"view", v}, {"visible_ratio", visible_ratio},
+                                            {"objects", static_cast<double>(rec.scene.objects.size())}};
+          std::vector<Superquadric> shapes;
+          std::vector<std::vector<float>> occupancy;
+          if (m.perception) {
+            const SceneEstimate est = m.perception->perceive(view);
+            if (!have_gt) {
+              grid = est.grid;
+              gt = computeGroundTruth(rec.scene, grid, truncation);
+              have_gt = true;
+            }
+            double full = 0, visible = 0;
+            for (const SceneHypothesis& h : est.hypotheses) {
+              occupancy.push_back(h.tsdf_m.data);
+              full += chamferDistance(samplePoints(h.surface, chamfer_points, rng), gt_full);
+              visible += chamferDistance(
+                  samplePoints(subMesh(h.surface, visibleTriangles(h.surface, camera, T)),
+                               chamfer_points, rng),
+                  gt_vis_pts);
+            }
+            row["chamfer_full_m"] = full / est.hypotheses.size();
+            row["chamfer_visible_m"] = visible / est.hypotheses.size();
+            for (const InstanceEstimate& e : est.instances()) shapes.push_back(e.superquadric);
+            row["perceive_ms"] = est.timings.total_ms;
+          } else {
+            if (!have_gt) {
+              // The grid the networks would use, for the occupancy scores.
+              const Vec2 c = visiblePileCentre(r.depth, camera, T, rec.scene.surfaceCentroid().head<2>(),
+                                               0.5 * reader.info().extent_m);
+              grid = GridSpec::sceneGrid(c, reader.info().extent_m, reader.info().resolution);
+              gt = computeGroundTruth(rec.scene, grid, truncation);
+              have_gt = true;
+            }
+            ClassicalConfig cc;
+            cc.threads = threads;
+            shapes = classicalBaseline(r.depth, camera, T, cc, &grid);
+            occupancy.push_back(superquadricOccupancy(shapes, grid));
+            const TriangleMesh sq_mesh = superquadricsMesh(shapes);
+            row["chamfer_full_m"] = chamferDistance(samplePoints(sq_mesh, chamfer_points, rng), gt_full);
+            row["chamfer_visible_m"] = chamferDistance(
+                samplePoints(subMesh(sq_mesh, visibleTriangles(sq_mesh, camera, T)), chamfer_points, rng),
+                gt_vis_pts);
+          }
+          const OccupancyScores sc = scoreOccupancy(gt.tsdf.data, occupancy);
+          row["iou"] = sc.iou;
+          row["bce"] = sc.bce;
+          row["chamfer_full_sq_m"] =
+              chamferDistance(samplePoints(superquadricsMesh(shapes), chamfer_points, rng), gt_full);
+          row["count"] = shapes.size();
+          row["count_error"] = std::abs(static_cast<double>(shapes.size()) - rec.scene.objects.size());
+          row["count_exact"] = shapes.size() == rec.scene.objects.size();
+          if (!no_stability && !shapes.empty()) {
+            const StabilityResult st = simulateStability(shapes);
+            row["displacement_m"] = st.mean_displacement_m;
+            row["stable"] = st.stable;
+          }
+          m.rows.push_back(row);
+        }
+      }
+      bar.update(k + 1);
+    }
+    bar.finish();
+
+    json results;
     results["dataset"] = dataset;
     results["dataset_seed"] = reader.info().seed;
     results["scenes"] = n;
     results["views"] = views;
+    results["samples"] = samples;
     results["seed"] = seed;
     results["image"] = "640x480";
     results["noise"] = noise;
-    for (const auto& path : models) {
-      const CvaeInference net(path, threads);
-      const CvaeConfig& c = net.config();
-      const int s_count = c.architecture == "fc" ? 1 : samples;
-      const TrainingSampleBuilder builder(c, scaledKinect(640, 480), noise);
-      Stats stats;
-      ProgressBar bar("evaluating " + path, n);
-      for (int k = 0; k < n; ++k) {
-        const SceneRecord rec = reader.read(k);
-        std::mt19937_64 rng(seed * 1000003ull + static_cast<uint64_t>(k));
-        for (int v = 0; v < views; ++v) {
-          const TrainingSample t = builder.build(rec, rng);
-          Grid3<float> tsdf(t.grid, 0.0f), weight(t.grid, 0.0f);
-          const size_t nv = tsdf.data.size();
-          for (size_t i = 0; i < nv; ++i) {
-            tsdf.data[i] = t.partial[i] * static_cast<float>(c.truncation_m());
-            weight.data[i] = t.partial[nv + i];
-          }
-          const auto preds = net.predict(tsdf, weight, s_count, rng());
-          std::vector<std::vector<float>> p;
-          for (const auto& pr : preds) p.push_back(pr.tsdf_m.data);
-          const OccupancyScores sc = scoreOccupancy(t.tsdf, p);
-          stats.iou.push_back(sc.iou);
-          stats.bce.push_back(sc.bce);
-        }
-        bar.update(k + 1);
-      }
-      bar.finish();
-      nlohmann::json m;
-      m["model"] = path;
-      m["architecture"] = c.architecture;
-      m["resolution"] = c.resolution;
-      m["samples"] = s_count;
-      m["iou_mean"] = Stats::mean(stats.iou);
-      m["iou_std"] = Stats::stddev(stats.iou);
-      m["bce_mean"] = Stats::mean(stats.bce);
-      m["bce_std"] = Stats::stddev(stats.bce);
-      results["methods"][c.architecture] = m;
-      std::cout << c.architecture << " (" << path << "): IoU " << m["iou_mean"].get<double>()
-                << " +- " << m["iou_std"].get<double>() << ", BCE " << m["bce_mean"].get<double>()
-                << " +- " << m["bce_std"].get<double>() << " over " << stats.iou.size()
-                << " views\n";
+    results["chamfer_points"] = chamfer_points;
+    for (const Method& m : methods) {
+      json j = summarise(m.rows);
+      j["model"] = m.perception ? m.perception->config().model_path : "";
+      j["samples"] = m.perception ? m.perception->config().samples : 1;
+      j["views"] = json(m.rows);
+      results["methods"][m.name] = j;
     }
     std::ofstream f(output);
     if (!f) throw std::runtime_error("cannot write " + output);
-    f << results.dump(2) << "\n";
-    std::cout << "results: " << output << "\n";
+    f << results.dump(1) << "\n";
+
+    std::cout << "\n| method | CD visible (mm) | CD full (mm) | CD full, superquadrics (mm) | IoU | BCE "
+                 "| displacement (mm) | stable | objects exact |\n|---|---|---|---|---|---|---|---|---|\n";
+    for (const Method& m : methods) {
+      const json s = summarise(m.rows);
+      auto val = [&](const char* key, double scale, int digits) {
+        std::ostringstream o;
+        o << std::fixed << std::setprecision(digits) << s[key]["mean"].get<double>() * scale;
+        return o.str();
+      };
+      std::cout << "| " << m.name << " | " << val("chamfer_visible_m", 1000, 1) << " | "
+                << val("chamfer_full_m", 1000, 1) << " | " << val("chamfer_full_sq_m", 1000, 1)
+                << " | " << val("iou", 1, 3) << " | " << val("bce", 1, 3) << " | "
+                << val("displacement_m", 1000, 1) << " | " << val("stable", 100, 0) << " % | "
+                << val("count_exact", 100, 0) << " % |\n";
+    }
+    std::cout << "\n" << n << " scenes x " << views << " views; results: " << output << "\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_evaluate: error: " << e.what() << "\n";

@@ -12,6 +12,7 @@
 /// then eq. 7 adds L_coll (eq. 8: the mean over samples of j inside i) and L_floor (eq. 9: the
 /// sum over samples below z = 0, as the paper writes it).
 
+#include <optional>
 #include <vector>
 
 #include "simstack/geometry/superquadric.h"
@@ -22,16 +23,17 @@ struct FitConfig {
   double min_scale_m = 0.005;
   double max_scale_m = 0.4;
   double min_exponent = 1.0;   ///< >= 1 keeps shapes convex
-  double max_exponent = 40.0;
+  double max_exponent = 100.0;  ///< the generator's range; a bound that binds costs Ceres
+                                ///< many projected line searches
   double initial_exponent = 3.0;
   double lambda_dist = 100.0;  ///< eq. 7 weights (the paper's values)
   double lambda_coll = 10.0;
   double lambda_floor = 1.0;
-  int max_points = 400;        ///< points per instance used by the solver (evenly subsampled)
-  int shape_samples = 150;     ///< surface samples per shape for the collision and floor terms
+  int max_points = 200;        ///< points per instance used by the solver (evenly subsampled)
+  int shape_samples = 80;      ///< surface samples per shape for the collision and floor terms
                               ///< (L_floor is a sum, so it grows with this)
   int joint_rounds = 2;        ///< joint solves, samples redrawn between them
-  int max_iterations = 100;    ///< per Ceres solve
+  int max_iterations = 50;     ///< per Ceres solve
   int threads = 1;
 };
 
@@ -53,6 +55,13 @@ Superquadric fitSuperquadric(const Points3& points_table, const FitConfig& confi
 std::vector<Superquadric> refineJointly(const std::vector<Points3>& points_table,
                                         const std::vector<Superquadric>& shapes,
                                         const FitConfig& config = FitConfig());
+
+/// Both stages for a scene: per-instance fits (in parallel over `threads`), then, when
+/// `joint`, the joint refinement of all fitted shapes. Sets with fewer than `min_points`
+/// points are skipped (std::nullopt).
+std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>& points,
+                                                      const FitConfig& config, bool joint,
+                                                      int min_points = 30);
 
 /// Mean squared penetration of `samples` surface samples of `b` into `a` (eq. 8 without
 /// the weight), for reporting and tests.

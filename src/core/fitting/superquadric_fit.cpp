@@ -279,6 +279,34 @@ std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
   return out;
 }
 
+std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>& points,
+                                                      const FitConfig& c, bool joint,
+                                                      int min_points) {
+  const int n = static_cast<int>(points.size());
+  std::vector<std::optional<Superquadric>> fits(n);
+  FitConfig single = c;
+  single.threads = 1;
+#pragma omp parallel for schedule(dynamic) num_threads(std::max(1, c.threads))
+  for (int i = 0; i < n; ++i) {
+    if (static_cast<int>(points[i].size()) < std::max(4, min_points)) continue;
+    fits[i] = fitSuperquadric(points[i], single);
+  }
+  if (!joint) return fits;
+  std::vector<Points3> pts;
+  std::vector<Superquadric> shapes;
+  std::vector<int> index;
+  for (int i = 0; i < n; ++i) {
+    if (!fits[i]) continue;
+    pts.push_back(points[i]);
+    shapes.push_back(*fits[i]);
+    index.push_back(i);
+  }
+  if (shapes.empty()) return fits;
+  const std::vector<Superquadric> refined = refineJointly(pts, shapes, c);
+  for (size_t k = 0; k < index.size(); ++k) fits[index[k]] = refined[k];
+  return fits;
+}
+
 double collisionCost(const Superquadric& a, const Superquadric& b, int samples) {
   const Params xb = toParams(b);
   double sum = 0;

@@ -3,6 +3,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -12,53 +13,12 @@
 namespace simstack {
 namespace {
 
-/// Open-addressing counter keyed by a fine-cell index (linear probing, power-of-two size).
-class CellCounter {
- public:
-  CellCounter() { resize(1 << 14); }
-  void add(uint32_t key, uint32_t amount = 1) {
-    if (2 * (used_ + 1) > keys_.size()) resize(keys_.size() * 2);
-    size_t i = hash(key) & mask_;
-    while (true) {
-      if (keys_[i] == kEmpty) {
-        keys_[i] = key;
-        counts_[i] = amount;
-        ++used_;
-        return;
-      }
-      if (keys_[i] == key) {
-        counts_[i] += amount;
-        return;
-      }
-      i = (i + 1) & mask_;
-    }
-  }
-  template <class F>
-  void forEach(F&& f) const {
-    for (size_t i = 0; i < keys_.size(); ++i)
-      if (keys_[i] != kEmpty) f(keys_[i], counts_[i]);
-  }
-
- private:
-  static constexpr uint32_t kEmpty = 0xFFFFFFFFu;
-  static size_t hash(uint32_t k) { return (static_cast<uint64_t>(k) * 0x9E3779B97F4A7C15ull) >> 20; }
-  void resize(size_t capacity) {
-    std::vector<uint32_t> old_keys = std::move(keys_), old_counts = std::move(counts_);
-    keys_.assign(capacity, kEmpty);
-    counts_.assign(capacity, 0);
-    mask_ = capacity - 1;
-    used_ = 0;
-    for (size_t i = 0; i < old_keys.size(); ++i)
-      if (old_keys[i] != kEmpty) add(old_keys[i], old_counts[i]);
-  }
-  std::vector<uint32_t> keys_, counts_;
-  size_t mask_ = 0, used_ = 0;
-};
-
-/// Marches the ray from fine-grid point `p` along unit `d` (Amanatides & Woo), counting every
-/// fine cell once while the ray stays in (or within `tolerance` voxels of) occupied space.
+/// Marches the ray from fine-grid point `p` along unit `d` (Amanatides & Woo), visiting every
+/// fine cell once while the ray stays in (or within `tolerance` voxels of) occupied space:
+/// visit(scene voxel, fine cell x, y, z).
+template <class Visit>
 size_t marchRay(const Vec3& p, const Vec3& d, int ref, int fine, const std::vector<uint8_t>& occ,
-                int r, int tolerance, CellCounter* counter) {
+                int r, int tolerance, Visit&& visit) {
   int cell[3], step[3];
   double t_max[3], t_delta[3];
   for (int a = 0; a < 3; ++a) {
@@ -86,7 +46,7 @@ size_t marchRay(const Vec3& p, const Vec3& d, int ref, int fine, const std::vect
       outside = occ[voxel] ? 0 : outside + 1;
       if (outside > tolerance) break;
     }
-    counter->add((static_cast<uint32_t>(cell[2]) * fine + cell[1]) * fine + cell[0]);
+    visit(voxel, cell[0], cell[1], cell[2]);
     ++visits;
     const int a = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
     cell[a] += step[a];
@@ -148,9 +108,9 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
   if (!(tsdf_m.spec == votes.spec) || tsdf_m.data.size() != votes.data.size() ||
       static_cast<int>(tsdf_m.data.size()) != tsdf_m.spec.voxelCount())
     throw std::invalid_argument("houghInstances: the TSDF and the vote field must share a grid");
-  if (config.refinement < 1 || config.min_traversals < 0 || config.bandwidth_vox <= 0)
+  if (config.refinement < 1 || config.min_traversals < 0 || config.bandwidth_m <= 0)
     throw std::invalid_argument("houghInstances: refinement >= 1, min_traversals >= 0 and "
-                                "bandwidth_vox > 0 are required");
+                                "bandwidth_m > 0 are required");
   const GridSpec& g = tsdf_m.spec;
   const int r = g.resolution, ref = config.refinement, fine = r * ref;
   if (static_cast<double>(fine) * fine * fine >= 4294967295.0)
@@ -169,51 +129,91 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
   }
   if (occupied.empty()) return out;
 
-  // 1. Rays, counted per thread, then merged.
+  // 1. Every ray at the scene resolution: a fine cell can only be crossed by more than mu rays
+  //    inside a voxel crossed by more than mu rays, so only those ("hot") voxels need fine
+  //    counts. Both passes are exact; memory is one R^3 count grid plus ref^3 counts per hot
+  //    voxel.
   const int threads = std::max(1, std::min(config.threads, static_cast<int>(occupied.size())));
-  std::vector<CellCounter> counters(threads);
-  std::vector<size_t> visits(threads, 0);
-#pragma omp parallel num_threads(threads)
-  {
-    const int t = omp_get_thread_num();
-#pragma omp for schedule(static)
-    for (size_t k = 0; k < occupied.size(); ++k) {
-      const Vec3f v = votes.data[occupied[k]];
-      const float n = v.norm();
-      if (!(n > 1e-3f)) continue;
-      const Vec3i idx = g.unravel(occupied[k]);
-      const Vec3 p = (idx.cast<double>() + Vec3::Constant(0.5)) * ref;
-      visits[t] += marchRay(p, (v / n).cast<double>(), ref, fine, occ, r,
-                            config.outside_tolerance_vox, &counters[t]);
-    }
+  std::vector<Vec3> dirs(occupied.size(), Vec3::Zero());
+  for (size_t k = 0; k < occupied.size(); ++k) {
+    const Vec3f v = votes.data[occupied[k]];
+    if (v.norm() > 1e-3f) dirs[k] = (v / v.norm()).cast<double>();
   }
-  for (int t = 1; t < threads; ++t)
-    counters[t].forEach([&](uint32_t key, uint32_t c) { counters[0].add(key, c); });
+  auto start = [&](size_t k, int scale) -> Vec3 {
+    return (g.unravel(occupied[k]).cast<double>() + Vec3::Constant(0.5)) * scale;
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  auto ms = [](std::chrono::steady_clock::time_point a) {
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a).count();
+  };
+  std::vector<uint32_t> coarse(g.voxelCount(), 0);
+  {
+    std::vector<std::vector<uint32_t>> partial(threads, std::vector<uint32_t>(g.voxelCount(), 0));
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (size_t k = 0; k < occupied.size(); ++k) {
+      if (dirs[k].squaredNorm() == 0) continue;
+      auto& counts = partial[omp_get_thread_num()];
+      marchRay(start(k, 1), dirs[k], 1, r, occ, r, config.outside_tolerance_vox,
+               [&](int voxel, int, int, int) { ++counts[voxel]; });
+    }
+    for (const auto& p : partial)
+      for (int i = 0; i < g.voxelCount(); ++i) coarse[i] += p[i];
+  }
+  std::vector<int> block_of(g.voxelCount(), -1);
+  std::vector<int> hot;
+  for (int i = 0; i < g.voxelCount(); ++i)
+    if (static_cast<int>(coarse[i]) > config.min_traversals) {
+      block_of[i] = static_cast<int>(hot.size());
+      hot.push_back(i);
+    }
+  out.hot_voxels = static_cast<int>(hot.size());
+  const size_t block = static_cast<size_t>(ref) * ref * ref;
+  std::vector<uint32_t> fine_counts(hot.size() * block, 0);
+  std::vector<size_t> visits(threads, 0);
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (size_t k = 0; k < occupied.size(); ++k) {
+    if (dirs[k].squaredNorm() == 0) continue;
+    visits[omp_get_thread_num()] += marchRay(
+        start(k, ref), dirs[k], ref, fine, occ, r, config.outside_tolerance_vox,
+        [&](int voxel, int fx, int fy, int fz) {
+          const int b = block_of[voxel];
+          if (b < 0) return;
+          const size_t local = (static_cast<size_t>(fz % ref) * ref + fy % ref) * ref + fx % ref;
+          __atomic_fetch_add(&fine_counts[b * block + local], 1u, __ATOMIC_RELAXED);
+        });
+  }
   out.traversals = std::accumulate(visits.begin(), visits.end(), size_t{0});
 
+  out.timings.rays_ms = ms(t0);
+  const auto t1 = std::chrono::steady_clock::now();
+
   // 2. Cells above mu, gathered per scene voxel (weighted by count) to seed mean shift.
-  std::vector<WeightedPoint> bins(g.voxelCount(), WeightedPoint{Vec3::Zero(), 0.0});
-  counters[0].forEach([&](uint32_t key, uint32_t c) {
-    if (static_cast<int>(c) <= config.min_traversals) return;
-    ++out.candidate_cells;
-    const int fx = key % fine, fy = (key / fine) % fine, fz = key / (fine * fine);
-    const Vec3 p = g.origin_table + h * Vec3(fx + 0.5, fy + 0.5, fz + 0.5);
-    WeightedPoint& b = bins[g.linear(fx / ref, fy / ref, fz / ref)];
-    b.p += c * p;
-    b.w += c;
-  });
-  std::vector<WeightedPoint> seeds;
-  for (const WeightedPoint& b : bins)
-    if (b.w > 0) seeds.push_back({b.p / b.w, b.w});
-  std::vector<Vec3> centres = meanShift(seeds, config.bandwidth_vox * g.voxel_size_m);
+  std::vector<WeightedPoint> bins;
+  for (size_t b = 0; b < hot.size(); ++b) {
+    const Vec3i v = g.unravel(hot[b]);
+    WeightedPoint bin{Vec3::Zero(), 0.0};
+    for (int lz = 0; lz < ref; ++lz)
+      for (int ly = 0; ly < ref; ++ly)
+        for (int lx = 0; lx < ref; ++lx) {
+          const uint32_t c = fine_counts[b * block + (static_cast<size_t>(lz) * ref + ly) * ref + lx];
+          if (static_cast<int>(c) <= config.min_traversals) continue;
+          ++out.candidate_cells;
+          const Vec3 p = g.origin_table +
+                         h * Vec3(v.x() * ref + lx + 0.5, v.y() * ref + ly + 0.5, v.z() * ref + lz + 0.5);
+          bin.p += c * p;
+          bin.w += c;
+        }
+    if (bin.w > 0) bins.push_back({bin.p / bin.w, bin.w});
+  }
+  std::vector<Vec3> centres = meanShift(bins, config.bandwidth_m);
+  out.timings.mean_shift_ms = ms(t1);
+  const auto t2 = std::chrono::steady_clock::now();
 
   // 3. Assignment; instances below the size limit are dropped and their voxels re-assigned.
-  std::vector<Vec3> positions(occupied.size()), dirs(occupied.size());
+  std::vector<Vec3> positions(occupied.size());
   for (size_t k = 0; k < occupied.size(); ++k) {
     const Vec3i idx = g.unravel(occupied[k]);
     positions[k] = g.voxelCentre(idx.x(), idx.y(), idx.z());
-    const Vec3f v = votes.data[occupied[k]];
-    dirs[k] = v.norm() > 1e-3f ? Vec3((v / v.norm()).cast<double>()) : Vec3::Zero();
   }
   std::vector<int> assignment(occupied.size(), -1);
   while (!centres.empty()) {
@@ -254,6 +254,7 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
     }
     centres = std::move(kept);
   }
+  out.timings.assign_ms = ms(t2);
   return out;
 }
 

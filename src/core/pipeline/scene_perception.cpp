@@ -1,6 +1,5 @@
 #include "simstack/pipeline/scene_perception.h"
 
-#include <omp.h>
 
 #include <algorithm>
 #include <chrono>
@@ -59,29 +58,9 @@ Vec2 pileCentre(const DepthView& view, const Transform& T_table_camera, double e
 
 std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>& points,
                                                       const PerceptionConfig& config) {
-  const int n = static_cast<int>(points.size());
-  std::vector<std::optional<Superquadric>> fits(n);
-#pragma omp parallel for schedule(dynamic) num_threads(std::max(1, config.threads))
-  for (int i = 0; i < n; ++i) {
-    if (static_cast<int>(points[i].size()) < std::max(4, config.min_instance_points)) continue;
-    fits[i] = fitSuperquadric(points[i], config.fit);
-  }
-  if (!config.joint_refinement) return fits;
-  std::vector<Points3> pts;
-  std::vector<Superquadric> shapes;
-  std::vector<int> index;
-  for (int i = 0; i < n; ++i) {
-    if (!fits[i]) continue;
-    pts.push_back(points[i]);
-    shapes.push_back(*fits[i]);
-    index.push_back(i);
-  }
-  if (shapes.empty()) return fits;
-  FitConfig joint = config.fit;
-  joint.threads = std::max(1, config.threads);
-  const std::vector<Superquadric> refined = refineJointly(pts, shapes, joint);
-  for (size_t k = 0; k < index.size(); ++k) fits[index[k]] = refined[k];
-  return fits;
+  FitConfig fit = config.fit;
+  fit.threads = std::max(1, config.threads);
+  return fitInstances(points, fit, config.joint_refinement, config.min_instance_points);
 }
 
 void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings* timings) {

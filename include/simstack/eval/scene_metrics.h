@@ -1,0 +1,57 @@
+#pragma once
+/// @file scene_metrics.h
+/// Scene-level measures of the paper's section 4.1: Chamfer distance between surface samples
+/// (eq. 7), visible surfaces, occupancy of superquadric scenes, and stability under physics.
+
+#include <random>
+#include <vector>
+
+#include "simstack/geometry/pinhole_camera.h"
+#include "simstack/geometry/superquadric.h"
+#include "simstack/geometry/triangle_mesh.h"
+#include "simstack/geometry/voxel_grid.h"
+
+namespace simstack {
+
+/// Eq. 7: mean nearest-neighbour distance from a to b plus from b to a (metres). Infinite
+/// when either set is empty.
+double chamferDistance(const Points3& a, const Points3& b);
+
+/// Triangles of `mesh` seen by the camera: the first surface hit by the ray from the camera
+/// through the triangle's centre (Embree), with the centre inside the image.
+std::vector<bool> visibleTriangles(const TriangleMesh& mesh, const PinholeCamera& camera,
+                                   const Transform& T_table_camera);
+
+/// The triangles with mask[i] set, as a mesh (vertices shared with the original).
+TriangleMesh subMesh(const TriangleMesh& mesh, const std::vector<bool>& mask);
+
+/// `count` area-weighted surface points (empty for an empty mesh).
+Points3 samplePoints(const TriangleMesh& mesh, int count, std::mt19937_64& rng);
+
+/// One closed mesh of all shapes (table frame).
+TriangleMesh superquadricsMesh(const std::vector<Superquadric>& shapes, int subdivisions = 16);
+
+/// Signed occupancy of shapes at the voxel centres of `grid`: -1 inside any shape, +1 outside
+/// (a TSDF sign, for scoreOccupancy).
+std::vector<float> superquadricOccupancy(const std::vector<Superquadric>& shapes,
+                                         const GridSpec& grid);
+
+/// The protocol of DESIGN.md section 5: the shapes as rigid bodies of uniform density on the
+/// table, 10,000 steps, gravity 10 m/s^2, friction 1.
+struct StabilityConfig {
+  int steps = 10000;
+  double gravity_mps2 = 10.0;
+  double friction = 1.0;
+  double max_displacement_m = 0.2;  ///< a pile is stable when no centre moves further
+  double max_rotation_rad = 30.0 * M_PI / 180.0;  ///< and no object turns more
+};
+struct StabilityResult {
+  double mean_displacement_m = 0.0;
+  double max_displacement_m = 0.0;
+  double max_rotation_rad = 0.0;
+  bool stable = true;
+};
+StabilityResult simulateStability(const std::vector<Superquadric>& shapes,
+                                  const StabilityConfig& config = StabilityConfig());
+
+}  // namespace simstack

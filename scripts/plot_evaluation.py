@@ -1,0 +1,77 @@
+#!/usr/bin/env python3
+"""Draws the paper's evaluation figures from simstack_evaluate JSON files.
+
+    scripts/plot_evaluation.py results_synthetic.json [results_ycb.json ...] --output docs/figures
+
+For every results file: Chamfer distance on the visible (VS) and full (FS) surface against the
+visible share of the pile's surface (the paper's Figure 5), IoU and the share of stable piles
+against the same bins, one line per method.
+"""
+import argparse
+import json
+import os
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+STYLE = {"cvae": ("C0", "C-VAE (ours)"), "fc": ("C1", "FC baseline"), "classical": ("C2", "classical")}
+
+
+def bins_of(method):
+    rows = [b for b in method["by_visible_ratio"] if b["views"] > 0]
+    centres = [0.5 * (b["visible_from"] + b["visible_to"]) for b in rows]
+    return rows, centres
+
+
+def value(b, key, scale=1.0):
+    v = b.get(key)
+    return None if v is None else v * scale
+
+
+def plot_file(path, out_dir):
+    with open(path) as f:
+        results = json.load(f)
+    name = os.path.splitext(os.path.basename(path))[0]
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+    for method_name, method in results["methods"].items():
+        colour, label = STYLE.get(method_name, (None, method_name))
+        rows, x = bins_of(method)
+        for key, style, suffix in (("chamfer_visible_m", "--", "VS"), ("chamfer_full_m", "-", "FS")):
+            axes[0].plot(x, [value(b, key, 1000.0) for b in rows], style, marker="o", color=colour,
+                         label=f"{label} {suffix}")
+        axes[1].plot(x, [value(b, "iou") for b in rows], marker="o", color=colour, label=label)
+        axes[2].plot(x, [value(b, "stable", 100.0) for b in rows], marker="o", color=colour, label=label)
+    axes[0].set_ylabel("Chamfer distance (mm)")
+    axes[1].set_ylabel("occupancy IoU")
+    axes[2].set_ylabel("stable piles (%)")
+    for ax in axes:
+        ax.set_xlabel("visible share of the pile surface")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{name}: {results['scenes']} scenes x {results['views']} views, "
+                 f"dataset seed {results['dataset_seed']}")
+    fig.tight_layout()
+    out = os.path.join(out_dir, f"{name}.png")
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("results", nargs="+", help="JSON files written by simstack_evaluate")
+    parser.add_argument("--output", default=".", help="directory for the PNG figures")
+    args = parser.parse_args()
+    os.makedirs(args.output, exist_ok=True)
+    for path in args.results:
+        try:
+            print(plot_file(path, args.output))
+        except (OSError, KeyError, json.JSONDecodeError) as e:
+            sys.exit(f"plot_evaluation: {path}: {e}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,173 @@
+#include "simstack/eval/scene_metrics.h"
+
+#include <embree3/rtcore.h>
+
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <nanoflann.hpp>
+#include <stdexcept>
+
+#include "simstack/physics/physics_world.h"
+#include "simstack/scene/scene.h"
+
+namespace simstack {
+namespace {
+
+struct PointSet {
+  const Points3* pts;
+  size_t kdtree_get_point_count() const { return pts->size(); }
+  double kdtree_get_pt(size_t i, size_t d) const { return (*pts)[i][d]; }
+  template <class B>
+  bool kdtree_get_bbox(B&) const { return false; }
+};
+using Tree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointSet>,
+                                                 PointSet, 3>;
+
+double meanNearest(const Points3& from, const Points3& to) {
+  PointSet set{&to};
+  Tree tree(3, set, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  tree.buildIndex();
+  double sum = 0;
+  for (const Vec3& p : from) {
+    size_t index;
+    double d2;
+    nanoflann::KNNResultSet<double> result(1);
+    result.init(&index, &d2);
+    tree.findNeighbors(result, p.data(), nanoflann::SearchParams());
+    sum += std::sqrt(d2);
+  }
+  return sum / from.size();
+}
+
+}  // namespace
+
+double chamferDistance(const Points3& a, const Points3& b) {
+  if (a.empty() || b.empty()) return std::numeric_limits<double>::infinity();
+  return meanNearest(a, b) + meanNearest(b, a);
+}
+
+std::vector<bool> visibleTriangles(const TriangleMesh& mesh, const PinholeCamera& camera,
+                                   const Transform& T_table_camera) {
+  std::vector<bool> visible(mesh.triangles.size(), false);
+  if (mesh.empty()) return visible;
+  RTCDevice device = rtcNewDevice("threads=1");
+  if (!device) throw std::runtime_error("Embree: cannot create a device");
+  RTCScene scene = rtcNewScene(device);
+  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), mesh.vertices.size()));
+  auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), mesh.triangles.size()));
+  for (size_t i = 0; i < mesh.vertices.size(); ++i)
+    for (int k = 0; k < 3; ++k) vb[3 * i + k] = static_cast<float>(mesh.vertices[i][k]);
+  for (size_t i = 0; i < mesh.triangles.size(); ++i)
+    for (int k = 0; k < 3; ++k) ib[3 * i + k] = static_cast<unsigned>(mesh.triangles[i][k]);
+  rtcCommitGeometry(geom);
+  rtcAttachGeometry(scene, geom);
+  rtcReleaseGeometry(geom);
+  rtcCommitScene(scene);
+  const Vec3 eye = T_table_camera.translation();
+  const Transform T_camera_table = T_table_camera.inverse();
+  for (size_t i = 0; i < mesh.triangles.size(); ++i) {
+    const auto& t = mesh.triangles[i];
+    const Vec3 c = (mesh.vertices[t[0]] + mesh.vertices[t[1]] + mesh.vertices[t[2]]) / 3.0;
+    double u, v;
+    if (!camera.project(T_camera_table * c, &u, &v) || u < 0 || v < 0 || u >= camera.width ||
+        v >= camera.height)
+      continue;
+    const Vec3 dir = (c - eye).normalized();
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    RTCRayHit rh;
+    rh.ray.org_x = eye.x();
+    rh.ray.org_y = eye.y();
+    rh.ray.org_z = eye.z();
+    rh.ray.dir_x = dir.x();
+    rh.ray.dir_y = dir.y();
+    rh.ray.dir_z = dir.z();
+    rh.ray.tnear = 0.0f;
+    rh.ray.tfar = std::numeric_limits<float>::infinity();
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.flags = 0;
+    rh.ray.time = 0.0f;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(scene, &context, &rh);
+    // The triangle itself, or a hit within 1 mm of its centre (shared edges, float rounding).
+    visible[i] = rh.hit.geomID != RTC_INVALID_GEOMETRY_ID &&
+                 (rh.hit.primID == i || std::abs(rh.ray.tfar - (c - eye).norm()) < 1e-3);
+  }
+  rtcReleaseScene(scene);
+  rtcReleaseDevice(device);
+  return visible;
+}
+
+TriangleMesh subMesh(const TriangleMesh& mesh, const std::vector<bool>& mask) {
+  TriangleMesh out;
+  out.vertices = mesh.vertices;
+  for (size_t i = 0; i < mesh.triangles.size(); ++i)
+    if (i < mask.size() && mask[i]) out.triangles.push_back(mesh.triangles[i]);
+  return out;
+}
+
+Points3 samplePoints(const TriangleMesh& mesh, int count, std::mt19937_64& rng) {
+  Points3 out;
+  if (mesh.empty() || mesh.area() <= 0) return out;
+  for (const SurfacePoint& s : mesh.sampleSurface(count, rng)) out.push_back(s.position);
+  return out;
+}
+
+TriangleMesh superquadricsMesh(const std::vector<Superquadric>& shapes, int subdivisions) {
+  TriangleMesh all;
+  for (const Superquadric& sq : shapes) all.append(sq.meshObject(subdivisions).transformed(sq.T_table_object));
+  return all;
+}
+
+std::vector<float> superquadricOccupancy(const std::vector<Superquadric>& shapes,
+                                         const GridSpec& grid) {
+  std::vector<float> out(grid.voxelCount(), 1.0f);
+  for (const Superquadric& sq : shapes) {
+    const double reach = sq.scale_m.maxCoeff() * std::sqrt(3.0);
+    const Vec3i lo = grid.voxelIndex(sq.centroid() - Vec3::Constant(reach));
+    const Vec3i hi = grid.voxelIndex(sq.centroid() + Vec3::Constant(reach));
+    for (int z = std::max(0, lo.z()); z <= std::min(grid.resolution - 1, hi.z()); ++z)
+      for (int y = std::max(0, lo.y()); y <= std::min(grid.resolution - 1, hi.y()); ++y)
+        for (int x = std::max(0, lo.x()); x <= std::min(grid.resolution - 1, hi.x()); ++x)
+          if (sq.contains(grid.voxelCentre(x, y, z))) out[grid.linear(x, y, z)] = -1.0f;
+  }
+  return out;
+}
+
+StabilityResult simulateStability(const std::vector<Superquadric>& shapes,
+                                  const StabilityConfig& config) {
+  StabilityResult r;
+  if (shapes.empty()) return r;
+  PhysicsConfig pc;
+  pc.gravity_mps2 = config.gravity_mps2;
+  pc.friction = config.friction;
+  PhysicsWorld world(pc);
+  std::vector<Transform> start;
+  for (const Superquadric& sq : shapes) {
+    const auto shape = ObjectShape::fromSuperquadric(sq);
+    world.addConvexObject(shape->hullPoints(), shape->volume(), sq.T_table_object);
+    start.push_back(sq.T_table_object);
+  }
+  world.step(config.steps);
+  double sum = 0;
+  for (size_t i = 0; i < shapes.size(); ++i) {
+    const Transform end = world.pose(static_cast<int>(i));
+    double d = (end.translation() - start[i].translation()).norm();
+    const double angle = Eigen::AngleAxisd(start[i].linear().transpose() * end.linear()).angle();
+    if (!std::isfinite(d)) d = std::numeric_limits<double>::infinity();
+    sum += d;
+    r.max_displacement_m = std::max(r.max_displacement_m, d);
+    r.max_rotation_rad = std::max(r.max_rotation_rad, angle);
+  }
+  r.mean_displacement_m = sum / shapes.size();
+  r.stable = r.max_displacement_m <= config.max_displacement_m &&
+             r.max_rotation_rad <= config.max_rotation_rad;
+  return r;
+}
+
+}  // namespace simstack

@@ -1,0 +1,112 @@
+// Scene decomposition: Hough voting at R = 32 and 64, the joint fit of a 4-object scene, and a
+// whole ScenePerception::perceive() at R = 32 with 3 samples (the shipped model).
+#include <benchmark/benchmark.h>
+
+#include <filesystem>
+
+#include "simstack/fitting/superquadric_fit.h"
+#include "simstack/instances/hough_voting.h"
+#include "simstack/pipeline/scene_perception.h"
+#include "simstack/render/depth_renderer.h"
+#include "simstack/scene/pile_generator.h"
+#include "simstack/tsdf/ground_truth.h"
+
+using namespace simstack;
+
+namespace {
+
+/// A settled 4-object pile and its ground-truth grids at resolution r (the ideal network
+/// output, so that the benchmark does not depend on a model's quality).
+struct BenchScene {
+  Scene scene;
+  GroundTruthGrids gt;
+};
+const BenchScene& benchScene(int r) {
+  static std::map<int, BenchScene> cache;
+  auto it = cache.find(r);
+  if (it != cache.end()) return it->second;
+  PileConfig pc;
+  pc.min_objects = pc.max_objects = 4;
+  BenchScene b;
+  b.scene = PileGenerator(pc).generate(17).scene;
+  const GridSpec g = GridSpec::sceneGrid(b.scene.surfaceCentroid().head<2>(), 0.64, r);
+  b.gt = computeGroundTruth(b.scene, g, 3 * g.voxel_size_m);
+  return cache.emplace(r, std::move(b)).first->second;
+}
+
+}  // namespace
+
+static void BM_HoughVoting(benchmark::State& state) {
+  const BenchScene& b = benchScene(static_cast<int>(state.range(0)));
+  HoughConfig hc;
+  hc.threads = 2;
+  InstanceSegmentation seg;
+  double rays = 0, shift = 0, assign = 0;
+  for (auto _ : state) {
+    seg = houghInstances(b.gt.tsdf, b.gt.votes, hc);
+    rays += seg.timings.rays_ms;
+    shift += seg.timings.mean_shift_ms;
+    assign += seg.timings.assign_ms;
+  }
+  const double n = static_cast<double>(state.iterations());
+  state.counters["instances"] = seg.size();
+  state.counters["rays_ms"] = rays / n;
+  state.counters["mean_shift_ms"] = shift / n;
+  state.counters["assign_ms"] = assign / n;
+  state.counters["hot_voxels"] = seg.hot_voxels;
+  state.counters["candidates"] = seg.candidate_cells;
+}
+BENCHMARK(BM_HoughVoting)->Arg(32)->Arg(64)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+static void BM_JointFitFourObjects(benchmark::State& state) {
+  const BenchScene& b = benchScene(32);
+  // Exact surface samples of the 4 objects, 1000 each, as the pipeline hands them over.
+  std::vector<Points3> pts;
+  std::mt19937_64 rng(3);
+  for (const SceneObject& o : b.scene.objects) {
+    Points3 p;
+    for (const SurfacePoint& s : o.superquadricTable().sampleSurfaceObject(1000, rng))
+      p.push_back(o.T_table_object * s.position);
+    pts.push_back(p);
+  }
+  FitConfig fc;
+  fc.threads = 2;
+  for (auto _ : state) benchmark::DoNotOptimize(fitInstances(pts, fc, true));
+}
+BENCHMARK(BM_JointFitFourObjects)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+static void BM_Perceive(benchmark::State& state) {
+  const std::string model = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
+  if (!std::filesystem::exists(model)) {
+    state.SkipWithError("shipped model missing");
+    return;
+  }
+  const BenchScene& b = benchScene(32);
+  PinholeCamera camera;
+  const Vec3 c = b.scene.surfaceCentroid();
+  const Transform T = lookAt(c + Vec3(0.55, -0.35, 0.55), Vec3(c.x(), c.y(), 0.05));
+  const RenderResult r = DepthRenderer(b.scene).render(camera, T, SensorNoiseConfig::kinect(1));
+  PerceptionConfig pc;
+  pc.model_path = model;
+  pc.samples = static_cast<int>(state.range(0));
+  pc.threads = 2;
+  const ScenePerception perception(pc);
+  StageTimings sum;
+  for (auto _ : state) {
+    const SceneEstimate e = perception.perceive(DepthView{r.depth, camera, T});
+    sum.tsdf_ms += e.timings.tsdf_ms;
+    sum.network_ms += e.timings.network_ms;
+    sum.instances_ms += e.timings.instances_ms;
+    sum.mesh_ms += e.timings.mesh_ms;
+    sum.fitting_ms += e.timings.fitting_ms;
+  }
+  const double n = static_cast<double>(state.iterations());
+  state.counters["tsdf_ms"] = sum.tsdf_ms / n;
+  state.counters["network_ms"] = sum.network_ms / n;
+  state.counters["instances_ms"] = sum.instances_ms / n;
+  state.counters["mesh_ms"] = sum.mesh_ms / n;
+  state.counters["fitting_ms"] = sum.fitting_ms / n;
+}
+BENCHMARK(BM_Perceive)->Arg(3)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+BENCHMARK_MAIN();
