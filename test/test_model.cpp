@@ -81,6 +81,20 @@ TEST(Cvae, MmdSeparatesPriorFromShiftedCodes) {
   EXPECT_GT(mmdLoss(torch::randn({256, 8}) + 2.0, prior).item<double>(), 0.3);
 }
 
+TEST(Cvae, OneSharedConditionEqualsOnePerCode) {
+  torch::manual_seed(4);
+  Cvae model(tiny());
+  model->eval();
+  torch::NoGradGuard no_grad;
+  const auto partial = torch::rand({1, 2, 16, 16, 16});
+  const auto z = torch::randn({3, 8});
+  const CvaeOutput shared = model->generate(partial, z);
+  const CvaeOutput each = model->generate(partial.expand({3, 2, 16, 16, 16}).contiguous(), z);
+  EXPECT_TRUE(torch::allclose(shared.tsdf, each.tsdf, 1e-5, 1e-6));
+  EXPECT_TRUE(torch::allclose(shared.votes, each.votes, 1e-5, 1e-6));
+  EXPECT_THROW(model->generate(torch::rand({2, 2, 16, 16, 16}), z), std::invalid_argument);
+}
+
 TEST(Cvae, SaveLoadGivesIdenticalOutputs) {
   torch::manual_seed(1);
   Cvae model(tiny());

@@ -134,8 +134,8 @@ int main(int argc, char** argv) {
     writeSuperquadricsYaml((out / "superquadrics.yaml").string(), shapes);
     writeMeshPly((out / "surface.ply").string(), h.surface);
 
-    // Visible points labelled by the instance of their voxel (0 = table or unassigned,
-    // k + 1 = instance k).
+    // Visible points labelled by instance (0 = table or unassigned, k + 1 = instance k).
+    const Image<int> pixel_labels = pixelInstances(view, est, 0, config.min_pile_height_m);
     Points3 pts;
     std::vector<int> labels;
     const GridSpec& g = est.grid;
@@ -143,14 +143,8 @@ int main(int argc, char** argv) {
       for (int u = 0; u < view.depth.width; ++u) {
         const float d = view.depth.at(u, v);
         if (!validDepth(d)) continue;
-        const Vec3 p = est.T_table_camera * view.camera.backproject(u, v, d);
-        const Vec3i i = g.voxelIndex(p);
-        int label = -1;
-        for (int dz = 0; dz >= -1 && label < 0; --dz)  // surface points sit at the voxel border
-          if (g.inside(i.x(), i.y(), i.z() + dz)) label = h.labels.at(i.x(), i.y(), i.z() + dz);
-        if (p.z() < config.min_pile_height_m) label = -1;
-        pts.push_back(p);
-        labels.push_back(label + 1);
+        pts.push_back(est.T_table_camera * view.camera.backproject(u, v, d));
+        labels.push_back(pixel_labels.at(u, v) + 1);
       }
     writeLabelledCloudPcd((out / "instances.pcd").string(), pts, labels);
 

@@ -21,7 +21,7 @@ static void BM_CvaeInference(benchmark::State& state) {
   Cvae model(configFor(r));
   model->eval();
   torch::NoGradGuard no_grad;
-  const auto partial = torch::rand({samples, 2, r, r, r});
+  const auto partial = torch::rand({1, 2, r, r, r});  // one frame, S codes
   const auto z = torch::randn({samples, 96});
   for (auto _ : state) benchmark::DoNotOptimize(model->generate(partial, z).tsdf.data_ptr<float>());
 }

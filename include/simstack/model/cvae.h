@@ -75,8 +75,8 @@ class CvaeImpl : public torch::nn::Module {
   /// Training pass: encodes (tsdf, votes) with the condition, samples z by reparametrisation.
   CvaeOutput forward(const torch::Tensor& partial, const torch::Tensor& tsdf,
                      const torch::Tensor& votes);
-  /// Generation: decodes codes z [B, latent] conditioned on `partial` [B, 2, R, R, R]
-  /// (the FC baseline ignores z).
+  /// Generation: decodes codes z [B, latent] conditioned on `partial` [B or 1, 2, R, R, R]; a
+  /// single condition is encoded once and shared by all codes. The FC baseline ignores z.
   CvaeOutput generate(const torch::Tensor& partial, const torch::Tensor& z);
   const CvaeConfig& config() const { return config_; }
 

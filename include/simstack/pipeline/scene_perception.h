@@ -92,6 +92,12 @@ void decompose(SceneHypothesis* hypothesis, const PerceptionConfig& config,
 std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>& points,
                                                       const PerceptionConfig& config);
 
+/// Instance of every pixel of `view` (the first view of `estimate`): the label of the voxel
+/// holding its table-frame point, or of the voxel below it (observed points lie on the
+/// surface, at the top of their object's voxels); -1 for table, free space or missing depth.
+Image<int> pixelInstances(const DepthView& view, const SceneEstimate& estimate,
+                          int hypothesis = 0, double min_height_m = 0.01);
+
 class ScenePerception {
  public:
   /// Loads the model; throws std::runtime_error naming the file when it cannot, and

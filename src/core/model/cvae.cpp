@@ -183,9 +183,16 @@ CvaeOutput CvaeImpl::forward(const torch::Tensor& partial, const torch::Tensor& 
 }
 
 CvaeOutput CvaeImpl::generate(const torch::Tensor& partial, const torch::Tensor& z) {
-  const std::vector<torch::Tensor> cond = encodeCondition(partial);
+  std::vector<torch::Tensor> cond = encodeCondition(partial);
   if (config_.architecture == "fc") return decode(cond[4], cond);
-  const auto b = partial.size(0);
+  const auto b = z.size(0);
+  if (partial.size(0) == 1 && b > 1) {
+    // One condition for all codes: encode it once, share its features.
+    for (auto& c : cond) c = c.expand({b, -1, -1, -1, -1});
+  } else if (partial.size(0) != b) {
+    throw std::invalid_argument("generate: " + std::to_string(partial.size(0)) +
+                                " conditions for " + std::to_string(b) + " codes");
+  }
   const torch::Tensor bottleneck =
       dec_fc2(torch::relu(dec_fc1(z))).view({b, widths_[4], bottom_, bottom_, bottom_});
   CvaeOutput out = decode(bottleneck, cond);

@@ -44,11 +44,16 @@ std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_t
   const std::vector<float> channels = partialChannels(partial_tsdf_m, weight, c.truncation_m());
   const torch::Tensor one =
       torch::from_blob(const_cast<float*>(channels.data()), {1, 2, r, r, r}).clone();
-  const torch::Tensor input = one.expand({samples, 2, r, r, r}).contiguous();
   torch::Generator gen = at::detail::createCPUGenerator(seed);
   torch::Tensor z = torch::randn({samples, c.latent_size}, gen);
   if (zero_code_first) z[0].zero_();
-  const CvaeOutput out = impl_->model->generate(input, z);
+  // The condition is encoded once and shared by the S codes; the FC baseline has no code and
+  // runs once.
+  CvaeOutput out = impl_->model->generate(one, c.architecture == "fc" ? z.narrow(0, 0, 1) : z);
+  if (out.tsdf.size(0) == 1 && samples > 1) {
+    out.tsdf = out.tsdf.expand({samples, -1, -1, -1, -1});
+    out.votes = out.votes.expand({samples, -1, -1, -1, -1});
+  }
   const torch::Tensor tsdf = (out.tsdf * c.truncation_m()).contiguous();
   const torch::Tensor votes = out.votes.contiguous();
   std::vector<CvaePrediction> result(samples);

@@ -101,6 +101,32 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   if (timings) timings->fitting_ms += msSince(t);
 }
 
+Image<int> pixelInstances(const DepthView& view, const SceneEstimate& est, int hypothesis,
+                          double min_height_m) {
+  Image<int> out(view.depth.width, view.depth.height, -1);
+  if (hypothesis < 0 || hypothesis >= static_cast<int>(est.hypotheses.size())) return out;
+  const Grid3<int>& labels = est.hypotheses[hypothesis].labels;
+  const GridSpec& g = labels.spec;
+  if (static_cast<int>(labels.data.size()) != g.voxelCount()) return out;
+  for (int v = 0; v < view.depth.height; ++v)
+    for (int u = 0; u < view.depth.width; ++u) {
+      const float d = view.depth.at(u, v);
+      if (!validDepth(d)) continue;
+      const Vec3 p = est.T_table_camera * view.camera.backproject(u, v, d);
+      if (p.z() < min_height_m) continue;
+      const Vec3i i = g.voxelIndex(p);
+      for (int dz = 0; dz >= -1; --dz) {
+        if (!g.inside(i.x(), i.y(), i.z() + dz)) continue;
+        const int l = labels.at(i.x(), i.y(), i.z() + dz);
+        if (l >= 0) {
+          out.at(u, v) = l;
+          break;
+        }
+      }
+    }
+  return out;
+}
+
 struct ScenePerception::Impl {
   PerceptionConfig config;
   std::unique_ptr<CvaeInference> model;
