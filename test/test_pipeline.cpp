@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
@@ -30,6 +31,26 @@ RenderedPile renderPile(uint64_t seed) {
   const DepthRenderer renderer(p.scene);
   p.view = renderer.render(p.camera, p.T_table_camera);
   return p;
+}
+
+TEST(PerceptionConfig, ShippedYamlHoldsTheDefaultsAndTyposAreErrors) {
+  const std::string dir = SIMSTACK_SOURCE_DIR;
+  const PerceptionConfig c = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
+  EXPECT_EQ(c.model_path, kModel);
+  PerceptionConfig defaults;
+  defaults.model_path = kModel;
+  EXPECT_EQ(perceptionYaml(c), perceptionYaml(defaults));
+  const std::string bad = std::filesystem::temp_directory_path() / "simstack_bad_perception.yaml";
+  std::ofstream(bad) << "hough:\n  min_travesals: 3\n";
+  try {
+    loadPerceptionYaml(bad);
+    ADD_FAILURE() << "a misspelt field must be an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("hough.min_travesals"), std::string::npos) << e.what();
+  }
+  std::ofstream(bad) << "hough:\n  min_traversals: many\n";
+  EXPECT_THROW(loadPerceptionYaml(bad), std::runtime_error);
+  std::filesystem::remove(bad);
 }
 
 TEST(TablePlane, RecoversTheTableOfARenderedScene) {

@@ -85,15 +85,12 @@ json summarise(const std::vector<std::map<std::string, double>>& rows) {
 /// The real-data check of DESIGN.md section 5 on labelled organized clouds (mOSD): object
 /// count and agreement of the visible-point segmentation with the labels (label / 10 = object,
 /// labels < 20 = table or invalid).
-json evaluateReal(const std::string& dir, const std::string& model, int threads) {
+json evaluateReal(const std::string& dir, PerceptionConfig pc) {
   std::vector<std::filesystem::path> files;
   for (const auto& e : std::filesystem::directory_iterator(dir))
     if (e.path().extension() == ".pcd") files.push_back(e.path());
   std::sort(files.begin(), files.end());
   if (files.empty()) throw std::runtime_error("no .pcd files in " + dir);
-  PerceptionConfig pc;
-  pc.model_path = model;
-  pc.threads = threads;
   const ScenePerception perception(pc);
   json out = json::array();
   std::cout << "\n| scene | objects (labels) | objects found | segmentation agreement |\n|---|---|---|---|\n";
@@ -170,7 +167,11 @@ int main(int argc, char** argv) {
       "(1 for the FC baseline); writes JSON and prints the table."};
   app.add_option("--model", models, "model file(s), e.g. models/simstack_r32.pt runs/fc/model.pt")
       ->check(CLI::ExistingFile);
-  std::string real_dir;
+  std::string real_dir, config_path;
+  app.add_option("--config", config_path,
+                 "perception parameters for the network methods (config/perception.yaml; the "
+                 "classical baseline uses its fitting section)")
+      ->check(CLI::ExistingFile);
   app.add_option("--dataset", dataset, "test dataset (a seed never used for training)")
       ->check(CLI::ExistingFile);
   app.add_option("--real", real_dir,
@@ -200,8 +201,14 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
+    PerceptionConfig base;
+    if (!config_path.empty()) base = loadPerceptionYaml(config_path, SIMSTACK_SOURCE_DIR);
+    base.threads = threads;
     if (!real_dir.empty()) {
-      const json real = {{"real_dir", real_dir}, {"model", models.front()}, {"scenes", evaluateReal(real_dir, models.front(), threads)}};
+      PerceptionConfig pc = base;
+      pc.model_path = models.front();
+      const json real = {{"real_dir", real_dir}, {"model", models.front()},
+                         {"config", perceptionYaml(pc)}, {"scenes", evaluateReal(real_dir, pc)}};
       std::ofstream f(output);
       if (!f) throw std::runtime_error("cannot write " + output);
       f << real.dump(1) << "\n";
@@ -212,9 +219,8 @@ int main(int argc, char** argv) {
     const int n = scenes > 0 ? std::min(scenes, reader.size()) : reader.size();
     std::vector<Method> methods;
     for (const auto& path : models) {
-      PerceptionConfig pc;
+      PerceptionConfig pc = base;
       pc.model_path = path;
-      pc.threads = threads;
       pc.zero_code_first = false;  // random codes, as the paper evaluates
       Method m;
       m.perception = std::make_unique<ScenePerception>(pc);
@@ -288,6 +294,7 @@ int main(int argc, char** argv) {
             }
             ClassicalConfig cc;
             cc.threads = threads;
+            cc.fit = base.fit;
             shapes = classicalBaseline(r.depth, camera, T, cc, &grid);
             occupancy.push_back(superquadricOccupancy(shapes, grid));
             const TriangleMesh sq_mesh = superquadricsMesh(shapes);
@@ -326,6 +333,7 @@ int main(int argc, char** argv) {
     results["image"] = "640x480";
     results["noise"] = noise;
     results["chamfer_points"] = chamfer_points;
+    results["config"] = perceptionYaml(base);
     for (const Method& m : methods) {
       json j = summarise(m.rows);
       j["model"] = m.perception ? m.perception->config().model_path : "";

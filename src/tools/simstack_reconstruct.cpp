@@ -76,7 +76,7 @@ void renderShapes(const std::string& path, const std::vector<Superquadric>& shap
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string depth_path, intrinsics, pose_path, output, model = defaultModel();
+  std::string depth_path, intrinsics, pose_path, output, model = defaultModel(), config_path;
   double depth_scale = 0.001;
   int samples = 3, threads = 2;
   uint64_t seed = 0;
@@ -98,6 +98,9 @@ int main(int argc, char** argv) {
                  "it the table plane is estimated from the depth (RANSAC)")
       ->check(CLI::ExistingFile);
   app.add_option("--output", output, "output directory (created)")->required();
+  app.add_option("--config", config_path,
+                 "perception parameters (config/perception.yaml); the options below override it")
+      ->check(CLI::ExistingFile);
   app.add_option("--model", model, "trained model")->capture_default_str()->check(CLI::ExistingFile);
   app.add_option("--samples", samples, "latent samples S")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--seed", seed, "latent code seed")->capture_default_str();
@@ -113,11 +116,18 @@ int main(int argc, char** argv) {
     if (!pose_path.empty()) view.T_table_camera = readTablePose(pose_path);
 
     PerceptionConfig config;
-    config.model_path = model;
-    config.samples = samples;
-    config.seed = seed;
-    config.threads = threads;
-    config.joint_refinement = !no_joint;
+    if (!config_path.empty()) {
+      config = loadPerceptionYaml(config_path, SIMSTACK_SOURCE_DIR);
+      if (app.count("--model") || config.model_path.empty()) config.model_path = model;
+    } else {
+      config.model_path = model;
+    }
+    if (!config_path.empty() && !std::filesystem::exists(config.model_path))
+      throw std::runtime_error(config_path + ": model " + config.model_path + " does not exist");
+    if (config_path.empty() || app.count("--samples")) config.samples = samples;
+    if (config_path.empty() || app.count("--seed")) config.seed = seed;
+    if (config_path.empty() || app.count("--threads")) config.threads = threads;
+    if (no_joint) config.joint_refinement = false;
     const ScenePerception perception(config);
     const SceneEstimate est = perception.perceive(view);
 

@@ -21,7 +21,10 @@ struct HoughConfig {
   int min_traversals = 10;    ///< mu: a fine cell with more traversals is a centre vote
   double gamma = 0.1;         ///< weight of the distance (in voxels) in the assignment rule
   double bandwidth_m = 0.03;  ///< mean-shift radius (flat kernel)
-  int min_instance_voxels = 4;  ///< smaller instances are dropped (their voxels unlabelled)
+  int min_instance_voxels = 4;  ///< smaller instances are dropped (their voxels re-assigned)
+  /// Votes shorter than this cast no ray (the network shrinks votes it is unsure of); their
+  /// voxels are still assigned, by distance alone.
+  double min_vote_norm = 0.0;
   /// Rays may leave the occupied region for this many voxels (noisy TSDF borders).
   int outside_tolerance_vox = 1;
   int threads = 2;
@@ -42,7 +45,7 @@ struct InstanceSegmentation {
 
 /// Instances of one scene hypothesis. `tsdf_m` and `votes` must share a grid
 /// (std::invalid_argument otherwise); occupied = tsdf <= 0. Votes need not be unit length
-/// (the network's are normalised here); near-zero votes are assigned by distance alone.
+/// (the network's are normalised here); short votes are assigned by distance alone.
 InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
                                     const HoughConfig& config = HoughConfig());
 

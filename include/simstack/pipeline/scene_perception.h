@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "simstack/fitting/superquadric_fit.h"
+#include "simstack/pipeline/perception_config.h"
 #include "simstack/geometry/image.h"
 #include "simstack/geometry/pinhole_camera.h"
 #include "simstack/geometry/triangle_mesh.h"
@@ -21,22 +22,6 @@
 #include "simstack/pipeline/table_plane.h"
 
 namespace simstack {
-
-struct PerceptionConfig {
-  std::string model_path;        ///< a model written by simstack_train (required)
-  int samples = 3;               ///< S latent samples per frame
-  bool zero_code_first = true;   ///< hypothesis 0 is the mean scene (z = 0)
-  uint64_t seed = 0;             ///< latent codes; the same seed gives the same hypotheses
-  int decompose_samples = 1;     ///< hypotheses split into instances and fitted (the first ones)
-  int points_per_instance = 1000;  ///< mesh samples handed to the fitter
-  int min_instance_points = 30;  ///< instances with a smaller surface are dropped
-  bool joint_refinement = true;  ///< eqs. 7-9 after the per-instance fits
-  double min_pile_height_m = 0.01;  ///< depth points lower than this are table
-  int threads = 2;
-  HoughConfig hough;
-  FitConfig fit;
-  TablePlaneConfig table;
-};
 
 /// One depth image with its camera and, when known, its pose. Views after the first must
 /// carry a pose (they are fused into the first view's table frame).

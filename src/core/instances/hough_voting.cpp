@@ -137,7 +137,7 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
   std::vector<Vec3> dirs(occupied.size(), Vec3::Zero());
   for (size_t k = 0; k < occupied.size(); ++k) {
     const Vec3f v = votes.data[occupied[k]];
-    if (v.norm() > 1e-3f) dirs[k] = (v / v.norm()).cast<double>();
+    if (v.norm() > std::max(1e-3, config.min_vote_norm)) dirs[k] = (v / v.norm()).cast<double>();
   }
   auto start = [&](size_t k, int scale) -> Vec3 {
     return (g.unravel(occupied[k]).cast<double>() + Vec3::Constant(0.5)) * scale;

@@ -1,0 +1,128 @@
+#include "simstack/pipeline/perception_config.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <filesystem>
+#include <set>
+#include <stdexcept>
+
+namespace simstack {
+namespace {
+
+// Every field once, with its YAML name: reading and writing walk the same lists.
+template <class C, class F>
+void perceptionFields(C& c, F&& f) {
+  f("model", c.model_path);
+  f("samples", c.samples);
+  f("zero_code_first", c.zero_code_first);
+  f("seed", c.seed);
+  f("decompose_samples", c.decompose_samples);
+  f("points_per_instance", c.points_per_instance);
+  f("min_instance_points", c.min_instance_points);
+  f("joint_refinement", c.joint_refinement);
+  f("min_pile_height_m", c.min_pile_height_m);
+  f("threads", c.threads);
+}
+template <class C, class F>
+void houghFields(C& c, F&& f) {
+  f("refinement", c.refinement);
+  f("min_traversals", c.min_traversals);
+  f("gamma", c.gamma);
+  f("bandwidth_m", c.bandwidth_m);
+  f("min_instance_voxels", c.min_instance_voxels);
+  f("min_vote_norm", c.min_vote_norm);
+  f("outside_tolerance_vox", c.outside_tolerance_vox);
+}
+template <class C, class F>
+void fitFields(C& c, F&& f) {
+  f("min_scale_m", c.min_scale_m);
+  f("max_scale_m", c.max_scale_m);
+  f("min_exponent", c.min_exponent);
+  f("max_exponent", c.max_exponent);
+  f("initial_exponent", c.initial_exponent);
+  f("lambda_dist", c.lambda_dist);
+  f("lambda_coll", c.lambda_coll);
+  f("lambda_floor", c.lambda_floor);
+  f("max_points", c.max_points);
+  f("shape_samples", c.shape_samples);
+  f("joint_rounds", c.joint_rounds);
+  f("max_iterations", c.max_iterations);
+}
+template <class C, class F>
+void tableFields(C& c, F&& f) {
+  f("inlier_distance_m", c.inlier_distance_m);
+  f("max_iterations", c.max_iterations);
+  f("pixel_stride", c.pixel_stride);
+  f("max_depth_m", c.max_depth_m);
+  f("min_inlier_share", c.min_inlier_share);
+}
+
+template <class C, class Fields>
+void readSection(const YAML::Node& root, const char* name, C* c, Fields fields,
+                 const std::string& path) {
+  const YAML::Node n = root[name];
+  if (!n) return;
+  if (!n.IsMap()) throw std::runtime_error(path + ": '" + name + "' must be a map");
+  std::set<std::string> known;
+  fields(*c, [&](const char* key, auto& value) {
+    known.insert(key);
+    if (!n[key]) return;
+    try {
+      value = n[key].as<std::remove_reference_t<decltype(value)>>();
+    } catch (const YAML::Exception& e) {
+      throw std::runtime_error(path + ": " + name + "." + key + ": " + e.what());
+    }
+  });
+  for (const auto& kv : n) {
+    const std::string key = kv.first.as<std::string>();
+    if (!known.count(key))
+      throw std::runtime_error(path + ": unknown field " + name + "." + key);
+  }
+}
+
+template <class C, class Fields>
+void writeSection(YAML::Emitter& e, const char* name, C& c, Fields fields) {
+  e << YAML::Key << name << YAML::Value << YAML::BeginMap;
+  fields(c, [&](const char* key, const auto& value) { e << YAML::Key << key << YAML::Value << value; });
+  e << YAML::EndMap;
+}
+
+}  // namespace
+
+PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& base_dir) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::Exception& e) {
+    throw std::runtime_error("cannot read perception config " + path + ": " + e.what());
+  }
+  PerceptionConfig c;
+  if (!root.IsMap()) throw std::runtime_error(path + ": expected a YAML map");
+  for (const auto& kv : root) {
+    const std::string section = kv.first.as<std::string>();
+    if (section != "perception" && section != "hough" && section != "fitting" && section != "table")
+      throw std::runtime_error(path + ": unknown section '" + section + "'");
+  }
+  readSection(root, "perception", &c, [](auto& x, auto&& f) { perceptionFields(x, f); }, path);
+  readSection(root, "hough", &c.hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
+  readSection(root, "fitting", &c.fit, [](auto& x, auto&& f) { fitFields(x, f); }, path);
+  readSection(root, "table", &c.table, [](auto& x, auto&& f) { tableFields(x, f); }, path);
+  if (!c.model_path.empty() && !base_dir.empty() &&
+      std::filesystem::path(c.model_path).is_relative())
+    c.model_path = (std::filesystem::path(base_dir) / c.model_path).string();
+  return c;
+}
+
+std::string perceptionYaml(const PerceptionConfig& config) {
+  PerceptionConfig c = config;
+  YAML::Emitter e;
+  e << YAML::BeginMap;
+  writeSection(e, "perception", c, [](auto& x, auto&& f) { perceptionFields(x, f); });
+  writeSection(e, "hough", c.hough, [](auto& x, auto&& f) { houghFields(x, f); });
+  writeSection(e, "fitting", c.fit, [](auto& x, auto&& f) { fitFields(x, f); });
+  writeSection(e, "table", c.table, [](auto& x, auto&& f) { tableFields(x, f); });
+  e << YAML::EndMap;
+  return e.c_str();
+}
+
+}  // namespace simstack
