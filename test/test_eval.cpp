@@ -24,17 +24,6 @@ Superquadric box(const Vec3& half, const Vec3& centre, double yaw = 0.0) {
   return sq;
 }
 
-Scene sceneOf(const std::vector<Superquadric>& shapes) {
-  Scene s;
-  for (const Superquadric& sq : shapes) {
-    SceneObject o;
-    o.shape = ObjectShape::fromSuperquadric(sq);
-    o.T_table_object = sq.T_table_object;
-    s.objects.push_back(o);
-  }
-  return s;
-}
-
 TEST(Chamfer, ZeroForIdenticalSetsAndTwiceTheShiftForAPlane) {
   Points3 a, b;
   for (int i = 0; i < 40; ++i)
@@ -86,7 +75,7 @@ TEST(Stability, ARestingPileIsStableAndAFloatingTowerFalls) {
 TEST(ClassicalBaseline, SeparatedBoxesGiveOneShapeEach) {
   const std::vector<Superquadric> truth = {box(Vec3(0.05, 0.05, 0.05), Vec3(-0.12, 0, 0.05)),
                                            box(Vec3(0.04, 0.06, 0.03), Vec3(0.12, 0.02, 0.03), 0.5)};
-  const Scene scene = sceneOf(truth);
+  const Scene scene = Scene::fromSuperquadrics(truth);
   PinholeCamera camera;
   const Transform T = lookAt(Vec3(0.5, -0.4, 0.6), Vec3(0, 0, 0.03));
   const RenderResult r = DepthRenderer(scene).render(camera, T);

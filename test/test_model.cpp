@@ -46,7 +46,9 @@ TEST(Cvae, OutputShapesAreRightAndFinite) {
     EXPECT_EQ(o.partial_recon.sizes(), torch::IntArrayRef({2, 1, 16, 16, 16})) << arch;
     EXPECT_TRUE(torch::isfinite(o.tsdf).all().item<bool>()) << arch;
     EXPECT_TRUE(torch::isfinite(o.votes).all().item<bool>()) << arch;
-    if (arch == "cvae") EXPECT_EQ(o.z.sizes(), torch::IntArrayRef({2, 8}));
+    if (arch == "cvae") {
+      EXPECT_EQ(o.z.sizes(), torch::IntArrayRef({2, 8}));
+    }
     const CvaeLosses l = computeLosses(o, partial, tsdf, votes, model->config());
     EXPECT_TRUE(std::isfinite(l.total.item<double>())) << arch;
   }

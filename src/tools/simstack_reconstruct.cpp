@@ -59,13 +59,7 @@ Transform readTablePose(const std::string& path) {
 /// Renders superquadrics from a camera and writes the shaded picture.
 void renderShapes(const std::string& path, const std::vector<Superquadric>& shapes,
                   const PinholeCamera& camera, const Transform& T_table_camera) {
-  Scene scene;
-  for (const Superquadric& sq : shapes) {
-    SceneObject o;
-    o.shape = ObjectShape::fromSuperquadric(sq);
-    o.T_table_object = sq.T_table_object;
-    scene.objects.push_back(o);
-  }
+  const Scene scene = Scene::fromSuperquadrics(shapes);
   RenderConfig rc;
   rc.table_half_size_m = 5.0;  // the table origin may be far from the pile when estimated
   const DepthRenderer renderer(scene, rc);

@@ -47,6 +47,8 @@ struct RenderResult {
 class DepthRenderer {
  public:
   DepthRenderer(const Scene& scene, const RenderConfig& config = RenderConfig());
+  /// One mesh as instance 1, no table (for visibility tests of arbitrary surfaces).
+  explicit DepthRenderer(const TriangleMesh& mesh, double max_range_m = 10.0);
   ~DepthRenderer();
   DepthRenderer(const DepthRenderer&) = delete;
   DepthRenderer& operator=(const DepthRenderer&) = delete;
@@ -55,9 +57,10 @@ class DepthRenderer {
                       const SensorNoiseConfig& noise = SensorNoiseConfig(),
                       bool with_normals = false) const;
   /// Distance along a table-frame ray to the first surface (inf when none); `instance`
-  /// receives what was hit (kNoSurface when none).
+  /// receives what was hit (kNoSurface when none), `triangle` the index of the triangle hit in
+  /// its mesh (-1 when none).
   double castRay(const Vec3& origin_table, const Vec3& direction_table,
-                 int* instance = nullptr) const;
+                 int* instance = nullptr, int* triangle = nullptr) const;
 
  private:
   struct Impl;

@@ -96,6 +96,9 @@ struct SceneObject {
 struct Scene {
   std::vector<SceneObject> objects;
 
+  /// A scene of superquadrics given in the table frame (e.g. fitted shapes).
+  static Scene fromSuperquadrics(const std::vector<Superquadric>& shapes);
+
   /// Area-weighted centroid of all object surfaces: the x/y centre of the scene grid.
   Vec3 surfaceCentroid() const;
   /// Surface samples of every object in the table frame; `object_index` (if given) receives the

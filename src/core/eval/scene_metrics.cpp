@@ -1,7 +1,5 @@
 #include "simstack/eval/scene_metrics.h"
 
-#include <embree3/rtcore.h>
-
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -9,6 +7,7 @@
 #include <stdexcept>
 
 #include "simstack/physics/physics_world.h"
+#include "simstack/render/depth_renderer.h"
 #include "simstack/scene/scene.h"
 
 namespace simstack {
@@ -51,22 +50,7 @@ std::vector<bool> visibleTriangles(const TriangleMesh& mesh, const PinholeCamera
                                    const Transform& T_table_camera) {
   std::vector<bool> visible(mesh.triangles.size(), false);
   if (mesh.empty()) return visible;
-  RTCDevice device = rtcNewDevice("threads=1");
-  if (!device) throw std::runtime_error("Embree: cannot create a device");
-  RTCScene scene = rtcNewScene(device);
-  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
-      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), mesh.vertices.size()));
-  auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-      geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), mesh.triangles.size()));
-  for (size_t i = 0; i < mesh.vertices.size(); ++i)
-    for (int k = 0; k < 3; ++k) vb[3 * i + k] = static_cast<float>(mesh.vertices[i][k]);
-  for (size_t i = 0; i < mesh.triangles.size(); ++i)
-    for (int k = 0; k < 3; ++k) ib[3 * i + k] = static_cast<unsigned>(mesh.triangles[i][k]);
-  rtcCommitGeometry(geom);
-  rtcAttachGeometry(scene, geom);
-  rtcReleaseGeometry(geom);
-  rtcCommitScene(scene);
+  const DepthRenderer caster(mesh);
   const Vec3 eye = T_table_camera.translation();
   const Transform T_camera_table = T_table_camera.inverse();
   for (size_t i = 0; i < mesh.triangles.size(); ++i) {
@@ -76,30 +60,11 @@ std::vector<bool> visibleTriangles(const TriangleMesh& mesh, const PinholeCamera
     if (!camera.project(T_camera_table * c, &u, &v) || u < 0 || v < 0 || u >= camera.width ||
         v >= camera.height)
       continue;
-    const Vec3 dir = (c - eye).normalized();
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    RTCRayHit rh;
-    rh.ray.org_x = eye.x();
-    rh.ray.org_y = eye.y();
-    rh.ray.org_z = eye.z();
-    rh.ray.dir_x = dir.x();
-    rh.ray.dir_y = dir.y();
-    rh.ray.dir_z = dir.z();
-    rh.ray.tnear = 0.0f;
-    rh.ray.tfar = std::numeric_limits<float>::infinity();
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.flags = 0;
-    rh.ray.time = 0.0f;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(scene, &context, &rh);
+    int hit = -1;
+    const double distance = caster.castRay(eye, c - eye, nullptr, &hit);
     // The triangle itself, or a hit within 1 mm of its centre (shared edges, float rounding).
-    visible[i] = rh.hit.geomID != RTC_INVALID_GEOMETRY_ID &&
-                 (rh.hit.primID == i || std::abs(rh.ray.tfar - (c - eye).norm()) < 1e-3);
+    visible[i] = hit == static_cast<int>(i) || std::abs(distance - (c - eye).norm()) < 1e-3;
   }
-  rtcReleaseScene(scene);
-  rtcReleaseDevice(device);
   return visible;
 }
 

@@ -277,7 +277,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
     }
     std::array<double, 5> row{};
     double rate = 0.0;
-    if (std::sscanf(last.c_str(), "%*lld,%lf,%lf,%lf,%lf,%lf,%lf", &row[0], &row[1], &row[2],
+    if (std::sscanf(last.c_str(), "%*[^,],%lf,%lf,%lf,%lf,%lf,%lf", &row[0], &row[1], &row[2],
                     &row[3], &row[4], &rate) == 6) {
       recent.push_back(row);
       report.samples_per_second = rate;

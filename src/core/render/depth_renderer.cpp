@@ -53,8 +53,8 @@ struct DepthRenderer::Impl {
   }
 
   // Returns the hit distance in units of `dir` (inf when none).
-  float intersect(const Vec3& org, const Vec3& dir, float tfar, int* instance,
-                  Vec3f* normal) const {
+  float intersect(const Vec3& org, const Vec3& dir, float tfar, int* instance, Vec3f* normal,
+                  int* triangle = nullptr) const {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
     RTCRayHit rh;
@@ -74,8 +74,10 @@ struct DepthRenderer::Impl {
     rtcIntersect1(scene, &context, &rh);
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
       if (instance) *instance = kNoSurface;
+      if (triangle) *triangle = -1;
       return std::numeric_limits<float>::infinity();
     }
+    if (triangle) *triangle = static_cast<int>(rh.hit.primID);
     if (instance) *instance = instance_of_geometry[rh.hit.geomID];
     if (normal) *normal = Vec3f(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z).normalized();
     return rh.ray.tfar;
@@ -105,12 +107,27 @@ DepthRenderer::DepthRenderer(const Scene& scene, const RenderConfig& config)
   rtcCommitScene(impl_->scene);
 }
 
+DepthRenderer::DepthRenderer(const TriangleMesh& mesh, double max_range_m)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->config.with_table = false;
+  impl_->config.max_range_m = max_range_m;
+  impl_->device = rtcNewDevice("threads=1");
+  if (!impl_->device)
+    throw std::runtime_error("Embree: cannot create a device (error " +
+                             std::to_string(rtcGetDeviceError(nullptr)) + ")");
+  impl_->scene = rtcNewScene(impl_->device);
+  if (!mesh.empty()) impl_->addMesh(mesh, 1);
+  rtcCommitScene(impl_->scene);
+}
+
 DepthRenderer::~DepthRenderer() = default;
 
-double DepthRenderer::castRay(const Vec3& origin, const Vec3& direction, int* instance) const {
+double DepthRenderer::castRay(const Vec3& origin, const Vec3& direction, int* instance,
+                              int* triangle) const {
   const double len = direction.norm();
-  const float t = impl_->intersect(
-      origin, direction / len, static_cast<float>(impl_->config.max_range_m), instance, nullptr);
+  const float t = impl_->intersect(origin, direction / len,
+                                   static_cast<float>(impl_->config.max_range_m), instance, nullptr,
+                                   triangle);
   return t;
 }
 

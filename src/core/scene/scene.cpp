@@ -103,6 +103,17 @@ bool ObjectShape::containsObject(const Vec3& p_object) const {
   return hull_->contains(p_object);
 }
 
+Scene Scene::fromSuperquadrics(const std::vector<Superquadric>& shapes) {
+  Scene scene;
+  for (const Superquadric& sq : shapes) {
+    SceneObject o;
+    o.shape = ObjectShape::fromSuperquadric(sq);
+    o.T_table_object = sq.T_table_object;
+    scene.objects.push_back(o);
+  }
+  return scene;
+}
+
 Vec3 Scene::surfaceCentroid() const {
   Vec3 sum = Vec3::Zero();
   double weight = 0.0;
