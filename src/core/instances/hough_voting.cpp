@@ -15,21 +15,24 @@ namespace {
 
 /// Marches the ray from fine-grid point `p` along unit `d` (Amanatides & Woo), visiting every
 /// fine cell once while the ray stays in (or within `tolerance` voxels of) occupied space:
-/// visit(scene voxel, fine cell x, y, z).
+/// visit(scene voxel, index of the fine cell within that voxel). Voxel and in-voxel
+/// coordinates are stepped along with the cell, so the loop has no division.
 template <class Visit>
-size_t marchRay(const Vec3& p, const Vec3& d, int ref, int fine, const std::vector<uint8_t>& occ,
-                int r, int tolerance, Visit&& visit) {
-  int cell[3], step[3];
+size_t marchRay(const Vec3& p, const Vec3& d, int ref, const std::vector<uint8_t>& occ, int r,
+                int tolerance, Visit&& visit) {
+  int voxel[3], local[3], step[3];
   double t_max[3], t_delta[3];
   for (int a = 0; a < 3; ++a) {
-    cell[a] = static_cast<int>(std::floor(p[a]));
+    const int cell = static_cast<int>(std::floor(p[a]));
+    voxel[a] = cell / ref;  // p is inside the grid: cell >= 0
+    local[a] = cell - voxel[a] * ref;
     if (d[a] > 1e-12) {
       step[a] = 1;
-      t_max[a] = (cell[a] + 1 - p[a]) / d[a];
+      t_max[a] = (cell + 1 - p[a]) / d[a];
       t_delta[a] = 1.0 / d[a];
     } else if (d[a] < -1e-12) {
       step[a] = -1;
-      t_max[a] = (p[a] - cell[a]) / -d[a];
+      t_max[a] = (p[a] - cell) / -d[a];
       t_delta[a] = -1.0 / d[a];
     } else {
       step[a] = 0;
@@ -37,20 +40,33 @@ size_t marchRay(const Vec3& p, const Vec3& d, int ref, int fine, const std::vect
     }
   }
   size_t visits = 0;
-  int outside = 0, last_voxel = -1;
-  while (cell[0] >= 0 && cell[1] >= 0 && cell[2] >= 0 && cell[0] < fine && cell[1] < fine &&
-         cell[2] < fine) {
-    const int voxel = ((cell[2] / ref) * r + cell[1] / ref) * r + cell[0] / ref;
-    if (voxel != last_voxel) {
-      last_voxel = voxel;
-      outside = occ[voxel] ? 0 : outside + 1;
+  int outside = 0;
+  bool moved = true;
+  int index = 0;
+  while (true) {
+    if (moved) {  // entered a new scene voxel
+      if (voxel[0] < 0 || voxel[1] < 0 || voxel[2] < 0 || voxel[0] >= r || voxel[1] >= r ||
+          voxel[2] >= r)
+        break;
+      index = (voxel[2] * r + voxel[1]) * r + voxel[0];
+      outside = occ[index] ? 0 : outside + 1;
       if (outside > tolerance) break;
+      moved = false;
     }
-    visit(voxel, cell[0], cell[1], cell[2]);
+    visit(index, (local[2] * ref + local[1]) * ref + local[0]);
     ++visits;
     const int a = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
-    cell[a] += step[a];
     t_max[a] += t_delta[a];
+    local[a] += step[a];
+    if (local[a] == ref) {
+      local[a] = 0;
+      ++voxel[a];
+      moved = true;
+    } else if (local[a] < 0) {
+      local[a] = ref - 1;
+      --voxel[a];
+      moved = true;
+    }
   }
   return visits;
 }
@@ -153,8 +169,8 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
     for (size_t k = 0; k < occupied.size(); ++k) {
       if (dirs[k].squaredNorm() == 0) continue;
       auto& counts = partial[omp_get_thread_num()];
-      marchRay(start(k, 1), dirs[k], 1, r, occ, r, config.outside_tolerance_vox,
-               [&](int voxel, int, int, int) { ++counts[voxel]; });
+      marchRay(start(k, 1), dirs[k], 1, occ, r, config.outside_tolerance_vox,
+               [&](int voxel, int) { ++counts[voxel]; });
     }
     for (const auto& p : partial)
       for (int i = 0; i < g.voxelCount(); ++i) coarse[i] += p[i];
@@ -174,12 +190,10 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
   for (size_t k = 0; k < occupied.size(); ++k) {
     if (dirs[k].squaredNorm() == 0) continue;
     visits[omp_get_thread_num()] += marchRay(
-        start(k, ref), dirs[k], ref, fine, occ, r, config.outside_tolerance_vox,
-        [&](int voxel, int fx, int fy, int fz) {
+        start(k, ref), dirs[k], ref, occ, r, config.outside_tolerance_vox,
+        [&](int voxel, int local) {
           const int b = block_of[voxel];
-          if (b < 0) return;
-          const size_t local = (static_cast<size_t>(fz % ref) * ref + fy % ref) * ref + fx % ref;
-          __atomic_fetch_add(&fine_counts[b * block + local], 1u, __ATOMIC_RELAXED);
+          if (b >= 0) __atomic_fetch_add(&fine_counts[b * block + local], 1u, __ATOMIC_RELAXED);
         });
   }
   out.traversals = std::accumulate(visits.begin(), visits.end(), size_t{0});
