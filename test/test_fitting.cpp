@@ -55,6 +55,21 @@ TEST(SurfaceDistance, IsMetresAlongTheRayForEveryExponent) {
   }
 }
 
+TEST(SurfaceDistance, StaysFiniteForExtremeExponentsAndScales) {
+  // Exponents 1 and 100 with a 5 mm axis: |q/a|^e spans 1e-200..1e178 (a NaN in the evaluation
+  // runs before the distance was computed in logs).
+  const Superquadric sq = makeShape(Vec3(0.005, 0.03, 0.07), Vec3(1, 100, 3.6), Vec3(0, 0, 0.07),
+                                    Vec3(1, 1, 0), 1.2);
+  for (const Vec3& p : {Vec3(0.3, -0.2, 0.5), Vec3(0.001, 0.0, 0.07), Vec3(0, 0.029, 0.07),
+                        Vec3(0.0, 0.0, 0.07)}) {
+    const double d = surfaceDistance(sq, p);
+    EXPECT_TRUE(std::isfinite(d)) << p.transpose();
+    if (d > 0) EXPECT_LE(d, (p - sq.centroid()).norm() + 1e-9);  // outside: at most |OP|
+    else EXPECT_GE(d, -sq.scale_m.norm());  // inside: at most the ray to the bounding box
+  }
+  EXPECT_GT(surfaceDistance(sq, Vec3(0.3, -0.2, 0.5)), 0.0);
+}
+
 TEST(SuperquadricFit, RecoversKnownShapesFromNoisySamples) {
   const std::vector<Superquadric> truth = {
       makeShape(Vec3(0.05, 0.07, 0.10), Vec3(2, 2, 2), Vec3(0.1, -0.05, 0.12), Vec3(1, 2, 3), 0.7),

@@ -17,11 +17,11 @@
 namespace simstack {
 
 struct HoughConfig {
-  int refinement = 10;        ///< fine cells per voxel along each axis (the paper: 10)
-  int min_traversals = 10;    ///< mu: a fine cell with more traversals is a centre vote
+  int refinement = 5;         ///< fine cells per voxel along each axis (the paper: 10)
+  int min_traversals = 5;     ///< mu: a fine cell with more traversals is a centre vote (paper: 10)
   double gamma = 0.1;         ///< weight of the distance (in voxels) in the assignment rule
-  double bandwidth_m = 0.03;  ///< mean-shift radius (flat kernel)
-  int min_instance_voxels = 4;  ///< smaller instances are dropped (their voxels re-assigned)
+  double bandwidth_m = 0.07;  ///< mean-shift radius (flat kernel)
+  int min_instance_voxels = 15;  ///< smaller instances are dropped (their voxels re-assigned)
   /// Votes shorter than this cast no ray (the network shrinks votes it is unsure of); their
   /// voxels are still assigned, by distance alone.
   double min_vote_norm = 0.0;

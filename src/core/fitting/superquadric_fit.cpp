@@ -24,25 +24,42 @@ T rayDistance(const T* x, const T* p) {
   const T inverse[3] = {-x[9], -x[10], -x[11]};
   T q[3];
   ceres::AngleAxisRotatePoint(inverse, d, q);
-  T w[3];
-  T f(0.0);
-  for (int i = 0; i < 3; ++i) {
-    w[i] = pow(q[i] * q[i] / (x[i] * x[i]) + T(1e-18), x[3 + i] * T(0.5));  // |q_i / a_i|^e_i
-    f += w[i];
-  }
-  const T norm = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + T(1e-18));
-  if (f < T(1e-12)) return -norm;  // at the centre: deep inside, any finite value will do
-  // Solve sum_i w_i exp(mu e_i) = 1 for mu = log(lambda): Newton on the convex log-sum-exp,
-  // started from the equal-exponent solution.
-  T mu = -log(f) / ((x[3] + x[4] + x[5]) / T(3.0));
-  for (int it = 0; it < 5; ++it) {
-    T s(0.0), ds(0.0);
+  // Everything in logs: exponents up to 100 over- and underflow doubles otherwise.
+  T lw[3];  // log |q_i / a_i|^e_i
+  for (int i = 0; i < 3; ++i) lw[i] = T(0.5) * x[3 + i] * log(q[i] * q[i] / (x[i] * x[i]) + T(1e-18));
+  auto logSumExp = [&](const T& mu, T* weighted_exponent) {
+    T terms[3];
+    T top = lw[0] + mu * x[3];
     for (int i = 0; i < 3; ++i) {
-      const T term = w[i] * exp(mu * x[3 + i]);
-      s += term;
-      ds += x[3 + i] * term;
+      terms[i] = lw[i] + mu * x[3 + i];
+      if (terms[i] > top) top = terms[i];
     }
-    mu -= log(s) * s / ds;
+    T s(0.0), se(0.0);
+    for (int i = 0; i < 3; ++i) {
+      const T e = exp(terms[i] - top);
+      s += e;
+      se += x[3 + i] * e;
+    }
+    if (weighted_exponent) *weighted_exponent = se / s;
+    return top + log(s);
+  };
+  const T norm = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + T(1e-18));
+  const T log_f = logSumExp(T(0.0), nullptr);
+  if (norm < T(1e-7) || log_f < T(-27.6)) {
+    // At the centre the ray has no direction: any point there is deep inside; report the
+    // smallest semi-axis, a lower bound of its depth.
+    T smallest = x[0];
+    if (x[1] < smallest) smallest = x[1];
+    if (x[2] < smallest) smallest = x[2];
+    return -smallest;
+  }
+  // Solve log sum_i |q_i/a_i|^e_i exp(mu e_i) = 0 for mu = log(lambda): Newton on the convex
+  // log-sum-exp, started from the equal-exponent solution.
+  T mu = -log_f / ((x[3] + x[4] + x[5]) / T(3.0));
+  for (int it = 0; it < 6; ++it) {
+    T slope;
+    const T value = logSumExp(mu, &slope);
+    mu -= value / slope;
   }
   return norm * (T(1.0) - exp(mu));
 }
