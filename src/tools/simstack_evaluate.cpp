@@ -19,6 +19,7 @@
 #include "simstack/dataset/dataset.h"
 #include "simstack/eval/occupancy.h"
 #include "simstack/eval/scene_metrics.h"
+#include "simstack/mesh/marching_cubes.h"
 #include "simstack/model/training_sample.h"
 #include "simstack/pipeline/classical_baseline.h"
 #include "simstack/pipeline/scene_perception.h"
@@ -222,12 +223,10 @@ int main(int argc, char** argv) {
       PerceptionConfig pc = base;
       pc.model_path = path;
       pc.zero_code_first = false;  // random codes, as the paper evaluates
+      pc.samples = samples;  // an FC model runs with 1
       Method m;
       m.perception = std::make_unique<ScenePerception>(pc);
-      const std::string arch = m.perception->modelConfig().architecture;
-      pc.samples = arch == "fc" ? 1 : samples;
-      m.perception = std::make_unique<ScenePerception>(pc);
-      m.name = arch == "fc" ? "fc" : "cvae";
+      m.name = m.perception->modelConfig().architecture;
       for (const auto& other : methods)
         if (other.name == m.name) m.name += "_" + std::to_string(methods.size());
       methods.push_back(std::move(m));
@@ -273,9 +272,10 @@ int main(int argc, char** argv) {
             double full = 0, visible = 0;
             for (const SceneHypothesis& h : est.hypotheses) {
               occupancy.push_back(h.tsdf_m.data);
-              full += chamferDistance(samplePoints(h.surface, chamfer_points, rng), gt_full);
+              const TriangleMesh surface = h.surface.empty() ? extractSurface(h.tsdf_m) : h.surface;
+              full += chamferDistance(samplePoints(surface, chamfer_points, rng), gt_full);
               visible += chamferDistance(
-                  samplePoints(subMesh(h.surface, visibleTriangles(h.surface, camera, T)),
+                  samplePoints(subMesh(surface, visibleTriangles(surface, camera, T)),
                                chamfer_points, rng),
                   gt_vis_pts);
             }

@@ -9,6 +9,7 @@
 
 #include "simstack/io/image_io.h"
 #include "simstack/io/scene_io.h"
+#include "simstack/mesh/marching_cubes.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/scene.h"
@@ -49,11 +50,6 @@ PinholeCamera parseIntrinsics(const std::string& text, int width, int height) {
   c.cy = v[3];
   c.validate();
   return c;
-}
-
-Transform readTablePose(const std::string& path) {
-  // Either a view YAML written by simstack_generate --views, or the same T_table_camera keys.
-  return readViewYaml(path).T_table_camera;
 }
 
 /// Renders superquadrics from a camera and writes the shaded picture.
@@ -107,7 +103,7 @@ int main(int argc, char** argv) {
     const std::string ext = fs::path(depth_path).extension().string();
     view.depth = ext == ".pcd" ? readDepthPcd(depth_path) : readDepthImage(depth_path, depth_scale);
     view.camera = parseIntrinsics(intrinsics, view.depth.width, view.depth.height);
-    if (!pose_path.empty()) view.T_table_camera = readTablePose(pose_path);
+    if (!pose_path.empty()) view.T_table_camera = readViewYaml(pose_path).T_table_camera;
 
     PerceptionConfig config;
     if (!config_path.empty()) {
@@ -136,7 +132,8 @@ int main(int argc, char** argv) {
       writeMeshPly((out / ("instance_" + std::to_string(k) + ".ply")).string(), h.instances[k].mesh);
     }
     writeSuperquadricsYaml((out / "superquadrics.yaml").string(), shapes);
-    writeMeshPly((out / "surface.ply").string(), h.surface);
+    writeMeshPly((out / "surface.ply").string(),
+                 h.surface.empty() ? extractSurface(h.tsdf_m) : h.surface);
 
     // Visible points labelled by instance (0 = table or unassigned, k + 1 = instance k).
     const Image<int> pixel_labels = pixelInstances(view, est, 0, config.min_pile_height_m);

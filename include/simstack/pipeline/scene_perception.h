@@ -44,7 +44,7 @@ struct SceneHypothesis {
   Grid3<float> tsdf_m;
   Grid3<Vec3f> votes;
   Grid3<int> labels;          ///< instance per voxel, -1 free (empty unless decomposed)
-  TriangleMesh surface;       ///< marching cubes of tsdf_m
+  TriangleMesh surface;       ///< marching cubes of tsdf_m (made when decomposed)
   std::vector<InstanceEstimate> instances;
   bool decomposed = false;
 };
@@ -86,7 +86,8 @@ Image<int> pixelInstances(const DepthView& view, const SceneEstimate& estimate,
 class ScenePerception {
  public:
   /// Loads the model; throws std::runtime_error naming the file when it cannot, and
-  /// std::invalid_argument for a bad config value.
+  /// std::invalid_argument for a bad config value. An FC model has no latent space: it gets
+  /// samples = 1 (see config()).
   explicit ScenePerception(const PerceptionConfig& config);
   ~ScenePerception();
   ScenePerception(const ScenePerception&) = delete;

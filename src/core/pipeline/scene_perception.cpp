@@ -140,6 +140,11 @@ ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Imp
   if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
   impl_->config = config;
   impl_->model = std::make_unique<CvaeInference>(config.model_path, config.threads);
+  if (impl_->model->config().architecture == "fc") {
+    // No latent space: S hypotheses would be S copies of one.
+    impl_->config.samples = 1;
+    impl_->config.decompose_samples = std::min(impl_->config.decompose_samples, 1);
+  }
 }
 
 ScenePerception::~ScenePerception() = default;
@@ -195,9 +200,6 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views) con
     h.labels = Grid3<int>(out.grid, -1);
     out.hypotheses.push_back(std::move(h));
   }
-  t = Clock::now();
-  for (SceneHypothesis& h : out.hypotheses) h.surface = extractSurface(h.tsdf_m);
-  out.timings.mesh_ms += msSince(t);
   for (int k = 0; k < c.decompose_samples; ++k) decompose(&out.hypotheses[k], c, &out.timings);
   out.timings.total_ms = msSince(start);
   return out;
