@@ -1,7 +1,8 @@
 #pragma once
 /// @file superquadric_fit.h
-/// One superquadric per instance (paper section 3.2.2, eqs. 5-9), solved with Ceres (dogleg,
-/// bounded parameters).
+/// One superquadric per instance (paper section 3.2.2, eqs. 5-9), solved with Ceres (dogleg).
+/// The bounds (sizes, exponents in [min, max] so that shapes stay convex) are built into the
+/// solver's parametrisation rather than given to Ceres as bounds.
 ///
 /// Distance: the paper's d = |OP| (f - 1) / f saturates for box-like shapes (f grows like
 /// distance^exponent), so a point 10 % outside a box of exponent 20 reads as 85 % of |OP|.
@@ -23,18 +24,23 @@ struct FitConfig {
   double min_scale_m = 0.005;
   double max_scale_m = 0.4;
   double min_exponent = 1.0;   ///< >= 1 keeps shapes convex
-  double max_exponent = 100.0;  ///< the generator's range; a bound that binds costs Ceres
-                                ///< many projected line searches
+  double max_exponent = 100.0;  ///< the generator's range
   double initial_exponent = 3.0;
   double lambda_dist = 100.0;  ///< eq. 7 weights (the paper's values)
   double lambda_coll = 10.0;
   double lambda_floor = 1.0;
-  int max_points = 200;        ///< points per instance used by the solver (evenly subsampled)
-  int shape_samples = 80;      ///< surface samples per shape for the collision and floor terms
+  int max_points = 100;        ///< points per instance used by the solver (evenly subsampled)
+  int shape_samples = 200;     ///< surface samples per shape for the collision and floor terms
                               ///< (L_floor is a sum, so it grows with this)
-  int joint_rounds = 2;        ///< joint solves, samples redrawn between them
-  int max_iterations = 50;     ///< per Ceres solve
+  /// A collision or floor sample joins a joint round only when it is within this distance of
+  /// penetrating at the round's start (the terms are hinges: farther samples add zeros).
+  double contact_margin_m = 0.01;
+  int joint_rounds = 3;        ///< joint solves, samples redrawn and re-selected between them
+  int max_iterations = 10;     ///< per Ceres solve
   int threads = 1;
+
+  /// Throws std::invalid_argument naming the first field out of range.
+  void validate() const;
 };
 
 /// Signed distance along the ray from the centre (see the file comment), metres, table frame.

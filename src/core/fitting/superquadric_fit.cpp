@@ -17,6 +17,26 @@ namespace {
 constexpr int kParams = 12;
 using Params = std::array<double, kParams>;
 
+// Ceres solves in an unbounded space: scale a = a_min + exp(u) and exponent
+// e = e_min + (e_max - e_min) sigmoid(v), so that the bounds (positive size, convex shape, the
+// exponent range) hold by construction; the scale's upper bound is applied at the end. Bounds
+// inside Ceres cost a projected line search per step, three Jacobian evaluations per iteration
+// on network surfaces, and made the joint refinement five times slower. Box-like surfaces
+// push exponents to the top of their range, where the sigmoid flattens instead of overflowing.
+struct Bounds {
+  double min_scale, min_exponent, max_exponent;
+};
+
+template <typename T>
+void toShape(const T* u, const Bounds& b, T* x) {
+  for (int i = 0; i < 3; ++i) {
+    x[i] = T(b.min_scale) + exp(u[i]);
+    const T sigmoid = T(0.5) * (T(1.0) + tanh(T(0.5) * u[3 + i]));  // stable for any v
+    x[3 + i] = T(b.min_exponent) + T(b.max_exponent - b.min_exponent) * sigmoid;
+  }
+  for (int i = 6; i < kParams; ++i) x[i] = u[i];
+}
+
 /// Signed distance from the shape's surface along the ray centre -> p (see the header).
 template <typename T>
 T rayDistance(const T* x, const T* p) {
@@ -64,10 +84,23 @@ T rayDistance(const T* x, const T* p) {
   return norm * (T(1.0) - exp(mu));
 }
 
-/// Table-frame point of the unit-scale sample q of shape x.
+/// A point on the surface of every superquadric, whatever its sizes and exponents: the signed
+/// shares w (|w_1| + |w_2| + |w_3| = 1) of the implicit function's three terms, so that the
+/// local point a_i sign(w_i) |w_i|^(1 / e_i) satisfies eq. 4 exactly. A sample therefore stays
+/// on the surface while the solver changes the exponents; a sample frozen in the unit shape's
+/// coordinates would leave it, and let a box-like shape grow corners between the samples that
+/// guard its contacts.
+using SurfaceSample = Vec3;
+
+/// Table-frame position of surface sample w on shape x.
 template <typename T>
-void placeSample(const T* x, const Vec3& q, T* p) {
-  const T local[3] = {x[0] * T(q.x()), x[1] * T(q.y()), x[2] * T(q.z())};
+void placeSample(const T* x, const SurfaceSample& w, T* p) {
+  T local[3];
+  for (int i = 0; i < 3; ++i) {
+    const double share = std::abs(w[i]);
+    local[i] = share > 0.0 ? x[i] * T(w[i] < 0 ? -1.0 : 1.0) * exp(T(std::log(share)) / x[3 + i])
+                           : T(0.0);
+  }
   const T aa[3] = {x[9], x[10], x[11]};
   ceres::AngleAxisRotatePoint(aa, local, p);
   for (int i = 0; i < 3; ++i) p[i] += x[6 + i];
@@ -76,8 +109,11 @@ void placeSample(const T* x, const Vec3& q, T* p) {
 struct DistortionResidual {
   Vec3 point;
   double weight;  // sqrt(lambda / N)
+  Bounds lo;
   template <typename T>
-  bool operator()(const T* x, T* r) const {
+  bool operator()(const T* u, T* r) const {
+    T x[kParams];
+    toShape(u, lo, x);
     const T p[3] = {T(point.x()), T(point.y()), T(point.z())};
     r[0] = T(weight) * pow(x[0] * x[1] * x[2], 0.25) * rayDistance(x, p);
     return true;
@@ -87,8 +123,12 @@ struct DistortionResidual {
 struct CollisionResidual {  // sample q of shape j penetrating shape i
   Vec3 q;
   double weight;
+  Bounds lo;
   template <typename T>
-  bool operator()(const T* xi, const T* xj, T* r) const {
+  bool operator()(const T* ui, const T* uj, T* r) const {
+    T xi[kParams], xj[kParams];
+    toShape(ui, lo, xi);
+    toShape(uj, lo, xj);
     T p[3];
     placeSample(xj, q, p);
     const T d = rayDistance(xi, p);
@@ -100,8 +140,11 @@ struct CollisionResidual {  // sample q of shape j penetrating shape i
 struct FloorResidual {
   Vec3 q;
   double weight;
+  Bounds lo;
   template <typename T>
-  bool operator()(const T* x, T* r) const {
+  bool operator()(const T* u, T* r) const {
+    T x[kParams];
+    toShape(u, lo, x);
     T p[3];
     placeSample(x, q, p);
     r[0] = p[2] < T(0.0) ? T(weight) * p[2] : T(0.0);
@@ -140,17 +183,30 @@ void clampToBounds(Params* x, const FitConfig& c) {
   }
 }
 
-void setBounds(ceres::Problem* problem, double* x, const FitConfig& c) {
+Bounds solverBounds(const FitConfig& c) { return {c.min_scale_m, c.min_exponent, c.max_exponent}; }
+
+// Shape parameters (clamped to the bounds, kept a hair inside them so that the inverse maps
+// exist) to solver variables, and back.
+Params toSolver(Params x, const FitConfig& c) {
+  clampToBounds(&x, c);
   for (int i = 0; i < 3; ++i) {
-    problem->SetParameterLowerBound(x, i, c.min_scale_m);
-    problem->SetParameterUpperBound(x, i, c.max_scale_m);
-    problem->SetParameterLowerBound(x, 3 + i, c.min_exponent);
-    problem->SetParameterUpperBound(x, 3 + i, c.max_exponent);
+    x[i] = std::log(std::max(x[i] - c.min_scale_m, 1e-4 * c.min_scale_m));
+    const double share = std::clamp((x[3 + i] - c.min_exponent) / (c.max_exponent - c.min_exponent),
+                                    1e-4, 1.0 - 1e-4);
+    x[3 + i] = std::log(share / (1.0 - share));
   }
+  return x;
+}
+
+Params fromSolver(const Params& u, const FitConfig& c) {
+  Params x;
+  toShape(u.data(), solverBounds(c), x.data());
+  clampToBounds(&x, c);
+  return x;
 }
 
 void addDistortion(ceres::Problem* problem, double* x, const Points3& points, double lambda,
-                   int max_points) {
+                   int max_points, const Bounds& lo) {
   const size_t n = points.size();
   const size_t stride = std::max<size_t>(1, (n + max_points - 1) / std::max(1, max_points));
   const size_t used = (n + stride - 1) / stride;
@@ -158,7 +214,7 @@ void addDistortion(ceres::Problem* problem, double* x, const Points3& points, do
   for (size_t k = 0; k < n; k += stride) {
     problem->AddResidualBlock(
         new ceres::AutoDiffCostFunction<DistortionResidual, 1, kParams>(
-            new DistortionResidual{points[k], weight}),
+            new DistortionResidual{points[k], weight, lo}),
         nullptr, x);
   }
 }
@@ -166,22 +222,32 @@ void addDistortion(ceres::Problem* problem, double* x, const Points3& points, do
 ceres::Solver::Options solverOptions(const FitConfig& c) {
   ceres::Solver::Options o;
   o.trust_region_strategy_type = ceres::DOGLEG;
-  o.linear_solver_type = ceres::DENSE_QR;
+  o.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;  // 12 parameters per shape: tiny normal equations
   o.max_num_iterations = c.max_iterations;
+  // Ceres' default first trust region (1e4) is far beyond the scale of these parameters
+  // (centimetres, log sizes, exponent logits): every early step overshot, the dogleg halves the
+  // radius per rejected step, and a 15-iteration solve spent all of them shrinking it and
+  // returned its starting point.
+  o.initial_trust_region_radius = 1.0;
   o.num_threads = std::max(1, c.threads);
   o.logging_type = ceres::SILENT;
-  o.minimizer_progress_to_stdout = false;
   return o;
 }
 
-/// Surface samples of the unit-scale shape with the given exponents.
-std::vector<Vec3> unitSamples(const Vec3& exponents, int count, uint64_t seed) {
+/// Near-uniform surface samples of the shape with the given exponents, as SurfaceSamples.
+std::vector<SurfaceSample> unitSamples(const Vec3& exponents, int count, uint64_t seed) {
   Superquadric unit;
   unit.scale_m = Vec3::Ones();
   unit.exponents = exponents;
   std::mt19937_64 rng(seed);
-  std::vector<Vec3> out;
-  for (const SurfacePoint& s : unit.sampleSurfaceObject(count, rng)) out.push_back(s.position);
+  std::vector<SurfaceSample> out;
+  for (const SurfacePoint& s : unit.sampleSurfaceObject(count, rng)) {
+    SurfaceSample w;
+    for (int i = 0; i < 3; ++i)
+      w[i] = std::copysign(std::pow(std::abs(s.position[i]), exponents[i]), s.position[i]);
+    const double sum = w.cwiseAbs().sum();
+    if (sum > 0.0) out.push_back(w / sum);
+  }
   return out;
 }
 
@@ -194,6 +260,23 @@ void checkPoints(const Points3& points) {
 }
 
 }  // namespace
+
+void FitConfig::validate() const {
+  auto require = [](bool ok, const std::string& what) {
+    if (!ok) throw std::invalid_argument("fitting config: " + what);
+  };
+  require(min_scale_m > 0.0 && max_scale_m > min_scale_m, "need 0 < min_scale_m < max_scale_m");
+  require(min_exponent >= 1.0 && max_exponent > min_exponent,
+          "need 1 <= min_exponent < max_exponent (exponents below 1 are not convex)");
+  require(initial_exponent >= min_exponent && initial_exponent <= max_exponent,
+          "initial_exponent must lie in [min_exponent, max_exponent]");
+  require(lambda_dist >= 0.0 && lambda_coll >= 0.0 && lambda_floor >= 0.0,
+          "lambda_dist, lambda_coll and lambda_floor must be >= 0");
+  require(max_points >= 4 && shape_samples >= 1, "need max_points >= 4 and shape_samples >= 1");
+  require(contact_margin_m >= 0.0, "contact_margin_m must be >= 0");
+  require(joint_rounds >= 1 && max_iterations >= 1 && threads >= 1,
+          "joint_rounds, max_iterations and threads must be >= 1");
+}
 
 double surfaceDistance(const Superquadric& sq, const Vec3& p_table) {
   const Params x = toParams(sq);
@@ -236,60 +319,77 @@ Superquadric initialGuess(const Points3& points, double initial_exponent) {
 }
 
 Superquadric fitSuperquadric(const Points3& points, const FitConfig& c) {
+  c.validate();
   checkPoints(points);
-  Params x = toParams(initialGuess(points, c.initial_exponent));
-  clampToBounds(&x, c);
+  Params u = toSolver(toParams(initialGuess(points, c.initial_exponent)), c);
   ceres::Problem problem;
-  addDistortion(&problem, x.data(), points, 1.0, c.max_points);
-  setBounds(&problem, x.data(), c);
+  addDistortion(&problem, u.data(), points, 1.0, c.max_points, solverBounds(c));
   ceres::Solver::Summary summary;
   ceres::Solve(solverOptions(c), &problem, &summary);
-  return fromParams(x);
+  return fromParams(fromSolver(u, c));
 }
 
 std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
                                         const std::vector<Superquadric>& shapes,
                                         const FitConfig& c) {
+  c.validate();
   if (points.size() != shapes.size())
     throw std::invalid_argument("refineJointly: one point set per shape is required");
   const size_t n = shapes.size();
-  std::vector<Params> x(n);
+  const Bounds lo = solverBounds(c);
+  std::vector<Params> u(n), x(n);
   for (size_t i = 0; i < n; ++i) {
-    x[i] = toParams(shapes[i]);
-    clampToBounds(&x[i], c);
+    u[i] = toSolver(toParams(shapes[i]), c);
+    x[i] = fromSolver(u[i], c);
   }
-  for (int round = 0; round < std::max(1, c.joint_rounds); ++round) {
+  // Active-set rounds: the collision and floor terms are hinges, zero for every sample that is
+  // clear of the other shape (or above the floor). Each round keeps only the samples within
+  // contact_margin_m of penetrating, at the shapes of the round's start, so that a dense sample
+  // set costs the solver a few dozen residuals; samples that come close during a round join
+  // in the next one.
+  for (int round = 0; round < c.joint_rounds; ++round) {
     ceres::Problem problem;
-    std::vector<std::vector<Vec3>> samples(n);
+    std::vector<std::vector<SurfaceSample>> samples(n);
+    std::vector<Superquadric> current(n);
     for (size_t i = 0; i < n; ++i) {
-      problem.AddParameterBlock(x[i].data(), kParams);
-      if (!points[i].empty()) addDistortion(&problem, x[i].data(), points[i], c.lambda_dist, c.max_points);
+      problem.AddParameterBlock(u[i].data(), kParams);
+      if (!points[i].empty())
+        addDistortion(&problem, u[i].data(), points[i], c.lambda_dist, c.max_points, lo);
       samples[i] = unitSamples(Vec3(x[i][3], x[i][4], x[i][5]), c.shape_samples, 977 * round + i);
+      current[i] = fromParams(x[i]);
     }
     for (size_t i = 0; i < n; ++i) {
       const double floor_w = std::sqrt(c.lambda_floor);  // eq. 9 sums, it has no 1/N
-      for (const Vec3& q : samples[i])
-        problem.AddResidualBlock(
-            new ceres::AutoDiffCostFunction<FloorResidual, 1, kParams>(new FloorResidual{q, floor_w}),
-            nullptr, x[i].data());
+      for (const Vec3& q : samples[i]) {
+        double p[3];
+        placeSample(x[i].data(), q, p);
+        if (p[2] > c.contact_margin_m) continue;
+        problem.AddResidualBlock(new ceres::AutoDiffCostFunction<FloorResidual, 1, kParams>(
+                                     new FloorResidual{q, floor_w, lo}),
+                                 nullptr, u[i].data());
+      }
       for (size_t j = 0; j < n; ++j) {
         if (i == j) continue;
         // Only pairs whose bounding spheres meet can collide.
         const double reach_i = std::max({x[i][0], x[i][1], x[i][2]}) * std::sqrt(3.0);
         const double reach_j = std::max({x[j][0], x[j][1], x[j][2]}) * std::sqrt(3.0);
         const Vec3 ti(x[i][6], x[i][7], x[i][8]), tj(x[j][6], x[j][7], x[j][8]);
-        if ((ti - tj).norm() > reach_i + reach_j) continue;
-        const double w = std::sqrt(c.lambda_coll / samples[j].size());
-        for (const Vec3& q : samples[j])
-          problem.AddResidualBlock(new ceres::AutoDiffCostFunction<CollisionResidual, 1, kParams, kParams>(
-                                       new CollisionResidual{q, w}),
-                                   nullptr, x[i].data(), x[j].data());
+        if ((ti - tj).norm() > reach_i + reach_j + c.contact_margin_m) continue;
+        const double w = std::sqrt(c.lambda_coll / samples[j].size());  // eq. 8's 1/N_j
+        for (const Vec3& q : samples[j]) {
+          double p[3];
+          placeSample(x[j].data(), q, p);
+          if (surfaceDistance(current[i], Vec3(p[0], p[1], p[2])) > c.contact_margin_m) continue;
+          problem.AddResidualBlock(
+              new ceres::AutoDiffCostFunction<CollisionResidual, 1, kParams, kParams>(
+                  new CollisionResidual{q, w, lo}),
+              nullptr, u[i].data(), u[j].data());
+        }
       }
     }
-    for (size_t i = 0; i < n; ++i) setBounds(&problem, x[i].data(), c);
-    ceres::Solver::Options options = solverOptions(c);
     ceres::Solver::Summary summary;
-    ceres::Solve(options, &problem, &summary);
+    ceres::Solve(solverOptions(c), &problem, &summary);
+    for (size_t i = 0; i < n; ++i) x[i] = fromSolver(u[i], c);
   }
   std::vector<Superquadric> out;
   for (const Params& p : x) out.push_back(fromParams(p));
@@ -327,7 +427,7 @@ std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>
 double collisionCost(const Superquadric& a, const Superquadric& b, int samples) {
   const Params xb = toParams(b);
   double sum = 0;
-  const std::vector<Vec3> q = unitSamples(b.exponents, samples, 12345);
+  const std::vector<SurfaceSample> q = unitSamples(b.exponents, samples, 12345);
   for (const Vec3& s : q) {
     double p[3];
     placeSample(xb.data(), s, p);

@@ -45,6 +45,7 @@ void fitFields(C& c, F&& f) {
   f("lambda_floor", c.lambda_floor);
   f("max_points", c.max_points);
   f("shape_samples", c.shape_samples);
+  f("contact_margin_m", c.contact_margin_m);
   f("joint_rounds", c.joint_rounds);
   f("max_iterations", c.max_iterations);
 }

@@ -138,6 +138,7 @@ ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Imp
     throw std::invalid_argument("decompose_samples must lie in [0, samples]");
   if (config.points_per_instance < 10) throw std::invalid_argument("points_per_instance must be >= 10");
   if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
+  config.fit.validate();
   impl_->config = config;
   impl_->model = std::make_unique<CvaeInference>(config.model_path, config.threads);
   if (impl_->model->config().architecture == "fc") {
