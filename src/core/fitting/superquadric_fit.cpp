@@ -17,22 +17,26 @@ namespace {
 constexpr int kParams = 12;
 using Params = std::array<double, kParams>;
 
-// Ceres solves in an unbounded space: scale a = a_min + exp(u) and exponent
+// Ceres solves in an unbounded space: scale a = a_min + (a_max - a_min) sigmoid(u) and exponent
 // e = e_min + (e_max - e_min) sigmoid(v), so that the bounds (positive size, convex shape, the
-// exponent range) hold by construction; the scale's upper bound is applied at the end. Bounds
-// inside Ceres cost a projected line search per step, three Jacobian evaluations per iteration
-// on network surfaces, and made the joint refinement five times slower. Box-like surfaces
-// push exponents to the top of their range, where the sigmoid flattens instead of overflowing.
+// ranges of the config) hold by construction and no trial step can overflow. Bounds inside
+// Ceres cost a projected line search per step, three Jacobian evaluations per iteration on
+// network surfaces, and made the joint refinement five times slower. Box-like surfaces push
+// exponents to the top of their range, where the sigmoid flattens instead of overflowing.
 struct Bounds {
-  double min_scale, min_exponent, max_exponent;
+  double min_scale, max_scale, min_exponent, max_exponent;
 };
+
+template <typename T>
+T sigmoid(const T& v) {
+  return T(0.5) * (T(1.0) + tanh(T(0.5) * v));  // stable for any v
+}
 
 template <typename T>
 void toShape(const T* u, const Bounds& b, T* x) {
   for (int i = 0; i < 3; ++i) {
-    x[i] = T(b.min_scale) + exp(u[i]);
-    const T sigmoid = T(0.5) * (T(1.0) + tanh(T(0.5) * u[3 + i]));  // stable for any v
-    x[3 + i] = T(b.min_exponent) + T(b.max_exponent - b.min_exponent) * sigmoid;
+    x[i] = T(b.min_scale) + T(b.max_scale - b.min_scale) * sigmoid(u[i]);
+    x[3 + i] = T(b.min_exponent) + T(b.max_exponent - b.min_exponent) * sigmoid(u[3 + i]);
   }
   for (int i = 6; i < kParams; ++i) x[i] = u[i];
 }
@@ -183,17 +187,21 @@ void clampToBounds(Params* x, const FitConfig& c) {
   }
 }
 
-Bounds solverBounds(const FitConfig& c) { return {c.min_scale_m, c.min_exponent, c.max_exponent}; }
+Bounds solverBounds(const FitConfig& c) {
+  return {c.min_scale_m, c.max_scale_m, c.min_exponent, c.max_exponent};
+}
 
 // Shape parameters (clamped to the bounds, kept a hair inside them so that the inverse maps
 // exist) to solver variables, and back.
 Params toSolver(Params x, const FitConfig& c) {
   clampToBounds(&x, c);
+  auto logit = [](double value, double lo, double hi) {
+    const double share = std::clamp((value - lo) / (hi - lo), 1e-4, 1.0 - 1e-4);
+    return std::log(share / (1.0 - share));
+  };
   for (int i = 0; i < 3; ++i) {
-    x[i] = std::log(std::max(x[i] - c.min_scale_m, 1e-4 * c.min_scale_m));
-    const double share = std::clamp((x[3 + i] - c.min_exponent) / (c.max_exponent - c.min_exponent),
-                                    1e-4, 1.0 - 1e-4);
-    x[3 + i] = std::log(share / (1.0 - share));
+    x[i] = logit(x[i], c.min_scale_m, c.max_scale_m);
+    x[3 + i] = logit(x[3 + i], c.min_exponent, c.max_exponent);
   }
   return x;
 }
