@@ -1,6 +1,7 @@
 // Scene decomposition: Hough voting at R = 32 and 64, the joint fit of a 4-object scene, and a
 // whole ScenePerception::perceive() at R = 32 with 3 samples (the shipped model).
 #include <benchmark/benchmark.h>
+#include <malloc.h>
 
 #include <filesystem>
 
@@ -109,4 +110,10 @@ static void BM_Perceive(benchmark::State& state) {
 }
 BENCHMARK(BM_Perceive)->Arg(3)->Unit(benchmark::kMillisecond)->UseRealTime();
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+  mallopt(M_MMAP_MAX, 0);
+  mallopt(M_TRIM_THRESHOLD, -1);
+  benchmark::Initialize(&argc, argv);
+  benchmark::RunSpecifiedBenchmarks();
+  return 0;
+}
