@@ -21,11 +21,22 @@ Transform fromBt(const btTransform& t) {
   return T;
 }
 
+// Bullet's default pools hold 4096 manifolds and 4096 collision algorithms (about 5 MB that
+// the pool constructors touch page by page). Our worlds hold a handful of objects and the pile
+// generator builds one per drop: the pools cost more than the simulation of short drops and
+// serialised the generator's threads in the kernel. Pools overflow to the heap when full.
+btDefaultCollisionConstructionInfo smallPools() {
+  btDefaultCollisionConstructionInfo info;
+  info.m_defaultMaxPersistentManifoldPoolSize = 64;
+  info.m_defaultMaxCollisionAlgorithmPoolSize = 64;
+  return info;
+}
+
 }  // namespace
 
 struct PhysicsWorld::Impl {
   PhysicsConfig config;
-  btDefaultCollisionConfiguration collision_config;
+  btDefaultCollisionConfiguration collision_config{smallPools()};
   btCollisionDispatcher dispatcher{&collision_config};
   btDbvtBroadphase broadphase;
   btSequentialImpulseConstraintSolver solver;
