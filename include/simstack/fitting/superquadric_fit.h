@@ -36,7 +36,8 @@ struct FitConfig {
   /// penetrating at the round's start (the terms are hinges: farther samples add zeros).
   double contact_margin_m = 0.01;
   int joint_rounds = 3;        ///< joint solves, samples redrawn and re-selected between them
-  int max_iterations = 10;     ///< per Ceres solve
+  int max_iterations = 20;     ///< Ceres iterations of each per-instance fit (stage one)
+  int joint_max_iterations = 10;  ///< Ceres iterations of each joint round
   int threads = 1;
 
   /// Throws std::invalid_argument naming the first field out of range.

@@ -227,11 +227,11 @@ void addDistortion(ceres::Problem* problem, double* x, const Points3& points, do
   }
 }
 
-ceres::Solver::Options solverOptions(const FitConfig& c) {
+ceres::Solver::Options solverOptions(const FitConfig& c, int max_iterations) {
   ceres::Solver::Options o;
   o.trust_region_strategy_type = ceres::DOGLEG;
   o.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;  // 12 parameters per shape: tiny normal equations
-  o.max_num_iterations = c.max_iterations;
+  o.max_num_iterations = max_iterations;
   // Ceres' default first trust region (1e4) is far beyond the scale of these parameters
   // (centimetres, log sizes, exponent logits): every early step overshot, the dogleg halves the
   // radius per rejected step, and a 15-iteration solve spent all of them shrinking it and
@@ -282,8 +282,8 @@ void FitConfig::validate() const {
           "lambda_dist, lambda_coll and lambda_floor must be >= 0");
   require(max_points >= 4 && shape_samples >= 1, "need max_points >= 4 and shape_samples >= 1");
   require(contact_margin_m >= 0.0, "contact_margin_m must be >= 0");
-  require(joint_rounds >= 1 && max_iterations >= 1 && threads >= 1,
-          "joint_rounds, max_iterations and threads must be >= 1");
+  require(joint_rounds >= 1 && max_iterations >= 1 && joint_max_iterations >= 1 && threads >= 1,
+          "joint_rounds, max_iterations, joint_max_iterations and threads must be >= 1");
 }
 
 double surfaceDistance(const Superquadric& sq, const Vec3& p_table) {
@@ -333,7 +333,7 @@ Superquadric fitSuperquadric(const Points3& points, const FitConfig& c) {
   ceres::Problem problem;
   addDistortion(&problem, u.data(), points, 1.0, c.max_points, solverBounds(c));
   ceres::Solver::Summary summary;
-  ceres::Solve(solverOptions(c), &problem, &summary);
+  ceres::Solve(solverOptions(c, c.max_iterations), &problem, &summary);
   return fromParams(fromSolver(u, c));
 }
 
@@ -396,7 +396,7 @@ std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
       }
     }
     ceres::Solver::Summary summary;
-    ceres::Solve(solverOptions(c), &problem, &summary);
+    ceres::Solve(solverOptions(c, c.joint_max_iterations), &problem, &summary);
     for (size_t i = 0; i < n; ++i) x[i] = fromSolver(u[i], c);
   }
   std::vector<Superquadric> out;

@@ -48,6 +48,7 @@ void fitFields(C& c, F&& f) {
   f("contact_margin_m", c.contact_margin_m);
   f("joint_rounds", c.joint_rounds);
   f("max_iterations", c.max_iterations);
+  f("joint_max_iterations", c.joint_max_iterations);
 }
 template <class C, class F>
 void tableFields(C& c, F&& f) {
