@@ -16,5 +16,25 @@ inline Scene sphereScene(double radius, const Vec3& centre) {
   return Scene{{o}};
 }
 
+/// A fixed four-object pile (a box carrying an ellipsoid, a standing cylinder and a rounded box
+/// beside it) of 16 litres, the mean occupied volume of generated test piles: inputs for
+/// benchmarks that must not change when the pile generator does.
+inline Scene fourObjectPile() {
+  auto object = [](const Vec3& half_m, const Vec3& exponents, const Vec3& centre, double yaw) {
+    Superquadric sq;
+    sq.scale_m = half_m;
+    sq.exponents = exponents;
+    SceneObject o;
+    o.shape = ObjectShape::fromSuperquadric(sq);
+    o.T_table_object.linear() = Eigen::AngleAxisd(yaw, Vec3::UnitZ()).toRotationMatrix();
+    o.T_table_object.translation() = centre;
+    return o;
+  };
+  return Scene{{object({0.14, 0.11, 0.07}, {10, 10, 10}, {0.0, 0.0, 0.07}, 0.0),
+                object({0.07, 0.07, 0.115}, {2, 2, 10}, {0.215, 0.03, 0.115}, 0.0),
+                object({0.10, 0.07, 0.06}, {2, 2, 2}, {-0.03, 0.0, 0.20}, 0.5),
+                object({0.07, 0.07, 0.07}, {4, 4, 4}, {-0.04, -0.203, 0.07}, 0.3)}};
+}
+
 }  // namespace test
 }  // namespace simstack

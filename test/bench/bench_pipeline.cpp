@@ -9,15 +9,15 @@
 #include "simstack/instances/hough_voting.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
-#include "simstack/scene/pile_generator.h"
 #include "simstack/tsdf/ground_truth.h"
+#include "../test_scenes.h"
 
 using namespace simstack;
 
 namespace {
 
-/// A settled 4-object pile and its ground-truth grids at resolution r (the ideal network
-/// output, so that the benchmark does not depend on a model's quality).
+/// A fixed 4-object pile and its ground-truth grids at resolution r (the ideal network output,
+/// so that the benchmark depends neither on a model's quality nor on the pile generator).
 struct BenchScene {
   Scene scene;
   GroundTruthGrids gt;
@@ -26,10 +26,8 @@ const BenchScene& benchScene(int r) {
   static std::map<int, BenchScene> cache;
   auto it = cache.find(r);
   if (it != cache.end()) return it->second;
-  PileConfig pc;
-  pc.min_objects = pc.max_objects = 4;
   BenchScene b;
-  b.scene = PileGenerator(pc).generate(17).scene;
+  b.scene = test::fourObjectPile();
   const GridSpec g = GridSpec::sceneGrid(b.scene.surfaceCentroid().head<2>(), 0.64, r);
   b.gt = computeGroundTruth(b.scene, g, 3 * g.voxel_size_m);
   return cache.emplace(r, std::move(b)).first->second;
