@@ -16,6 +16,7 @@
 #include <pcl/io/pcd_io.h>
 #include <pcl/point_types.h>
 
+#include "simstack/model/cpu_allocator.h"
 #include "simstack/dataset/dataset.h"
 #include "simstack/eval/occupancy.h"
 #include "simstack/eval/scene_metrics.h"
@@ -196,6 +197,7 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   app.add_option("--threads", threads, "threads")->capture_default_str()->check(CLI::PositiveNumber);
   CLI11_PARSE(app, argc, argv);
+  keepFreedMemoryForReuse();  // the network runs in this process
   if (models.empty()) models.push_back(defaultModel());
   if (dataset.empty() == real_dir.empty()) {
     std::cerr << "simstack_evaluate: give either --dataset or --real\n";

@@ -7,6 +7,7 @@
 #include <iostream>
 #include <sstream>
 
+#include "simstack/model/cpu_allocator.h"
 #include "simstack/io/image_io.h"
 #include "simstack/io/scene_io.h"
 #include "simstack/mesh/marching_cubes.h"
@@ -97,6 +98,7 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "threads")->capture_default_str()->check(CLI::PositiveNumber);
   app.add_flag("--no-joint", no_joint, "skip the joint refinement (eqs. 7-9)");
   CLI11_PARSE(app, argc, argv);
+  keepFreedMemoryForReuse();  // the network runs in this process
 
   try {
     DepthView view;

@@ -1,7 +1,7 @@
 // Inference latency (1 and 3 samples, R = 32 and 64) and training throughput of the C-VAE.
 #include <benchmark/benchmark.h>
-#include <malloc.h>
 
+#include "simstack/model/cpu_allocator.h"
 #include "simstack/model/cvae.h"
 
 using namespace simstack;
@@ -53,8 +53,7 @@ static void BM_CvaeTrainingStep(benchmark::State& state) {
 BENCHMARK(BM_CvaeTrainingStep)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(5.0);
 
 int main(int argc, char** argv) {
-  mallopt(M_MMAP_MAX, 0);
-  mallopt(M_TRIM_THRESHOLD, -1);
+  keepFreedMemoryForReuse();
   benchmark::Initialize(&argc, argv);
   benchmark::RunSpecifiedBenchmarks();
   return 0;

@@ -1,10 +1,10 @@
 // Scene decomposition: Hough voting at R = 32 and 64, the joint fit of a 4-object scene, and a
 // whole ScenePerception::perceive() at R = 32 with 3 samples (the shipped model).
 #include <benchmark/benchmark.h>
-#include <malloc.h>
 
 #include <filesystem>
 
+#include "simstack/model/cpu_allocator.h"
 #include "simstack/fitting/superquadric_fit.h"
 #include "simstack/instances/hough_voting.h"
 #include "simstack/pipeline/scene_perception.h"
@@ -109,8 +109,7 @@ static void BM_Perceive(benchmark::State& state) {
 BENCHMARK(BM_Perceive)->Arg(3)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 int main(int argc, char** argv) {
-  mallopt(M_MMAP_MAX, 0);
-  mallopt(M_TRIM_THRESHOLD, -1);
+  keepFreedMemoryForReuse();
   benchmark::Initialize(&argc, argv);
   benchmark::RunSpecifiedBenchmarks();
   return 0;
