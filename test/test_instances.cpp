@@ -80,6 +80,24 @@ TEST(HoughVoting, RecoversOneToEightCentresWithinOneVoxel) {
   }
 }
 
+TEST(HoughVoting, SeparatesCentresCloserThanTheMeanShiftCell) {
+  // Two balls 9.5 cm apart (bandwidth 7 cm) whose centres share one 7 cm cell of the table
+  // frame: a single mean-shift seed per such cell would settle between them.
+  const GridSpec g = GridSpec::sceneGrid(Vec2(0.1, 0.1), 0.64, 32);
+  const std::vector<Ball> balls = {{Vec3(0.0751, 0.0751, 0.0751), 0.04},
+                                   {Vec3(0.1299, 0.1299, 0.1299), 0.04}};
+  Grid3<float> tsdf;
+  Grid3<Vec3f> votes;
+  ballFields(g, balls, &tsdf, &votes);
+  const InstanceSegmentation seg = houghInstances(tsdf, votes);
+  ASSERT_EQ(seg.size(), 2);
+  for (const Ball& b : balls) {
+    double best = 1e9;
+    for (const Vec3& c : seg.centres_table) best = std::min(best, (c - b.centre).norm());
+    EXPECT_LT(best, g.voxel_size_m);
+  }
+}
+
 TEST(HoughVoting, WorksAtR64AndIsSparse) {
   const GridSpec g = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 64);
   std::mt19937_64 rng(5);

@@ -32,8 +32,8 @@ struct PileConfig {
   double table_half_size_m = 0.5;  ///< an object whose centre leaves this square fell off
   bool require_stack = true;       ///< one connected pile with at least one object not on the table
   int max_settle_steps = 2000;  ///< per drop (8.3 s); longer was 4 % of drops, 17 % of steps
-  /// A drop is abandoned once the new object has rested on the table touching no other object
-  /// at this many consecutive checks (one per 60 steps): it has rolled off the pile.
+  /// A drop is abandoned once the new object has touched the table and no other object at this
+  /// many consecutive checks (one per 60 steps), moving or not: it has come off the pile.
   int apart_runs = 2;
   int rest_check_steps = 240;       ///< re-simulation (from zero velocities) of a finished pile
   double rest_tolerance_m = 0.005;  ///< largest centre motion during it for the pile to be at rest

@@ -8,6 +8,7 @@
 #include <array>
 #include <cmath>
 #include <stdexcept>
+#include <tuple>
 
 namespace simstack {
 namespace {
@@ -233,7 +234,7 @@ ceres::Solver::Options solverOptions(const FitConfig& c, int max_iterations) {
   o.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;  // 12 parameters per shape: tiny normal equations
   o.max_num_iterations = max_iterations;
   // Ceres' default first trust region (1e4) is far beyond the scale of these parameters
-  // (centimetres, log sizes, exponent logits): every early step overshot, the dogleg halves the
+  // (centimetres, size and exponent logits): every early step overshot, the dogleg halves the
   // radius per rejected step, and a 15-iteration solve spent all of them shrinking it and
   // returned its starting point.
   o.initial_trust_region_radius = 1.0;
@@ -354,9 +355,11 @@ std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
   // clear of the other shape (or above the floor). Each round keeps only the samples within
   // contact_margin_m of penetrating, at the shapes of the round's start, so that a dense sample
   // set costs the solver a few dozen residuals; samples that come close during a round join
-  // in the next one.
-  for (int round = 0; round < c.joint_rounds; ++round) {
+  // in the next one. Contacts that form during the last round get one more round.
+  for (int round = 0, rounds = c.joint_rounds; round < rounds; ++round) {
     ceres::Problem problem;
+    std::vector<std::pair<size_t, const SurfaceSample*>> left_out_floor;
+    std::vector<std::tuple<size_t, size_t, const SurfaceSample*>> left_out_pairs;
     std::vector<std::vector<SurfaceSample>> samples(n);
     std::vector<Superquadric> current(n);
     for (size_t i = 0; i < n; ++i) {
@@ -371,7 +374,10 @@ std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
       for (const Vec3& q : samples[i]) {
         double p[3];
         placeSample(x[i].data(), q, p);
-        if (p[2] > c.contact_margin_m) continue;
+        if (p[2] > c.contact_margin_m) {
+          left_out_floor.emplace_back(i, &q);
+          continue;
+        }
         problem.AddResidualBlock(new ceres::AutoDiffCostFunction<FloorResidual, 1, kParams>(
                                      new FloorResidual{q, floor_w, lo}),
                                  nullptr, u[i].data());
@@ -387,7 +393,10 @@ std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
         for (const Vec3& q : samples[j]) {
           double p[3];
           placeSample(x[j].data(), q, p);
-          if (surfaceDistance(current[i], Vec3(p[0], p[1], p[2])) > c.contact_margin_m) continue;
+          if (surfaceDistance(current[i], Vec3(p[0], p[1], p[2])) > c.contact_margin_m) {
+            left_out_pairs.emplace_back(i, j, &q);
+            continue;
+          }
           problem.AddResidualBlock(
               new ceres::AutoDiffCostFunction<CollisionResidual, 1, kParams, kParams>(
                   new CollisionResidual{q, w, lo}),
@@ -398,6 +407,21 @@ std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
     ceres::Solver::Summary summary;
     ceres::Solve(solverOptions(c, c.joint_max_iterations), &problem, &summary);
     for (size_t i = 0; i < n; ++i) x[i] = fromSolver(u[i], c);
+    if (round + 1 == rounds && rounds == c.joint_rounds) {
+      bool new_contact = false;
+      for (const auto& [i, q] : left_out_floor) {
+        double p[3];
+        placeSample(x[i].data(), *q, p);
+        new_contact = new_contact || p[2] < 0.0;
+      }
+      for (size_t k = 0; k < left_out_pairs.size() && !new_contact; ++k) {
+        const auto& [i, j, q] = left_out_pairs[k];
+        double p[3];
+        placeSample(x[j].data(), *q, p);
+        new_contact = surfaceDistance(fromParams(x[i]), Vec3(p[0], p[1], p[2])) < 0.0;
+      }
+      if (new_contact) ++rounds;
+    }
   }
   std::vector<Superquadric> out;
   for (const Params& p : x) out.push_back(fromParams(p));
@@ -407,6 +431,7 @@ std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
 std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>& points,
                                                       const FitConfig& c, bool joint,
                                                       int min_points) {
+  c.validate();  // here: an exception must not leave the parallel loop below
   const int n = static_cast<int>(points.size());
   std::vector<std::optional<Superquadric>> fits(n);
   FitConfig single = c;
