@@ -77,9 +77,10 @@ void decompose(SceneHypothesis* hypothesis, const PerceptionConfig& config,
 std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>& points,
                                                       const PerceptionConfig& config);
 
-/// Instance of every pixel of `view` (the first view of `estimate`): the label of the voxel
-/// holding its table-frame point, or of the voxel below it (observed points lie on the
-/// surface, at the top of their object's voxels); -1 for table, free space or missing depth.
+/// Instance of every pixel of `view` (the first view of `estimate`): the label of the labelled
+/// voxel nearest to its table-frame point among the voxel holding it and its 26 neighbours
+/// (observed points lie on the surface, which the prediction places up to a voxel off); -1 for
+/// table, free space or missing depth.
 Image<int> pixelInstances(const DepthView& view, const SceneEstimate& estimate,
                           int hypothesis = 0, double min_height_m = 0.01);
 

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <random>
 #include <stdexcept>
 
@@ -114,15 +115,23 @@ Image<int> pixelInstances(const DepthView& view, const SceneEstimate& est, int h
       if (!validDepth(d)) continue;
       const Vec3 p = est.T_table_camera * view.camera.backproject(u, v, d);
       if (p.z() < min_height_m) continue;
+      // The labelled voxel nearest to the point among its own and the 26 around it: the
+      // predicted surface lies up to a voxel off the observed one.
       const Vec3i i = g.voxelIndex(p);
-      for (int dz = 0; dz >= -1; --dz) {
-        if (!g.inside(i.x(), i.y(), i.z() + dz)) continue;
-        const int l = labels.at(i.x(), i.y(), i.z() + dz);
-        if (l >= 0) {
-          out.at(u, v) = l;
-          break;
-        }
-      }
+      double best = std::numeric_limits<double>::infinity();
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int x = i.x() + dx, y = i.y() + dy, z = i.z() + dz;
+            if (!g.inside(x, y, z)) continue;
+            const int l = labels.at(x, y, z);
+            if (l < 0) continue;
+            const double d = (g.voxelCentre(x, y, z) - p).squaredNorm();
+            if (d < best) {
+              best = d;
+              out.at(u, v) = l;
+            }
+          }
     }
   return out;
 }
