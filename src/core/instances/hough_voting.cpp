@@ -43,33 +43,55 @@ size_t marchRay(const Vec3& p, const Vec3& d, int ref, const std::vector<uint8_t
       t_max[a] = t_delta[a] = std::numeric_limits<double>::infinity();
     }
   }
+  // The axis to step is picked without branches (which axis comes next is close to random, and
+  // mispredicting it cost more than the step); the loop only branches when the ray leaves a
+  // scene voxel, once per `ref` steps or so. Ties go to the later axis.
+  double tx = t_max[0], ty = t_max[1], tz = t_max[2];
+  int lx = local[0], ly = local[1], lz = local[2];
+  int vx = voxel[0], vy = voxel[1], vz = voxel[2];
   size_t visits = 0;
   int outside = 0;
-  bool moved = true;
-  int index = 0;
   while (true) {
-    if (moved) {  // entered a new scene voxel
-      if (voxel[0] < 0 || voxel[1] < 0 || voxel[2] < 0 || voxel[0] >= r || voxel[1] >= r ||
-          voxel[2] >= r)
+    if (vx < 0 || vy < 0 || vz < 0 || vx >= r || vy >= r || vz >= r) break;
+    const int index = (vz * r + vy) * r + vx;
+    outside = occ[index] ? 0 : outside + 1;
+    if (outside > tolerance) break;
+    while (true) {  // the fine cells of this voxel
+      visit(index, (lz * ref + ly) * ref + lx);
+      ++visits;
+      const bool x_before_y = tx < ty;
+      const bool bx = x_before_y & (tx < tz);
+      const bool by = !x_before_y & (ty < tz);
+      const bool bz = !(bx | by);
+      tx += bx ? t_delta[0] : 0.0;
+      ty += by ? t_delta[1] : 0.0;
+      tz += bz ? t_delta[2] : 0.0;
+      lx += bx * step[0];
+      ly += by * step[1];
+      lz += bz * step[2];
+      const unsigned n = static_cast<unsigned>(ref);  // a negative index wraps above it
+      if ((static_cast<unsigned>(lx) >= n) | (static_cast<unsigned>(ly) >= n) |
+          (static_cast<unsigned>(lz) >= n))
         break;
-      index = (voxel[2] * r + voxel[1]) * r + voxel[0];
-      outside = occ[index] ? 0 : outside + 1;
-      if (outside > tolerance) break;
-      moved = false;
     }
-    visit(index, (local[2] * ref + local[1]) * ref + local[0]);
-    ++visits;
-    const int a = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
-    t_max[a] += t_delta[a];
-    local[a] += step[a];
-    if (local[a] == ref) {
-      local[a] = 0;
-      ++voxel[a];
-      moved = true;
-    } else if (local[a] < 0) {
-      local[a] = ref - 1;
-      --voxel[a];
-      moved = true;
+    if (lx < 0) {
+      lx = ref - 1;
+      --vx;
+    } else if (lx == ref) {
+      lx = 0;
+      ++vx;
+    } else if (ly < 0) {
+      ly = ref - 1;
+      --vy;
+    } else if (ly == ref) {
+      ly = 0;
+      ++vy;
+    } else if (lz < 0) {
+      lz = ref - 1;
+      --vz;
+    } else {
+      lz = 0;
+      ++vz;
     }
   }
   return visits;
