@@ -16,11 +16,11 @@
 #include <pcl/io/pcd_io.h>
 #include <pcl/point_types.h>
 
-#include "simstack/model/cpu_allocator.h"
 #include "simstack/dataset/dataset.h"
 #include "simstack/eval/occupancy.h"
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/mesh/marching_cubes.h"
+#include "simstack/model/cpu_allocator.h"
 #include "simstack/model/training_sample.h"
 #include "simstack/pipeline/classical_baseline.h"
 #include "simstack/pipeline/scene_perception.h"

@@ -7,10 +7,10 @@
 #include <iostream>
 #include <sstream>
 
-#include "simstack/model/cpu_allocator.h"
 #include "simstack/io/image_io.h"
 #include "simstack/io/scene_io.h"
 #include "simstack/mesh/marching_cubes.h"
+#include "simstack/model/cpu_allocator.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/scene.h"

@@ -414,11 +414,12 @@ std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
         placeSample(x[i].data(), *q, p);
         new_contact = new_contact || p[2] < 0.0;
       }
+      for (size_t i = 0; i < n; ++i) current[i] = fromParams(x[i]);
       for (size_t k = 0; k < left_out_pairs.size() && !new_contact; ++k) {
         const auto& [i, j, q] = left_out_pairs[k];
         double p[3];
         placeSample(x[j].data(), *q, p);
-        new_contact = surfaceDistance(fromParams(x[i]), Vec3(p[0], p[1], p[2])) < 0.0;
+        new_contact = surfaceDistance(current[i], Vec3(p[0], p[1], p[2])) < 0.0;
       }
       if (new_contact) ++rounds;
     }

@@ -49,6 +49,7 @@ size_t marchRay(const Vec3& p, const Vec3& d, int ref, const std::vector<uint8_t
   double tx = t_max[0], ty = t_max[1], tz = t_max[2];
   int lx = local[0], ly = local[1], lz = local[2];
   int vx = voxel[0], vy = voxel[1], vz = voxel[2];
+  const unsigned n = static_cast<unsigned>(ref);  // as unsigned, a negative index is >= n
   size_t visits = 0;
   int outside = 0;
   while (true) {
@@ -69,30 +70,16 @@ size_t marchRay(const Vec3& p, const Vec3& d, int ref, const std::vector<uint8_t
       lx += bx * step[0];
       ly += by * step[1];
       lz += bz * step[2];
-      const unsigned n = static_cast<unsigned>(ref);  // a negative index wraps above it
       if ((static_cast<unsigned>(lx) >= n) | (static_cast<unsigned>(ly) >= n) |
           (static_cast<unsigned>(lz) >= n))
         break;
     }
-    if (lx < 0) {
-      lx = ref - 1;
-      --vx;
-    } else if (lx == ref) {
-      lx = 0;
-      ++vx;
-    } else if (ly < 0) {
-      ly = ref - 1;
-      --vy;
-    } else if (ly == ref) {
-      ly = 0;
-      ++vy;
-    } else if (lz < 0) {
-      lz = ref - 1;
-      --vz;
-    } else {
-      lz = 0;
-      ++vz;
-    }
+    // Exactly one in-voxel index has left [0, ref) by one cell: wrap it, step that voxel index.
+    int& l = static_cast<unsigned>(lx) >= n ? lx : static_cast<unsigned>(ly) >= n ? ly : lz;
+    int& v = &l == &lx ? vx : &l == &ly ? vy : vz;
+    const int dir = l < 0 ? -1 : 1;
+    l -= dir * ref;
+    v += dir;
   }
   return visits;
 }

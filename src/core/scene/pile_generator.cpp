@@ -30,6 +30,19 @@ Quat randomDropRotation(double max_tilt_deg, std::mt19937_64& rng) {
   return (tilt * yaw * face).normalized();
 }
 
+// What object `index` of the world touches: the table, other objects.
+struct Touching {
+  bool table = false, object = false;
+};
+Touching touching(const PhysicsWorld& world, int index) {
+  Touching t;
+  for (const auto& [a, b] : world.contacts()) {  // a < b; the table is -1
+    if (a != index && b != index) continue;
+    (a < 0 ? t.table : t.object) = true;
+  }
+  return t;
+}
+
 // Lowest point of the object's hull in the table frame.
 double minZ(const SceneObject& o) {
   double z = 1e9;
@@ -217,12 +230,8 @@ Pile PileGenerator::generate(uint64_t seed) const {
             break;
           }
           if (index > 0 && config_.require_stack) {
-            bool on_table = false, on_object = false;
-            for (const auto& [a, b] : trial->contacts()) {
-              if (a != index && b != index) continue;
-              (a < 0 ? on_table : on_object) = true;
-            }
-            apart_runs = on_table && !on_object ? apart_runs + 1 : 0;
+            const Touching t = touching(*trial, index);
+            apart_runs = t.table && !t.object ? apart_runs + 1 : 0;
             if (apart_runs >= config_.apart_runs) {
               apart = true;
               break;
@@ -236,10 +245,7 @@ Pile PileGenerator::generate(uint64_t seed) const {
           continue;
         }
         if (index > 0 && config_.require_stack) {
-          bool touches = false;
-          for (const auto& [a, b] : trial->contacts())
-            touches |= (b == index && a >= 0) || (a == index && b >= 0);
-          if (!touches) {
+          if (!touching(*trial, index).object) {
             why = "the objects do not form one stack";
             continue;
           }
