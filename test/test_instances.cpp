@@ -109,6 +109,9 @@ TEST(HoughVoting, WorksAtR64AndIsSparse) {
   EXPECT_EQ(seg.size(), 4);
   EXPECT_GT(seg.traversals, 0u);
   EXPECT_LT(static_cast<double>(seg.candidate_cells), 0.001 * 640.0 * 640 * 640);
+  // Sparse: the counts take a small fraction of a dense 16-bit array over the fine grid.
+  const double dense_bytes = 2.0 * std::pow(64.0 * HoughConfig().refinement, 3);
+  EXPECT_LT(static_cast<double>(seg.count_bytes), 0.05 * dense_bytes);
 }
 
 TEST(HoughVoting, EmptySceneAndBadInput) {

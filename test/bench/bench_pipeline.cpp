@@ -52,7 +52,7 @@ static void BM_HoughVoting(benchmark::State& state) {
   state.counters["rays_ms"] = rays / n;
   state.counters["mean_shift_ms"] = shift / n;
   state.counters["assign_ms"] = assign / n;
-  state.counters["hot_voxels"] = seg.hot_voxels;
+  state.counters["count_MB"] = seg.count_bytes / 1e6;
   state.counters["candidates"] = seg.candidate_cells;
 }
 BENCHMARK(BM_HoughVoting)->Arg(32)->Arg(64)->Unit(benchmark::kMillisecond)->UseRealTime();

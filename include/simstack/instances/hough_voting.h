@@ -7,8 +7,8 @@
 /// them into centres, and each occupied voxel joins the centre minimising
 ///   |arccos(v . u_n)| + gamma * d_n / voxel_size,
 /// with v its vote, u_n the unit vector towards centre n and d_n the distance to it.
-/// Counting is exact and sparse: a first pass counts rays per scene voxel; only voxels crossed
-/// by more than mu rays can hold a fine cell above mu, and only those get fine counts.
+/// Counting is sparse: only the fine cells of occupied voxels are counted (ref^3 16-bit counts
+/// per occupied voxel and thread, saturating at 65535), never a dense fine grid.
 
 #include <vector>
 
@@ -35,7 +35,7 @@ struct InstanceSegmentation {
   Grid3<int> labels;                ///< instance index per voxel, -1 = free space / none
   std::vector<int> voxel_counts;    ///< occupied voxels per instance
   int candidate_cells = 0;          ///< fine cells above the traversal threshold
-  int hot_voxels = 0;               ///< scene voxels that got fine counts
+  size_t count_bytes = 0;           ///< memory of the fine counts (all threads)
   size_t traversals = 0;            ///< fine-cell visits counted (all rays)
   struct {
     double rays_ms = 0, mean_shift_ms = 0, assign_ms = 0;
