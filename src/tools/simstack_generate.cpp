@@ -38,6 +38,7 @@ struct Options {
   bool noise = false;
   double extent_m = 0.64;
   double truncation_vox = 3.0;
+  double max_tilt_deg = 180.0;
   int threads = 2;
 };
 
@@ -126,6 +127,11 @@ int main(int argc, char** argv) {
   app.add_option("--truncation-vox", o.truncation_vox, "TSDF truncation in voxels")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  app.add_option("--max-tilt", o.max_tilt_deg,
+                 "drop orientation: a face down, random yaw, tilt up to this many degrees; 180 = "
+                 "uniformly random (the paper); 0 is 2.2x faster but gives neater, taller piles")
+      ->check(CLI::Range(0.0, 180.0))
+      ->capture_default_str();
   app.add_option("--threads", o.threads, "worker threads")
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
@@ -137,6 +143,7 @@ int main(int argc, char** argv) {
     config.min_objects = min_objects;
     config.max_objects = max_objects;
     config.grid_extent_m = o.extent_m;
+    config.max_tilt_deg = o.max_tilt_deg;
     std::unique_ptr<PileGenerator> generator;
     DatasetInfo info;
     if (!o.ycb_dir.empty()) {
@@ -203,6 +210,7 @@ int main(int argc, char** argv) {
     for (int t = 0; t < threads; ++t) pool.emplace_back(worker);
     ProgressBar bar("generating", o.scenes);
     long attempts = 0, objects = 0;
+    double undone_steps = 0, all_steps = 0;
     for (int i = 0; i < o.scenes; ++i) {
       SceneResult r;
       {
@@ -215,6 +223,9 @@ int main(int argc, char** argv) {
       writer.write(i, r.pile.scene, r.gt);
       attempts += r.pile.attempts;
       objects += static_cast<long>(r.pile.scene.objects.size());
+      const auto& st = r.pile.object_steps;
+      undone_steps += st.failed_drops + st.rejected_piles;
+      all_steps += st.placed + st.failed_drops + st.rest_checks + st.rejected_piles;
       bar.update(i + 1);
     }
     for (auto& t : pool) t.join();
@@ -228,7 +239,9 @@ int main(int argc, char** argv) {
               << " cm voxels, truncation " << info.truncation_m * 100.0 << " cm\n"
               << "  " << attempts << " piles drawn for " << o.scenes << " accepted ("
               << 100.0 * o.scenes / attempts << " % accepted), " << o.scenes / seconds
-              << " scenes/s on " << threads << " threads\n";
+              << " scenes/s on " << threads << " threads; "
+              << (all_steps > 0 ? 100.0 * undone_steps / all_steps : 0.0)
+              << " % of the physics went to drops and piles that were undone\n";
     if (o.views > 0)
       std::cout << "  " << o.views << " views per scene in " << views_dir.string() << "/\n";
     return 0;

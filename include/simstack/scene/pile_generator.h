@@ -23,8 +23,11 @@ struct PileConfig {
   double min_size_m = 0.05;  ///< full extent 2 a_i of each axis, uniform in [min, max]
   double max_size_m = 0.30;
   double drop_radius_m = 0.05;  ///< horizontal scatter of each drop about the pile centre
-  /// Each object falls with a face down, a random yaw and a random tilt up to this angle;
-  /// 180 (the default) drops it in a uniformly random orientation.
+  /// Each object falls with one of its six faces down, a random yaw and a random tilt up to
+  /// this angle; 180 (the default) drops it in a uniformly random orientation. Measured on 150
+  /// piles: face-down drops (0) need 2.2x fewer physics steps per pile, but 98 % of the objects
+  /// then rest with an axis within 10 degrees of vertical (81 % with 180) and piles are taller
+  /// (0.46 against 0.36 m): neater piles than the paper's random drops.
   double max_tilt_deg = 180.0;
   double drop_gap_m = 0.01;        ///< height of each drop above the top of the pile
   double grid_extent_m = 0.64;     ///< the scene grid that the pile must fit
@@ -58,8 +61,14 @@ struct PileConfig {
 struct Pile {
   Scene scene;
   int attempts = 0;      ///< piles drawn until this one was accepted
-  int drops = 0;         ///< object drops simulated in all attempts
+  int drops = 0;         ///< object drops tried in all attempts
   int settle_steps = 0;  ///< physics steps of the accepted pile
+  /// Physics steps of every world simulated for this pile: object-steps (steps x objects in the
+  /// world), split by what became of them, for profiling the generator.
+  struct {
+    long placed = 0, failed_drops = 0, rest_checks = 0, rejected_piles = 0;
+  } object_steps;
+  int failed_drops = 0;  ///< drops undone (rolled out of the grid or off the pile, no rest)
 };
 
 class PileGenerator {
@@ -76,8 +85,8 @@ class PileGenerator {
   /// Whether a settled scene satisfies the acceptance rules; `why` receives the reason.
   bool accept(const Scene& scene, const PhysicsWorld& world, std::string* why) const;
   /// Re-simulates the finished pile from rest (updating its poses) until it stays put; false
-  /// when it keeps moving.
-  bool verifyRest(Scene* scene) const;
+  /// when it keeps moving. Adds the object-steps it simulated to `object_steps` when given.
+  bool verifyRest(Scene* scene, long* object_steps = nullptr) const;
   /// Whether every object is on the table and the pile fits the scene grid.
   bool fits(const Scene& scene, std::string* why) const;
   /// A random superquadric shape of this config's ranges.
