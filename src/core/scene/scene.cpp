@@ -7,6 +7,7 @@ namespace simstack {
 namespace {
 constexpr double kSampleSpacing = 0.004;  // m; GT distances near the surface use the normal
 constexpr int kMaxSamples = 60000;
+constexpr double kHullQuantum_m = 0.001;
 }  // namespace
 
 std::shared_ptr<const ObjectShape> ObjectShape::fromSuperquadric(const Superquadric& sq) {
@@ -20,12 +21,19 @@ std::shared_ptr<const ObjectShape> ObjectShape::fromSuperquadric(const Superquad
   s->superquadric_ = sq;
   s->superquadric_.T_table_object = Transform::Identity();
   s->mesh_ = s->superquadric_.meshObject(24);
-  // A coarse lattice (duplicates on cube edges removed) keeps Bullet's GJK fast.
-  for (const Vec3& v : s->superquadric_.meshObject(4).vertices) {
+  // Bullet's GJK scans every hull point for each support query (a quarter of the pile
+  // generator's time), so the physics shape is the hull of a coarse lattice (98 points) snapped
+  // to 1 mm: on the flat faces of box-like shapes the snapped points are coplanar and drop out
+  // of the hull. 59 vertices on average instead of 98 on random shapes, while the surface's
+  // largest excursion outside the hull stays the lattice's own (mean 5 mm, worst 11 mm).
+  std::vector<Vec3> lattice;
+  for (Vec3 v : s->superquadric_.meshObject(4).vertices) {
+    v = (v / kHullQuantum_m).array().round().matrix() * kHullQuantum_m;
     bool seen = false;
-    for (const Vec3& h : s->hull_points_) seen |= (h - v).squaredNorm() < 1e-14;
-    if (!seen) s->hull_points_.push_back(v);
+    for (const Vec3& h : lattice) seen |= (h - v).squaredNorm() < 1e-14;
+    if (!seen) lattice.push_back(v);
   }
+  s->hull_points_ = ConvexHull(lattice).vertices();
   s->volume_ = s->superquadric_.volume();
   // Deterministic per shape: the samples depend on the parameters only.
   std::seed_seq seq{static_cast<int>(sq.scale_m.x() * 1e6), static_cast<int>(sq.scale_m.y() * 1e6),
