@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """Draws the paper's evaluation figures from simstack_evaluate JSON files.
 
     scripts/plot_evaluation.py results_synthetic.json [results_ycb.json ...] --output docs/figures
