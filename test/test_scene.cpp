@@ -47,6 +47,24 @@ TEST(Physics, BoxComesToRestOnTheTable) {
   EXPECT_LT(Quat(world.pose(0).linear()).angularDistance(Quat::Identity()), 0.01);
 }
 
+TEST(ObjectShape, PhysicsHullIsCompactOnTheSurfaceAndSurvivesTinyShapes) {
+  // Box-like: the snapped lattice's face points are coplanar and leave the hull.
+  Superquadric box;
+  box.scale_m = Vec3(0.10, 0.05, 0.08);
+  box.exponents = Vec3::Constant(80.0);
+  const auto shape = ObjectShape::fromSuperquadric(box);
+  EXPECT_LT(shape->hullPoints().size(), 60u);
+  for (const Vec3& p : shape->hullPoints())  // the snap moves a point by at most 0.87 mm
+    EXPECT_LT((p - box.surfacePointAlong(p)).norm(), 1e-3) << p.transpose();
+  // Thinner than the 1 mm snap: the unsnapped lattice is kept instead of a flat hull.
+  Superquadric tiny;
+  tiny.scale_m = Vec3(0.0003, 0.02, 0.02);
+  tiny.exponents = Vec3::Constant(2.0);
+  std::shared_ptr<const ObjectShape> thin;
+  ASSERT_NO_THROW(thin = ObjectShape::fromSuperquadric(tiny));
+  EXPECT_GE(thin->hullPoints().size(), 4u);
+}
+
 TEST(PileGenerator, SettledPileIsAtRestAndAboveTheTable) {
   PileGenerator gen{PileConfig()};
   for (uint64_t seed : {1u, 2u, 3u, 4u, 5u}) {
@@ -66,23 +84,31 @@ TEST(PileGenerator, SettledPileIsAtRestAndAboveTheTable) {
   }
 }
 
-TEST(PileGenerator, FaceDownPilesFitUnderTheGridCeilingAndKeepTheBooks) {
-  // Face-down drops build tall piles, so drops that would stick out of the grid are skipped
-  // unsimulated; accepted piles must still fit, and the step bookkeeping must add up.
+TEST(PileGenerator, TallPilesSkipObjectsThatCannotFitAndKeepTheBooks) {
+  // Face-down drops build tall piles: objects too thick to lie on top of them inside the grid
+  // are skipped unsimulated, accepted piles still fit, and the bookkeeping adds up.
   PileConfig config;
   config.max_tilt_deg = 0.0;
   PileGenerator gen(config);
-  for (uint64_t seed : {1u, 2u, 3u}) {
+  int skipped = 0;
+  for (uint64_t seed = 1; seed <= 8; ++seed) {
     const Pile pile = gen.generate(seed);
+    const int n = static_cast<int>(pile.scene.objects.size());
     double top = 0.0;
     for (const auto& o : pile.scene.objects)
       for (const Vec3& h : o.shape->hullPoints()) top = std::max(top, (o.T_table_object * h).z());
     EXPECT_LE(top, config.grid_extent_m - config.grid_margin_m) << "seed " << seed;
-    EXPECT_GT(pile.object_steps.placed, 0) << "seed " << seed;
+    EXPECT_EQ(pile.drops, pile.placed_drops + pile.undone_drops) << "seed " << seed;
+    EXPECT_GE(pile.placed_drops, n) << "seed " << seed;
+    // Drop i simulates i + 1 objects: the accepted pile's object-steps lie between its steps
+    // and n times its steps.
+    EXPECT_GE(pile.object_steps.placed, pile.settle_steps) << "seed " << seed;
+    EXPECT_LE(pile.object_steps.placed, static_cast<long>(n) * pile.settle_steps) << "seed " << seed;
+    EXPECT_EQ(pile.object_steps.rest_checks % config.rest_check_steps, 0) << "seed " << seed;
     EXPECT_GT(pile.object_steps.rest_checks, 0) << "seed " << seed;
-    EXPECT_LE(pile.failed_drops, pile.drops - static_cast<int>(pile.scene.objects.size()))
-        << "seed " << seed;
+    skipped += pile.skipped_objects;
   }
+  EXPECT_GT(skipped, 0) << "no object was skipped on 8 tall piles: the pre-check never fired";
 }
 
 TEST(PileGenerator, DeterministicForASeed) {

@@ -129,7 +129,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--max-tilt", o.max_tilt_deg,
                  "drop orientation: a face down, random yaw, tilt up to this many degrees; 180 = "
-                 "uniformly random (the paper); 0 is 2.2x faster but gives neater, taller piles")
+                 "uniformly random (the paper); 0 is about 2x faster but gives neater, taller piles")
       ->check(CLI::Range(0.0, 180.0))
       ->capture_default_str();
   app.add_option("--threads", o.threads, "worker threads")
@@ -224,8 +224,8 @@ int main(int argc, char** argv) {
       attempts += r.pile.attempts;
       objects += static_cast<long>(r.pile.scene.objects.size());
       const auto& st = r.pile.object_steps;
-      undone_steps += st.failed_drops + st.rejected_piles;
-      all_steps += st.placed + st.failed_drops + st.rest_checks + st.rejected_piles;
+      undone_steps += st.undone_drops + st.rejected_piles;
+      all_steps += st.placed + st.undone_drops + st.rest_checks + st.rejected_piles;
       bar.update(i + 1);
     }
     for (auto& t : pool) t.join();

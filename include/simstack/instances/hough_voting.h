@@ -7,8 +7,10 @@
 /// them into centres, and each occupied voxel joins the centre minimising
 ///   |arccos(v . u_n)| + gamma * d_n / voxel_size,
 /// with v its vote, u_n the unit vector towards centre n and d_n the distance to it.
-/// Counting is sparse: only the fine cells of occupied voxels are counted (ref^3 16-bit counts
-/// per occupied voxel and thread, saturating at 65535), never a dense fine grid.
+/// Counting is sparse: only the fine cells of occupied voxels are counted, never a dense fine
+/// grid. Memory: threads x occupied voxels x ref^3 x 2 bytes (16-bit counts that saturate at
+/// 65535 per thread; the threads' counts are summed in 32 bits); 7.8 MB for a 4-object pile at
+/// R = 64, ref = 5, 2 threads.
 
 #include <vector>
 

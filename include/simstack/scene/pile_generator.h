@@ -25,9 +25,9 @@ struct PileConfig {
   double drop_radius_m = 0.05;  ///< horizontal scatter of each drop about the pile centre
   /// Each object falls with one of its six faces down, a random yaw and a random tilt up to
   /// this angle; 180 (the default) drops it in a uniformly random orientation. Measured on 150
-  /// piles: face-down drops (0) need 2.2x fewer physics steps per pile, but 98 % of the objects
+  /// piles: face-down drops (0) need 2.1x fewer physics steps per pile, but 97 % of the objects
   /// then rest with an axis within 10 degrees of vertical (81 % with 180) and piles are taller
-  /// (0.46 against 0.36 m): neater piles than the paper's random drops.
+  /// (0.44 against 0.36 m): neater piles than the paper's random drops.
   double max_tilt_deg = 180.0;
   double drop_gap_m = 0.01;        ///< height of each drop above the top of the pile
   double grid_extent_m = 0.64;     ///< the scene grid that the pile must fit
@@ -61,14 +61,17 @@ struct PileConfig {
 struct Pile {
   Scene scene;
   int attempts = 0;      ///< piles drawn until this one was accepted
-  int drops = 0;         ///< object drops tried in all attempts
-  int settle_steps = 0;  ///< physics steps of the accepted pile
-  /// Physics steps of every world simulated for this pile: object-steps (steps x objects in the
-  /// world), split by what became of them, for profiling the generator.
+  int drops = 0;         ///< object drops simulated in all attempts
+  int placed_drops = 0;  ///< drops kept (in all attempts, also of piles rejected later)
+  int undone_drops = 0;  ///< drops undone: rolled out of the grid or off the pile, no rest
+  int skipped_objects = 0;  ///< objects too thick to lie on top of the pile inside the grid
+  int settle_steps = 0;     ///< physics steps of the drops of the accepted pile
+  /// Physics work for this pile in object-steps (steps x objects in the world), by what became
+  /// of it: the accepted pile's drops and rest checks, undone drops, and the drops and rest
+  /// checks of piles drawn again.
   struct {
-    long placed = 0, failed_drops = 0, rest_checks = 0, rejected_piles = 0;
+    long placed = 0, undone_drops = 0, rest_checks = 0, rejected_piles = 0;
   } object_steps;
-  int failed_drops = 0;  ///< drops undone (rolled out of the grid or off the pile, no rest)
 };
 
 class PileGenerator {

@@ -26,14 +26,22 @@ std::shared_ptr<const ObjectShape> ObjectShape::fromSuperquadric(const Superquad
   // to 1 mm: on the flat faces of box-like shapes the snapped points are coplanar and drop out
   // of the hull. 59 vertices on average instead of 98 on random shapes, while the surface's
   // largest excursion outside the hull stays the lattice's own (mean 5 mm, worst 11 mm).
-  std::vector<Vec3> lattice;
-  for (Vec3 v : s->superquadric_.meshObject(4).vertices) {
-    v = (v / kHullQuantum_m).array().round().matrix() * kHullQuantum_m;
-    bool seen = false;
-    for (const Vec3& h : lattice) seen |= (h - v).squaredNorm() < 1e-14;
-    if (!seen) lattice.push_back(v);
+  // A shape thinner than the snap (a fitted superquadric can be) keeps its unsnapped lattice.
+  const auto lattice = [&](double quantum) {
+    std::vector<Vec3> points;
+    for (Vec3 v : s->superquadric_.meshObject(4).vertices) {
+      if (quantum > 0.0) v = (v / quantum).array().round().matrix() * quantum;
+      bool seen = false;
+      for (const Vec3& h : points) seen |= (h - v).squaredNorm() < 1e-14;
+      if (!seen) points.push_back(v);
+    }
+    return points;
+  };
+  try {
+    s->hull_points_ = ConvexHull(lattice(kHullQuantum_m)).vertices();
+  } catch (const std::invalid_argument&) {
+    s->hull_points_ = lattice(0.0);
   }
-  s->hull_points_ = ConvexHull(lattice).vertices();
   s->volume_ = s->superquadric_.volume();
   // Deterministic per shape: the samples depend on the parameters only.
   std::seed_seq seq{static_cast<int>(sq.scale_m.x() * 1e6), static_cast<int>(sq.scale_m.y() * 1e6),
