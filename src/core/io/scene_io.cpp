@@ -91,8 +91,8 @@ void writeMeshPly(const std::string& path, const TriangleMesh& mesh) {
   pcl::toPCLPointCloud2(cloud, pm.cloud);
   for (const auto& t : mesh.triangles) {
     pcl::Vertices f;
-    f.vertices = {static_cast<uint32_t>(t[0]), static_cast<uint32_t>(t[1]),
-                  static_cast<uint32_t>(t[2])};
+    f.vertices = {static_cast<pcl::index_t>(t[0]), static_cast<pcl::index_t>(t[1]),
+                  static_cast<pcl::index_t>(t[2])};
     pm.polygons.push_back(f);
   }
   if (pcl::io::savePLYFileBinary(path, pm) != 0) throw std::runtime_error("cannot write " + path);
