@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iomanip>
 #include <iostream>
 #include <map>
@@ -244,9 +245,13 @@ int main(int argc, char** argv) {
       TriangleMesh gt_mesh;
       for (const SceneObject& o : rec.scene.objects)
         gt_mesh.append(o.shape->mesh().transformed(o.T_table_object));
-      std::mt19937_64 rng(seed * 1000003ull + static_cast<uint64_t>(k));
-      const Points3 gt_full = samplePoints(gt_mesh, chamfer_points, rng);
+      // Separate random streams per scene, per view and per method: the views, and each
+      // method's Chamfer samples, do not depend on which other methods are in the run.
+      std::mt19937_64 scene_rng(seed * 1000003ull + static_cast<uint64_t>(k));
+      const Points3 gt_full = samplePoints(gt_mesh, chamfer_points, scene_rng);
+      const uint64_t scene_seed = scene_rng();
       for (int v = 0; v < views; ++v) {
+        std::mt19937_64 rng(scene_seed + 7919ull * static_cast<uint64_t>(v + 1));
         const Transform T = sampleViewpoint(rec.scene.surfaceCentroid(), ViewpointRange(), rng);
         const uint64_t view_seed = rng();
         const RenderResult r = renderer.render(
@@ -259,7 +264,9 @@ int main(int argc, char** argv) {
         GridSpec grid;
         GroundTruthGrids gt;
         bool have_gt = false;
+        const uint64_t method_seed = rng();
         for (Method& m : methods) {
+          std::mt19937_64 rng(method_seed ^ std::hash<std::string>{}(m.name));
           std::map<std::string, double> row{{"scene", k}, {"view", v}, {"visible_ratio", visible_ratio},
                                             {"objects", static_cast<double>(rec.scene.objects.size())}};
           std::vector<Superquadric> shapes;
