@@ -4,9 +4,9 @@
 
 #include <filesystem>
 
-#include "simstack/model/cpu_allocator.h"
 #include "simstack/fitting/superquadric_fit.h"
 #include "simstack/instances/hough_voting.h"
+#include "simstack/model/cpu_allocator.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/tsdf/ground_truth.h"

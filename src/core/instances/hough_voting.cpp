@@ -20,15 +20,14 @@ namespace {
 
 /// Marches the ray from fine-grid point `p` along unit `d` (Amanatides & Woo), visiting every
 /// fine cell once while the ray stays in (or within `tolerance` voxels of) occupied space.
-/// `enter(scene voxel)` is called when the ray enters a voxel and returns that voxel's block of
-/// ref^3 fine counts (nullptr: not counted); each fine cell crossed bumps its count, saturating.
-/// Voxel and in-voxel coordinates are stepped along with the cell, so the loop has no division,
-/// and the block is looked up once per voxel, not once per cell. On entering a voxel the ray
-/// already knows the voxel it will enter next: `prefetch(that voxel)` may bring its block into
-/// cache while this voxel's cells are counted.
-template <class Count, class Enter, class Prefetch>
+/// `block(scene voxel)` gives that voxel's ref^3 fine counts (nullptr: not counted); each fine
+/// cell crossed bumps its count, saturating. Voxel and in-voxel coordinates are stepped along
+/// with the cell, so the loop has no division, and the block is looked up once per voxel, not
+/// once per cell. On entering a voxel the ray already knows the voxel it will enter next, whose
+/// block is prefetched while this voxel's cells are counted.
+template <class Count, class Block>
 size_t marchRay(const Vec3& p, const Vec3& d, int ref, const std::vector<uint8_t>& occ, int r,
-                int tolerance, Enter&& enter, Prefetch&& prefetch) {
+                int tolerance, Block&& block_of) {
   int voxel[3], local[3], step[3];
   double t_max[3], t_delta[3];
   for (int a = 0; a < 3; ++a) {
@@ -63,7 +62,7 @@ size_t marchRay(const Vec3& p, const Vec3& d, int ref, const std::vector<uint8_t
     const int index = (vz * r + vy) * r + vx;
     outside = occ[index] ? 0 : outside + 1;
     if (outside > tolerance) break;
-    Count* const block = enter(index);
+    Count* const block = block_of(index);
     {
       // Parameter at which each in-voxel index leaves [0, ref); the smallest one is the exit.
       const double ex = step[0] ? tx + (step[0] > 0 ? ref - 1 - lx : lx) * t_delta[0] : tx;
@@ -74,7 +73,9 @@ size_t marchRay(const Vec3& p, const Vec3& d, int ref, const std::vector<uint8_t
       if (static_cast<unsigned>(next[0]) < static_cast<unsigned>(r) &&
           static_cast<unsigned>(next[1]) < static_cast<unsigned>(r) &&
           static_cast<unsigned>(next[2]) < static_cast<unsigned>(r))
-        prefetch((next[2] * r + next[1]) * r + next[0]);
+        if (const Count* upcoming = block_of((next[2] * r + next[1]) * r + next[0]))
+          for (size_t byte = 0; byte < sizeof(Count) * ref * ref * ref; byte += 64)
+            __builtin_prefetch(reinterpret_cast<const char*>(upcoming) + byte, 1);
     }
     int li = (lz * ref + ly) * ref + lx;
     while (true) {  // the fine cells of this voxel
@@ -267,13 +268,6 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
                                        [&](int voxel) {
                                          const int b = block_of[voxel];
                                          return b >= 0 ? counts + b * block : nullptr;
-                                       },
-                                       [&](int voxel) {
-                                         const int b = block_of[voxel];
-                                         if (b < 0) return;
-                                         const char* first = reinterpret_cast<const char*>(counts + b * block);
-                                         for (size_t byte = 0; byte < block * sizeof(FineCount); byte += 64)
-                                           __builtin_prefetch(first + byte, 1);
                                        });
     }
   }

@@ -204,16 +204,12 @@ Pile PileGenerator::generate(uint64_t seed) const {
       // is not dropped (the attempt fails, as after max_drops_per_object failed drops): it could
       // only be kept by sliding down beside the pile. With face-down drops, tries of such objects
       // were a third of all simulated steps; with random drops they are rare.
-      double thinnest = std::numeric_limits<double>::infinity();
-      for (int a = 0; a < 3; ++a) {
-        double lo = 1e9, hi = -1e9;
-        for (const auto& p : o.shape->hullPoints()) {
-          lo = std::min(lo, p[a]);
-          hi = std::max(hi, p[a]);
-        }
-        thinnest = std::min(thinnest, hi - lo);
+      Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+      for (const auto& p : o.shape->hullPoints()) {
+        lo = lo.cwiseMin(p);
+        hi = hi.cwiseMax(p);
       }
-      if (top + thinnest > config_.grid_extent_m - config_.grid_margin_m) {
+      if (top + (hi - lo).minCoeff() > config_.grid_extent_m - config_.grid_margin_m) {
         why = "the pile is taller than the scene grid";
         ++out.skipped_objects;
         break;
@@ -261,9 +257,12 @@ Pile PileGenerator::generate(uint64_t seed) const {
           }
         }
         const long object_steps = long{s} * trial->objectCount();
-        if (escaped || apart || s >= config_.max_settle_steps) {
+        const auto undo = [&] {
           out.object_steps.undone_drops += object_steps;
           ++out.undone_drops;
+        };
+        if (escaped || apart || s >= config_.max_settle_steps) {
+          undo();
           why = escaped ? "the pile is wider than the scene grid"
                 : apart ? "the objects do not form one stack"
                         : "the pile did not come to rest";
@@ -272,8 +271,7 @@ Pile PileGenerator::generate(uint64_t seed) const {
         if (index > 0 && config_.require_stack) {
           if (!touching(*trial, index).object) {
             why = "the objects do not form one stack";
-            out.object_steps.undone_drops += object_steps;
-            ++out.undone_drops;
+            undo();
             continue;
           }
         }
@@ -282,8 +280,7 @@ Pile PileGenerator::generate(uint64_t seed) const {
         for (size_t k = 0; k < candidate.objects.size(); ++k)
           candidate.objects[k].T_table_object = trial->pose(static_cast<int>(k));
         if (!fits(candidate, &why)) {
-          out.object_steps.undone_drops += object_steps;
-          ++out.undone_drops;
+          undo();
           continue;
         }
         pile_object_steps += object_steps;
