@@ -81,6 +81,13 @@ TEST(Cvae, MmdSeparatesPriorFromShiftedCodes) {
   const auto prior = torch::randn({256, 8});
   EXPECT_LT(mmdLoss(torch::randn({256, 8}), prior).item<double>(), 0.02);
   EXPECT_GT(mmdLoss(torch::randn({256, 8}) + 2.0, prior).item<double>(), 0.3);
+  // Hand-computed on two 1-D sets, kernel exp(-(a - b)^2): within {0, 1} e^-1, within {0, 2}
+  // e^-4 (diagonals left out), across (1 + e^-4 + e^-1 + e^-1) / 4.
+  const torch::Tensor a = torch::tensor({0.0f, 1.0f}).view({2, 1});
+  const torch::Tensor b = torch::tensor({0.0f, 2.0f}).view({2, 1});
+  const double e1 = std::exp(-1.0), e4 = std::exp(-4.0);
+  EXPECT_NEAR(mmdLoss(a, b).item<double>(), e1 + e4 - 2.0 * (1.0 + e4 + 2.0 * e1) / 4.0, 1e-6);
+  EXPECT_THROW(mmdLoss(a.narrow(0, 0, 1), b), std::invalid_argument);
 }
 
 TEST(Cvae, OneSharedConditionEqualsOnePerCode) {

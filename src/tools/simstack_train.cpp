@@ -53,7 +53,9 @@ int main(int argc, char** argv) {
               << r.samples_per_second << " samples/s)\n  final losses: total " << r.total
               << ", tsdf " << r.tsdf << ", partial " << r.partial << ", votes " << r.votes
               << ", mmd " << r.mmd << "\n  validation: IoU " << r.validation_iou << ", BCE "
-              << r.validation_bce << "\n  model: " << output
+              << r.validation_bce << ", hypotheses disagree on " << 100.0 * r.validation_disagreement
+              << " % of their voxels, posterior mu RMS " << r.posterior_mu_rms << ", sigma "
+              << r.posterior_sigma << "\n  model: " << output
               << "/model.pt (provenance in model.yaml)\n";
     return 0;
   } catch (const std::exception& e) {

@@ -16,6 +16,13 @@ struct TrainingReport {
   int64_t steps = 0;
   double total = 0, tsdf = 0, partial = 0, votes = 0, mmd = 0;  ///< mean of the last 50 steps
   double validation_iou = 0, validation_bce = 0;
+  /// Share of the voxels occupied in some of the three validation hypotheses that are not
+  /// occupied in all: near 0 means the samples are copies of one scene.
+  double validation_disagreement = 0;
+  /// The encoder's posterior N(mu, sigma^2) on the last 50 training batches: RMS of mu and mean
+  /// sigma (C-VAE only). mu ~ 0 with sigma ~ 1 for every scene: the code says nothing about it;
+  /// an informative code has means spread like the prior and small sigmas.
+  double posterior_mu_rms = 0, posterior_sigma = 0;
   double samples_per_second = 0;
 };
 

@@ -213,11 +213,18 @@ torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target, b
 }
 
 torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior) {
+  if (z.size(0) < 2 || prior.size(0) < 2)
+    throw std::invalid_argument("MMD needs at least two codes and two prior samples");
   const double d = static_cast<double>(z.size(1));
   auto kernel = [d](const torch::Tensor& a, const torch::Tensor& b) {
-    return torch::exp(-(a.unsqueeze(1) - b.unsqueeze(0)).pow(2).sum(2) / d).mean();
+    return torch::exp(-(a.unsqueeze(1) - b.unsqueeze(0)).pow(2).sum(2) / d);
   };
-  return kernel(z, z) + kernel(prior, prior) - 2.0 * kernel(z, prior);
+  // Unbiased: a set's kernel with itself leaves out the diagonal (each k(x, x) = 1).
+  auto within = [&](const torch::Tensor& a) {
+    const double n = static_cast<double>(a.size(0));
+    return (kernel(a, a).sum() - n) / (n * (n - 1.0));
+  };
+  return within(z) + within(prior) - 2.0 * kernel(z, prior).mean();
 }
 
 CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
@@ -227,8 +234,9 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
   l.tsdf = inverseTsdfWeightedLoss(out.tsdf, tsdf, c.tsdf_epsilon);
   l.partial = inverseTsdfWeightedLoss(out.partial_recon, partial.narrow(1, 0, 1), c.tsdf_epsilon);
   l.votes = voteLoss(out.votes, votes, c.vote_loss == "occupied");
-  l.mmd =
-      out.z.defined() ? mmdLoss(out.z, torch::randn_like(out.z)) : torch::zeros({}, tsdf.options());
+  l.mmd = out.z.defined()
+              ? mmdLoss(out.z, torch::randn({c.mmd_prior_samples, out.z.size(1)}, out.z.options()))
+              : torch::zeros({}, tsdf.options());
   l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + c.delta * l.mmd;
   return l;
 }

@@ -41,6 +41,7 @@ void cvaeFields(C& c, F&& f) {
   f("beta", c.beta);
   f("gamma", c.gamma);
   f("delta", c.delta);
+  f("mmd_prior_samples", c.mmd_prior_samples);
   f("tsdf_epsilon", c.tsdf_epsilon);
   f("vote_loss", c.vote_loss);
 }
@@ -79,6 +80,7 @@ void CvaeConfig::validate() const {
   require(latent_size >= 1 && condition_size >= 1 && hidden_size >= 1,
           "latent, condition and hidden sizes must be >= 1");
   require(alpha >= 0 && beta >= 0 && gamma >= 0 && delta >= 0, "loss weights must be >= 0");
+  require(mmd_prior_samples >= 2, "mmd_prior_samples must be >= 2");
   require(tsdf_epsilon > 0.0, "tsdf_epsilon must be > 0");
   require(vote_loss == "occupied" || vote_loss == "all",
           "vote_loss must be 'occupied' or 'all', got '" + vote_loss + "'");

@@ -169,12 +169,14 @@ TrainingReport CvaeTrainer::run(bool resume) {
     worker.join();
   };
 
-  // Validation set: one fixed view per held-out scene, three codes each.
+  // Validation set: one fixed view per held-out scene, three codes each. Besides IoU and BCE
+  // it measures whether the latent space is used: how often the three hypotheses disagree.
   auto validate = [&](TrainingReport* report) {
     model->eval();
     torch::NoGradGuard no_grad;
     const int n = impl_->reader->size();
     double iou = 0, bce = 0;
+    long disagree = 0, predicted = 0;
     int count = 0;
     for (int k = impl_->train_scenes; k < n; ++k) {
       std::mt19937_64 rng(mix(tc.seed ^ 0xA11DA7Eull, static_cast<uint64_t>(k)));
@@ -191,10 +193,14 @@ TrainingReport CvaeTrainer::run(bool resume) {
       const OccupancyScores sc = scoreOccupancy(s.tsdf, preds);
       iou += sc.iou;
       bce += sc.bce;
+      const torch::Tensor votes = (o.tsdf <= 0).sum(0);  // per voxel: hypotheses occupied
+      predicted += (votes > 0).sum().item<long>();
+      disagree += ((votes > 0) & (votes < samples)).sum().item<long>();
       ++count;
     }
     report->validation_iou = iou / count;
     report->validation_bce = bce / count;
+    report->validation_disagreement = predicted > 0 ? static_cast<double>(disagree) / predicted : 0;
     model->train();
   };
 
@@ -202,7 +208,8 @@ TrainingReport CvaeTrainer::run(bool resume) {
                     resume && start > 0 ? std::ios::app : std::ios::trunc);
   if (!log) throw std::runtime_error("cannot write " + (out / "train_log.csv").string());
   if (start == 0)
-    log << "step,total,tsdf,partial,votes,mmd,samples_per_s,validation_iou,validation_bce\n";
+    log << "step,total,tsdf,partial,votes,mmd,samples_per_s,validation_iou,validation_bce,"
+           "validation_disagreement,posterior_mu_rms,posterior_sigma\n";
   auto save_checkpoint = [&](int64_t step) {
     saveCvae(checkpoint.string(), model);
     torch::save(optimizer, optim_file.string());
@@ -212,6 +219,9 @@ TrainingReport CvaeTrainer::run(bool resume) {
 
   TrainingReport report;
   std::deque<std::array<double, 5>> recent;
+  // The encoder's posterior on the training batches (train mode; in eval mode BatchNorm's
+  // running statistics give other codes): mean square of mu and mean sigma, last 50 steps.
+  std::deque<std::array<double, 2>> posterior;
   ProgressBar bar(mc.architecture == "fc" ? "training FC" : "training C-VAE", tc.steps, start);
   auto t0 = std::chrono::steady_clock::now();
   int64_t trained = 0;
@@ -242,6 +252,18 @@ TrainingReport CvaeTrainer::run(bool resume) {
     recent.push_back({l.total.item<double>(), l.tsdf.item<double>(), l.partial.item<double>(),
                       l.votes.item<double>(), l.mmd.item<double>()});
     if (recent.size() > 50) recent.pop_front();
+    if (o.mu.defined()) {
+      posterior.push_back({o.mu.pow(2).mean().item<double>(),
+                           torch::exp(0.5 * o.logvar).mean().item<double>()});
+      if (posterior.size() > 50) posterior.pop_front();
+      double mu_sq = 0.0, sigma = 0.0;
+      for (const auto& p : posterior) {
+        mu_sq += p[0] / posterior.size();
+        sigma += p[1] / posterior.size();
+      }
+      report.posterior_mu_rms = std::sqrt(mu_sq);
+      report.posterior_sigma = sigma;
+    }
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     report.samples_per_second = trained * tc.batch_size / seconds;
@@ -251,7 +273,11 @@ TrainingReport CvaeTrainer::run(bool resume) {
       const auto& a = recent.back();
       log << step + 1 << "," << a[0] << "," << a[1] << "," << a[2] << "," << a[3] << "," << a[4]
           << "," << report.samples_per_second;
-      if (validating) log << "," << report.validation_iou << "," << report.validation_bce;
+      if (validating) {
+        log << "," << report.validation_iou << "," << report.validation_bce << ","
+            << report.validation_disagreement << "," << report.posterior_mu_rms << ","
+            << report.posterior_sigma;
+      }
       log << "\n";
     }
     if ((step + 1) % tc.checkpoint_every == 0) save_checkpoint(step + 1);
@@ -309,7 +335,13 @@ TrainingReport CvaeTrainer::run(bool resume) {
        << YAML::EndMap;
   meta << YAML::Key << "validation" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
        << "iou" << YAML::Value << report.validation_iou << YAML::Key << "bce" << YAML::Value
-       << report.validation_bce << YAML::EndMap;
+       << report.validation_bce << YAML::Key << "disagreement" << YAML::Value
+       << report.validation_disagreement << YAML::EndMap;
+  if (mc.architecture == "cvae") {
+    meta << YAML::Key << "posterior" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
+         << "mu_rms" << YAML::Value << report.posterior_mu_rms << YAML::Key << "sigma"
+         << YAML::Value << report.posterior_sigma << YAML::EndMap;
+  }
   meta << YAML::Key << "samples_per_second" << YAML::Value << report.samples_per_second;
   meta << YAML::EndMap;
   saveCvae((out / "model.pt").string(), model, meta.c_str());
