@@ -152,6 +152,9 @@ TEST(PileGenerator, RespectsObjectRangeAndBadConfig) {
   EXPECT_EQ(pile.scene.objects.size(), 5u);
   config.min_objects = 6;
   EXPECT_THROW(PileGenerator{config}, std::invalid_argument);
+  config.min_objects = 5;
+  config.rest_check_steps = 0;  // would switch off the settle rule's displacement limit
+  EXPECT_THROW(PileGenerator{config}, std::invalid_argument);
 }
 
 TEST(YcbPiles, LoadCatalogueAndGenerate) {

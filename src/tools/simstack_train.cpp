@@ -1,6 +1,7 @@
 // simstack_train: trains the C-VAE (or the FC baseline) on a dataset from simstack_generate.
 #include <CLI/CLI.hpp>
 
+#include <cmath>
 #include <iostream>
 
 #include "simstack/model/cpu_allocator.h"
@@ -54,8 +55,12 @@ int main(int argc, char** argv) {
               << ", tsdf " << r.tsdf << ", partial " << r.partial << ", votes " << r.votes
               << ", mmd " << r.mmd << "\n  validation: IoU " << r.validation_iou << ", BCE "
               << r.validation_bce << ", hypotheses disagree on " << 100.0 * r.validation_disagreement
-              << " % of their voxels, posterior mu RMS " << r.posterior_mu_rms << ", sigma "
-              << r.posterior_sigma << "\n  model: " << output
+              << " % of their voxels";
+    if (std::isfinite(r.posterior_mu_rms)) {
+      std::cout << "\n  posterior on the last training batches: mu RMS " << r.posterior_mu_rms
+                << ", mean sigma " << r.posterior_sigma;
+    }
+    std::cout << "\n  model: " << output
               << "/model.pt (provenance in model.yaml)\n";
     return 0;
   } catch (const std::exception& e) {

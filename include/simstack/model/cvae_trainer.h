@@ -2,9 +2,11 @@
 /// @file cvae_trainer.h
 /// Trains a C-VAE or the FC baseline on a generated dataset: random views are rendered and
 /// their partial TSDFs built on the fly (paper section 3.1.1), Adam, checkpoints that resume,
-/// a CSV log, validation on the last scenes of the dataset. Deterministic for a seed.
+/// a CSV log, validation on the last scenes of the dataset. Deterministic for a seed and the
+/// steps at which it was resumed (a resumed run reseeds torch from the seed and its step).
 
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 
@@ -16,13 +18,16 @@ struct TrainingReport {
   int64_t steps = 0;
   double total = 0, tsdf = 0, partial = 0, votes = 0, mmd = 0;  ///< mean of the last 50 steps
   double validation_iou = 0, validation_bce = 0;
-  /// Share of the voxels occupied in some of the three validation hypotheses that are not
-  /// occupied in all: near 0 means the samples are copies of one scene.
+  /// Over all validation scenes, the share of the voxels occupied in some of a scene's three
+  /// hypotheses that are not occupied in all three: near 0 means the samples are copies of one
+  /// scene.
   double validation_disagreement = 0;
   /// The encoder's posterior N(mu, sigma^2) on the last 50 training batches: RMS of mu and mean
-  /// sigma (C-VAE only). mu ~ 0 with sigma ~ 1 for every scene: the code says nothing about it;
-  /// an informative code has means spread like the prior and small sigmas.
-  double posterior_mu_rms = 0, posterior_sigma = 0;
+  /// sigma. mu ~ 0 with sigma ~ 1 for every scene: the code says nothing about it; an
+  /// informative code has means spread like the prior and small sigmas. NaN when this run
+  /// trained no C-VAE step (FC baseline, or a resumed run that had reached its steps).
+  double posterior_mu_rms = std::numeric_limits<double>::quiet_NaN();
+  double posterior_sigma = std::numeric_limits<double>::quiet_NaN();
   double samples_per_second = 0;
 };
 

@@ -25,21 +25,26 @@ struct PileConfig {
   double drop_radius_m = 0.05;  ///< horizontal scatter of each drop about the pile centre
   /// Each object falls with one of its six faces down, a random yaw and a random tilt up to
   /// this angle; 180 (the default) drops it in a uniformly random orientation. Measured on 150
-  /// piles: face-down drops (0) need 2.1x fewer physics steps per pile, but 97 % of the objects
-  /// then rest with an axis within 10 degrees of vertical (81 % with 180) and piles are taller
-  /// (0.44 against 0.36 m): neater piles than the paper's random drops.
+  /// piles: face-down drops (0) need 1.9x fewer physics steps per pile, but 97 % of the objects
+  /// then rest with an axis within 10 degrees of vertical (80 % with 180) and piles are taller
+  /// (0.45 against 0.35 m): neater piles than the paper's random drops.
   double max_tilt_deg = 180.0;
   double drop_gap_m = 0.01;        ///< height of each drop above the top of the pile
   double grid_extent_m = 0.64;     ///< the scene grid that the pile must fit
   double grid_margin_m = 0.04;     ///< free border kept inside the grid
   double table_half_size_m = 0.5;  ///< an object whose centre leaves this square fell off
   bool require_stack = true;       ///< one connected pile with at least one object not on the table
-  int max_settle_steps = 2000;  ///< per drop (8.3 s); longer was 4 % of drops, 17 % of steps
+  /// Per drop (8.3 s). Measured before the displacement rule of generate() existed: drops that
+  /// needed longer were 4 % of drops and 17 % of steps.
+  int max_settle_steps = 2000;
   /// A drop is abandoned once the new object has touched the table and no other object at this
   /// many consecutive checks (one per 60 steps), moving or not: it has come off the pile.
   int apart_runs = 2;
-  int rest_check_steps = 240;       ///< re-simulation (from zero velocities) of a finished pile
-  double rest_tolerance_m = 0.005;  ///< largest centre motion during it for the pile to be at rest
+  /// Re-simulation (from zero velocities) of a finished pile, and the largest centre motion
+  /// during it for the pile to be at rest. Their ratio is also the pace below which a drop
+  /// counts as settled (see generate()).
+  int rest_check_steps = 240;
+  double rest_tolerance_m = 0.005;
   int rest_check_rounds = 4;        ///< re-simulations before a creeping pile is drawn again
   int max_drops_per_object = 8;     ///< drops of one object before the pile is drawn again
   int max_attempts = 100;
@@ -88,8 +93,10 @@ class PileGenerator {
   /// Whether a settled scene satisfies the acceptance rules; `why` receives the reason.
   bool accept(const Scene& scene, const PhysicsWorld& world, std::string* why) const;
   /// Re-simulates the finished pile from rest (updating its poses) until it stays put; false
-  /// when it keeps moving. Adds the object-steps it simulated to `object_steps` when given.
-  bool verifyRest(Scene* scene, long* object_steps = nullptr) const;
+  /// when it keeps moving. Adds the object-steps it simulated to `object_steps` and hands over
+  /// the last simulated world (whose poses are the scene's) to `last_world`, when given.
+  bool verifyRest(Scene* scene, long* object_steps = nullptr,
+                  std::unique_ptr<PhysicsWorld>* last_world = nullptr) const;
   /// Whether every object is on the table and the pile fits the scene grid.
   bool fits(const Scene& scene, std::string* why) const;
   /// A random superquadric shape of this config's ranges.

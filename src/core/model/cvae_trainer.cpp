@@ -176,7 +176,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
     torch::NoGradGuard no_grad;
     const int n = impl_->reader->size();
     double iou = 0, bce = 0;
-    long disagree = 0, predicted = 0;
+    int64_t disagree = 0, predicted = 0;
     int count = 0;
     for (int k = impl_->train_scenes; k < n; ++k) {
       std::mt19937_64 rng(mix(tc.seed ^ 0xA11DA7Eull, static_cast<uint64_t>(k)));
@@ -194,8 +194,8 @@ TrainingReport CvaeTrainer::run(bool resume) {
       iou += sc.iou;
       bce += sc.bce;
       const torch::Tensor votes = (o.tsdf <= 0).sum(0);  // per voxel: hypotheses occupied
-      predicted += (votes > 0).sum().item<long>();
-      disagree += ((votes > 0) & (votes < samples)).sum().item<long>();
+      predicted += (votes > 0).sum().item<int64_t>();
+      disagree += ((votes > 0) & (votes < samples)).sum().item<int64_t>();
       ++count;
     }
     report->validation_iou = iou / count;
@@ -207,7 +207,8 @@ TrainingReport CvaeTrainer::run(bool resume) {
   std::ofstream log((out / "train_log.csv").string(),
                     resume && start > 0 ? std::ios::app : std::ios::trunc);
   if (!log) throw std::runtime_error("cannot write " + (out / "train_log.csv").string());
-  if (start == 0)
+  log.seekp(0, std::ios::end);
+  if (log.tellp() == 0)  // a new log (also when a finished model is trained further)
     log << "step,total,tsdf,partial,votes,mmd,samples_per_s,validation_iou,validation_bce,"
            "validation_disagreement,posterior_mu_rms,posterior_sigma\n";
   auto save_checkpoint = [&](int64_t step) {
@@ -253,6 +254,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
                       l.votes.item<double>(), l.mmd.item<double>()});
     if (recent.size() > 50) recent.pop_front();
     if (o.mu.defined()) {
+      torch::NoGradGuard no_grad;
       posterior.push_back({o.mu.pow(2).mean().item<double>(),
                            torch::exp(0.5 * o.logvar).mean().item<double>()});
       if (posterior.size() > 50) posterior.pop_front();
@@ -275,8 +277,12 @@ TrainingReport CvaeTrainer::run(bool resume) {
           << "," << report.samples_per_second;
       if (validating) {
         log << "," << report.validation_iou << "," << report.validation_bce << ","
-            << report.validation_disagreement << "," << report.posterior_mu_rms << ","
-            << report.posterior_sigma;
+            << report.validation_disagreement << ",";
+        if (posterior.empty()) {
+          log << ",";  // FC baseline: no posterior
+        } else {
+          log << report.posterior_mu_rms << "," << report.posterior_sigma;
+        }
       }
       log << "\n";
     }
@@ -337,7 +343,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
        << "iou" << YAML::Value << report.validation_iou << YAML::Key << "bce" << YAML::Value
        << report.validation_bce << YAML::Key << "disagreement" << YAML::Value
        << report.validation_disagreement << YAML::EndMap;
-  if (mc.architecture == "cvae") {
+  if (!posterior.empty()) {  // C-VAE steps trained in this run
     meta << YAML::Key << "posterior" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
          << "mu_rms" << YAML::Value << report.posterior_mu_rms << YAML::Key << "sigma"
          << YAML::Value << report.posterior_sigma << YAML::EndMap;
