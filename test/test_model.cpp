@@ -93,6 +93,29 @@ TEST(Cvae, MmdSeparatesPriorFromShiftedCodes) {
   const double e1 = std::exp(-1.0), e4 = std::exp(-4.0);
   EXPECT_NEAR(mmdLoss(a, b).item<double>(), e1 + e4 - 2.0 * (1.0 + e4 + 2.0 * e1) / 4.0, 1e-6);
   EXPECT_THROW(mmdLoss(a.narrow(0, 0, 1), b), std::invalid_argument);
+  // Widths 1 and 2 (kernel exp(-(a - b)^2 / w) for d = 1): each term is the mean of the two.
+  auto k = [](double sq) { return 0.5 * (std::exp(-sq) + std::exp(-sq / 2.0)); };
+  EXPECT_NEAR(mmdLoss(a, b, {1.0, 2.0}).item<double>(),
+              k(1) + k(4) - 2.0 * (k(0) + k(4) + 2.0 * k(1)) / 4.0, 1e-6);
+  EXPECT_THROW(mmdLoss(a, b, {}), std::invalid_argument);
+}
+
+TEST(Cvae, SeveralKernelWidthsSeePinnedAndWideCodes) {
+  // What our encoders learned: 3/8 of the codes pinned near the prior's centre, the rest wide
+  // noise. The single width scores it like a small shift of the prior; widths 0.2, 1 and 5
+  // see it.
+  torch::manual_seed(5);
+  const int n = 512, d = 96, pinned = 3 * n / 8;
+  const torch::Tensor prior = torch::randn({n, d});
+  const torch::Tensor centre = torch::randn({n, d}) * 0.42;
+  torch::Tensor spread = torch::full({n, 1}, 2.5);
+  spread.narrow(0, 0, pinned).fill_(0.03);
+  const torch::Tensor mixture = centre + torch::randn({n, d}) * spread;
+  const double single = mmdLoss(mixture, prior).item<double>();
+  const double several = mmdLoss(mixture, prior, {0.2, 1.0, 5.0}).item<double>();
+  EXPECT_LT(single, 0.01);
+  EXPECT_GT(several, 0.025);
+  EXPECT_NEAR(mmdLoss(torch::randn({n, d}), prior, {0.2, 1.0, 5.0}).item<double>(), 0.0, 0.003);
 }
 
 TEST(Cvae, OneSharedConditionEqualsOnePerCode) {

@@ -115,9 +115,11 @@ torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Te
 torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target,
                        bool occupied_only = false);
 /// Maximum mean discrepancy between codes z [B, d] and prior samples [N, d] with the Gaussian
-/// kernel exp(-|a - b|^2 / d) (InfoVAE, Zhao et al. 2019), unbiased (zero in expectation when
-/// z follows the prior; may be slightly negative). Both sets need at least two rows.
-torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior);
+/// kernel exp(-|a - b|^2 / (w d)) averaged over the widths w (InfoVAE, Zhao et al. 2019, uses
+/// w = 1), unbiased (zero in expectation when z follows the prior; may be slightly negative).
+/// Both sets need at least two rows.
+torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior,
+                      const std::vector<double>& widths = {1.0});
 
 struct CvaeLosses {
   torch::Tensor total, tsdf, partial, votes, mmd;

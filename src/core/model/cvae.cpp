@@ -212,12 +212,17 @@ torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target, b
   return per_voxel.flatten(1).sum(1).mean();
 }
 
-torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior) {
+torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior,
+                      const std::vector<double>& widths) {
   if (z.size(0) < 2 || prior.size(0) < 2)
     throw std::invalid_argument("MMD needs at least two codes and two prior samples");
+  if (widths.empty()) throw std::invalid_argument("MMD needs at least one kernel width");
   const double d = static_cast<double>(z.size(1));
-  auto kernel = [d](const torch::Tensor& a, const torch::Tensor& b) {
-    return torch::exp(-(a.unsqueeze(1) - b.unsqueeze(0)).pow(2).sum(2) / d);
+  auto kernel = [&](const torch::Tensor& a, const torch::Tensor& b) {
+    const torch::Tensor sq = (a.unsqueeze(1) - b.unsqueeze(0)).pow(2).sum(2);
+    torch::Tensor k = torch::zeros_like(sq);
+    for (double w : widths) k = k + torch::exp(-sq / (w * d));
+    return k / static_cast<double>(widths.size());
   };
   // Unbiased: a set's kernel with itself leaves out the diagonal (each k(x, x) = 1).
   auto within = [&](const torch::Tensor& a) {
@@ -235,7 +240,8 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
   l.partial = inverseTsdfWeightedLoss(out.partial_recon, partial.narrow(1, 0, 1), c.tsdf_epsilon);
   l.votes = voteLoss(out.votes, votes, c.vote_loss == "occupied");
   l.mmd = out.z.defined()
-              ? mmdLoss(out.z, torch::randn({c.mmd_prior_samples, out.z.size(1)}, out.z.options()))
+              ? mmdLoss(out.z, torch::randn({c.mmd_prior_samples, out.z.size(1)}, out.z.options()),
+                        c.mmd_kernel_widths)
               : torch::zeros({}, tsdf.options());
   l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + c.delta * l.mmd;
   return l;

@@ -42,6 +42,7 @@ void cvaeFields(C& c, F&& f) {
   f("gamma", c.gamma);
   f("delta", c.delta);
   f("mmd_prior_samples", c.mmd_prior_samples);
+  f("mmd_kernel_widths", c.mmd_kernel_widths);
   f("tsdf_epsilon", c.tsdf_epsilon);
   f("vote_loss", c.vote_loss);
 }
@@ -81,6 +82,8 @@ void CvaeConfig::validate() const {
           "latent, condition and hidden sizes must be >= 1");
   require(alpha >= 0 && beta >= 0 && gamma >= 0 && delta >= 0, "loss weights must be >= 0");
   require(mmd_prior_samples >= 2, "mmd_prior_samples must be >= 2");
+  require(!mmd_kernel_widths.empty(), "mmd_kernel_widths needs at least one width");
+  for (double w : mmd_kernel_widths) require(w > 0.0, "mmd_kernel_widths must be > 0");
   require(tsdf_epsilon > 0.0, "tsdf_epsilon must be > 0");
   require(vote_loss == "occupied" || vote_loss == "all",
           "vote_loss must be 'occupied' or 'all', got '" + vote_loss + "'");
