@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <unistd.h>
 #include <fstream>
 
 #include "simstack/dataset/dataset.h"
@@ -33,9 +34,19 @@ CvaeConfig tiny(const std::string& architecture = "cvae") {
   return c;
 }
 
+// Per process, so that two test runs on one machine do not share files.
 std::string tempPath(const std::string& name) {
-  return (fs::temp_directory_path() / name).string();
+  return (fs::temp_directory_path() / (name + "_" + std::to_string(::getpid()))).string();
 }
+
+// Removes the paths when the test ends, also when an assertion returns early.
+struct RemoveAtExit {
+  std::vector<std::string> paths;
+  ~RemoveAtExit() {
+    std::error_code ec;
+    for (const auto& p : paths) fs::remove_all(p, ec);
+  }
+};
 }  // namespace
 
 TEST(Cvae, OutputShapesAreRightAndFinite) {
@@ -338,6 +349,7 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   tc.image_height = 60;
   const std::string a = tempPath("simstack_train_a"), b = tempPath("simstack_train_b"),
                     c = tempPath("simstack_train_c");
+  const RemoveAtExit cleanup{{a, b, c, data}};
   for (const auto& d : {a, b, c}) fs::remove_all(d);
   // Two fresh runs with one seed give the same weights.
   const TrainingReport ra = CvaeTrainer(data, tiny(), tc, a, "test").run(false);
@@ -355,7 +367,8 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   EXPECT_EQ(fields(log[1]), fields(log[0]));
   EXPECT_EQ(log[2].rfind("4,", 0), 0u);
   // Interrupted at step 2 and resumed: it continues from the checkpoint to step 4, appending
-  // to the log, and a resumed run is itself reproducible.
+  // to the log, and a resumed run is itself reproducible (not equal to the uninterrupted run:
+  // the shorter run's learning-rate schedule differs, and a resumed run reseeds torch).
   TrainConfig half = tc;
   half.steps = 2;
   for (const auto& d : {b, c}) {
@@ -374,6 +387,27 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   fs::remove_all(c);
   const TrainingReport rf = CvaeTrainer(data, tiny("fc"), fc, c, "test").run(false);
   EXPECT_TRUE(std::isnan(rf.posterior_mu_rms));
-  for (const auto& d : {a, b, c}) fs::remove_all(d);
-  fs::remove(data);
+  // Trained further with other loss settings, the saved model says which; another network in
+  // the config is an error.
+  CvaeConfig widths = tiny();
+  widths.mmd_kernel_widths = {0.2, 1.0, 5.0};
+  TrainConfig longer = tc;
+  longer.steps = 5;
+  CvaeTrainer(data, widths, longer, b, "test").run(true);
+  EXPECT_EQ(loadCvae(b + "/model.pt")->config().mmd_kernel_widths, widths.mmd_kernel_widths);
+  CvaeConfig wider = tiny();
+  wider.base_channels = 8;
+  longer.steps = 6;
+  EXPECT_THROW(CvaeTrainer(data, wider, longer, b, "test").run(true), std::runtime_error);
+}
+
+TEST(CvaeConfig, RoundTripsThroughYaml) {
+  CvaeConfig c = tiny();
+  c.mmd_kernel_widths = {0.2, 1.0, 5.0};
+  c.vote_loss = "all";
+  EXPECT_EQ(CvaeConfig::fromYaml(c.toYaml()).toYaml(), c.toYaml());
+  // Fields absent keep their defaults (model files older than a field).
+  EXPECT_EQ(CvaeConfig::fromYaml("resolution: 16").mmd_kernel_widths, std::vector<double>{1.0});
+  EXPECT_THROW(CvaeConfig::fromYaml("mmd_kernel_widths: []"), std::invalid_argument);
+  EXPECT_THROW(CvaeConfig::fromYaml("mmd_kernel_widths: 2"), std::invalid_argument);
 }

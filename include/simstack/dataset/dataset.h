@@ -59,7 +59,7 @@ class DatasetWriter {
   std::unique_ptr<Impl> impl_;
 };
 
-/// Reads a dataset written by DatasetWriter. Not thread-safe.
+/// Reads a dataset written by DatasetWriter. Reads from several threads take turns.
 class DatasetReader {
  public:
   /// Opens `path` and checks its layout; mesh scenes need the catalogue the file names

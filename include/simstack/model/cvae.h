@@ -12,6 +12,7 @@
 #include <torch/torch.h>
 
 #include <string>
+#include <vector>
 
 #include "simstack/model/cvae_config.h"
 
@@ -79,6 +80,9 @@ class CvaeImpl : public torch::nn::Module {
   /// single condition is encoded once and shared by all codes. The FC baseline ignores z.
   CvaeOutput generate(const torch::Tensor& partial, const torch::Tensor& z);
   const CvaeConfig& config() const { return config_; }
+  /// Replaces the stored config by one that describes the same network (only the loss
+  /// settings may differ); throws std::invalid_argument otherwise.
+  void setConfig(const CvaeConfig& config);
 
  private:
   std::vector<torch::Tensor> encodeCondition(const torch::Tensor& partial);

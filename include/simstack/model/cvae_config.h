@@ -51,6 +51,8 @@ struct CvaeConfig {
   std::string toYaml() const;
   /// Parses YAML text (fields absent keep their defaults); throws std::invalid_argument.
   static CvaeConfig fromYaml(const std::string& text);
+  /// Takes the loss weights and settings (not the network) of `other`.
+  void copyLossSettings(const CvaeConfig& other);
   double voxelSize() const { return extent_m / resolution; }
   double truncation_m() const { return truncation_vox * voxelSize(); }
 };

@@ -2,6 +2,7 @@
 
 #include <H5Cpp.h>
 
+#include <mutex>
 #include <sstream>
 #include <stdexcept>
 
@@ -11,8 +12,8 @@ namespace simstack {
 
 const char* const kObjectColumns =
     "kind(0=superquadric,1=mesh),catalogue_index,a1,a2,a3,r,s,t,x,y,z,qw,qx,qy,qz";
-// 1: every generator up to 2026-11-22 (it was not bumped when the piles changed);
-// 2: drops also settle by the displacement rule, acceptance reads the verified world.
+// 1: every generator up to commit 0287ce8 (it was not bumped when the piles changed);
+// 2: from commit 75d1177: drops also settle by the displacement rule (2939dd1, 1b94af2).
 const char* const kGeneratorVersion = "simstack-generate-2";
 namespace {
 
@@ -204,6 +205,7 @@ struct DatasetReader::Impl {
   std::unique_ptr<H5::H5File> file;
   H5::DataSet tsdf, votes, labels, origin, count, objects;
   std::vector<std::shared_ptr<const ObjectShape>> catalogue;
+  std::mutex mutex;  // one HDF5 read at a time (the trainer reads from two threads)
 };
 
 DatasetReader::DatasetReader(const std::string& path, const std::string& mesh_dir)
@@ -262,6 +264,7 @@ SceneRecord DatasetReader::readScene(int index) const {
   int32_t n = 0;
   Vec3 origin;
   std::vector<double> objects(static_cast<size_t>(info.max_objects_per_scene) * kColumns);
+  std::unique_lock<std::mutex> lock(impl_->mutex);
   try {
     slab(impl_->count, index, H5::PredType::NATIVE_INT32, &n, false);
     slab(impl_->origin, index, H5::PredType::NATIVE_DOUBLE, origin.data(), false);
@@ -309,6 +312,7 @@ SceneRecord DatasetReader::read(int index) const {
   rec.ground_truth.labels = Grid3<uint8_t>(rec.grid, 0);
   rec.ground_truth.votes = Grid3<Vec3f>(rec.grid, Vec3f::Zero());
   std::vector<float> votes(3 * static_cast<size_t>(nv));
+  std::unique_lock<std::mutex> lock(impl_->mutex);
   try {
     slab(impl_->tsdf, index, H5::PredType::NATIVE_FLOAT, rec.ground_truth.tsdf.data.data(), false);
     slab(impl_->labels, index, H5::PredType::NATIVE_UINT8, rec.ground_truth.labels.data.data(),
@@ -318,6 +322,7 @@ SceneRecord DatasetReader::read(int index) const {
     throw std::runtime_error("cannot read scene " + std::to_string(index) + " of " + impl_->path +
                              ": " + e.getDetailMsg());
   }
+  lock.unlock();
   for (int i = 0; i < nv; ++i) {
     rec.ground_truth.votes.data[i] =
         Vec3f(votes[i], votes[static_cast<size_t>(nv) + i], votes[2 * static_cast<size_t>(nv) + i]);

@@ -125,6 +125,15 @@ CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
   }
 }
 
+void CvaeImpl::setConfig(const CvaeConfig& config) {
+  CvaeConfig network = config_;
+  network.copyLossSettings(config);
+  if (network.toYaml() != config.toYaml())
+    throw std::invalid_argument("setConfig: the config describes another network");
+  config.validate();
+  config_ = config;
+}
+
 std::vector<torch::Tensor> CvaeImpl::encodeCondition(const torch::Tensor& partial) {
   std::vector<torch::Tensor> features;
   torch::Tensor x = partial;

@@ -89,6 +89,17 @@ void CvaeConfig::validate() const {
           "vote_loss must be 'occupied' or 'all', got '" + vote_loss + "'");
 }
 
+void CvaeConfig::copyLossSettings(const CvaeConfig& o) {
+  alpha = o.alpha;
+  beta = o.beta;
+  gamma = o.gamma;
+  delta = o.delta;
+  mmd_prior_samples = o.mmd_prior_samples;
+  mmd_kernel_widths = o.mmd_kernel_widths;
+  tsdf_epsilon = o.tsdf_epsilon;
+  vote_loss = o.vote_loss;
+}
+
 std::string CvaeConfig::toYaml() const {
   YAML::Emitter e;
   e << YAML::BeginMap;
