@@ -2,23 +2,30 @@
 #include <benchmark/benchmark.h>
 #include <omp.h>
 
+#include <atomic>
+
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/pile_generator.h"
 #include "simstack/tsdf/ground_truth.h"
 
 using namespace simstack;
 
-// The same 60 piles (seeds 1000..1059) for every thread count, split across the threads: the
-// cost of a pile varies several-fold with how many drops it needs, so runs over different
-// seeds are not comparable.
+// The same 200 piles (seeds 1000..1199) for every thread count, handed out one at a time as
+// simstack_generate does (the cost of a pile varies several-fold with how many drops it
+// needs, so a fixed split leaves one thread idle at the end, and runs over different seeds
+// are not comparable).
+static std::atomic<int> next_pile{0};
 static void BM_PileWithGroundTruth(benchmark::State& state) {
   omp_set_num_threads(1);  // parallel across piles, as simstack_generate runs
   const int resolution = static_cast<int>(state.range(0));
   const int piles = static_cast<int>(state.range(1));
   const PileGenerator gen{PileConfig()};
+  // Reset before this thread reaches the start barrier of the timed loop, which every thread
+  // passes before taking a pile.
+  if (state.thread_index() == 0) next_pile = 0;
   int made = 0;
   for (auto _ : state) {
-    for (int k = state.thread_index(); k < piles; k += state.threads()) {
+    for (int k = next_pile++; k < piles; k = next_pile++) {
       const Scene scene = gen.generate(1000 + k).scene;
       const GridSpec grid = GridSpec::sceneGrid(scene.surfaceCentroid().head<2>(), 0.64, resolution);
       benchmark::DoNotOptimize(
@@ -29,7 +36,7 @@ static void BM_PileWithGroundTruth(benchmark::State& state) {
   state.SetItemsProcessed(made);
 }
 BENCHMARK(BM_PileWithGroundTruth)
-    ->Args({32, 60})
+    ->Args({32, 200})
     ->Threads(1)
     ->Threads(2)
     ->Iterations(1)
