@@ -18,16 +18,18 @@
 
 namespace simstack {
 
-/// Conv3d(3x3x3) + BatchNorm + PReLU. At inference (no grad) the convolution calls oneDNN
-/// directly: libtorch 1.13's CPU build skips it for 3D convolutions otherwise (6-7x slower).
+/// Conv3d(3x3x3) + BatchNorm (or GroupNorm) + PReLU. At inference (no grad) the convolution
+/// calls oneDNN directly: libtorch 1.13's CPU build skips it for 3D convolutions otherwise
+/// (6-7x slower).
 class ConvBlockImpl : public torch::nn::Module {
  public:
-  ConvBlockImpl(int in, int out, int stride);
+  ConvBlockImpl(int in, int out, int stride, bool group_norm = false);
   torch::Tensor forward(const torch::Tensor& x);
 
  private:
   torch::nn::Conv3d conv{nullptr};
   torch::nn::BatchNorm3d bn{nullptr};
+  torch::nn::GroupNorm gn{nullptr};
   torch::nn::PReLU act{nullptr};
   int stride_;
 };
@@ -36,13 +38,14 @@ TORCH_MODULE(ConvBlock);
 /// Residual block with squeeze-and-excitation (He et al. 2016; Hu et al. 2018).
 class ResSEBlockImpl : public torch::nn::Module {
  public:
-  ResSEBlockImpl(int in, int out, int stride);
+  ResSEBlockImpl(int in, int out, int stride, bool group_norm = false);
   torch::Tensor forward(const torch::Tensor& x);
 
  private:
   ConvBlock a{nullptr};
   torch::nn::Conv3d b{nullptr};
   torch::nn::BatchNorm3d bn{nullptr};
+  torch::nn::GroupNorm gn{nullptr};
   torch::nn::Linear se1{nullptr}, se2{nullptr};
   torch::nn::Conv3d skip{nullptr};
   torch::nn::PReLU act{nullptr};

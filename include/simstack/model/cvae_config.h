@@ -21,6 +21,10 @@ struct CvaeConfig {
   int latent_size = 96;               ///< VAE latent z
   int condition_size = 96;            ///< bottleneck of the conditioning autoencoder
   int hidden_size = 128;              ///< width of the hidden linear layer on either side
+  /// Normalisation in every convolution block: "batch" (the paper's BatchNorm) or "group"
+  /// (GroupNorm, 4 channels per group). In training mode BatchNorm makes each sample's code
+  /// depend on the rest of its batch, which the MMD estimate assumes it does not (README).
+  std::string norm = "batch";
   // Loss weights of L = alpha L_tsdf + beta L_ptsdf + gamma L_votes + delta MMD.
   double alpha = 1.0;
   double beta = 1.0;

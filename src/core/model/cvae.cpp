@@ -21,6 +21,13 @@ torch::Tensor conv3d(torch::nn::Conv3d conv, const torch::Tensor& x, int stride,
   return conv->forward(x);
 }
 
+// Groups of 4 channels (one group when the count is not a multiple of 4): statistics per
+// sample, so no sample depends on the rest of its batch.
+torch::nn::GroupNorm groupNorm(int channels) {
+  return torch::nn::GroupNorm(
+      torch::nn::GroupNormOptions(channels % 4 == 0 ? channels / 4 : 1, channels));
+}
+
 torch::nn::Conv3d makeConv(int in, int out, int kernel, int stride, bool bias) {
   return torch::nn::Conv3d(
       torch::nn::Conv3dOptions(in, out, kernel).stride(stride).padding(kernel / 2).bias(bias));
@@ -28,20 +35,29 @@ torch::nn::Conv3d makeConv(int in, int out, int kernel, int stride, bool bias) {
 
 }  // namespace
 
-ConvBlockImpl::ConvBlockImpl(int in, int out, int stride) : stride_(stride) {
+ConvBlockImpl::ConvBlockImpl(int in, int out, int stride, bool group_norm) : stride_(stride) {
   conv = register_module("conv", makeConv(in, out, 3, stride, false));
-  bn = register_module("bn", torch::nn::BatchNorm3d(out));
+  if (group_norm) {
+    gn = register_module("gn", groupNorm(out));
+  } else {
+    bn = register_module("bn", torch::nn::BatchNorm3d(out));
+  }
   act = register_module("act", torch::nn::PReLU());
 }
 
 torch::Tensor ConvBlockImpl::forward(const torch::Tensor& x) {
-  return act(bn(conv3d(conv, x.contiguous(), stride_, 1)));
+  const torch::Tensor y = conv3d(conv, x.contiguous(), stride_, 1);
+  return act(bn ? bn(y) : gn(y));
 }
 
-ResSEBlockImpl::ResSEBlockImpl(int in, int out, int stride) {
-  a = register_module("a", ConvBlock(in, out, stride));
+ResSEBlockImpl::ResSEBlockImpl(int in, int out, int stride, bool group_norm) {
+  a = register_module("a", ConvBlock(in, out, stride, group_norm));
   b = register_module("b", makeConv(out, out, 3, 1, false));
-  bn = register_module("bn", torch::nn::BatchNorm3d(out));
+  if (group_norm) {
+    gn = register_module("gn", groupNorm(out));
+  } else {
+    bn = register_module("bn", torch::nn::BatchNorm3d(out));
+  }
   const int squeeze = std::max(4, out / 4);
   se1 = register_module("se1", torch::nn::Linear(out, squeeze));
   se2 = register_module("se2", torch::nn::Linear(squeeze, out));
@@ -50,7 +66,8 @@ ResSEBlockImpl::ResSEBlockImpl(int in, int out, int stride) {
 }
 
 torch::Tensor ResSEBlockImpl::forward(const torch::Tensor& x) {
-  torch::Tensor y = bn(conv3d(b, a(x).contiguous(), 1, 1));
+  torch::Tensor y = conv3d(b, a(x).contiguous(), 1, 1);
+  y = bn ? bn(y) : gn(y);
   // Squeeze: global average; excite: per-channel gates.
   const torch::Tensor gates = torch::sigmoid(se2(torch::relu(se1(y.mean({2, 3, 4})))));
   y = y * gates.unsqueeze(2).unsqueeze(3).unsqueeze(4);
@@ -73,6 +90,7 @@ torch::Tensor UpsampleImpl::forward(const torch::Tensor& x) {
 
 CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
   config_.validate();
+  const bool gn = config.norm == "group";
   for (int i = 0; i < 5; ++i)
     widths_.push_back(std::min(config.base_channels << i, config.max_channels));
   bottom_ = config.resolution / 16;
@@ -81,7 +99,7 @@ CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
   // Conditioning autoencoder: 5 convolutions, 2 linear layers each way (Appendix C).
   for (int i = 0; i < 5; ++i) {
     cond_enc_.push_back(register_module("cond_enc" + std::to_string(i),
-                                        ConvBlock(i == 0 ? 2 : w[i - 1], w[i], i == 0 ? 1 : 2)));
+                                        ConvBlock(i == 0 ? 2 : w[i - 1], w[i], i == 0 ? 1 : 2, gn)));
   }
   cond_fc1 = register_module("cond_fc1", torch::nn::Linear(flat, config.hidden_size));
   cond_fc2 =
@@ -92,7 +110,7 @@ CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
   for (int i = 4; i >= 1; --i) {
     cond_up_.push_back(register_module("cond_up" + std::to_string(i), Upsample(w[i], w[i - 1])));
     cond_dec_.push_back(
-        register_module("cond_dec" + std::to_string(i), ConvBlock(w[i - 1], w[i - 1], 1)));
+        register_module("cond_dec" + std::to_string(i), ConvBlock(w[i - 1], w[i - 1], 1, gn)));
   }
   cond_head = register_module("cond_head", makeConv(w[0], 1, 1, 1, true));
   // Decoder, shared by the C-VAE and the FC baseline.
@@ -102,24 +120,24 @@ CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
     if (i < 4)
       dec_up_.push_back(register_module("dec_up" + std::to_string(i), Upsample(w[i + 1], w[i])));
     dec_joint_.push_back(
-        register_module("dec_joint" + std::to_string(i), ResSEBlock(2 * w[i], w[i], 1)));
+        register_module("dec_joint" + std::to_string(i), ResSEBlock(2 * w[i], w[i], 1, gn)));
   }
-  head_tsdf = register_module("head_tsdf", ConvBlock(w[0], w[0], 1));
-  head_votes = register_module("head_votes", ConvBlock(w[0], w[0], 1));
+  head_tsdf = register_module("head_tsdf", ConvBlock(w[0], w[0], 1, gn));
+  head_votes = register_module("head_votes", ConvBlock(w[0], w[0], 1, gn));
   out_tsdf = register_module("out_tsdf", makeConv(w[0], 1, 1, 1, true));
   out_votes = register_module("out_votes", makeConv(w[0], 3, 1, 1, true));
   if (config.architecture == "cvae") {
     // Task-specific first layers, then 5 joint residual-SE layers to the latent code.
-    enc_tsdf1 = register_module("enc_tsdf1", ConvBlock(1, w[0], 1));
-    enc_tsdf2 = register_module("enc_tsdf2", ConvBlock(w[0], w[0], 1));
-    enc_votes1 = register_module("enc_votes1", ConvBlock(3, w[0], 1));
-    enc_votes2 = register_module("enc_votes2", ConvBlock(w[0], w[0], 1));
-    enc_joint_.push_back(register_module("enc_joint0", ResSEBlock(3 * w[0], w[1], 2)));
+    enc_tsdf1 = register_module("enc_tsdf1", ConvBlock(1, w[0], 1, gn));
+    enc_tsdf2 = register_module("enc_tsdf2", ConvBlock(w[0], w[0], 1, gn));
+    enc_votes1 = register_module("enc_votes1", ConvBlock(3, w[0], 1, gn));
+    enc_votes2 = register_module("enc_votes2", ConvBlock(w[0], w[0], 1, gn));
+    enc_joint_.push_back(register_module("enc_joint0", ResSEBlock(3 * w[0], w[1], 2, gn)));
     for (int i = 1; i < 4; ++i) {
       enc_joint_.push_back(
-          register_module("enc_joint" + std::to_string(i), ResSEBlock(2 * w[i], w[i + 1], 2)));
+          register_module("enc_joint" + std::to_string(i), ResSEBlock(2 * w[i], w[i + 1], 2, gn)));
     }
-    enc_joint_.push_back(register_module("enc_joint4", ResSEBlock(2 * w[4], w[4], 1)));
+    enc_joint_.push_back(register_module("enc_joint4", ResSEBlock(2 * w[4], w[4], 1, gn)));
     enc_mu = register_module("enc_mu", torch::nn::Linear(flat, config.latent_size));
     enc_logvar = register_module("enc_logvar", torch::nn::Linear(flat, config.latent_size));
   }
