@@ -4,6 +4,7 @@
 /// generated piles, to test the stability of estimated scenes and to simulate suction pulls.
 /// Not thread-safe; use one world per thread.
 
+#include <functional>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -45,8 +46,9 @@ class PhysicsWorld {
   /// Advances `steps` fixed time steps.
   void step(int steps = 1);
   /// Steps until every object has been at rest for `rest_steps` steps; returns the number of
-  /// steps taken, or -1 when `max_steps` passed first.
-  int settle(int max_steps);
+  /// steps taken, or -1 when `max_steps` passed first. `after_step(i)`, when given, is called
+  /// after step i (1-based) unless that step ended the settling.
+  int settle(int max_steps, const std::function<void(int)>& after_step = {});
   bool atRest() const;
   Transform pose(int index) const;
   void setPose(int index, const Transform& T_table_object);

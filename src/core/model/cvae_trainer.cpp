@@ -119,22 +119,19 @@ TrainingReport CvaeTrainer::run(bool resume) {
                  state_file = out / "state.yaml";
   const bool resuming = resume && fs::exists(checkpoint) && fs::exists(state_file);
   Cvae model = resuming ? loadCvae(checkpoint.string(), &mc) : Cvae(mc);
-  if (resuming) {
-    // The network must be the checkpoint's; the losses are this config's (training a model
-    // further may change them), and the saved files must say so.
-    CvaeConfig stored = model->config();
-    stored.copyLossSettings(mc);
-    if (stored.toYaml() != mc.toYaml()) {
-      throw std::runtime_error("checkpoint " + checkpoint.string() +
-                               " has another network than the config:\n" + stored.toYaml() +
-                               "\nagainst\n" + mc.toYaml());
-    }
-    if (model->config().toYaml() != mc.toYaml())
-      std::cerr << "the checkpoint's loss settings are replaced by the config's\n";
-    model->setConfig(mc);
-  }
   torch::optim::Adam optimizer(model->parameters(), torch::optim::AdamOptions(tc.learning_rate));
   if (resuming) {
+    // The network is the checkpoint's; the losses are this config's (training a model further
+    // may change them), and the saved files say so.
+    const bool same = model->config().toYaml() == mc.toYaml();
+    try {
+      model->setConfig(mc);
+    } catch (const std::invalid_argument&) {
+      throw std::runtime_error("checkpoint " + checkpoint.string() +
+                               " has another network than the config:\n" +
+                               model->config().toYaml() + "\nagainst\n" + mc.toYaml());
+    }
+    if (!same) std::cerr << "the checkpoint's loss settings are replaced by the config's\n";
     if (fs::exists(optim_file)) torch::load(optimizer, optim_file.string());
     start = YAML::LoadFile(state_file.string())["step"].as<int64_t>();
     torch::manual_seed(mix(tc.seed, static_cast<uint64_t>(start)));

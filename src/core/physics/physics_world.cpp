@@ -120,12 +120,13 @@ bool PhysicsWorld::atRest() const {
   return true;
 }
 
-int PhysicsWorld::settle(int max_steps) {
+int PhysicsWorld::settle(int max_steps, const std::function<void(int)>& after_step) {
   int quiet = 0;
   for (int i = 1; i <= max_steps; ++i) {
     step(1);
     quiet = atRest() ? quiet + 1 : 0;
     if (quiet >= impl_->config.rest_steps) return i;
+    if (after_step) after_step(i);
   }
   return -1;
 }

@@ -258,19 +258,17 @@ Pile PileGenerator::generate(uint64_t seed) const {
         while (!settled && s < config_.max_settle_steps) {
           for (int k = 0; k < trial->objectCount(); ++k) start[k] = trial->pose(k);
           double shift = 0.0, turn = 0.0;
-          for (int i = 1, quiet = 0; i <= kRun && !settled; ++i) {
-            trial->step(1);
-            ++s;
-            quiet = trial->atRest() ? quiet + 1 : 0;
-            settled = quiet >= config_.physics.rest_steps;
-            if (i % kSample) continue;
+          const int run = trial->settle(kRun, [&](int i) {
+            if (i % kSample) return;
             for (int k = 0; k < trial->objectCount(); ++k) {
               const Transform T = trial->pose(k);
               shift = std::max(shift, (T.translation() - start[k].translation()).norm());
               turn = std::max(
                   turn, Eigen::AngleAxisd(T.linear() * start[k].linear().transpose()).angle());
             }
-          }
+          });
+          s += run < 0 ? kRun : run;
+          settled = run >= 0;
           if (settled) break;
           if ((trial->pose(index).translation().head<2>() - centre).norm() >
               0.5 * config_.grid_extent_m) {
