@@ -143,6 +143,34 @@ TEST(PileGenerator, RejectsScatteredObjects) {
   EXPECT_TRUE(PileGenerator(config).accept(scene, world, &why)) << why;
 }
 
+TEST(PileGenerator, FitsTestsTheGridWithOrWithoutItsTop) {
+  // A drop under way is checked without the grid's top (its object may still be falling from
+  // above it), but a pile pushed out sideways fails either way.
+  const PileGenerator gen{PileConfig()};
+  Superquadric sq;
+  sq.scale_m = Vec3::Constant(0.05);
+  sq.exponents = Vec3::Constant(2);
+  Scene scene;
+  for (int i = 0; i < 2; ++i) {
+    SceneObject o;
+    o.shape = ObjectShape::fromSuperquadric(sq);
+    o.T_table_object.translation() = Vec3(0.0, 0.0, 0.05 + 0.10 * i);
+    scene.objects.push_back(o);
+  }
+  std::string why;
+  EXPECT_TRUE(gen.fits(scene, &why)) << why;
+  scene.objects[1].T_table_object.translation().z() = 0.70;  // above the 0.60 m top
+  EXPECT_FALSE(gen.fits(scene, &why));
+  EXPECT_NE(why.find("taller"), std::string::npos) << why;
+  EXPECT_TRUE(gen.fits(scene, &why, false)) << why;
+  scene.objects[0].T_table_object.translation() = Vec3(-0.2, 0.0, 0.05);  // spread sideways
+  scene.objects[1].T_table_object.translation() = Vec3(0.4, 0.0, 0.05);
+  for (bool top : {true, false}) {
+    EXPECT_FALSE(gen.fits(scene, &why, top));
+    EXPECT_NE(why.find("wider"), std::string::npos) << why;
+  }
+}
+
 TEST(PileGenerator, RespectsObjectRangeAndBadConfig) {
   PileConfig config;
   config.min_objects = 5;

@@ -97,8 +97,10 @@ class PileGenerator {
   /// the last simulated world (whose poses are the scene's) to `last_world`, when given.
   bool verifyRest(Scene* scene, long* object_steps = nullptr,
                   std::unique_ptr<PhysicsWorld>* last_world = nullptr) const;
-  /// Whether every object is on the table and the pile fits the scene grid.
-  bool fits(const Scene& scene, std::string* why) const;
+  /// Whether every object is on the table and the pile fits the scene grid. With
+  /// `check_height` false the grid's top is not tested (an object still falling may be above
+  /// it).
+  bool fits(const Scene& scene, std::string* why, bool check_height = true) const;
   /// A random superquadric shape of this config's ranges.
   Superquadric randomSuperquadric(std::mt19937_64& rng) const;
 

@@ -66,8 +66,10 @@ float SceneDistanceField::signedDistance(const Vec3& p_table, uint8_t* label) co
   for (size_t k = 0; k < impl_->objects.size(); ++k) {
     const ObjectField& f = impl_->objects[k];
     const Vec3 p = f.T_object_table * p_table;
+    // Farther than tau outside the bounding sphere: neither inside nor within truncation (the
+    // costly inside test is left for the voxels near the object).
+    if (p.norm() - f.object->shape->boundingRadius() > tau) continue;
     const bool inside = f.object->shape->containsObject(p);
-    if (!inside && p.norm() - f.object->shape->boundingRadius() > tau) continue;
     size_t index = 0;
     double dist_sq = 0.0;
     f.tree->knnSearch(p.data(), 1, &index, &dist_sq);
