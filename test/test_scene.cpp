@@ -162,10 +162,12 @@ TEST(PileGenerator, FitsTestsTheGridWithOrWithoutItsTop) {
   scene.objects[1].T_table_object.translation().z() = 0.70;  // above the 0.60 m top
   EXPECT_FALSE(gen.fits(scene, &why));
   EXPECT_NE(why.find("taller"), std::string::npos) << why;
+  why.clear();
   EXPECT_TRUE(gen.fits(scene, &why, false)) << why;
   scene.objects[0].T_table_object.translation() = Vec3(-0.2, 0.0, 0.05);  // spread sideways
   scene.objects[1].T_table_object.translation() = Vec3(0.4, 0.0, 0.05);
   for (bool top : {true, false}) {
+    why.clear();
     EXPECT_FALSE(gen.fits(scene, &why, top));
     EXPECT_NE(why.find("wider"), std::string::npos) << why;
   }
