@@ -161,6 +161,41 @@ TEST(Cvae, GroupNormKeepsEachSampleIndependentOfItsBatch) {
   EXPECT_THROW(bad.validate(), std::invalid_argument);
 }
 
+TEST(Cvae, ConditionDropoutDropsWholeSamplesInTrainingOnly) {
+  // With condition_dropout, a training step decodes some samples without the condition's two
+  // finest maps (they differ from the same step without dropout) and the rest unchanged
+  // (GroupNorm keeps samples independent); in eval mode nothing is dropped.
+  CvaeConfig c = tiny();
+  c.norm = "group";
+  torch::manual_seed(5);
+  Cvae model(c);
+  const auto x = torch::rand({8, 2, 16, 16, 16});
+  const auto t = torch::rand({8, 1, 16, 16, 16});
+  const auto v = torch::rand({8, 3, 16, 16, 16});
+  CvaeConfig dropping = c;
+  dropping.condition_dropout = 0.5;
+  for (const bool training : {true, false}) {
+    model->train(training);
+    torch::NoGradGuard no_grad;
+    model->setConfig(c);
+    torch::manual_seed(9);
+    const torch::Tensor plain = model->forward(x, t, v).tsdf;
+    model->setConfig(dropping);
+    torch::manual_seed(9);  // the same codes: they are drawn before the dropout mask
+    const torch::Tensor dropped = model->forward(x, t, v).tsdf;
+    int same = 0;
+    for (int b = 0; b < 8; ++b) same += torch::allclose(plain[b], dropped[b], 1e-5, 1e-6);
+    if (training) {
+      EXPECT_GT(same, 0) << "every sample lost its condition maps (p = 0.5, 8 samples)";
+      EXPECT_LT(same, 8) << "no sample lost its condition maps (p = 0.5, 8 samples)";
+    } else {
+      EXPECT_EQ(same, 8);
+    }
+  }
+  dropping.condition_dropout = 1.0;
+  EXPECT_THROW(dropping.validate(), std::invalid_argument);
+}
+
 TEST(Cvae, OneSharedConditionEqualsOnePerCode) {
   torch::manual_seed(4);
   Cvae model(tiny());
@@ -437,6 +472,7 @@ TEST(CvaeConfig, RoundTripsThroughYaml) {
   CvaeConfig c = tiny();
   c.mmd_kernel_widths = {0.2, 1.0, 5.0};
   c.vote_loss = "all";
+  c.condition_dropout = 0.25;
   EXPECT_EQ(CvaeConfig::fromYaml(c.toYaml()).toYaml(), c.toYaml());
   // Fields absent keep their defaults (model files older than a field).
   EXPECT_EQ(CvaeConfig::fromYaml("resolution: 16").mmd_kernel_widths, std::vector<double>{1.0});

@@ -49,6 +49,11 @@ struct CvaeConfig {
   /// "all" the ~30,000 free voxels pull every vote to zero with unit-size gradients, and our
   /// models learned zero votes everywhere (loss = number of occupied voxels).
   std::string vote_loss = "occupied";
+  /// Training only: the probability that a sample's decoder loses the condition's two finest
+  /// feature maps (32^3 and 16^3 at R = 32) for that step, so that it must take the shape from
+  /// coarser features and the latent code. 0 (the default) never drops them; inference never
+  /// does.
+  double condition_dropout = 0.0;
 
   /// Throws std::invalid_argument naming the bad field.
   void validate() const;

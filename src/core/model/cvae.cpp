@@ -173,9 +173,15 @@ torch::Tensor CvaeImpl::decodeCondition(const torch::Tensor& deepest) {
 CvaeOutput CvaeImpl::decode(const torch::Tensor& bottleneck,
                             const std::vector<torch::Tensor>& cond) {
   torch::Tensor x = bottleneck;
+  torch::Tensor keep;  // per sample: 1 keeps the two finest condition maps, 0 drops them
+  if (is_training() && config_.condition_dropout > 0.0) {
+    keep = (torch::rand({x.size(0), 1, 1, 1, 1}, x.options()) >= config_.condition_dropout)
+               .to(x.dtype());
+  }
   for (int level = 4, k = 0; level >= 0; --level, ++k) {
     if (level < 4) x = dec_up_[k - 1](x);
-    x = dec_joint_[k](torch::cat({x, cond[level]}, 1));
+    const torch::Tensor c = keep.defined() && level <= 1 ? cond[level] * keep : cond[level];
+    x = dec_joint_[k](torch::cat({x, c}, 1));
   }
   CvaeOutput out;
   out.tsdf = torch::tanh(conv3d(out_tsdf, head_tsdf(x).contiguous(), 1, 0));

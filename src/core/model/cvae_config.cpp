@@ -46,6 +46,7 @@ void cvaeFields(C& c, F&& f) {
   f("mmd_kernel_widths", c.mmd_kernel_widths);
   f("tsdf_epsilon", c.tsdf_epsilon);
   f("vote_loss", c.vote_loss);
+  f("condition_dropout", c.condition_dropout);
 }
 
 template <class C, class F>
@@ -87,6 +88,8 @@ void CvaeConfig::validate() const {
   require(!mmd_kernel_widths.empty(), "mmd_kernel_widths needs at least one width");
   for (double w : mmd_kernel_widths) require(w > 0.0, "mmd_kernel_widths must be > 0");
   require(tsdf_epsilon > 0.0, "tsdf_epsilon must be > 0");
+  require(condition_dropout >= 0.0 && condition_dropout < 1.0,
+          "condition_dropout must lie in [0, 1)");
   require(vote_loss == "occupied" || vote_loss == "all",
           "vote_loss must be 'occupied' or 'all', got '" + vote_loss + "'");
 }
@@ -100,6 +103,7 @@ void CvaeConfig::copyLossSettings(const CvaeConfig& o) {
   mmd_kernel_widths = o.mmd_kernel_widths;
   tsdf_epsilon = o.tsdf_epsilon;
   vote_loss = o.vote_loss;
+  condition_dropout = o.condition_dropout;
 }
 
 std::string CvaeConfig::toYaml() const {
