@@ -103,7 +103,8 @@ TEST(PileGenerator, TallPilesSkipObjectsThatCannotFitAndKeepTheBooks) {
     // Drop i simulates i + 1 objects: the accepted pile's object-steps lie between its steps
     // and n times its steps.
     EXPECT_GE(pile.object_steps.placed, pile.settle_steps) << "seed " << seed;
-    EXPECT_LE(pile.object_steps.placed, static_cast<long>(n) * pile.settle_steps) << "seed " << seed;
+    EXPECT_LE(pile.object_steps.placed, static_cast<long>(n) * pile.settle_steps)
+        << "seed " << seed;
     EXPECT_EQ(pile.object_steps.rest_checks % config.rest_check_steps, 0) << "seed " << seed;
     EXPECT_GT(pile.object_steps.rest_checks, 0) << "seed " << seed;
     skipped += pile.skipped_objects;

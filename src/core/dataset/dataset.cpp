@@ -13,7 +13,8 @@ namespace simstack {
 const char* const kObjectColumns =
     "kind(0=superquadric,1=mesh),catalogue_index,a1,a2,a3,r,s,t,x,y,z,qw,qx,qy,qz";
 // 1: every generator up to commit 0287ce8 (it was not bumped when the piles changed);
-// 2: from commit 75d1177: drops also settle by the displacement rule (2939dd1, 1b94af2).
+// 2: from commit 75d1177: drops also settle by the displacement rule (2939dd1, 1b94af2);
+// 3: from commit 072e807: a drop is abandoned once the pile sticks out of the grid's sides.
 const char* const kGeneratorVersion = "simstack-generate-3";
 namespace {
 

@@ -98,8 +98,9 @@ CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
   const int flat = w[4] * bottom_ * bottom_ * bottom_;
   // Conditioning autoencoder: 5 convolutions, 2 linear layers each way (Appendix C).
   for (int i = 0; i < 5; ++i) {
-    cond_enc_.push_back(register_module("cond_enc" + std::to_string(i),
-                                        ConvBlock(i == 0 ? 2 : w[i - 1], w[i], i == 0 ? 1 : 2, gn)));
+    cond_enc_.push_back(
+        register_module("cond_enc" + std::to_string(i),
+                        ConvBlock(i == 0 ? 2 : w[i - 1], w[i], i == 0 ? 1 : 2, gn)));
   }
   cond_fc1 = register_module("cond_fc1", torch::nn::Linear(flat, config.hidden_size));
   cond_fc2 =

@@ -83,7 +83,8 @@ void CvaeConfig::validate() const {
   require(latent_size >= 1 && condition_size >= 1 && hidden_size >= 1,
           "latent, condition and hidden sizes must be >= 1");
   require(alpha >= 0 && beta >= 0 && gamma >= 0 && delta >= 0, "loss weights must be >= 0");
-  require(norm == "batch" || norm == "group", "norm must be 'batch' or 'group', got '" + norm + "'");
+  require(norm == "batch" || norm == "group",
+          "norm must be 'batch' or 'group', got '" + norm + "'");
   require(mmd_prior_samples >= 2, "mmd_prior_samples must be >= 2");
   require(!mmd_kernel_widths.empty(), "mmd_kernel_widths needs at least one width");
   for (double w : mmd_kernel_widths) require(w > 0.0, "mmd_kernel_widths must be > 0");
