@@ -210,6 +210,60 @@ TEST(Cvae, OneSharedConditionEqualsOnePerCode) {
   EXPECT_THROW(model->generate(torch::rand({2, 2, 16, 16, 16}), z), std::invalid_argument);
 }
 
+TEST(Cvae, EveryScaleCodeWarmStartsFromABottleneckModel) {
+  // latent_injection "every_scale" adds one projection of z per decoder scale and nothing else:
+  // a warm start from a bottleneck model copies every other tensor, and with the projections
+  // zeroed the two networks agree; with them the code changes the finest output.
+  torch::manual_seed(6);
+  Cvae source(tiny());
+  source->eval();
+  const std::string path = tempPath("simstack_warm_source.pt");
+  saveCvae(path, source);
+  CvaeConfig c = tiny();
+  c.latent_injection = "every_scale";
+  torch::manual_seed(7);
+  Cvae model(c);
+  model->eval();
+  std::vector<std::string> fresh = warmStartCvae(model, path);
+  std::sort(fresh.begin(), fresh.end());
+  std::vector<std::string> expected;
+  for (int i = 0; i <= 4; ++i) {
+    expected.push_back("dec_code" + std::to_string(i) + ".bias");
+    expected.push_back("dec_code" + std::to_string(i) + ".weight");
+  }
+  EXPECT_EQ(fresh, expected);
+  torch::NoGradGuard no_grad;
+  const auto partial = torch::rand({1, 2, 16, 16, 16});
+  const auto z = torch::randn({3, 8});
+  const torch::Tensor before = model->generate(partial, z).tsdf;
+  EXPECT_FALSE(torch::allclose(before, source->generate(partial, z).tsdf, 1e-5, 1e-6));
+  for (auto& p : model->named_parameters())
+    if (p.key().rfind("dec_code", 0) == 0) p.value().zero_();
+  EXPECT_TRUE(torch::allclose(model->generate(partial, z).tsdf, source->generate(partial, z).tsdf,
+                              1e-5, 1e-6));
+  // The FC baseline has no code, so the setting adds nothing to it.
+  CvaeConfig fc = tiny("fc");
+  fc.latent_injection = "every_scale";
+  EXPECT_EQ(Cvae(fc)->parameters().size(), Cvae(tiny("fc"))->parameters().size());
+  // A tensor of the same name with another shape is an error that names the file and tensor.
+  CvaeConfig wider = c;
+  wider.base_channels = 8;
+  wider.max_channels = 32;
+  Cvae other(wider);
+  try {
+    warmStartCvae(other, path);
+    ADD_FAILURE() << "a warm start into another shape did not throw";
+  } catch (const std::runtime_error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find(path), std::string::npos) << m;
+    EXPECT_NE(m.find("shape"), std::string::npos) << m;
+  }
+  EXPECT_THROW(warmStartCvae(other, "/nonexistent/model.pt"), std::runtime_error);
+  c.latent_injection = "everywhere";
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+  fs::remove(path);
+}
+
 TEST(Cvae, SaveLoadGivesIdenticalOutputs) {
   torch::manual_seed(1);
   Cvae model(tiny());
@@ -426,6 +480,8 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   EXPECT_TRUE(std::isfinite(ra.posterior_mu_rms) && ra.posterior_sigma > 0.0);
   EXPECT_GE(ra.validation_disagreement, 0.0);
   EXPECT_LE(ra.validation_disagreement, 1.0);
+  EXPECT_GE(ra.validation_posterior_iou, 0.0);
+  EXPECT_LE(ra.validation_posterior_iou, 1.0);
   // The log: header, a row every 10 steps or validation (steps 2 and 4), all columns on
   // validation rows.
   const std::vector<std::string> log = lines(a + "/train_log.csv");
@@ -448,12 +504,42 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   ASSERT_EQ(resumed.size(), 3u);
   EXPECT_EQ(resumed[2].rfind("4,", 0), 0u);
   EXPECT_TRUE(torch::equal(probe(b + "/model.pt"), probe(c + "/model.pt")));
+  // A warm start takes the file's weights (the every-scale network adds its code projections),
+  // stays nearer to them than a fresh start, and says where it started in model.yaml.
+  {
+    const std::string w = tempPath("simstack_train_warm"), f = tempPath("simstack_train_fresh");
+    const RemoveAtExit cleanup_warm{{w, f}};
+    CvaeConfig every = tiny();
+    every.latent_injection = "every_scale";
+    TrainConfig warm = tc;
+    warm.steps = 1;
+    warm.learning_rate = warm.final_learning_rate = 1e-9;
+    CvaeTrainer(data, every, warm, f, "test").run(false);
+    warm.init_from = a + "/model.pt";
+    CvaeTrainer(data, every, warm, w, "test").run(false);
+    const torch::Tensor from = probe(a + "/model.pt");
+    EXPECT_LT((probe(w + "/model.pt") - from).abs().max().item<double>(),
+              (probe(f + "/model.pt") - from).abs().max().item<double>());
+    bool recorded = false;
+    for (const auto& line : lines(w + "/model.yaml"))
+      recorded |= line.find("init_from: " + warm.init_from) != std::string::npos;
+    EXPECT_TRUE(recorded) << "model.yaml does not name the warm start's file";
+    warm.init_from = "/nonexistent/start.pt";
+    fs::remove_all(w);
+    try {
+      CvaeTrainer(data, every, warm, w, "test").run(false);
+      ADD_FAILURE() << "a warm start from a missing file did not throw";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("/nonexistent/start.pt"), std::string::npos) << e.what();
+    }
+  }
   // FC: no posterior to report.
   TrainConfig fc = tc;
   fc.steps = 2;
   fs::remove_all(c);
   const TrainingReport rf = CvaeTrainer(data, tiny("fc"), fc, c, "test").run(false);
   EXPECT_TRUE(std::isnan(rf.posterior_mu_rms));
+  EXPECT_TRUE(std::isnan(rf.validation_posterior_iou));
   // Trained further with other loss settings, the saved model says which; another network in
   // the config is an error.
   CvaeConfig widths = tiny();
@@ -473,7 +559,11 @@ TEST(CvaeConfig, RoundTripsThroughYaml) {
   c.mmd_kernel_widths = {0.2, 1.0, 5.0};
   c.vote_loss = "all";
   c.condition_dropout = 0.25;
+  c.latent_injection = "every_scale";
   EXPECT_EQ(CvaeConfig::fromYaml(c.toYaml()).toYaml(), c.toYaml());
+  TrainConfig t;
+  t.init_from = "models/some model.pt";
+  EXPECT_EQ(TrainConfig::fromYaml(t.toYaml()).init_from, t.init_from);
   // Fields absent keep their defaults (model files older than a field).
   EXPECT_EQ(CvaeConfig::fromYaml("resolution: 16").mmd_kernel_widths, std::vector<double>{1.0});
   EXPECT_THROW(CvaeConfig::fromYaml("mmd_kernel_widths: []"), std::invalid_argument);

@@ -15,6 +15,7 @@ int main(int argc, char** argv) {
   int threads = 0;
   std::string architecture;
   int64_t steps = 0;
+  std::string init_from;
   CLI::App app{
       "Train the depth-conditioned VAE of SIMstack (or its FC ablation) on a generated dataset. "
       "Views and "
@@ -36,6 +37,10 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"cvae", "fc"}));
   app.add_option("--steps", steps, "optimiser steps (overrides training.steps)")
       ->check(CLI::PositiveNumber);
+  app.add_option("--init-from", init_from,
+                 "warm start from this model file: its tensors of the same name and shape "
+                 "(overrides training.init_from; not read with --resume from a checkpoint)")
+      ->check(CLI::ExistingFile);
   CLI11_PARSE(app, argc, argv);
 
   keepFreedMemoryForReuse();
@@ -46,6 +51,7 @@ int main(int argc, char** argv) {
     if (threads > 0) training.threads = threads;
     if (!architecture.empty()) model.architecture = architecture;
     if (steps > 0) training.steps = steps;
+    if (!init_from.empty()) training.init_from = init_from;
     std::string command;
     for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
     CvaeTrainer trainer(dataset, model, training, output, command);
@@ -56,6 +62,8 @@ int main(int argc, char** argv) {
               << ", mmd " << r.mmd << "\n  validation: IoU " << r.validation_iou << ", BCE "
               << r.validation_bce << ", hypotheses disagree on " << 100.0 * r.validation_disagreement
               << " % of their voxels";
+    if (std::isfinite(r.validation_posterior_iou))
+      std::cout << ", IoU from the posterior code " << r.validation_posterior_iou;
     if (std::isfinite(r.posterior_mu_rms)) {
       std::cout << "\n  posterior on the last training batches: mu RMS " << r.posterior_mu_rms
                 << ", mean sigma " << r.posterior_sigma;

@@ -90,7 +90,10 @@ class CvaeImpl : public torch::nn::Module {
  private:
   std::vector<torch::Tensor> encodeCondition(const torch::Tensor& partial);
   torch::Tensor decodeCondition(const torch::Tensor& features);
-  CvaeOutput decode(const torch::Tensor& bottleneck, const std::vector<torch::Tensor>& cond);
+  /// `z` is undefined for the FC baseline; with latent_injection "every_scale" it is added, as
+  /// projected per-channel offsets, before each joint block.
+  CvaeOutput decode(const torch::Tensor& bottleneck, const std::vector<torch::Tensor>& cond,
+                    const torch::Tensor& z = {});
 
   CvaeConfig config_;
   std::vector<int> widths_;  // per stage: R, R/2, R/4, R/8, R/16
@@ -108,6 +111,7 @@ class CvaeImpl : public torch::nn::Module {
   // Decoder.
   torch::nn::Linear dec_fc1{nullptr}, dec_fc2{nullptr};
   std::vector<ResSEBlock> dec_joint_;
+  std::vector<torch::nn::Linear> dec_code_;  // latent_injection "every_scale": z -> offsets
   std::vector<Upsample> dec_up_;
   ConvBlock head_tsdf{nullptr}, head_votes{nullptr};
   torch::nn::Conv3d out_tsdf{nullptr}, out_votes{nullptr};
@@ -142,5 +146,11 @@ void saveCvae(const std::string& path, Cvae& model, const std::string& metadata 
 /// and the problem (missing, not a simstack model, config invalid or not matching `expect`).
 Cvae loadCvae(const std::string& path, const CvaeConfig* expect = nullptr,
               std::string* metadata = nullptr);
+
+/// Warm start: copies into `model` every parameter and buffer of the model file `path` that has
+/// the same name and shape, and returns the names of `model`'s tensors left as they were (new
+/// in this network). Throws std::runtime_error naming the file and the tensor when a tensor of
+/// the same name has another shape, or when the file shares no tensor with `model`.
+std::vector<std::string> warmStartCvae(Cvae& model, const std::string& path);
 
 }  // namespace simstack

@@ -54,6 +54,12 @@ struct CvaeConfig {
   /// coarser features and the latent code. 0 (the default) never drops them; inference never
   /// does.
   double condition_dropout = 0.0;
+  /// Where the C-VAE's decoder reads the latent code: "bottleneck" (the paper: z becomes the
+  /// deepest feature map, and the condition's maps join at every scale) or "every_scale" (z is
+  /// also projected to a per-channel offset added before each of the decoder's joint blocks,
+  /// down to the finest grid, as the probabilistic U-Net feeds its code to the last layers).
+  /// A network setting, stored with the model; the FC baseline has no code and ignores it.
+  std::string latent_injection = "bottleneck";
 
   /// Throws std::invalid_argument naming the bad field.
   void validate() const;
@@ -81,6 +87,9 @@ struct TrainConfig {
   int image_width = 320;       ///< rendered training views (intrinsics scale with it)
   int image_height = 240;
   bool sensor_noise = true;  ///< Kinect-like noise in training views
+  /// Warm start: a model file whose parameters of the same name and shape start this run (the
+  /// others keep their random initialisation); empty: all random. Not read when resuming.
+  std::string init_from;
 
   void validate() const;
   std::string toYaml() const;

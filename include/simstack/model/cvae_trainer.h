@@ -22,6 +22,10 @@ struct TrainingReport {
   /// hypotheses that are not occupied in all three: near 0 means the samples are copies of one
   /// scene.
   double validation_disagreement = 0;
+  /// Validation IoU of one hypothesis decoded from the encoder's posterior mean, the encoder
+  /// seeing the ground truth: above validation_iou only if the code carries the hidden parts
+  /// (it is what training optimises; prior codes are what inference has). NaN for FC.
+  double validation_posterior_iou = std::numeric_limits<double>::quiet_NaN();
   /// The encoder's posterior N(mu, sigma^2) on the last 50 training batches: RMS of mu and mean
   /// sigma. mu ~ 0 with sigma ~ 1 for every scene: the code says nothing about it; an
   /// informative code has means spread like the prior and small sigmas. NaN when this run

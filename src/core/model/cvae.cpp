@@ -3,6 +3,7 @@
 #include <ATen/ops/mkldnn_convolution.h>
 
 #include <filesystem>
+#include <map>
 #include <stdexcept>
 
 namespace simstack {
@@ -139,6 +140,18 @@ CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
           register_module("enc_joint" + std::to_string(i), ResSEBlock(2 * w[i], w[i + 1], 2, gn)));
     }
     enc_joint_.push_back(register_module("enc_joint4", ResSEBlock(2 * w[4], w[4], 1, gn)));
+    if (config.latent_injection == "every_scale") {
+      for (int i = 4; i >= 0; --i) {
+        auto proj = register_module("dec_code" + std::to_string(i),
+                                    torch::nn::Linear(config.latent_size, w[i]));
+        // Small offsets at first, so that a network warm-started from a bottleneck model
+        // begins close to it; the gradients still reach the encoder through them.
+        torch::NoGradGuard no_grad;
+        proj->weight.mul_(0.1);
+        proj->bias.zero_();
+        dec_code_.push_back(proj);
+      }
+    }
     enc_mu = register_module("enc_mu", torch::nn::Linear(flat, config.latent_size));
     enc_logvar = register_module("enc_logvar", torch::nn::Linear(flat, config.latent_size));
   }
@@ -171,8 +184,8 @@ torch::Tensor CvaeImpl::decodeCondition(const torch::Tensor& deepest) {
   return torch::tanh(conv3d(cond_head, x.contiguous(), 1, 0));
 }
 
-CvaeOutput CvaeImpl::decode(const torch::Tensor& bottleneck,
-                            const std::vector<torch::Tensor>& cond) {
+CvaeOutput CvaeImpl::decode(const torch::Tensor& bottleneck, const std::vector<torch::Tensor>& cond,
+                            const torch::Tensor& z) {
   torch::Tensor x = bottleneck;
   torch::Tensor keep;  // per sample: 1 keeps the two finest condition maps, 0 drops them
   if (is_training() && config_.condition_dropout > 0.0) {
@@ -181,6 +194,8 @@ CvaeOutput CvaeImpl::decode(const torch::Tensor& bottleneck,
   }
   for (int level = 4, k = 0; level >= 0; --level, ++k) {
     if (level < 4) x = dec_up_[k - 1](x);
+    if (!dec_code_.empty() && z.defined())
+      x = x + dec_code_[k](z).view({z.size(0), -1, 1, 1, 1});
     const torch::Tensor c = keep.defined() && level <= 1 ? cond[level] * keep : cond[level];
     x = dec_joint_[k](torch::cat({x, c}, 1));
   }
@@ -229,7 +244,7 @@ CvaeOutput CvaeImpl::generate(const torch::Tensor& partial, const torch::Tensor&
   }
   const torch::Tensor bottleneck =
       dec_fc2(torch::relu(dec_fc1(z))).view({b, widths_[4], bottom_, bottom_, bottom_});
-  CvaeOutput out = decode(bottleneck, cond);
+  CvaeOutput out = decode(bottleneck, cond, z);
   out.z = z;
   return out;
 }
@@ -342,6 +357,35 @@ Cvae loadCvae(const std::string& path, const CvaeConfig* expect, std::string* me
   }
   if (metadata && archive.try_read("simstack_metadata", meta)) *metadata = meta.toStringRef();
   return model;
+}
+
+std::vector<std::string> warmStartCvae(Cvae& model, const std::string& path) {
+  Cvae source = loadCvae(path);
+  std::map<std::string, torch::Tensor> from;
+  for (const auto& p : source->named_parameters()) from[p.key()] = p.value();
+  for (const auto& b : source->named_buffers()) from[b.key()] = b.value();
+  std::vector<std::string> fresh;
+  size_t copied = 0;
+  torch::NoGradGuard no_grad;
+  auto take = [&](const std::string& name, torch::Tensor& to) {
+    const auto it = from.find(name);
+    if (it == from.end()) {
+      fresh.push_back(name);
+      return;
+    }
+    if (it->second.sizes() != to.sizes()) {
+      throw std::runtime_error("warm start from " + path + ": tensor " + name + " has shape " +
+                               c10::str(it->second.sizes()) + ", this network's " +
+                               c10::str(to.sizes()));
+    }
+    to.copy_(it->second);
+    ++copied;
+  };
+  for (auto& p : model->named_parameters()) take(p.key(), p.value());
+  for (auto& b : model->named_buffers()) take(b.key(), b.value());
+  if (copied == 0)
+    throw std::runtime_error("warm start from " + path + ": the file shares no tensor with this network");
+  return fresh;
 }
 
 }  // namespace simstack

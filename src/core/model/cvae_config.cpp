@@ -38,6 +38,7 @@ void cvaeFields(C& c, F&& f) {
   f("condition_size", c.condition_size);
   f("hidden_size", c.hidden_size);
   f("norm", c.norm);
+  f("latent_injection", c.latent_injection);
   f("alpha", c.alpha);
   f("beta", c.beta);
   f("gamma", c.gamma);
@@ -63,6 +64,7 @@ void trainFields(C& c, F&& f) {
   f("image_width", c.image_width);
   f("image_height", c.image_height);
   f("sensor_noise", c.sensor_noise);
+  f("init_from", c.init_from);
 }
 
 void require(bool ok, const std::string& what) {
@@ -85,6 +87,9 @@ void CvaeConfig::validate() const {
   require(alpha >= 0 && beta >= 0 && gamma >= 0 && delta >= 0, "loss weights must be >= 0");
   require(norm == "batch" || norm == "group",
           "norm must be 'batch' or 'group', got '" + norm + "'");
+  require(latent_injection == "bottleneck" || latent_injection == "every_scale",
+          "latent_injection must be 'bottleneck' or 'every_scale', got '" + latent_injection +
+              "'");
   require(mmd_prior_samples >= 2, "mmd_prior_samples must be >= 2");
   require(!mmd_kernel_widths.empty(), "mmd_kernel_widths needs at least one width");
   for (double w : mmd_kernel_widths) require(w > 0.0, "mmd_kernel_widths must be > 0");

@@ -119,6 +119,13 @@ TrainingReport CvaeTrainer::run(bool resume) {
                  state_file = out / "state.yaml";
   const bool resuming = resume && fs::exists(checkpoint) && fs::exists(state_file);
   Cvae model = resuming ? loadCvae(checkpoint.string(), &mc) : Cvae(mc);
+  if (!resuming && !tc.init_from.empty()) {
+    const std::vector<std::string> fresh = warmStartCvae(model, tc.init_from);
+    std::cerr << "warm start from " << tc.init_from << ": " << fresh.size()
+              << " tensors of this network are new";
+    for (size_t i = 0; i < fresh.size() && i < 12; ++i) std::cerr << (i ? ", " : " (") << fresh[i];
+    std::cerr << (fresh.size() > 12 ? ", ...)\n" : fresh.empty() ? "\n" : ")\n");
+  }
   torch::optim::Adam optimizer(model->parameters(), torch::optim::AdamOptions(tc.learning_rate));
   if (resuming) {
     // The network is the checkpoint's; the losses are this config's (training a model further
@@ -186,7 +193,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
     model->eval();
     torch::NoGradGuard no_grad;
     const int n = impl_->reader->size();
-    double iou = 0, bce = 0;
+    double iou = 0, bce = 0, posterior_iou = 0;
     int64_t disagree = 0, predicted = 0;
     int count = 0;
     for (int k = impl_->train_scenes; k < n; ++k) {
@@ -204,6 +211,16 @@ TrainingReport CvaeTrainer::run(bool resume) {
       const OccupancyScores sc = scoreOccupancy(s.tsdf, preds);
       iou += sc.iou;
       bce += sc.bce;
+      if (mc.architecture == "cvae") {
+        // The code the encoder gives when it sees the ground truth (posterior mean): better
+        // than prior codes only when the code carries what the view does not show.
+        const torch::Tensor mu = model->forward(b.partial, b.tsdf, b.votes).mu;
+        const torch::Tensor t = model->generate(b.partial, mu).tsdf[0].contiguous();
+        posterior_iou +=
+            scoreOccupancy(s.tsdf, {std::vector<float>(t.data_ptr<float>(),
+                                                       t.data_ptr<float>() + t.numel())})
+                .iou;
+      }
       const torch::Tensor votes = (o.tsdf <= 0).sum(0);  // per voxel: hypotheses occupied
       predicted += (votes > 0).sum().item<int64_t>();
       disagree += ((votes > 0) & (votes < samples)).sum().item<int64_t>();
@@ -211,6 +228,9 @@ TrainingReport CvaeTrainer::run(bool resume) {
     }
     report->validation_iou = iou / count;
     report->validation_bce = bce / count;
+    report->validation_posterior_iou = mc.architecture == "cvae"
+                                           ? posterior_iou / count
+                                           : std::numeric_limits<double>::quiet_NaN();
     report->validation_disagreement = predicted > 0 ? static_cast<double>(disagree) / predicted : 0;
     model->train();
   };
@@ -221,7 +241,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
   log.seekp(0, std::ios::end);
   if (log.tellp() == 0)  // a new log (also when a finished model is trained further)
     log << "step,total,tsdf,partial,votes,mmd,samples_per_s,validation_iou,validation_bce,"
-           "validation_disagreement,posterior_mu_rms,posterior_sigma\n";
+           "validation_disagreement,posterior_mu_rms,posterior_sigma,validation_posterior_iou\n";
   auto save_checkpoint = [&](int64_t step) {
     saveCvae(checkpoint.string(), model);
     torch::save(optimizer, optim_file.string());
@@ -294,6 +314,8 @@ TrainingReport CvaeTrainer::run(bool resume) {
         } else {
           log << report.posterior_mu_rms << "," << report.posterior_sigma;
         }
+        log << ",";
+        if (std::isfinite(report.validation_posterior_iou)) log << report.validation_posterior_iou;
       }
       log << "\n";
     }
@@ -353,7 +375,10 @@ TrainingReport CvaeTrainer::run(bool resume) {
   meta << YAML::Key << "validation" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
        << "iou" << YAML::Value << report.validation_iou << YAML::Key << "bce" << YAML::Value
        << report.validation_bce << YAML::Key << "disagreement" << YAML::Value
-       << report.validation_disagreement << YAML::EndMap;
+       << report.validation_disagreement;
+  if (std::isfinite(report.validation_posterior_iou))
+    meta << YAML::Key << "posterior_code_iou" << YAML::Value << report.validation_posterior_iou;
+  meta << YAML::EndMap;
   if (!posterior.empty()) {  // C-VAE steps trained in this run
     meta << YAML::Key << "posterior" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
          << "mu_rms" << YAML::Value << report.posterior_mu_rms << YAML::Key << "sigma"
