@@ -194,8 +194,7 @@ CvaeOutput CvaeImpl::decode(const torch::Tensor& bottleneck, const std::vector<t
   }
   for (int level = 4, k = 0; level >= 0; --level, ++k) {
     if (level < 4) x = dec_up_[k - 1](x);
-    if (!dec_code_.empty() && z.defined())
-      x = x + dec_code_[k](z).view({z.size(0), -1, 1, 1, 1});
+    if (!dec_code_.empty() && z.defined()) x = x + dec_code_[k](z).view({z.size(0), -1, 1, 1, 1});
     const torch::Tensor c = keep.defined() && level <= 1 ? cond[level] * keep : cond[level];
     x = dec_joint_[k](torch::cat({x, c}, 1));
   }
@@ -384,7 +383,8 @@ std::vector<std::string> warmStartCvae(Cvae& model, const std::string& path) {
   for (auto& p : model->named_parameters()) take(p.key(), p.value());
   for (auto& b : model->named_buffers()) take(b.key(), b.value());
   if (copied == 0)
-    throw std::runtime_error("warm start from " + path + ": the file shares no tensor with this network");
+    throw std::runtime_error("warm start from " + path +
+                             ": the file shares no tensor with this network");
   return fresh;
 }
 

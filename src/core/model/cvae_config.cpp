@@ -88,8 +88,7 @@ void CvaeConfig::validate() const {
   require(norm == "batch" || norm == "group",
           "norm must be 'batch' or 'group', got '" + norm + "'");
   require(latent_injection == "bottleneck" || latent_injection == "every_scale",
-          "latent_injection must be 'bottleneck' or 'every_scale', got '" + latent_injection +
-              "'");
+          "latent_injection must be 'bottleneck' or 'every_scale', got '" + latent_injection + "'");
   require(mmd_prior_samples >= 2, "mmd_prior_samples must be >= 2");
   require(!mmd_kernel_widths.empty(), "mmd_kernel_widths needs at least one width");
   for (double w : mmd_kernel_widths) require(w > 0.0, "mmd_kernel_widths must be > 0");

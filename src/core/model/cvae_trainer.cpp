@@ -34,6 +34,11 @@ uint64_t mix(uint64_t a, uint64_t b) {
   return z ^ (z >> 31);
 }
 
+std::vector<float> values(const torch::Tensor& t) {
+  const torch::Tensor c = t.contiguous();
+  return std::vector<float>(c.data_ptr<float>(), c.data_ptr<float>() + c.numel());
+}
+
 struct Batch {
   torch::Tensor partial, tsdf, votes;
 };
@@ -122,9 +127,9 @@ TrainingReport CvaeTrainer::run(bool resume) {
   if (!resuming && !tc.init_from.empty()) {
     const std::vector<std::string> fresh = warmStartCvae(model, tc.init_from);
     std::cerr << "warm start from " << tc.init_from << ": " << fresh.size()
-              << " tensors of this network are new";
-    for (size_t i = 0; i < fresh.size() && i < 12; ++i) std::cerr << (i ? ", " : " (") << fresh[i];
-    std::cerr << (fresh.size() > 12 ? ", ...)\n" : fresh.empty() ? "\n" : ")\n");
+              << " tensors of this network are new:";
+    for (const std::string& name : fresh) std::cerr << " " << name;
+    std::cerr << "\n";
   }
   torch::optim::Adam optimizer(model->parameters(), torch::optim::AdamOptions(tc.learning_rate));
   if (resuming) {
@@ -204,10 +209,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
       const torch::Tensor z = torch::randn({samples, mc.latent_size});
       const CvaeOutput o = model->generate(b.partial.expand({samples, 2, r, r, r}).contiguous(), z);
       std::vector<std::vector<float>> preds;
-      for (int j = 0; j < samples; ++j) {
-        const torch::Tensor t = o.tsdf[j].contiguous();
-        preds.emplace_back(t.data_ptr<float>(), t.data_ptr<float>() + t.numel());
-      }
+      for (int j = 0; j < samples; ++j) preds.push_back(values(o.tsdf[j]));
       const OccupancyScores sc = scoreOccupancy(s.tsdf, preds);
       iou += sc.iou;
       bce += sc.bce;
@@ -215,11 +217,8 @@ TrainingReport CvaeTrainer::run(bool resume) {
         // The code the encoder gives when it sees the ground truth (posterior mean): better
         // than prior codes only when the code carries what the view does not show.
         const torch::Tensor mu = model->forward(b.partial, b.tsdf, b.votes).mu;
-        const torch::Tensor t = model->generate(b.partial, mu).tsdf[0].contiguous();
         posterior_iou +=
-            scoreOccupancy(s.tsdf, {std::vector<float>(t.data_ptr<float>(),
-                                                       t.data_ptr<float>() + t.numel())})
-                .iou;
+            scoreOccupancy(s.tsdf, {values(model->generate(b.partial, mu).tsdf[0])}).iou;
       }
       const torch::Tensor votes = (o.tsdf <= 0).sum(0);  // per voxel: hypotheses occupied
       predicted += (votes > 0).sum().item<int64_t>();
