@@ -90,6 +90,26 @@ TEST(Cvae, LossesMatchHandComputedValues) {
   const auto vt_in = torch::tensor({0.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f}).view({1, 3, 2, 1, 1});
   EXPECT_NEAR(voteLoss(vp, vt_in, false).item<double>(), 3.0 + 1.0, 1e-5);
   EXPECT_NEAR(voteLoss(vp, vt_in, true).item<double>(), 1.0, 1e-5);
+  // Occupancy, sharpness 10: voxel 0 free (target 0.25), logit -5, -log(1 - sigmoid(-5));
+  // voxel 1 occupied (target -0.5), logit 2, -log(sigmoid(2)). A target of exactly 0 is
+  // occupied (eq. 8).
+  const double free0 = std::log1p(std::exp(-5.0)), occ1 = std::log1p(std::exp(-2.0));
+  EXPECT_NEAR(occupancyLoss(pred, target, 10.0).item<double>(), free0 + occ1, 1e-5);
+  const auto on_surface = torch::zeros({1, 1, 1, 1, 1});
+  EXPECT_NEAR(occupancyLoss(on_surface + 0.1f, on_surface, 10.0).item<double>(),
+              std::log1p(std::exp(1.0)), 1e-5);
+  // In the total only with a weight: the same output, weight 0 and weight 2.
+  CvaeConfig c;
+  c.architecture = "fc";
+  CvaeOutput o;
+  o.tsdf = pred;
+  o.partial_recon = pred;
+  o.votes = vp;
+  const CvaeLosses without = computeLosses(o, torch::cat({target, target}, 1), target, vt, c);
+  c.occupancy_weight = 2.0;
+  const CvaeLosses with = computeLosses(o, torch::cat({target, target}, 1), target, vt, c);
+  EXPECT_NEAR(without.occupancy.item<double>(), free0 + occ1, 1e-5);
+  EXPECT_NEAR((with.total - without.total).item<double>(), 2.0 * (free0 + occ1), 1e-4);
 }
 
 TEST(Cvae, MmdSeparatesPriorFromShiftedCodes) {
@@ -560,7 +580,10 @@ TEST(CvaeConfig, RoundTripsThroughYaml) {
   c.vote_loss = "all";
   c.condition_dropout = 0.25;
   c.latent_injection = "every_scale";
+  c.occupancy_weight = 0.5;
+  c.occupancy_sharpness = 4.0;
   EXPECT_EQ(CvaeConfig::fromYaml(c.toYaml()).toYaml(), c.toYaml());
+  EXPECT_EQ(CvaeConfig::fromYaml(c.toYaml()).occupancy_sharpness, 4.0);
   TrainConfig t;
   t.init_from = "models/some model.pt";
   EXPECT_EQ(TrainConfig::fromYaml(t.toYaml()).init_from, t.init_from);
@@ -568,4 +591,6 @@ TEST(CvaeConfig, RoundTripsThroughYaml) {
   EXPECT_EQ(CvaeConfig::fromYaml("resolution: 16").mmd_kernel_widths, std::vector<double>{1.0});
   EXPECT_THROW(CvaeConfig::fromYaml("mmd_kernel_widths: []"), std::invalid_argument);
   EXPECT_THROW(CvaeConfig::fromYaml("mmd_kernel_widths: 2"), std::invalid_argument);
+  EXPECT_THROW(CvaeConfig::fromYaml("occupancy_weight: -1"), std::invalid_argument);
+  EXPECT_THROW(CvaeConfig::fromYaml("occupancy_sharpness: 0"), std::invalid_argument);
 }

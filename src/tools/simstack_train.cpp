@@ -59,9 +59,9 @@ int main(int argc, char** argv) {
     std::cout << "trained " << model.architecture << " for " << r.steps << " steps ("
               << r.samples_per_second << " samples/s)\n  final losses: total " << r.total
               << ", tsdf " << r.tsdf << ", partial " << r.partial << ", votes " << r.votes
-              << ", mmd " << r.mmd << "\n  validation: IoU " << r.validation_iou << ", BCE "
-              << r.validation_bce << ", hypotheses disagree on " << 100.0 * r.validation_disagreement
-              << " % of their voxels";
+              << ", mmd " << r.mmd << ", occupancy " << r.occupancy << "\n  validation: IoU "
+              << r.validation_iou << ", BCE " << r.validation_bce << ", hypotheses disagree on "
+              << 100.0 * r.validation_disagreement << " % of their voxels";
     if (std::isfinite(r.validation_posterior_iou))
       std::cout << ", IoU from the posterior code " << r.validation_posterior_iou;
     if (std::isfinite(r.posterior_mu_rms)) {

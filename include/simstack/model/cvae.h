@@ -121,6 +121,10 @@ TORCH_MODULE(Cvae);
 /// Eq. 1: sum over voxels of |v - v_hat| / (|v| + eps), averaged over the batch.
 torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Tensor& target,
                                       double eps);
+/// Not in the paper: binary cross-entropy between sigmoid(-sharpness * pred) and the occupancy
+/// target <= 0, summed over voxels and averaged over the batch (pred and target in units of tau).
+torch::Tensor occupancyLoss(const torch::Tensor& pred, const torch::Tensor& target,
+                            double sharpness);
 /// Eq. 2: sum over voxels of the Euclidean norm of the vote error, averaged over the batch;
 /// with `occupied_only`, only over voxels whose target vote is non-zero (inside an object).
 torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target,
@@ -133,9 +137,10 @@ torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior,
                       const std::vector<double>& widths = {1.0});
 
 struct CvaeLosses {
-  torch::Tensor total, tsdf, partial, votes, mmd;
+  torch::Tensor total, tsdf, partial, votes, mmd, occupancy;
 };
-/// The weighted sum of the paper's section 3.1.3 (MMD is 0 for the FC baseline).
+/// The weighted sum of the paper's section 3.1.3 (MMD is 0 for the FC baseline), plus the
+/// occupancy term when its weight is not 0 (its value is reported either way).
 CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
                          const torch::Tensor& tsdf, const torch::Tensor& votes,
                          const CvaeConfig& config);

@@ -25,7 +25,8 @@ struct CvaeConfig {
   /// (GroupNorm, 4 channels per group). In training mode BatchNorm makes each sample's code
   /// depend on the rest of its batch, which the MMD estimate assumes it does not (README).
   std::string norm = "batch";
-  // Loss weights of L = alpha L_tsdf + beta L_ptsdf + gamma L_votes + delta MMD.
+  // Loss weights of L = alpha L_tsdf + beta L_ptsdf + gamma L_votes + delta MMD
+  // (+ occupancy_weight L_occ, below).
   double alpha = 1.0;
   double beta = 1.0;
   double gamma = 1.0;
@@ -44,6 +45,14 @@ struct CvaeConfig {
   /// epsilon of eq. 1 in units of tau. The paper's 1e-9 gives voxels that happen to lie on the
   /// surface weights up to 1e9; 0.01 caps them at 100x.
   double tsdf_epsilon = 0.01;
+  /// Weight of an occupancy term that is not in the paper: the binary cross-entropy between
+  /// sigmoid(-occupancy_sharpness * tsdf / tau) and the ground-truth occupancy (tsdf <= 0, eq. 8's
+  /// definition), summed over voxels like eq. 1. Eq. 1 weights a voxel by its distance to the
+  /// surface, not by which side of it the prediction lies, and the evaluation's IoU and BCE
+  /// score only the side. 0 (the default) is the paper's loss.
+  double occupancy_weight = 0.0;
+  /// Slope of that sigmoid: a prediction of +-1/occupancy_sharpness tau is 73 % sure.
+  double occupancy_sharpness = 10.0;
   /// Voxels where eq. 2 is summed: "occupied" (ground-truth occupied voxels, whose votes the
   /// Hough step reads) or "all" (the paper: every voxel, target zero outside objects). With
   /// "all" the ~30,000 free voxels pull every vote to zero with unit-size gradients, and our

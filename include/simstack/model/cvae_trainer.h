@@ -16,7 +16,8 @@ namespace simstack {
 
 struct TrainingReport {
   int64_t steps = 0;
-  double total = 0, tsdf = 0, partial = 0, votes = 0, mmd = 0;  ///< mean of the last 50 steps
+  /// Mean of the last 50 steps; occupancy is reported also when its weight is 0.
+  double total = 0, tsdf = 0, partial = 0, votes = 0, mmd = 0, occupancy = 0;
   double validation_iou = 0, validation_bce = 0;
   /// Over all validation scenes, the share of the voxels occupied in some of a scene's three
   /// hypotheses that are not occupied in all three: near 0 means the samples are copies of one

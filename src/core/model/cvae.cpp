@@ -253,6 +253,17 @@ torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Te
   return ((pred - target).abs() / (target.abs() + eps)).flatten(1).sum(1).mean();
 }
 
+torch::Tensor occupancyLoss(const torch::Tensor& pred, const torch::Tensor& target,
+                            double sharpness) {
+  const torch::Tensor occupied = (target <= 0).to(pred.dtype());
+  return F::binary_cross_entropy_with_logits(
+             -sharpness * pred, occupied,
+             F::BinaryCrossEntropyWithLogitsFuncOptions().reduction(torch::kNone))
+      .flatten(1)
+      .sum(1)
+      .mean();
+}
+
 torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target, bool occupied_only) {
   // sqrt(. + 1e-12): the norm's gradient is undefined where prediction and target agree.
   torch::Tensor per_voxel = ((pred - target).pow(2).sum(1) + 1e-12).sqrt();
@@ -291,7 +302,9 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
               ? mmdLoss(out.z, torch::randn({c.mmd_prior_samples, out.z.size(1)}, out.z.options()),
                         c.mmd_kernel_widths)
               : torch::zeros({}, tsdf.options());
+  l.occupancy = occupancyLoss(out.tsdf, tsdf, c.occupancy_sharpness);
   l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + c.delta * l.mmd;
+  if (c.occupancy_weight > 0.0) l.total = l.total + c.occupancy_weight * l.occupancy;
   return l;
 }
 

@@ -46,6 +46,8 @@ void cvaeFields(C& c, F&& f) {
   f("mmd_prior_samples", c.mmd_prior_samples);
   f("mmd_kernel_widths", c.mmd_kernel_widths);
   f("tsdf_epsilon", c.tsdf_epsilon);
+  f("occupancy_weight", c.occupancy_weight);
+  f("occupancy_sharpness", c.occupancy_sharpness);
   f("vote_loss", c.vote_loss);
   f("condition_dropout", c.condition_dropout);
 }
@@ -93,6 +95,8 @@ void CvaeConfig::validate() const {
   require(!mmd_kernel_widths.empty(), "mmd_kernel_widths needs at least one width");
   for (double w : mmd_kernel_widths) require(w > 0.0, "mmd_kernel_widths must be > 0");
   require(tsdf_epsilon > 0.0, "tsdf_epsilon must be > 0");
+  require(occupancy_weight >= 0.0, "occupancy_weight must be >= 0");
+  require(occupancy_sharpness > 0.0, "occupancy_sharpness must be > 0");
   require(condition_dropout >= 0.0 && condition_dropout < 1.0,
           "condition_dropout must lie in [0, 1)");
   require(vote_loss == "occupied" || vote_loss == "all",
@@ -107,6 +111,8 @@ void CvaeConfig::copyLossSettings(const CvaeConfig& o) {
   mmd_prior_samples = o.mmd_prior_samples;
   mmd_kernel_widths = o.mmd_kernel_widths;
   tsdf_epsilon = o.tsdf_epsilon;
+  occupancy_weight = o.occupancy_weight;
+  occupancy_sharpness = o.occupancy_sharpness;
   vote_loss = o.vote_loss;
   condition_dropout = o.condition_dropout;
 }

@@ -126,8 +126,11 @@ TrainingReport CvaeTrainer::run(bool resume) {
   Cvae model = resuming ? loadCvae(checkpoint.string(), &mc) : Cvae(mc);
   if (!resuming && !tc.init_from.empty()) {
     const std::vector<std::string> fresh = warmStartCvae(model, tc.init_from);
-    std::cerr << "warm start from " << tc.init_from << ": " << fresh.size()
-              << " tensors of this network are new:";
+    std::cerr << "warm start from " << tc.init_from << ": ";
+    if (fresh.empty())
+      std::cerr << "every tensor of this network taken from it";
+    else
+      std::cerr << fresh.size() << " tensors of this network are new:";
     for (const std::string& name : fresh) std::cerr << " " << name;
     std::cerr << "\n";
   }
@@ -239,8 +242,9 @@ TrainingReport CvaeTrainer::run(bool resume) {
   if (!log) throw std::runtime_error("cannot write " + (out / "train_log.csv").string());
   log.seekp(0, std::ios::end);
   if (log.tellp() == 0)  // a new log (also when a finished model is trained further)
-    log << "step,total,tsdf,partial,votes,mmd,samples_per_s,validation_iou,validation_bce,"
-           "validation_disagreement,posterior_mu_rms,posterior_sigma,validation_posterior_iou\n";
+    log << "step,total,tsdf,partial,votes,mmd,occupancy,samples_per_s,validation_iou,"
+           "validation_bce,validation_disagreement,posterior_mu_rms,posterior_sigma,"
+           "validation_posterior_iou\n";
   auto save_checkpoint = [&](int64_t step) {
     saveCvae(checkpoint.string(), model);
     torch::save(optimizer, optim_file.string());
@@ -249,7 +253,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
   };
 
   TrainingReport report;
-  std::deque<std::array<double, 5>> recent;
+  std::deque<std::array<double, 6>> recent;
   // The encoder's posterior on the training batches (train mode; in eval mode BatchNorm's
   // running statistics give other codes): mean square of mu and mean sigma, last 50 steps.
   std::deque<std::array<double, 2>> posterior;
@@ -281,7 +285,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
     optimizer.step();
     ++trained;
     recent.push_back({l.total.item<double>(), l.tsdf.item<double>(), l.partial.item<double>(),
-                      l.votes.item<double>(), l.mmd.item<double>()});
+                      l.votes.item<double>(), l.mmd.item<double>(), l.occupancy.item<double>()});
     if (recent.size() > 50) recent.pop_front();
     if (o.mu.defined()) {
       torch::NoGradGuard no_grad;
@@ -303,8 +307,9 @@ TrainingReport CvaeTrainer::run(bool resume) {
     if (validating) validate(&report);
     if ((step + 1) % 10 == 0 || validating) {
       const auto& a = recent.back();
-      log << step + 1 << "," << a[0] << "," << a[1] << "," << a[2] << "," << a[3] << "," << a[4]
-          << "," << report.samples_per_second;
+      log << step + 1;
+      for (double v : a) log << "," << v;
+      log << "," << report.samples_per_second;
       if (validating) {
         log << "," << report.validation_iou << "," << report.validation_bce << ","
             << report.validation_disagreement << ",";
@@ -339,23 +344,24 @@ TrainingReport CvaeTrainer::run(bool resume) {
     while (std::getline(previous, line)) {
       if (!line.empty() && std::isdigit(static_cast<unsigned char>(line[0]))) last = line;
     }
-    std::array<double, 5> row{};
+    std::array<double, 6> row{};
     double rate = 0.0;
-    if (std::sscanf(last.c_str(), "%*[^,],%lf,%lf,%lf,%lf,%lf,%lf", &row[0], &row[1], &row[2],
-                    &row[3], &row[4], &rate) == 6) {
+    if (std::sscanf(last.c_str(), "%*[^,],%lf,%lf,%lf,%lf,%lf,%lf,%lf", &row[0], &row[1], &row[2],
+                    &row[3], &row[4], &row[5], &rate) == 7) {
       recent.push_back(row);
       report.samples_per_second = rate;
     }
   }
   if (!recent.empty()) {
-    std::array<double, 5> mean{};
+    std::array<double, 6> mean{};
     for (const auto& a : recent)
-      for (int i = 0; i < 5; ++i) mean[i] += a[i] / recent.size();
+      for (int i = 0; i < 6; ++i) mean[i] += a[i] / recent.size();
     report.total = mean[0];
     report.tsdf = mean[1];
     report.partial = mean[2];
     report.votes = mean[3];
     report.mmd = mean[4];
+    report.occupancy = mean[5];
   }
   // The model file and its provenance.
   YAML::Emitter meta;
@@ -370,7 +376,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
        << "total" << YAML::Value << report.total << YAML::Key << "tsdf" << YAML::Value
        << report.tsdf << YAML::Key << "partial" << YAML::Value << report.partial << YAML::Key
        << "votes" << YAML::Value << report.votes << YAML::Key << "mmd" << YAML::Value << report.mmd
-       << YAML::EndMap;
+       << YAML::Key << "occupancy" << YAML::Value << report.occupancy << YAML::EndMap;
   meta << YAML::Key << "validation" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
        << "iou" << YAML::Value << report.validation_iou << YAML::Key << "bce" << YAML::Value
        << report.validation_bce << YAML::Key << "disagreement" << YAML::Value
