@@ -302,9 +302,13 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
               ? mmdLoss(out.z, torch::randn({c.mmd_prior_samples, out.z.size(1)}, out.z.options()),
                         c.mmd_kernel_widths)
               : torch::zeros({}, tsdf.options());
-  l.occupancy = occupancyLoss(out.tsdf, tsdf, c.occupancy_sharpness);
-  l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + c.delta * l.mmd;
-  if (c.occupancy_weight > 0.0) l.total = l.total + c.occupancy_weight * l.occupancy;
+  {
+    // Reported also at weight 0, then without a graph: it is not trained.
+    torch::AutoGradMode grad(torch::GradMode::is_enabled() && c.occupancy_weight > 0.0);
+    l.occupancy = occupancyLoss(out.tsdf, tsdf, c.occupancy_sharpness);
+  }
+  l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + c.delta * l.mmd +
+            c.occupancy_weight * l.occupancy;
   return l;
 }
 

@@ -355,7 +355,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
   if (!recent.empty()) {
     std::array<double, 6> mean{};
     for (const auto& a : recent)
-      for (int i = 0; i < 6; ++i) mean[i] += a[i] / recent.size();
+      for (size_t i = 0; i < mean.size(); ++i) mean[i] += a[i] / recent.size();
     report.total = mean[0];
     report.tsdf = mean[1];
     report.partial = mean[2];
