@@ -6,9 +6,11 @@
 #include <fstream>
 
 #include "simstack/eval/scene_metrics.h"
+#include "simstack/eval/segmentation.h"
 #include "simstack/io/scene_io.h"
 #include "simstack/pipeline/classical_baseline.h"
 #include "simstack/render/depth_renderer.h"
+#include "simstack/scene/pile_generator.h"
 #include "simstack/scene/scene.h"
 
 namespace simstack {
@@ -72,9 +74,31 @@ TEST(Stability, ARestingPileIsStableAndAFloatingTowerFalls) {
   EXPECT_GT(f.max_rotation_rad, 0.5);
 }
 
+TEST(Stability, GeneratedPilesPassTheTestOverTheSecondTheGeneratorVerified) {
+  // The test simulates with the physics that settled the piles (rolling friction included): a
+  // generated pile, verified at rest for one second, must pass one second of the test, and a
+  // scene of superquadrics must score the same as its shapes.
+  const PileGenerator generator{PileConfig()};
+  StabilityConfig one_second;
+  one_second.steps = 240;
+  EXPECT_EQ(one_second.rolling_friction, PileConfig::generationPhysics().rolling_friction);
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    const Scene scene = generator.generate(seed).scene;
+    const StabilityResult r = simulateStability(scene, one_second);
+    EXPECT_TRUE(r.stable) << r.max_displacement_m << " m, " << r.max_rotation_rad << " rad";
+    EXPECT_LT(r.max_displacement_m, 0.02);
+    std::vector<Superquadric> shapes;
+    for (const SceneObject& o : scene.objects) shapes.push_back(o.superquadricTable());
+    EXPECT_DOUBLE_EQ(simulateStability(shapes, one_second).mean_displacement_m,
+                     r.mean_displacement_m);
+  }
+}
+
 TEST(ClassicalBaseline, SeparatedBoxesGiveOneShapeEach) {
-  const std::vector<Superquadric> truth = {box(Vec3(0.05, 0.05, 0.05), Vec3(-0.12, 0, 0.05)),
-                                           box(Vec3(0.04, 0.06, 0.03), Vec3(0.12, 0.02, 0.03), 0.5)};
+  const std::vector<Superquadric> truth = {
+      box(Vec3(0.05, 0.05, 0.05), Vec3(-0.12, 0, 0.05)),
+      box(Vec3(0.04, 0.06, 0.03), Vec3(0.12, 0.02, 0.03), 0.5)};
   const Scene scene = Scene::fromSuperquadrics(truth);
   PinholeCamera camera;
   const Transform T = lookAt(Vec3(0.5, -0.4, 0.6), Vec3(0, 0, 0.03));
@@ -86,12 +110,33 @@ TEST(ClassicalBaseline, SeparatedBoxesGiveOneShapeEach) {
   ASSERT_EQ(shapes.size(), 2u);
   for (const Superquadric& t : truth) {
     double best = 1e9;
-    for (const Superquadric& s : shapes) best = std::min(best, (s.centroid() - t.centroid()).norm());
+    for (const Superquadric& s : shapes)
+      best = std::min(best, (s.centroid() - t.centroid()).norm());
     EXPECT_LT(best, 0.03);  // visible points only: the hidden half is a guess
   }
   // Nothing above the table: no clusters, no shapes.
   const RenderResult empty = DepthRenderer(Scene{}).render(camera, T);
   EXPECT_TRUE(classicalBaseline(empty.depth, camera, T, config).empty());
+}
+
+TEST(Segmentation, OneToOneMatchingByLargestOverlap) {
+  // Objects 0 (6 elements) and 1 (4); instance 7 covers object 0 and half of object 1, instance
+  // 8 the other half: 7 goes to object 0 (overlap 6), 8 to object 1 (2 of its 4 elements).
+  const std::vector<int> truth = {0, 0, 0, 0, 0, 0, 1, 1, 1, 1, -1, -1};
+  const std::vector<int> found = {7, 7, 7, 7, 7, 7, 7, 7, 8, 8, 8, -1};
+  const SegmentationAgreement s = segmentationAgreement(truth, found);
+  EXPECT_NEAR(s.agreement, 8.0 / 10.0, 1e-12);
+  EXPECT_EQ(s.objects, 2);
+  EXPECT_EQ(s.instances, 2);
+  // One instance for everything: only the larger object is matched.
+  EXPECT_NEAR(segmentationAgreement(truth, std::vector<int>(12, 3)).agreement, 0.6, 1e-12);
+  // Relabelling the instances changes nothing; unassigned elements never agree.
+  std::vector<int> renamed = found;
+  for (int& f : renamed) f = f < 0 ? f : 20 - f;
+  EXPECT_NEAR(segmentationAgreement(truth, renamed).agreement, 0.8, 1e-12);
+  EXPECT_NEAR(segmentationAgreement(truth, std::vector<int>(12, -1)).agreement, 0.0, 1e-12);
+  EXPECT_NEAR(segmentationAgreement(truth, truth).agreement, 1.0, 1e-12);
+  EXPECT_THROW(segmentationAgreement(truth, std::vector<int>(3, 0)), std::invalid_argument);
 }
 
 TEST(SceneFiles, SuperquadricsMeshesAndGridsRoundTrip) {

@@ -89,7 +89,9 @@ TEST(HoughVoting, SeparatesCentresCloserThanTheMeanShiftCell) {
   Grid3<float> tsdf;
   Grid3<Vec3f> votes;
   ballFields(g, balls, &tsdf, &votes);
-  const InstanceSegmentation seg = houghInstances(tsdf, votes);
+  HoughConfig config;
+  config.bandwidth_m = 0.07;
+  const InstanceSegmentation seg = houghInstances(tsdf, votes, config);
   ASSERT_EQ(seg.size(), 2);
   for (const Ball& b : balls) {
     double best = 1e9;

@@ -11,7 +11,6 @@
 #include <iomanip>
 #include <iostream>
 #include <map>
-#include <set>
 #include <nlohmann/json.hpp>
 
 #include <pcl/io/pcd_io.h>
@@ -20,6 +19,7 @@
 #include "simstack/dataset/dataset.h"
 #include "simstack/eval/occupancy.h"
 #include "simstack/eval/scene_metrics.h"
+#include "simstack/eval/segmentation.h"
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/model/training_sample.h"
@@ -36,7 +36,7 @@ namespace {
 
 const std::vector<double> kBinEdges = {0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 1.01};
 const std::vector<std::string> kMetrics = {
-    "chamfer_visible_m", "chamfer_full_m", "chamfer_full_sq_m", "iou", "bce",
+    "chamfer_visible_m", "chamfer_full_m", "chamfer_full_sq_m", "iou",        "bce",
     "displacement_m",    "stable",         "count_error",       "count_exact"};
 
 struct Method {
@@ -71,7 +71,8 @@ json summarise(const std::vector<std::map<std::string, double>>& rows) {
     for (const auto& r : rows)
       if (r.at("visible_ratio") >= kBinEdges[b] && r.at("visible_ratio") < kBinEdges[b + 1])
         in.push_back(r);
-    json bin = {{"visible_from", kBinEdges[b]}, {"visible_to", std::min(kBinEdges[b + 1], 1.0)},
+    json bin = {{"visible_from", kBinEdges[b]},
+                {"visible_to", std::min(kBinEdges[b + 1], 1.0)},
                 {"views", in.size()}};
     for (const auto& m : kMetrics) {
       std::vector<double> v;
@@ -96,7 +97,8 @@ json evaluateReal(const std::string& dir, PerceptionConfig pc) {
   if (files.empty()) throw std::runtime_error("no .pcd files in " + dir);
   const ScenePerception perception(pc);
   json out = json::array();
-  std::cout << "\n| scene | objects (labels) | objects found | segmentation agreement |\n|---|---|---|---|\n";
+  std::cout << "\n| scene | objects (labels) | objects found | segmentation agreement "
+               "|\n|---|---|---|---|\n";
   for (const auto& f : files) {
     pcl::PointCloud<pcl::PointXYZL> cloud;
     if (pcl::io::loadPCDFile(f.string(), cloud) != 0 || !cloud.isOrganized())
@@ -118,26 +120,7 @@ json evaluateReal(const std::string& dir, PerceptionConfig pc) {
       }
     const SceneEstimate est = perception.perceive(view);
     const Image<int> found = pixelInstances(view, est);
-    // One-to-one greedy matching of labelled objects and instances by shared pixels.
-    std::map<std::pair<int, int>, int> overlap;
-    long labelled = 0;
-    for (size_t i = 0; i < truth.pixels.size(); ++i) {
-      if (truth.pixels[i] < 0) continue;
-      ++labelled;
-      if (found.pixels[i] >= 0) ++overlap[{truth.pixels[i], found.pixels[i]}];
-    }
-    std::vector<std::pair<int, std::pair<int, int>>> pairs;
-    for (const auto& [k, n] : overlap) pairs.push_back({n, k});
-    std::sort(pairs.rbegin(), pairs.rend());
-    std::set<int> used_t, used_f;
-    long matched = 0;
-    for (const auto& [n, k] : pairs) {
-      if (used_t.count(k.first) || used_f.count(k.second)) continue;
-      used_t.insert(k.first);
-      used_f.insert(k.second);
-      matched += n;
-    }
-    const double agreement = labelled ? static_cast<double>(matched) / labelled : 0.0;
+    const double agreement = segmentationAgreement(truth.pixels, found.pixels).agreement;
     out.push_back({{"scene", f.filename().string()},
                    {"objects", object_pixels.size()},
                    {"found", est.instances().size()},
@@ -152,7 +135,8 @@ json evaluateReal(const std::string& dir, PerceptionConfig pc) {
 }
 
 std::string defaultModel() {
-  const std::filesystem::path p = std::filesystem::path(SIMSTACK_SOURCE_DIR) / "models/simstack_r32.pt";
+  const std::filesystem::path p =
+      std::filesystem::path(SIMSTACK_SOURCE_DIR) / "models/simstack_r32.pt";
   return p.string();
 }
 
@@ -168,12 +152,17 @@ int main(int argc, char** argv) {
       "Evaluate trained models and the classical baseline on a test dataset (DESIGN.md section "
       "5): every scene from random viewpoints in the paper's ranges, S latent samples per view "
       "(1 for the FC baseline); writes JSON and prints the table."};
-  app.add_option("--model", models, "model file(s), e.g. models/simstack_r32.pt runs/fc/model.pt")
+  app.add_option("--model", models,
+                 "model file(s), e.g. models/simstack_r32.pt runs/fc/model.pt (default: the "
+                 "configs' models, else models/simstack_r32.pt)")
       ->check(CLI::ExistingFile);
-  std::string real_dir, config_path;
-  app.add_option("--config", config_path,
-                 "perception parameters for the network methods (config/perception.yaml; the "
-                 "classical baseline uses its fitting section)")
+  std::string real_dir;
+  std::vector<std::string> config_paths;
+  app.add_option("--config", config_paths,
+                 "perception parameters (config/perception.yaml): once for every model, or once "
+                 "per --model in the same order (each model's own Hough setting, "
+                 "simstack_tune_hough); without --model, the configs' models are evaluated. The "
+                 "classical baseline uses the first config's fitting section")
       ->check(CLI::ExistingFile);
   app.add_option("--dataset", dataset, "test dataset (a seed never used for training)")
       ->check(CLI::ExistingFile);
@@ -182,37 +171,62 @@ int main(int argc, char** argv) {
                  "and segmentation agreement with the first --model, instead of --dataset")
       ->check(CLI::ExistingDirectory);
   app.add_option("--output", output, "results JSON")->required();
-  app.add_option("--views", views, "viewpoints per scene")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--views", views, "viewpoints per scene")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   app.add_option("--samples", samples, "latent samples per viewpoint")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
   app.add_option("--scenes", scenes, "evaluate only the first N scenes (0 = all)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--seed", seed, "viewpoint and code seed")->capture_default_str();
-  app.add_option("--ycb", mesh_dir, "mesh directory for YCB datasets")->check(CLI::ExistingDirectory);
+  app.add_option("--ycb", mesh_dir, "mesh directory for YCB datasets")
+      ->check(CLI::ExistingDirectory);
   app.add_flag("--noise", noise, "Kinect-like sensor noise in the rendered views");
   app.add_flag("--no-classical", no_classical, "skip the classical baseline");
   app.add_flag("--no-stability", no_stability, "skip the physics stability test");
   app.add_option("--chamfer-points", chamfer_points, "surface samples per Chamfer set")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
-  app.add_option("--threads", threads, "threads")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--threads", threads, "threads")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
-  if (models.empty()) models.push_back(defaultModel());
   if (dataset.empty() == real_dir.empty()) {
     std::cerr << "simstack_evaluate: give either --dataset or --real\n";
     return 2;
   }
+  if (!models.empty() && config_paths.size() > 1 && config_paths.size() != models.size()) {
+    std::cerr << "simstack_evaluate: " << config_paths.size() << " --config for " << models.size()
+              << " --model: give one config for all models or one per model\n";
+    return 2;
+  }
   try {
-    PerceptionConfig base;
-    if (!config_path.empty()) base = loadPerceptionYaml(config_path, SIMSTACK_SOURCE_DIR);
-    base.threads = threads;
+    // One perception config per method, in the order of the models.
+    std::vector<PerceptionConfig> configs;
+    for (const auto& path : config_paths)
+      configs.push_back(loadPerceptionYaml(path, SIMSTACK_SOURCE_DIR));
+    if (configs.empty()) configs.emplace_back();
+    if (models.empty()) {
+      if (config_paths.empty()) {
+        models.push_back(defaultModel());
+      } else {
+        for (const auto& c : configs) models.push_back(c.model_path);
+      }
+    }
+    if (configs.size() == 1) configs.resize(models.size(), configs.front());
+    for (size_t i = 0; i < models.size(); ++i) {
+      configs[i].model_path = models[i];
+      configs[i].threads = threads;
+    }
+    const PerceptionConfig& base = configs.front();
     if (!real_dir.empty()) {
-      PerceptionConfig pc = base;
-      pc.model_path = models.front();
-      const json real = {{"real_dir", real_dir}, {"model", models.front()},
-                         {"config", perceptionYaml(pc)}, {"scenes", evaluateReal(real_dir, pc)}};
+      const PerceptionConfig& pc = base;
+      const json real = {{"real_dir", real_dir},
+                         {"model", models.front()},
+                         {"config", perceptionYaml(pc)},
+                         {"scenes", evaluateReal(real_dir, pc)}};
       std::ofstream f(output);
       if (!f) throw std::runtime_error("cannot write " + output);
       f << real.dump(1) << "\n";
@@ -222,11 +236,10 @@ int main(int argc, char** argv) {
     const DatasetReader reader(dataset, mesh_dir);
     const int n = scenes > 0 ? std::min(scenes, reader.size()) : reader.size();
     std::vector<Method> methods;
-    for (const auto& path : models) {
-      PerceptionConfig pc = base;
-      pc.model_path = path;
+    for (const PerceptionConfig& config : configs) {
+      PerceptionConfig pc = config;
       pc.zero_code_first = false;  // random codes, as the paper evaluates
-      pc.samples = samples;  // an FC model runs with 1
+      pc.samples = samples;        // an FC model runs with 1
       Method m;
       m.perception = std::make_unique<ScenePerception>(pc);
       m.name = m.perception->modelConfig().architecture;
@@ -239,8 +252,16 @@ int main(int argc, char** argv) {
     const PinholeCamera camera = scaledKinect(640, 480);
     const double truncation = reader.info().truncation_m;
     ProgressBar bar("evaluating " + std::to_string(methods.size()) + " methods", n);
+    // The true piles under the same stability test: the reference for the methods' rows (the
+    // generator verified them at rest for one second; the test runs 42 s).
+    std::vector<double> truth_stable, truth_displacement;
     for (int k = 0; k < n; ++k) {
       const SceneRecord rec = reader.read(k);
+      if (!no_stability) {
+        const StabilityResult st = simulateStability(rec.scene);
+        truth_stable.push_back(st.stable);
+        truth_displacement.push_back(st.mean_displacement_m);
+      }
       const DepthRenderer renderer(rec.scene);
       TriangleMesh gt_mesh;
       for (const SceneObject& o : rec.scene.objects)
@@ -267,8 +288,11 @@ int main(int argc, char** argv) {
         const uint64_t method_seed = rng();
         for (Method& m : methods) {
           std::mt19937_64 rng(method_seed ^ std::hash<std::string>{}(m.name));
-          std::map<std::string, double> row{{"scene", k}, {"view", v}, {"visible_ratio", visible_ratio},
-                                            {"objects", static_cast<double>(rec.scene.objects.size())}};
+          std::map<std::string, double> row{
+              {"scene", k},
+              {"view", v},
+              {"visible_ratio", visible_ratio},
+              {"objects", static_cast<double>(rec.scene.objects.size())}};
           std::vector<Superquadric> shapes;
           std::vector<std::vector<float>> occupancy;
           if (m.perception) {
@@ -295,8 +319,9 @@ int main(int argc, char** argv) {
           } else {
             if (!have_gt) {
               // The grid the networks would use, for the occupancy scores.
-              const Vec2 c = visiblePileCentre(r.depth, camera, T, rec.scene.surfaceCentroid().head<2>(),
-                                               0.5 * reader.info().extent_m);
+              const Vec2 c =
+                  visiblePileCentre(r.depth, camera, T, rec.scene.surfaceCentroid().head<2>(),
+                                    0.5 * reader.info().extent_m);
               grid = GridSpec::sceneGrid(c, reader.info().extent_m, reader.info().resolution);
               gt = computeGroundTruth(rec.scene, grid, truncation);
               have_gt = true;
@@ -307,18 +332,21 @@ int main(int argc, char** argv) {
             shapes = classicalBaseline(r.depth, camera, T, cc, &grid);
             occupancy.push_back(superquadricOccupancy(shapes, grid));
             const TriangleMesh sq_mesh = superquadricsMesh(shapes);
-            row["chamfer_full_m"] = chamferDistance(samplePoints(sq_mesh, chamfer_points, rng), gt_full);
-            row["chamfer_visible_m"] = chamferDistance(
-                samplePoints(subMesh(sq_mesh, visibleTriangles(sq_mesh, camera, T)), chamfer_points, rng),
-                gt_vis_pts);
+            row["chamfer_full_m"] =
+                chamferDistance(samplePoints(sq_mesh, chamfer_points, rng), gt_full);
+            row["chamfer_visible_m"] =
+                chamferDistance(samplePoints(subMesh(sq_mesh, visibleTriangles(sq_mesh, camera, T)),
+                                             chamfer_points, rng),
+                                gt_vis_pts);
           }
           const OccupancyScores sc = scoreOccupancy(gt.tsdf.data, occupancy);
           row["iou"] = sc.iou;
           row["bce"] = sc.bce;
-          row["chamfer_full_sq_m"] =
-              chamferDistance(samplePoints(superquadricsMesh(shapes), chamfer_points, rng), gt_full);
+          row["chamfer_full_sq_m"] = chamferDistance(
+              samplePoints(superquadricsMesh(shapes), chamfer_points, rng), gt_full);
           row["count"] = shapes.size();
-          row["count_error"] = std::abs(static_cast<double>(shapes.size()) - rec.scene.objects.size());
+          row["count_error"] =
+              std::abs(static_cast<double>(shapes.size()) - rec.scene.objects.size());
           row["count_exact"] = shapes.size() == rec.scene.objects.size();
           if (!no_stability && !shapes.empty()) {
             const StabilityResult st = simulateStability(shapes);
@@ -343,10 +371,14 @@ int main(int argc, char** argv) {
     results["noise"] = noise;
     results["chamfer_points"] = chamfer_points;
     results["config"] = perceptionYaml(base);
+    if (!truth_stable.empty())
+      results["ground_truth"] = {{"stable", mean(truth_stable)},
+                                 {"displacement_m", mean(truth_displacement)}};
     for (const Method& m : methods) {
       json j = summarise(m.rows);
       j["model"] = m.perception ? m.perception->config().model_path : "";
       j["samples"] = m.perception ? m.perception->config().samples : 1;
+      if (m.perception) j["config"] = perceptionYaml(m.perception->config());
       j["views"] = json(m.rows);
       results["methods"][m.name] = j;
     }
@@ -354,8 +386,10 @@ int main(int argc, char** argv) {
     if (!f) throw std::runtime_error("cannot write " + output);
     f << results.dump(1) << "\n";
 
-    std::cout << "\n| method | CD visible (mm) | CD full (mm) | CD full, superquadrics (mm) | IoU | BCE "
-                 "| displacement (mm) | stable | objects exact |\n|---|---|---|---|---|---|---|---|---|\n";
+    std::cout
+        << "\n| method | CD visible (mm) | CD full (mm) | CD full, superquadrics (mm) | IoU | BCE "
+           "| displacement (mm) | stable | objects exact "
+           "|\n|---|---|---|---|---|---|---|---|---|\n";
     for (const Method& m : methods) {
       const json s = summarise(m.rows);
       auto val = [&](const char* key, double scale, int digits) {
@@ -369,6 +403,11 @@ int main(int argc, char** argv) {
                 << val("displacement_m", 1000, 1) << " | " << val("stable", 100, 0) << " % | "
                 << val("count_exact", 100, 0) << " % |\n";
     }
+    if (!truth_stable.empty())
+      std::cout << "\nthe true piles under the same stability test: " << std::fixed
+                << std::setprecision(0) << 100 * mean(truth_stable)
+                << " % stable, mean displacement " << std::setprecision(1)
+                << 1000 * mean(truth_displacement) << " mm\n";
     std::cout << "\n" << n << " scenes x " << views << " views; results: " << output << "\n";
     return 0;
   } catch (const std::exception& e) {

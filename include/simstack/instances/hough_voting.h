@@ -20,9 +20,9 @@ namespace simstack {
 
 struct HoughConfig {
   int refinement = 5;         ///< fine cells per voxel along each axis (the paper: 10)
-  int min_traversals = 5;     ///< mu: a fine cell with more traversals is a centre vote (paper: 10)
+  int min_traversals = 4;     ///< mu: a fine cell with more traversals is a centre vote (paper: 10)
   double gamma = 0.1;         ///< weight of the distance (in voxels) in the assignment rule
-  double bandwidth_m = 0.07;  ///< mean-shift radius (flat kernel)
+  double bandwidth_m = 0.05;  ///< mean-shift radius (flat kernel)
   int min_instance_voxels = 15;  ///< smaller instances are dropped (their voxels re-assigned)
   /// Votes shorter than this cast no ray (the network shrinks votes it is unsure of); their
   /// voxels are still assigned, by distance alone.

@@ -18,7 +18,9 @@ struct PointSet {
   size_t kdtree_get_point_count() const { return pts->size(); }
   double kdtree_get_pt(size_t i, size_t d) const { return (*pts)[i][d]; }
   template <class B>
-  bool kdtree_get_bbox(B&) const { return false; }
+  bool kdtree_get_bbox(B&) const {
+    return false;
+  }
 };
 using Tree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointSet>,
                                                  PointSet, 3>;
@@ -85,7 +87,8 @@ Points3 samplePoints(const TriangleMesh& mesh, int count, std::mt19937_64& rng) 
 
 TriangleMesh superquadricsMesh(const std::vector<Superquadric>& shapes, int subdivisions) {
   TriangleMesh all;
-  for (const Superquadric& sq : shapes) all.append(sq.meshObject(subdivisions).transformed(sq.T_table_object));
+  for (const Superquadric& sq : shapes)
+    all.append(sq.meshObject(subdivisions).transformed(sq.T_table_object));
   return all;
 }
 
@@ -104,35 +107,38 @@ std::vector<float> superquadricOccupancy(const std::vector<Superquadric>& shapes
   return out;
 }
 
-StabilityResult simulateStability(const std::vector<Superquadric>& shapes,
-                                  const StabilityConfig& config) {
+StabilityResult simulateStability(const Scene& scene, const StabilityConfig& config) {
   StabilityResult r;
-  if (shapes.empty()) return r;
+  if (scene.objects.empty()) return r;
   PhysicsConfig pc;
   pc.gravity_mps2 = config.gravity_mps2;
   pc.friction = config.friction;
+  pc.rolling_friction = config.rolling_friction;
+  pc.spinning_friction = config.spinning_friction;
   PhysicsWorld world(pc);
-  std::vector<Transform> start;
-  for (const Superquadric& sq : shapes) {
-    const auto shape = ObjectShape::fromSuperquadric(sq);
-    world.addConvexObject(shape->hullPoints(), shape->volume(), sq.T_table_object);
-    start.push_back(sq.T_table_object);
-  }
+  for (const SceneObject& o : scene.objects)
+    world.addConvexObject(o.shape->hullPoints(), o.shape->volume(), o.T_table_object);
   world.step(config.steps);
   double sum = 0;
-  for (size_t i = 0; i < shapes.size(); ++i) {
+  for (size_t i = 0; i < scene.objects.size(); ++i) {
+    const Transform& start = scene.objects[i].T_table_object;
     const Transform end = world.pose(static_cast<int>(i));
-    double d = (end.translation() - start[i].translation()).norm();
-    const double angle = Eigen::AngleAxisd(start[i].linear().transpose() * end.linear()).angle();
+    double d = (end.translation() - start.translation()).norm();
+    const double angle = Eigen::AngleAxisd(start.linear().transpose() * end.linear()).angle();
     if (!std::isfinite(d)) d = std::numeric_limits<double>::infinity();
     sum += d;
     r.max_displacement_m = std::max(r.max_displacement_m, d);
     r.max_rotation_rad = std::max(r.max_rotation_rad, angle);
   }
-  r.mean_displacement_m = sum / shapes.size();
+  r.mean_displacement_m = sum / scene.objects.size();
   r.stable = r.max_displacement_m <= config.max_displacement_m &&
              r.max_rotation_rad <= config.max_rotation_rad;
   return r;
+}
+
+StabilityResult simulateStability(const std::vector<Superquadric>& shapes,
+                                  const StabilityConfig& config) {
+  return simulateStability(Scene::fromSuperquadrics(shapes), config);
 }
 
 }  // namespace simstack

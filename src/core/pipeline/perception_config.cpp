@@ -118,6 +118,7 @@ PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& 
 std::string perceptionYaml(const PerceptionConfig& config) {
   PerceptionConfig c = config;
   YAML::Emitter e;
+  e.SetDoublePrecision(10);  // 0.05, not 0.050000000000000003
   e << YAML::BeginMap;
   writeSection(e, "perception", c, [](auto& x, auto&& f) { perceptionFields(x, f); });
   writeSection(e, "hough", c.hough, [](auto& x, auto&& f) { houghFields(x, f); });

@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# End-to-end check of simstack_tune_hough on a few generated piles: the chosen setting comes
+# from the values tried (or is the config's own), scores at least as well as the config's own
+# setting, lands in a perception config that keeps the other fields, and bad input is refused.
+set -eu
+generate=$1
+tune=$2
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+"$generate" --scenes 3 --seed 9 --output "$dir/val.h5" > /dev/null
+"$tune" --dataset "$dir/val.h5" --views 1 --threads 1 --refinement 5 --min-traversals 2 3 \
+  --bandwidth 0.04 0.05 --min-instance-voxels 10 --min-vote-norm 0 --output "$dir/tuned.yaml" \
+  > "$dir/log.txt" 2> /dev/null
+grep -q "chosen setting written" "$dir/log.txt" || { cat "$dir/log.txt"; exit 1; }
+# First table row (the chosen one) and the config's own row: count exact is column 7.
+chosen=$(grep -m1 '^| [0-9]' "$dir/log.txt" | awk -F'|' '{print $7}' | tr -d ' %')
+own=$(tail -n 4 "$dir/log.txt" | grep '^| [0-9]' | awk -F'|' '{print $7}' | tr -d ' %')
+awk -v a="$chosen" -v b="$own" 'BEGIN { exit !(a >= b) }' ||
+  { echo "chosen setting ($chosen %) is worse than the config's ($own %)"; cat "$dir/log.txt"; exit 1; }
+if /usr/bin/python3 -c "import yaml" 2>/dev/null; then
+  /usr/bin/python3 - "$dir/tuned.yaml" "$(dirname "$0")/../config/perception.yaml" <<'PY'
+import sys, yaml
+c = yaml.safe_load(open(sys.argv[1]))
+h, p = c["hough"], c["perception"]
+o = yaml.safe_load(open(sys.argv[2]))["hough"]
+key = lambda x: (x["refinement"], x["min_traversals"], x["bandwidth_m"], x["min_instance_voxels"])
+tried = h["refinement"] == 5 and h["min_traversals"] in (2, 3) and h["bandwidth_m"] in (0.04, 0.05)
+own = key(h) == key(o)
+assert tried or own, h
+assert p["model"] == "models/simstack_r32.pt" and p["samples"] == 3, p
+assert set(c) == {"perception", "hough", "fitting", "table"}, c.keys()
+PY
+fi
+if "$tune" --dataset "$dir/nope.h5" --output "$dir/x.yaml" 2> "$dir/e1"; then
+  echo "accepted a missing dataset"; exit 1; fi
+grep -q "nope.h5" "$dir/e1" || { cat "$dir/e1"; exit 1; }
+echo "not hdf5" > "$dir/bad.h5"
+if "$tune" --dataset "$dir/bad.h5" --output "$dir/x.yaml" > /dev/null 2> "$dir/e2"; then
+  echo "accepted a corrupt dataset"; exit 1; fi
+grep -q "bad.h5" "$dir/e2" || { cat "$dir/e2"; exit 1; }
+echo "simstack_tune_hough ok"
