@@ -67,6 +67,13 @@ Score score(const std::vector<ViewGrids>& views, const HoughConfig& hough) {
   return s;
 }
 
+bool sameSetting(const HoughConfig& a, const HoughConfig& b) {
+  return a.refinement == b.refinement && a.min_traversals == b.min_traversals &&
+         a.gamma == b.gamma && a.bandwidth_m == b.bandwidth_m &&
+         a.min_instance_voxels == b.min_instance_voxels && a.min_vote_norm == b.min_vote_norm &&
+         a.outside_tolerance_vox == b.outside_tolerance_vox;
+}
+
 std::string row(const Score& s) {
   std::ostringstream o;
   o << "| " << s.hough.refinement << " | " << s.hough.min_traversals << " | " << std::fixed
@@ -192,7 +199,8 @@ int main(int argc, char** argv) {
               h.bandwidth_m = bw;
               h.min_instance_voxels = mv;
               h.min_vote_norm = norm;
-              h.threads = 1;  // the settings run in parallel instead
+              h.threads = 1;                          // the settings run in parallel instead
+              if (sameSetting(h, current)) continue;  // already the first candidate
               settings.push_back(h);
             }
     std::vector<Score> scores(settings.size());
