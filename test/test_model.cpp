@@ -1,10 +1,10 @@
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
-#include <unistd.h>
 #include <fstream>
 
 #include "simstack/dataset/dataset.h"
@@ -214,6 +214,30 @@ TEST(Cvae, ConditionDropoutDropsWholeSamplesInTrainingOnly) {
   }
   dropping.condition_dropout = 1.0;
   EXPECT_THROW(dropping.validate(), std::invalid_argument);
+}
+
+TEST(Cvae, DeterministicPosteriorTrainsOnTheMeanCode) {
+  // posterior "deterministic": a training step decodes z = mu, the same on every call; the
+  // Gaussian posterior decodes a noisy draw around it.
+  CvaeConfig c = tiny();
+  torch::manual_seed(6);
+  Cvae model(c);
+  model->train();
+  torch::NoGradGuard no_grad;
+  const auto x = torch::rand({4, 2, 16, 16, 16});
+  const auto t = torch::rand({4, 1, 16, 16, 16});
+  const auto v = torch::rand({4, 3, 16, 16, 16});
+  const CvaeOutput noisy = model->forward(x, t, v);
+  EXPECT_GT((noisy.z - noisy.mu).abs().max().item<float>(), 1e-3);
+  c.posterior = "deterministic";
+  model->setConfig(c);
+  const CvaeOutput a = model->forward(x, t, v);
+  const CvaeOutput b = model->forward(x, t, v);
+  EXPECT_TRUE(torch::equal(a.z, a.mu));
+  EXPECT_TRUE(torch::allclose(a.tsdf, b.tsdf, 1e-5, 1e-6));
+  EXPECT_EQ(CvaeConfig::fromYaml(c.toYaml()).posterior, "deterministic");
+  c.posterior = "sampled";
+  EXPECT_THROW(c.validate(), std::invalid_argument);
 }
 
 TEST(Cvae, OneSharedConditionEqualsOnePerCode) {

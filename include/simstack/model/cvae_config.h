@@ -69,6 +69,13 @@ struct CvaeConfig {
   /// down to the finest grid, as the probabilistic U-Net feeds its code to the last layers).
   /// A network setting, stored with the model; the FC baseline has no code and ignores it.
   std::string latent_injection = "bottleneck";
+  /// How a training step draws the code from the encoder: "gaussian" (z = mu + sigma * noise,
+  /// the reparameterised sample) or "deterministic" (z = mu, the MMD autoencoder of InfoVAE's
+  /// tutorial and of WAE-MMD: the MMD alone makes the codes look like the prior, and the
+  /// decoder sees the code without noise). Our Gaussian encoders settled at sigma 2 with mu of
+  /// RMS 0.1-0.7: such a z is mostly noise, the decoder learned to ignore it, and then nothing
+  /// made sigma shrink (README). Inference draws codes from the prior either way.
+  std::string posterior = "gaussian";
 
   /// Throws std::invalid_argument naming the bad field.
   void validate() const;
@@ -85,10 +92,11 @@ struct CvaeConfig {
 /// `training:`).
 struct TrainConfig {
   int batch_size = 8;
-  double learning_rate = 1e-3;        ///< Adam step size at step 0
-  double final_learning_rate = 1e-4;  ///< reached at `steps` along a cosine (= learning_rate: constant)
-  int64_t steps = 6000;               ///< optimiser steps
-  int threads = 2;        ///< torch intra-op threads
+  double learning_rate = 1e-3;  ///< Adam step size at step 0
+  double final_learning_rate =
+      1e-4;              ///< reached at `steps` along a cosine (= learning_rate: constant)
+  int64_t steps = 6000;  ///< optimiser steps
+  int threads = 2;       ///< torch intra-op threads
   uint64_t seed = 1;
   int checkpoint_every = 200;  ///< steps between checkpoints (and CSV flushes)
   int validate_every = 500;    ///< steps between validations

@@ -221,7 +221,9 @@ CvaeOutput CvaeImpl::forward(const torch::Tensor& partial, const torch::Tensor& 
   }
   const torch::Tensor mu = enc_mu(x.flatten(1));
   const torch::Tensor logvar = enc_logvar(x.flatten(1)).clamp(-10.0, 10.0);
-  const torch::Tensor z = mu + torch::randn_like(mu) * torch::exp(0.5 * logvar);
+  const torch::Tensor z = config_.posterior == "deterministic"
+                              ? mu
+                              : mu + torch::randn_like(mu) * torch::exp(0.5 * logvar);
   CvaeOutput out = generate(partial, z);
   out.partial_recon = partial_recon;
   out.mu = mu;

@@ -50,6 +50,7 @@ void cvaeFields(C& c, F&& f) {
   f("occupancy_sharpness", c.occupancy_sharpness);
   f("vote_loss", c.vote_loss);
   f("condition_dropout", c.condition_dropout);
+  f("posterior", c.posterior);
 }
 
 template <class C, class F>
@@ -99,6 +100,8 @@ void CvaeConfig::validate() const {
   require(occupancy_sharpness > 0.0, "occupancy_sharpness must be > 0");
   require(condition_dropout >= 0.0 && condition_dropout < 1.0,
           "condition_dropout must lie in [0, 1)");
+  require(posterior == "gaussian" || posterior == "deterministic",
+          "posterior must be 'gaussian' or 'deterministic', got '" + posterior + "'");
   require(vote_loss == "occupied" || vote_loss == "all",
           "vote_loss must be 'occupied' or 'all', got '" + vote_loss + "'");
 }
@@ -115,6 +118,7 @@ void CvaeConfig::copyLossSettings(const CvaeConfig& o) {
   occupancy_sharpness = o.occupancy_sharpness;
   vote_loss = o.vote_loss;
   condition_dropout = o.condition_dropout;
+  posterior = o.posterior;
 }
 
 std::string CvaeConfig::toYaml() const {
