@@ -146,6 +146,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> models;
   std::string dataset, output, mesh_dir;
   int views = 3, samples = 3, scenes = 0, threads = 2, chamfer_points = 1000;
+  int width = 640, height = 480;
   uint64_t seed = 7;
   bool noise = false, no_classical = false, no_stability = false;
   CLI::App app{
@@ -171,6 +172,13 @@ int main(int argc, char** argv) {
                  "and segmentation agreement with the first --model, instead of --dataset")
       ->check(CLI::ExistingDirectory);
   app.add_option("--output", output, "results JSON")->required();
+  app.add_option("--width", width,
+                 "rendered view width (pixels; the protocol's 640, intrinsics scale with it)")
+      ->capture_default_str()
+      ->check(CLI::Range(16, 4096));
+  app.add_option("--height", height, "rendered view height (the protocol's 480)")
+      ->capture_default_str()
+      ->check(CLI::Range(16, 4096));
   app.add_option("--views", views, "viewpoints per scene")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
@@ -249,7 +257,7 @@ int main(int argc, char** argv) {
     }
     if (!no_classical) methods.push_back(Method{"classical", nullptr, {}});
 
-    const PinholeCamera camera = scaledKinect(640, 480);
+    const PinholeCamera camera = scaledKinect(width, height);
     const double truncation = reader.info().truncation_m;
     ProgressBar bar("evaluating " + std::to_string(methods.size()) + " methods", n);
     // The true piles under the same stability test: the reference for the methods' rows (the
@@ -367,7 +375,7 @@ int main(int argc, char** argv) {
     results["views"] = views;
     results["samples"] = samples;
     results["seed"] = seed;
-    results["image"] = "640x480";
+    results["image"] = std::to_string(width) + "x" + std::to_string(height);
     results["noise"] = noise;
     results["chamfer_points"] = chamfer_points;
     results["config"] = perceptionYaml(base);
