@@ -12,9 +12,9 @@ trap 'rm -rf "$dir"' EXIT
   --bandwidth 0.04 0.05 --min-instance-voxels 10 --min-vote-norm 0 --output "$dir/tuned.yaml" \
   > "$dir/log.txt" 2> /dev/null
 grep -q "chosen setting written" "$dir/log.txt" || { cat "$dir/log.txt"; exit 1; }
-# First table row (the chosen one) and the config's own row: count exact is column 7.
-chosen=$(grep -m1 '^| [0-9]' "$dir/log.txt" | awk -F'|' '{print $7}' | tr -d ' %')
-own=$(tail -n 4 "$dir/log.txt" | grep '^| [0-9]' | awk -F'|' '{print $7}' | tr -d ' %')
+# First table row (the chosen one) and the config's own row: count exact is column 8.
+chosen=$(grep -m1 '^| [0-9]' "$dir/log.txt" | awk -F'|' '{print $8}' | tr -d ' %')
+own=$(tail -n 4 "$dir/log.txt" | grep '^| [0-9]' | awk -F'|' '{print $8}' | tr -d ' %')
 awk -v a="$chosen" -v b="$own" 'BEGIN { exit !(a >= b) }' ||
   { echo "chosen setting ($chosen %) is worse than the config's ($own %)"; cat "$dir/log.txt"; exit 1; }
 if /usr/bin/python3 -c "import yaml" 2>/dev/null; then

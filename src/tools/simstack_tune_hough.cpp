@@ -71,16 +71,20 @@ bool sameSetting(const HoughConfig& a, const HoughConfig& b) {
   return a.refinement == b.refinement && a.min_traversals == b.min_traversals &&
          a.gamma == b.gamma && a.bandwidth_m == b.bandwidth_m &&
          a.min_instance_voxels == b.min_instance_voxels && a.min_vote_norm == b.min_vote_norm &&
-         a.outside_tolerance_vox == b.outside_tolerance_vox;
+         a.outside_tolerance_vox == b.outside_tolerance_vox &&
+         a.split_below_solidity == b.split_below_solidity &&
+         (a.split_below_solidity == 0 || a.split_accept_solidity == b.split_accept_solidity);
 }
 
 std::string row(const Score& s) {
   std::ostringstream o;
   o << "| " << s.hough.refinement << " | " << s.hough.min_traversals << " | " << std::fixed
     << std::setprecision(3) << s.hough.bandwidth_m << " | " << s.hough.min_instance_voxels << " | "
-    << std::setprecision(1) << s.hough.min_vote_norm << " | " << 100 * s.exact << " % | "
-    << 100 * s.under << " % | " << 100 * s.over << " % | " << std::setprecision(2) << s.abs_error
-    << " | " << std::setprecision(3) << s.agreement << " |";
+    << std::setprecision(1) << s.hough.min_vote_norm << " | " << std::setprecision(2)
+    << s.hough.split_below_solidity << " / " << s.hough.split_accept_solidity << " | "
+    << std::setprecision(1) << 100 * s.exact << " % | " << 100 * s.under << " % | " << 100 * s.over
+    << " % | " << std::setprecision(2) << s.abs_error << " | " << std::setprecision(3)
+    << s.agreement << " |";
   return o.str();
 }
 
@@ -98,6 +102,8 @@ int main(int argc, char** argv) {
   std::vector<int> refinements = {3, 5, 8, 10}, traversals = {2, 3, 4, 5, 7, 10},
                    min_voxels = {10, 15, 25};
   std::vector<double> bandwidths = {0.04, 0.05, 0.06, 0.07}, min_norms = {0.0, 0.3, 0.6};
+  // The split test is off unless asked for: its values multiply the other settings.
+  std::vector<double> split_below = {0.0}, split_accept = {0.9};
   CLI::App app{
       "Choose the Hough-voting parameters for a model on validation piles (a seed used neither "
       "for training nor for testing): the network runs once per rendered view, every "
@@ -138,6 +144,14 @@ int main(int argc, char** argv) {
                  "vote lengths to try below which a voxel casts no ray (blunt, unsure votes)")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--split-below", split_below,
+                 "split test: solidities below which an instance is cut (0 = off) to try")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--split-accept", split_accept,
+                 "split test: joint solidities of the two parts that keep a cut, to try")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 1.0));
   app.add_option("--top", top, "rows of the table")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
@@ -192,17 +206,21 @@ int main(int argc, char** argv) {
       for (int mu : traversals)
         for (double bw : bandwidths)
           for (int mv : min_voxels)
-            for (double norm : min_norms) {
-              HoughConfig h = pc.hough;
-              h.refinement = ref;
-              h.min_traversals = mu;
-              h.bandwidth_m = bw;
-              h.min_instance_voxels = mv;
-              h.min_vote_norm = norm;
-              h.threads = 1;                          // the settings run in parallel instead
-              if (sameSetting(h, current)) continue;  // already the first candidate
-              settings.push_back(h);
-            }
+            for (double norm : min_norms)
+              for (double below : split_below)
+                for (double accept : split_accept) {
+                  HoughConfig h = pc.hough;
+                  h.split_below_solidity = below;
+                  h.split_accept_solidity = accept;
+                  h.refinement = ref;
+                  h.min_traversals = mu;
+                  h.bandwidth_m = bw;
+                  h.min_instance_voxels = mv;
+                  h.min_vote_norm = norm;
+                  h.threads = 1;                          // the settings run in parallel instead
+                  if (sameSetting(h, current)) continue;  // already the first candidate
+                  settings.push_back(h);
+                }
     std::vector<Score> scores(settings.size());
     ProgressBar sweep("scoring " + std::to_string(settings.size()) + " settings", settings.size());
     long done = 0;
@@ -216,12 +234,13 @@ int main(int argc, char** argv) {
     const Score before = scores.front();
     std::stable_sort(scores.begin(), scores.end(), better);
 
-    std::cout
-        << "\n"
-        << views.size() << " views (" << n << " scenes x " << views_per_scene << "), model "
-        << pc.model_path << "\n\n"
-        << "| refinement | mu | bandwidth (m) | min voxels | min vote norm | count exact | under | "
-           "over | mean abs error | voxel agreement |\n|---|---|---|---|---|---|---|---|---|---|\n";
+    std::cout << "\n"
+              << views.size() << " views (" << n << " scenes x " << views_per_scene << "), model "
+              << pc.model_path << "\n\n"
+              << "| refinement | mu | bandwidth (m) | min voxels | min vote norm | split below / "
+                 "accept | "
+                 "count exact | under | over | mean abs error | voxel agreement |\n"
+                 "|---|---|---|---|---|---|---|---|---|---|---|\n";
     for (int i = 0; i < std::min<int>(top, scores.size()); ++i) std::cout << row(scores[i]) << "\n";
     std::cout << "\nthe config's setting (" << config_path << "):\n" << row(before) << "\n";
 

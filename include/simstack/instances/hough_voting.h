@@ -29,6 +29,11 @@ struct HoughConfig {
   double min_vote_norm = 0.0;
   /// Rays may leave the occupied region for this many voxels (noisy TSDF borders).
   int outside_tolerance_vox = 1;
+  /// Split test after the assignment (convex_split.h): instances whose solidity is below this
+  /// are cut in two when the parts reach `split_accept_solidity` together. 0 = off.
+  double split_below_solidity = 0.0;
+  double split_accept_solidity = 0.9;
+  int split_max_rounds = 2;  ///< an instance may be cut again this many times in all
   int threads = 2;
 };
 
@@ -39,6 +44,7 @@ struct InstanceSegmentation {
   int candidate_cells = 0;          ///< fine cells above the traversal threshold
   size_t count_bytes = 0;           ///< memory of the fine counts (all threads)
   size_t traversals = 0;            ///< fine-cell visits counted (all rays)
+  int splits = 0;                   ///< instances cut by the split test
   struct {
     double rays_ms = 0, mean_shift_ms = 0, assign_ms = 0;
   } timings;

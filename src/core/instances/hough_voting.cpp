@@ -1,5 +1,7 @@
 #include "simstack/instances/hough_voting.h"
 
+#include "simstack/instances/convex_split.h"
+
 #include <omp.h>
 
 #include <nanoflann.hpp>
@@ -69,7 +71,8 @@ size_t marchRay(const Vec3& p, const Vec3& d, int ref, const std::vector<uint8_t
       const double ey = step[1] ? ty + (step[1] > 0 ? ref - 1 - ly : ly) * t_delta[1] : ty;
       const double ez = step[2] ? tz + (step[2] > 0 ? ref - 1 - lz : lz) * t_delta[2] : tz;
       const int a = ex < ey ? (ex < ez ? 0 : 2) : (ey < ez ? 1 : 2);
-      const int next[3] = {vx + (a == 0) * step[0], vy + (a == 1) * step[1], vz + (a == 2) * step[2]};
+      const int next[3] = {vx + (a == 0) * step[0], vy + (a == 1) * step[1],
+                           vz + (a == 2) * step[2]};
       if (static_cast<unsigned>(next[0]) < static_cast<unsigned>(r) &&
           static_cast<unsigned>(next[1]) < static_cast<unsigned>(r) &&
           static_cast<unsigned>(next[2]) < static_cast<unsigned>(r))
@@ -201,8 +204,15 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
       static_cast<int>(tsdf_m.data.size()) != tsdf_m.spec.voxelCount())
     throw std::invalid_argument("houghInstances: the TSDF and the vote field must share a grid");
   if (config.refinement < 1 || config.min_traversals < 0 || config.bandwidth_m <= 0)
-    throw std::invalid_argument("houghInstances: refinement >= 1, min_traversals >= 0 and "
-                                "bandwidth_m > 0 are required");
+    throw std::invalid_argument(
+        "houghInstances: refinement >= 1, min_traversals >= 0 and "
+        "bandwidth_m > 0 are required");
+  if (config.split_below_solidity < 0 || config.split_below_solidity > 1 ||
+      config.split_accept_solidity <= 0 || config.split_accept_solidity > 1 ||
+      config.split_max_rounds < 0)
+    throw std::invalid_argument(
+        "houghInstances: split solidities in [0, 1] (accept > 0) and "
+        "split_max_rounds >= 0 are required");
   const GridSpec& g = tsdf_m.spec;
   const int r = g.resolution, ref = config.refinement, fine = r * ref;
   if (static_cast<double>(fine) * fine * fine >= 4294967295.0)
@@ -349,18 +359,21 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
       // Largest instance first.
       std::vector<int> order(centres.size());
       std::iota(order.begin(), order.end(), 0);
-      std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return counts[a] > counts[b]; });
+      std::stable_sort(order.begin(), order.end(),
+                       [&](int a, int b) { return counts[a] > counts[b]; });
       std::vector<int> rank(centres.size());
       for (size_t i = 0; i < order.size(); ++i) {
         rank[order[i]] = static_cast<int>(i);
         out.centres_table.push_back(centres[order[i]]);
         out.voxel_counts.push_back(counts[order[i]]);
       }
-      for (size_t k = 0; k < occupied.size(); ++k) out.labels.data[occupied[k]] = rank[assignment[k]];
+      for (size_t k = 0; k < occupied.size(); ++k)
+        out.labels.data[occupied[k]] = rank[assignment[k]];
       break;
     }
     centres = std::move(kept);
   }
+  out.splits = splitNonConvexInstances(&out, config);
   out.timings.assign_ms = ms(t2);
   return out;
 }

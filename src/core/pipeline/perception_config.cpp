@@ -32,6 +32,9 @@ void houghFields(C& c, F&& f) {
   f("min_instance_voxels", c.min_instance_voxels);
   f("min_vote_norm", c.min_vote_norm);
   f("outside_tolerance_vox", c.outside_tolerance_vox);
+  f("split_below_solidity", c.split_below_solidity);
+  f("split_accept_solidity", c.split_accept_solidity);
+  f("split_max_rounds", c.split_max_rounds);
 }
 template <class C, class F>
 void fitFields(C& c, F&& f) {
@@ -77,15 +80,16 @@ void readSection(const YAML::Node& root, const char* name, C* c, Fields fields,
   });
   for (const auto& kv : n) {
     const std::string key = kv.first.as<std::string>();
-    if (!known.count(key))
-      throw std::runtime_error(path + ": unknown field " + name + "." + key);
+    if (!known.count(key)) throw std::runtime_error(path + ": unknown field " + name + "." + key);
   }
 }
 
 template <class C, class Fields>
 void writeSection(YAML::Emitter& e, const char* name, C& c, Fields fields) {
   e << YAML::Key << name << YAML::Value << YAML::BeginMap;
-  fields(c, [&](const char* key, const auto& value) { e << YAML::Key << key << YAML::Value << value; });
+  fields(c, [&](const char* key, const auto& value) {
+    e << YAML::Key << key << YAML::Value << value;
+  });
   e << YAML::EndMap;
 }
 
@@ -105,10 +109,14 @@ PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& 
     if (section != "perception" && section != "hough" && section != "fitting" && section != "table")
       throw std::runtime_error(path + ": unknown section '" + section + "'");
   }
-  readSection(root, "perception", &c, [](auto& x, auto&& f) { perceptionFields(x, f); }, path);
-  readSection(root, "hough", &c.hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
-  readSection(root, "fitting", &c.fit, [](auto& x, auto&& f) { fitFields(x, f); }, path);
-  readSection(root, "table", &c.table, [](auto& x, auto&& f) { tableFields(x, f); }, path);
+  readSection(
+      root, "perception", &c, [](auto& x, auto&& f) { perceptionFields(x, f); }, path);
+  readSection(
+      root, "hough", &c.hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
+  readSection(
+      root, "fitting", &c.fit, [](auto& x, auto&& f) { fitFields(x, f); }, path);
+  readSection(
+      root, "table", &c.table, [](auto& x, auto&& f) { tableFields(x, f); }, path);
   if (!c.model_path.empty() && !base_dir.empty() &&
       std::filesystem::path(c.model_path).is_relative())
     c.model_path = (std::filesystem::path(base_dir) / c.model_path).string();
