@@ -81,7 +81,6 @@ TEST(Stability, GeneratedPilesPassTheTestOverTheSecondTheGeneratorVerified) {
   const PileGenerator generator{PileConfig()};
   StabilityConfig one_second;
   one_second.steps = 240;
-  EXPECT_EQ(one_second.rolling_friction, PileConfig::generationPhysics().rolling_friction);
   for (uint64_t seed = 1; seed <= 4; ++seed) {
     SCOPED_TRACE("seed " + std::to_string(seed));
     const Scene scene = generator.generate(seed).scene;

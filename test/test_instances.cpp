@@ -193,9 +193,16 @@ TEST(ConvexSplit, CutsAnLAtItsSeamAndLeavesABoxWhole) {
   int labelled = 0;
   for (int l : seg.labels.data) labelled += l >= 0;
   EXPECT_EQ(labelled, 600 + 144 + 180);
-  // A cut that leaves a part below min_instance_voxels is never made: no cut of the 744 voxels
-  // leaves 400 on both sides (with 200, a cut at z = 4 would give two boxes of 384 and 360).
+  // A cut that leaves a part below min_instance_voxels is never made: with 200 the seam cut
+  // (600 + 144) is out, and the cut at z = 4 gives two boxes of 384 and 360 voxels; with 400
+  // no cut of the 744 voxels is allowed.
   InstanceSegmentation small = untouched;
+  config.min_instance_voxels = 200;
+  ASSERT_EQ(splitNonConvexInstances(&small, config), 1);
+  EXPECT_EQ(small.voxel_counts, (std::vector<int>{384, 360, 180}));
+  EXPECT_EQ(small.labels.at(15, 4, 3), 0);
+  EXPECT_EQ(small.labels.at(5, 4, 4), 1);
+  small = untouched;
   config.min_instance_voxels = 400;
   EXPECT_EQ(splitNonConvexInstances(&small, config), 0);
 }

@@ -2,7 +2,7 @@
 # End-to-end check of simstack_tune_hough on a few generated piles: the chosen setting comes
 # from the values tried (or is the config's own), scores at least as well as the config's own
 # setting, lands in a perception config that keeps the other fields, and bad input is refused.
-set -eu
+set -euo pipefail
 generate=$1
 tune=$2
 dir=$(mktemp -d)
@@ -15,6 +15,7 @@ grep -q "chosen setting written" "$dir/log.txt" || { cat "$dir/log.txt"; exit 1;
 # First table row (the chosen one) and the config's own row: count exact is column 8.
 chosen=$(grep -m1 '^| [0-9]' "$dir/log.txt" | awk -F'|' '{print $8}' | tr -d ' %')
 own=$(tail -n 4 "$dir/log.txt" | grep '^| [0-9]' | awk -F'|' '{print $8}' | tr -d ' %')
+[ -n "$chosen" ] && [ -n "$own" ] || { echo "no table rows parsed"; cat "$dir/log.txt"; exit 1; }
 awk -v a="$chosen" -v b="$own" 'BEGIN { exit !(a >= b) }' ||
   { echo "chosen setting ($chosen %) is worse than the config's ($own %)"; cat "$dir/log.txt"; exit 1; }
 if /usr/bin/python3 -c "import yaml" 2>/dev/null; then
@@ -24,7 +25,8 @@ c = yaml.safe_load(open(sys.argv[1]))
 h, p = c["hough"], c["perception"]
 o = yaml.safe_load(open(sys.argv[2]))["hough"]
 key = lambda x: (x["refinement"], x["min_traversals"], x["bandwidth_m"], x["min_instance_voxels"])
-tried = h["refinement"] == 5 and h["min_traversals"] in (2, 3) and h["bandwidth_m"] in (0.04, 0.05)
+tried = (h["refinement"] == 5 and h["min_traversals"] in (2, 3) and h["bandwidth_m"] in (0.04, 0.05)
+         and h["min_instance_voxels"] == 10 and h["min_vote_norm"] == 0)
 own = key(h) == key(o)
 assert tried or own, h
 assert p["model"] == "models/simstack_r32.pt" and p["samples"] == 3, p

@@ -173,7 +173,9 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingDirectory);
   app.add_option("--output", output, "results JSON")->required();
   app.add_option("--width", width,
-                 "rendered view width (pixels; the protocol's 640, intrinsics scale with it)")
+                 "rendered view width (pixels; the protocol's 640): fx scales with the width, fy "
+                 "with the height, "
+                 "so keep 4:3 for square pixels")
       ->capture_default_str()
       ->check(CLI::Range(16, 4096));
   app.add_option("--height", height, "rendered view height (the protocol's 480)")

@@ -9,6 +9,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
+#include <filesystem>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
@@ -221,16 +223,24 @@ int main(int argc, char** argv) {
                   if (sameSetting(h, current)) continue;  // already the first candidate
                   settings.push_back(h);
                 }
+    if (views.empty()) throw std::runtime_error(dataset + " holds no scene to score on");
     std::vector<Score> scores(settings.size());
+    std::exception_ptr failure;  // an exception must not leave the parallel loop
     ProgressBar sweep("scoring " + std::to_string(settings.size()) + " settings", settings.size());
     long done = 0;
 #pragma omp parallel for schedule(dynamic) num_threads(threads)
     for (long i = 0; i < static_cast<long>(settings.size()); ++i) {
-      scores[i] = score(views, settings[i]);
+      try {
+        scores[i] = score(views, settings[i]);
+      } catch (...) {
+#pragma omp critical
+        if (!failure) failure = std::current_exception();
+      }
 #pragma omp critical
       sweep.update(++done);
     }
     sweep.finish();
+    if (failure) std::rethrow_exception(failure);
     const Score before = scores.front();
     std::stable_sort(scores.begin(), scores.end(), better);
 
@@ -248,7 +258,9 @@ int main(int argc, char** argv) {
     tuned.hough = scores.front().hough;
     tuned.hough.threads = pc.hough.threads;
     const PerceptionConfig original = loadPerceptionYaml(config_path, "");
-    tuned.model_path = model.empty() ? original.model_path : model;
+    // Relative paths in a config are read from the package directory: write the model absolute.
+    tuned.model_path =
+        model.empty() ? original.model_path : std::filesystem::absolute(model).string();
     tuned.samples = original.samples;
     tuned.zero_code_first = original.zero_code_first;
     tuned.decompose_samples = original.decompose_samples;

@@ -40,8 +40,9 @@ std::vector<float> superquadricOccupancy(const std::vector<Superquadric>& shapes
 
 /// The protocol of DESIGN.md section 5: the shapes as rigid bodies of uniform density on the
 /// table, 10,000 steps, gravity 10 m/s^2, friction 1. Rolling and spinning friction are those
-/// of the physics that settled and verified the generated piles: with Bullet's near-zero
-/// default, rounded objects of the true piles themselves roll away during the 42 s.
+/// of the physics that settled and verified the generated piles (sleeping stays on, which the
+/// generator turns off): with the physics' default of 0.001, rounded objects of the true piles
+/// themselves roll away during the 42 s.
 struct StabilityConfig {
   int steps = 10000;
   double gravity_mps2 = 10.0;

@@ -8,7 +8,8 @@
 /// convex set of voxels). An instance below `split_below_solidity` is cut by the plane, among
 /// cuts across the grid axes and its principal axes at several quantiles, after which the two
 /// parts are most solid together; the cut is kept when that joint solidity reaches
-/// `split_accept_solidity`, and the parts are tested again (at most `split_max_rounds` times).
+/// `split_accept_solidity`, and the parts are tested again in the next round (at most
+/// `split_max_rounds` rounds; a part whose cut was refused is not tested again).
 
 #include <vector>
 
@@ -22,7 +23,7 @@ double voxelSolidity(const std::vector<Vec3i>& voxels, const GridSpec& grid);
 
 /// Applies the split test of the file comment to every instance of `seg` (labels, centres and
 /// counts updated, largest instance first again). Parts smaller than
-/// `config.min_instance_voxels` are never made. Returns the number of splits.
+/// `config.min_instance_voxels` are never made. Returns the number of cuts made.
 int splitNonConvexInstances(InstanceSegmentation* seg, const HoughConfig& config);
 
 }  // namespace simstack

@@ -33,7 +33,9 @@ struct HoughConfig {
   /// are cut in two when the parts reach `split_accept_solidity` together. 0 = off.
   double split_below_solidity = 0.0;
   double split_accept_solidity = 0.9;
-  int split_max_rounds = 2;  ///< an instance may be cut again this many times in all
+  /// Rounds of the test: each round cuts every part not yet settled at most once, so an
+  /// instance ends in at most 2^rounds parts.
+  int split_max_rounds = 2;
   int threads = 2;
 };
 
@@ -44,7 +46,7 @@ struct InstanceSegmentation {
   int candidate_cells = 0;          ///< fine cells above the traversal threshold
   size_t count_bytes = 0;           ///< memory of the fine counts (all threads)
   size_t traversals = 0;            ///< fine-cell visits counted (all rays)
-  int splits = 0;                   ///< instances cut by the split test
+  int splits = 0;                   ///< cuts made by the split test
   struct {
     double rays_ms = 0, mean_shift_ms = 0, assign_ms = 0;
   } timings;

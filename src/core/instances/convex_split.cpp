@@ -97,7 +97,8 @@ int splitNonConvexInstances(InstanceSegmentation* seg, const HoughConfig& config
   const GridSpec& grid = seg->labels.spec;
   struct Part {
     std::vector<Vec3i> voxels;
-    bool split = false;  ///< made by a cut (its centre is its centroid, not a Hough centre)
+    bool split = false;    ///< made by a cut (its centre is its centroid, not a Hough centre)
+    bool settled = false;  ///< convex enough, or its best cut was refused: not tested again
     Vec3 centre = Vec3::Zero();
   };
   std::vector<Part> parts(seg->size());
@@ -109,7 +110,7 @@ int splitNonConvexInstances(InstanceSegmentation* seg, const HoughConfig& config
     std::vector<Part> next;
     bool changed = false;
     for (Part& part : parts) {
-      if (voxelSolidity(part.voxels, grid) < config.split_below_solidity) {
+      if (!part.settled && voxelSolidity(part.voxels, grid) < config.split_below_solidity) {
         Cut c = bestCut(part.voxels, grid, config.min_instance_voxels);
         if (c.solidity >= config.split_accept_solidity) {
           next.push_back({std::move(c.a), true});
@@ -119,6 +120,7 @@ int splitNonConvexInstances(InstanceSegmentation* seg, const HoughConfig& config
           continue;
         }
       }
+      part.settled = true;
       next.push_back(std::move(part));
     }
     parts = std::move(next);
