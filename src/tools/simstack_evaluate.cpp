@@ -174,8 +174,7 @@ int main(int argc, char** argv) {
   app.add_option("--output", output, "results JSON")->required();
   app.add_option("--width", width,
                  "rendered view width (pixels; the protocol's 640): fx scales with the width, fy "
-                 "with the height, "
-                 "so keep 4:3 for square pixels")
+                 "with the height, so keep 4:3 for square pixels")
       ->capture_default_str()
       ->check(CLI::Range(16, 4096));
   app.add_option("--height", height, "rendered view height (the protocol's 480)")
@@ -232,11 +231,10 @@ int main(int argc, char** argv) {
     }
     const PerceptionConfig& base = configs.front();
     if (!real_dir.empty()) {
-      const PerceptionConfig& pc = base;
       const json real = {{"real_dir", real_dir},
                          {"model", models.front()},
-                         {"config", perceptionYaml(pc)},
-                         {"scenes", evaluateReal(real_dir, pc)}};
+                         {"config", perceptionYaml(base)},
+                         {"scenes", evaluateReal(real_dir, base)}};
       std::ofstream f(output);
       if (!f) throw std::runtime_error("cannot write " + output);
       f << real.dump(1) << "\n";

@@ -160,6 +160,8 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
   try {
+    // As written (relative model path kept), for the output; and resolved, for running.
+    const PerceptionConfig original = loadPerceptionYaml(config_path, "");
     PerceptionConfig pc = loadPerceptionYaml(config_path, SIMSTACK_SOURCE_DIR);
     if (!model.empty()) pc.model_path = model;
     pc.threads = threads;
@@ -254,17 +256,10 @@ int main(int argc, char** argv) {
     for (int i = 0; i < std::min<int>(top, scores.size()); ++i) std::cout << row(scores[i]) << "\n";
     std::cout << "\nthe config's setting (" << config_path << "):\n" << row(before) << "\n";
 
-    PerceptionConfig tuned = pc;
+    PerceptionConfig tuned = original;
     tuned.hough = scores.front().hough;
-    tuned.hough.threads = pc.hough.threads;
-    const PerceptionConfig original = loadPerceptionYaml(config_path, "");
     // Relative paths in a config are read from the package directory: write the model absolute.
-    tuned.model_path =
-        model.empty() ? original.model_path : std::filesystem::absolute(model).string();
-    tuned.samples = original.samples;
-    tuned.zero_code_first = original.zero_code_first;
-    tuned.decompose_samples = original.decompose_samples;
-    tuned.threads = original.threads;
+    if (!model.empty()) tuned.model_path = std::filesystem::absolute(model).string();
     std::ofstream f(output);
     if (!f) throw std::runtime_error("cannot write " + output);
     f << "# simstack_tune_hough on " << dataset << " (" << views.size() << " views): count exact "
