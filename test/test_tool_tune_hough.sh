@@ -30,7 +30,8 @@ tried = (h["refinement"] == 5 and h["min_traversals"] in (2, 3) and h["bandwidth
 own = key(h) == key(o)
 assert tried or own, h
 assert p["model"] == "models/simstack_r32.pt" and p["samples"] == 3, p
-assert set(c) == {"perception", "hough", "fitting", "table"}, c.keys()
+assert set(c) == {"perception", "hough", "segments", "fitting", "table"}, c.keys()
+assert c["segments"]["enabled"] is True, c["segments"]
 PY
 fi
 if "$tune" --dataset "$dir/nope.h5" --output "$dir/x.yaml" 2> "$dir/e1"; then

@@ -3,7 +3,9 @@
 // traversal threshold and mean-shift radius separate its objects, so the setting belongs to
 // the model and is re-chosen whenever the model changes. The network runs once per view; the
 // settings are then scored on its grids against the ground truth: the share of views whose
-// instance count is exact first, then the voxel segmentation agreement.
+// instance count is exact first, then the voxel segmentation agreement. When the config enables
+// the regrouping along the observed surface (`segments:`), it runs after each setting, as in
+// the pipeline.
 #include <omp.h>
 #include <CLI/CLI.hpp>
 
@@ -14,6 +16,7 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <optional>
 #include <random>
 #include <sstream>
 
@@ -36,6 +39,7 @@ struct ViewGrids {
   Grid3<Vec3f> votes;
   std::vector<int> truth;  ///< object index per voxel, -1 free
   int objects = 0;
+  std::optional<SurfaceSegments> segments;  ///< the view's convex patches, when regrouping
 };
 
 struct Score {
@@ -48,11 +52,16 @@ bool better(const Score& a, const Score& b) {
   return a.agreement > b.agreement;
 }
 
-Score score(const std::vector<ViewGrids>& views, const HoughConfig& hough) {
+// Scored as the pipeline decomposes: Hough voting, then the regrouping along the observed
+// surface when the config enables it.
+Score score(const std::vector<ViewGrids>& views, const HoughConfig& hough,
+            const SurfaceSegmentConfig& segments) {
   Score s;
   s.hough = hough;
   for (const ViewGrids& v : views) {
-    const InstanceSegmentation seg = houghInstances(v.tsdf_m, v.votes, hough);
+    InstanceSegmentation seg = houghInstances(v.tsdf_m, v.votes, hough);
+    if (v.segments)
+      seg = regroupAlongSurfaceSegments(*v.segments, segments, hough.min_instance_voxels, seg);
     const int error = seg.size() - v.objects;
     s.exact += error == 0;
     s.under += error < 0;
@@ -195,6 +204,8 @@ int main(int argc, char** argv) {
         for (size_t i = 0; i < g.truth.size(); ++i)
           g.truth[i] = static_cast<int>(gt.labels.data[i]) - 1;
         g.objects = static_cast<int>(rec.scene.objects.size());
+        if (pc.segments.enabled)
+          g.segments = segmentVisibleSurface(r.depth, camera, T, pc.min_pile_height_m, pc.segments);
         views.push_back(std::move(g));
       }
       bar.update(k + 1);
@@ -233,7 +244,7 @@ int main(int argc, char** argv) {
 #pragma omp parallel for schedule(dynamic) num_threads(threads)
     for (long i = 0; i < static_cast<long>(settings.size()); ++i) {
       try {
-        scores[i] = score(views, settings[i]);
+        scores[i] = score(views, settings[i], pc.segments);
       } catch (...) {
 #pragma omp critical
         if (!failure) failure = std::current_exception();

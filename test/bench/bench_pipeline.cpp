@@ -1,16 +1,17 @@
 // Scene decomposition: Hough voting at R = 32 and 64, the joint fit of a 4-object scene, and a
-// whole ScenePerception::perceive() at R = 32 with 3 samples (the shipped model).
+// whole ScenePerception::perceive() at R = 32 with 3 samples (the shipped model), with and
+// without the regrouping along the observed surface.
 #include <benchmark/benchmark.h>
 
 #include <filesystem>
 
+#include "../test_scenes.h"
 #include "simstack/fitting/superquadric_fit.h"
 #include "simstack/instances/hough_voting.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/tsdf/ground_truth.h"
-#include "../test_scenes.h"
 
 using namespace simstack;
 
@@ -88,6 +89,7 @@ static void BM_Perceive(benchmark::State& state) {
   PerceptionConfig pc;
   pc.model_path = model;
   pc.samples = static_cast<int>(state.range(0));
+  pc.segments.enabled = state.range(1) != 0;  // its peer: the same frame without the regrouping
   pc.threads = 2;
   const ScenePerception perception(pc);
   StageTimings sum;
@@ -106,7 +108,12 @@ static void BM_Perceive(benchmark::State& state) {
   state.counters["mesh_ms"] = sum.mesh_ms / n;
   state.counters["fitting_ms"] = sum.fitting_ms / n;
 }
-BENCHMARK(BM_Perceive)->Arg(3)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Perceive)
+    ->ArgNames({"samples", "segments"})
+    ->Args({3, 1})
+    ->Args({3, 0})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 int main(int argc, char** argv) {
   keepFreedMemoryForReuse();

@@ -12,13 +12,14 @@
 #include <vector>
 
 #include "simstack/fitting/superquadric_fit.h"
-#include "simstack/pipeline/perception_config.h"
 #include "simstack/geometry/image.h"
 #include "simstack/geometry/pinhole_camera.h"
 #include "simstack/geometry/triangle_mesh.h"
 #include "simstack/geometry/voxel_grid.h"
 #include "simstack/instances/hough_voting.h"
+#include "simstack/instances/surface_segments.h"
 #include "simstack/model/cvae_config.h"
+#include "simstack/pipeline/perception_config.h"
 #include "simstack/pipeline/table_plane.h"
 
 namespace simstack {
@@ -32,9 +33,9 @@ struct DepthView {
 };
 
 struct InstanceEstimate {
-  Superquadric superquadric;  ///< table frame
-  TriangleMesh mesh;          ///< this instance's part of the predicted surface
-  Points3 points;             ///< surface samples of `mesh` (what was fitted)
+  Superquadric superquadric;        ///< table frame
+  TriangleMesh mesh;                ///< this instance's part of the predicted surface
+  Points3 points;                   ///< surface samples of `mesh` (what was fitted)
   Vec3 vote_centre = Vec3::Zero();  ///< Hough centre
   int voxels = 0;
 };
@@ -43,15 +44,15 @@ struct InstanceEstimate {
 struct SceneHypothesis {
   Grid3<float> tsdf_m;
   Grid3<Vec3f> votes;
-  Grid3<int> labels;          ///< instance per voxel, -1 free (empty unless decomposed)
-  TriangleMesh surface;       ///< marching cubes of tsdf_m (made when decomposed)
+  Grid3<int> labels;     ///< instance per voxel, -1 free (empty unless decomposed)
+  TriangleMesh surface;  ///< marching cubes of tsdf_m (made when decomposed)
   std::vector<InstanceEstimate> instances;
   bool decomposed = false;
 };
 
 struct StageTimings {
-  double table_ms = 0, tsdf_ms = 0, network_ms = 0, instances_ms = 0, mesh_ms = 0,
-         fitting_ms = 0, total_ms = 0;
+  double table_ms = 0, tsdf_ms = 0, network_ms = 0, instances_ms = 0, mesh_ms = 0, fitting_ms = 0,
+         total_ms = 0;
 };
 
 struct SceneEstimate {
@@ -59,17 +60,19 @@ struct SceneEstimate {
   bool table_estimated = false;  ///< true when the table came from RANSAC, not the caller
   GridSpec grid;
   Grid3<float> partial_tsdf_m, partial_weight;  ///< the network's input
-  Grid3<float> occupancy_probability;  ///< share of hypotheses with tsdf <= 0, per voxel
-  std::vector<SceneHypothesis> hypotheses;  ///< S of them; the decomposed ones first
+  Grid3<float> occupancy_probability;           ///< share of hypotheses with tsdf <= 0, per voxel
+  std::vector<SceneHypothesis> hypotheses;      ///< S of them; the decomposed ones first
   StageTimings timings;
   /// Instances of hypothesis 0 (the mean scene by default).
   const std::vector<InstanceEstimate>& instances() const { return hypotheses.front().instances; }
 };
 
 /// Splits one hypothesis into instances and fits them (Hough voting, marching cubes, Ceres).
-/// Adds the time spent to `timings` when given.
+/// With `segments` (the first view's convex patches, surface_segments.h) and
+/// `config.segments.enabled`, instances are also split along the patches. Adds the time spent
+/// to `timings` when given.
 void decompose(SceneHypothesis* hypothesis, const PerceptionConfig& config,
-               StageTimings* timings = nullptr);
+               StageTimings* timings = nullptr, const SurfaceSegments* segments = nullptr);
 
 /// Fits superquadrics to point sets (one per instance) with the configured fitter: per-instance
 /// fits, then the joint refinement when enabled. Sets with too few points are skipped (their
@@ -81,8 +84,8 @@ std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>
 /// voxel nearest to its table-frame point among the voxel holding it and its 26 neighbours
 /// (observed points lie on the surface, which the prediction places up to a voxel off); -1 for
 /// table, free space or missing depth.
-Image<int> pixelInstances(const DepthView& view, const SceneEstimate& estimate,
-                          int hypothesis = 0, double min_height_m = 0.01);
+Image<int> pixelInstances(const DepthView& view, const SceneEstimate& estimate, int hypothesis = 0,
+                          double min_height_m = 0.01);
 
 class ScenePerception {
  public:
@@ -99,7 +102,9 @@ class ScenePerception {
   /// can be estimated. A scene with nothing on the table gives hypotheses without instances.
   /// Not thread-safe (one model state): use one ScenePerception per thread.
   SceneEstimate perceive(const std::vector<DepthView>& views) const;
-  SceneEstimate perceive(const DepthView& view) const { return perceive(std::vector<DepthView>{view}); }
+  SceneEstimate perceive(const DepthView& view) const {
+    return perceive(std::vector<DepthView>{view});
+  }
 
   const PerceptionConfig& config() const;
   const CvaeConfig& modelConfig() const;

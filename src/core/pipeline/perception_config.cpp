@@ -37,6 +37,19 @@ void houghFields(C& c, F&& f) {
   f("split_max_rounds", c.split_max_rounds);
 }
 template <class C, class F>
+void segmentFields(C& c, F&& f) {
+  f("enabled", c.enabled);
+  f("pixel_stride", c.pixel_stride);
+  f("voxel_resolution_m", c.voxel_resolution_m);
+  f("seed_resolution_m", c.seed_resolution_m);
+  f("concavity_tolerance_deg", c.concavity_tolerance_deg);
+  f("min_segment_points", c.min_segment_points);
+  f("min_instance_share", c.min_instance_share);
+  f("free_space_margin_m", c.free_space_margin_m);
+  f("max_free_share", c.max_free_share);
+  f("hull_samples", c.hull_samples);
+}
+template <class C, class F>
 void fitFields(C& c, F&& f) {
   f("min_scale_m", c.min_scale_m);
   f("max_scale_m", c.max_scale_m);
@@ -106,13 +119,16 @@ PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& 
   if (!root.IsMap()) throw std::runtime_error(path + ": expected a YAML map");
   for (const auto& kv : root) {
     const std::string section = kv.first.as<std::string>();
-    if (section != "perception" && section != "hough" && section != "fitting" && section != "table")
+    if (section != "perception" && section != "hough" && section != "segments" &&
+        section != "fitting" && section != "table")
       throw std::runtime_error(path + ": unknown section '" + section + "'");
   }
   readSection(
       root, "perception", &c, [](auto& x, auto&& f) { perceptionFields(x, f); }, path);
   readSection(
       root, "hough", &c.hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
+  readSection(
+      root, "segments", &c.segments, [](auto& x, auto&& f) { segmentFields(x, f); }, path);
   readSection(
       root, "fitting", &c.fit, [](auto& x, auto&& f) { fitFields(x, f); }, path);
   readSection(
@@ -130,6 +146,7 @@ std::string perceptionYaml(const PerceptionConfig& config) {
   e << YAML::BeginMap;
   writeSection(e, "perception", c, [](auto& x, auto&& f) { perceptionFields(x, f); });
   writeSection(e, "hough", c.hough, [](auto& x, auto&& f) { houghFields(x, f); });
+  writeSection(e, "segments", c.segments, [](auto& x, auto&& f) { segmentFields(x, f); });
   writeSection(e, "fitting", c.fit, [](auto& x, auto&& f) { fitFields(x, f); });
   writeSection(e, "table", c.table, [](auto& x, auto&& f) { tableFields(x, f); });
   e << YAML::EndMap;

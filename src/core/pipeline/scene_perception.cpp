@@ -1,6 +1,5 @@
 #include "simstack/pipeline/scene_perception.h"
 
-
 #include <algorithm>
 #include <chrono>
 #include <limits>
@@ -24,11 +23,10 @@ void checkView(const DepthView& v, size_t index) {
   v.camera.validate();
   if (v.depth.width != v.camera.width || v.depth.height != v.camera.height ||
       v.depth.pixels.size() != static_cast<size_t>(v.depth.width) * v.depth.height)
-    throw std::invalid_argument("view " + std::to_string(index) + ": the depth image is " +
-                                std::to_string(v.depth.width) + "x" +
-                                std::to_string(v.depth.height) + " but its camera is " +
-                                std::to_string(v.camera.width) + "x" +
-                                std::to_string(v.camera.height));
+    throw std::invalid_argument(
+        "view " + std::to_string(index) + ": the depth image is " + std::to_string(v.depth.width) +
+        "x" + std::to_string(v.depth.height) + " but its camera is " +
+        std::to_string(v.camera.width) + "x" + std::to_string(v.camera.height));
 }
 
 /// x/y centre of the visible pile: the median of above-table points, then the centroid of
@@ -64,11 +62,14 @@ std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>
   return fitInstances(points, fit, config.joint_refinement, config.min_instance_points);
 }
 
-void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings* timings) {
+void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings* timings,
+               const SurfaceSegments* segments) {
   auto t = Clock::now();
   HoughConfig hough = config.hough;
   hough.threads = std::max(1, config.threads);
-  const InstanceSegmentation seg = houghInstances(h->tsdf_m, h->votes, hough);
+  InstanceSegmentation seg = houghInstances(h->tsdf_m, h->votes, hough);
+  if (segments && config.segments.enabled)
+    seg = regroupAlongSurfaceSegments(*segments, config.segments, hough.min_instance_voxels, seg);
   h->labels = seg.labels;
   if (timings) timings->instances_ms += msSince(t);
 
@@ -115,23 +116,8 @@ Image<int> pixelInstances(const DepthView& view, const SceneEstimate& est, int h
       if (!validDepth(d)) continue;
       const Vec3 p = est.T_table_camera * view.camera.backproject(u, v, d);
       if (p.z() < min_height_m) continue;
-      // The labelled voxel nearest to the point among its own and the 26 around it: the
-      // predicted surface lies up to a voxel off the observed one.
-      const Vec3i i = g.voxelIndex(p);
-      double best = std::numeric_limits<double>::infinity();
-      for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dx = -1; dx <= 1; ++dx) {
-            const int x = i.x() + dx, y = i.y() + dy, z = i.z() + dz;
-            if (!g.inside(x, y, z)) continue;
-            const int l = labels.at(x, y, z);
-            if (l < 0) continue;
-            const double d = (g.voxelCentre(x, y, z) - p).squaredNorm();
-            if (d < best) {
-              best = d;
-              out.at(u, v) = l;
-            }
-          }
+      const int i = nearestLabelledVoxel(labels, p);
+      if (i >= 0) out.at(u, v) = labels.data[i];
     }
   return out;
 }
@@ -145,9 +131,11 @@ ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Imp
   if (config.samples < 1) throw std::invalid_argument("samples must be >= 1");
   if (config.decompose_samples < 0 || config.decompose_samples > config.samples)
     throw std::invalid_argument("decompose_samples must lie in [0, samples]");
-  if (config.points_per_instance < 10) throw std::invalid_argument("points_per_instance must be >= 10");
+  if (config.points_per_instance < 10)
+    throw std::invalid_argument("points_per_instance must be >= 10");
   if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
   config.fit.validate();
+  config.segments.validate();
   impl_->config = config;
   impl_->model = std::make_unique<CvaeInference>(config.model_path, config.threads);
   if (impl_->model->config().architecture == "fc") {
@@ -168,8 +156,9 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views) con
   for (size_t i = 0; i < views.size(); ++i) {
     checkView(views[i], i);
     if (i > 0 && !views[i].T_table_camera)
-      throw std::invalid_argument("perceive: view " + std::to_string(i) +
-                                  " has no pose; only the first view may leave the table to RANSAC");
+      throw std::invalid_argument(
+          "perceive: view " + std::to_string(i) +
+          " has no pose; only the first view may leave the table to RANSAC");
   }
   const auto start = Clock::now();
   SceneEstimate out;
@@ -177,7 +166,8 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views) con
   if (views[0].T_table_camera) {
     out.T_table_camera = *views[0].T_table_camera;
   } else {
-    out.T_table_camera = estimateTablePlane(views[0].depth, views[0].camera, c.table).T_table_camera;
+    out.T_table_camera =
+        estimateTablePlane(views[0].depth, views[0].camera, c.table).T_table_camera;
     out.table_estimated = true;
   }
   out.timings.table_ms = msSince(t);
@@ -210,7 +200,15 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views) con
     h.labels = Grid3<int>(out.grid, -1);
     out.hypotheses.push_back(std::move(h));
   }
-  for (int k = 0; k < c.decompose_samples; ++k) decompose(&out.hypotheses[k], c, &out.timings);
+  std::optional<SurfaceSegments> segments;
+  if (c.segments.enabled && c.decompose_samples > 0) {
+    t = Clock::now();
+    segments = segmentVisibleSurface(views[0].depth, views[0].camera, out.T_table_camera,
+                                     c.min_pile_height_m, c.segments);
+    out.timings.instances_ms += msSince(t);
+  }
+  for (int k = 0; k < c.decompose_samples; ++k)
+    decompose(&out.hypotheses[k], c, &out.timings, segments ? &*segments : nullptr);
   out.timings.total_ms = msSince(start);
   return out;
 }

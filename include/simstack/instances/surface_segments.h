@@ -1,0 +1,90 @@
+#pragma once
+/// @file surface_segments.h
+/// A second instance cue from the observed surface. The depth points above the table are cut
+/// into locally convex patches (PCL's supervoxels, then LCCP: Stein et al., "Object
+/// partitioning using local convexity", CVPR 2014): two patches are kept apart where they
+/// meet along a concave edge, as two convex objects resting on each other do. A Hough instance
+/// whose visible surface holds such touching patches is several objects that the votes did
+/// not separate; it is split along the patches.
+///
+/// Which patches of one instance belong together is decided by convexity and visibility: if
+/// two patches were one convex object, the object would contain every segment between their
+/// points, and none of that may lie in space the camera saw through (in front of the observed
+/// depth). Patches whose joint hull the camera saw through are different objects: two boxes
+/// meeting at a concave edge, or a box in front of another. Patches whose hull hides behind
+/// the observed surface can be one object, for example two sides of a box cut apart by an
+/// occluder in front of it, and stay together.
+#include <utility>
+#include <vector>
+
+#include "simstack/geometry/image.h"
+#include "simstack/geometry/pinhole_camera.h"
+#include "simstack/instances/hough_voting.h"
+
+namespace simstack {
+
+struct SurfaceSegmentConfig {
+  bool enabled = true;                  ///< regroup the Hough instances along the patches
+  int pixel_stride = 2;                 ///< every n-th pixel of each row and column
+  double voxel_resolution_m = 0.008;    ///< supervoxel octree leaf size
+  double seed_resolution_m = 0.03;      ///< supervoxel seed spacing
+  double concavity_tolerance_deg = 10;  ///< LCCP: steeper concave edges separate patches
+  int min_segment_points = 100;         ///< smaller patches take no part (at the stride)
+  /// A patch takes part in an instance's split when it holds at least this share of the
+  /// instance's visible points.
+  double min_instance_share = 0.1;
+  /// Hull points more than this in front of the observed depth are in space seen free.
+  double free_space_margin_m = 0.02;
+  /// Two groups of patches join when at most this share of their hull's samples is seen free.
+  double max_free_share = 0.05;
+  int hull_samples = 400;  ///< samples per pair test: points on segments between the groups
+  void validate() const;   ///< std::invalid_argument naming the field
+};
+
+/// The observed surface above the table, cut into convex patches, with the view it came from.
+struct SurfaceSegments {
+  DepthImage depth;
+  PinholeCamera camera;
+  Transform T_table_camera = Transform::Identity();
+  Points3 points_table;    ///< the depth points used, table frame
+  std::vector<int> pixel;  ///< per point: its pixel, v * width + u
+  std::vector<int> patch;  ///< per point: its patch, -1 = in no patch (too small)
+  int patches = 0;
+  std::vector<std::pair<int, int>> concave_edges;  ///< patch pairs (a < b) that meet at an edge
+  std::vector<int> patchSizes() const;
+};
+
+/// Patches of one depth view (std::invalid_argument when the image and camera disagree).
+/// Points lower than `min_height_m` above the table are left out.
+SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCamera& camera,
+                                      const Transform& T_table_camera, double min_height_m,
+                                      const SurfaceSegmentConfig& config);
+
+/// Linear index of the labelled voxel (label >= 0) nearest to a table-frame point among the
+/// point's voxel and the 26 around it, -1 if none: an observed point lies up to a voxel off the
+/// predicted surface.
+int nearestLabelledVoxel(const Grid3<int>& labels, const Vec3& p_table);
+
+/// Share of `hull_samples` points on segments between point sets `a` and `b` (indices into
+/// `s.points_table`) that lie in space the view saw free; points off the image or on missing
+/// depth are not counted (0 when none is counted).
+double seenFreeShare(const SurfaceSegments& s, const std::vector<int>& a, const std::vector<int>& b,
+                     const SurfaceSegmentConfig& config, uint64_t seed);
+
+/// The Hough instances regrouped along the patches (see the file comment).
+/// - A patch is part of an instance when it holds at least `min_instance_share` of the
+///   instance's visible points (and `min_segment_points`).
+/// - Patches start as groups; two groups that are part of a common instance join when at most
+///   `max_free_share` of their hull is seen free, the least free pair first.
+/// - Each voxel of an instance goes to the group whose visible voxels it reaches first through
+///   voxels of the same instance (6-connected); voxels no group reaches, and the voxels of a
+///   group left with fewer than `min_part_voxels`, go to the group holding most of the
+///   instance. Instances with no group (unseen, or seen in small patches only) stay as they are.
+/// So an instance holding two objects is split, and two instances that share one convex patch
+/// (one object cut by the votes) are joined. Centres are the new parts' voxel means.
+InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments,
+                                                 const SurfaceSegmentConfig& config,
+                                                 int min_part_voxels,
+                                                 const InstanceSegmentation& hough);
+
+}  // namespace simstack

@@ -1,0 +1,238 @@
+// Convex patches of the observed surface and the regrouping of Hough instances along them,
+// on rendered scenes whose objects (and which pixel shows which) are known.
+#include <gtest/gtest.h>
+
+#include <map>
+
+#include "simstack/eval/segmentation.h"
+#include "simstack/instances/surface_segments.h"
+#include "simstack/render/depth_renderer.h"
+#include "simstack/scene/scene.h"
+#include "simstack/tsdf/ground_truth.h"
+
+namespace simstack {
+namespace {
+
+Superquadric box(const Vec3& semi_axes, const Vec3& centre) {
+  Superquadric s;
+  s.scale_m = semi_axes;
+  s.exponents = Vec3(10, 10, 10);
+  s.T_table_object = Transform::Identity();
+  s.T_table_object.translation() = centre;
+  return s;
+}
+
+struct View {
+  Scene scene;
+  PinholeCamera camera;
+  Transform T_table_camera;
+  RenderResult render;
+  SurfaceSegments segments;
+};
+
+View look(const std::vector<Superquadric>& shapes, const Vec3& eye, const Vec3& target) {
+  View v;
+  v.scene = Scene::fromSuperquadrics(shapes);
+  v.T_table_camera = lookAt(eye, target);
+  v.render = DepthRenderer(v.scene).render(v.camera, v.T_table_camera);
+  v.segments = segmentVisibleSurface(v.render.depth, v.camera, v.T_table_camera, 0.01,
+                                     SurfaceSegmentConfig());
+  return v;
+}
+
+// A small box resting on a larger one, towards its back corner: the larger one's top is seen
+// on two sides of it, meeting its sides along concave edges.
+View stack() {
+  return look({box({0.08, 0.06, 0.04}, {0, 0, 0.04}), box({0.04, 0.03, 0.03}, {-0.03, 0.02, 0.11})},
+              {0.45, -0.3, 0.5}, {0, 0, 0.06});
+}
+
+// A narrow box in front of a wide one: the wide one is seen on both sides of it.
+View occlusion() {
+  return look({box({0.12, 0.03, 0.05}, {0, 0.08, 0.05}), box({0.04, 0.03, 0.07}, {0, -0.03, 0.07})},
+              {0, -0.6, 0.25}, {0, 0, 0.05});
+}
+
+// Object (1-based, 0 = table or nothing) of every segment point.
+std::vector<int> pointObjects(const View& v) {
+  std::vector<int> out;
+  for (int px : v.segments.pixel) {
+    const uint8_t k = v.render.instances.pixels[px];
+    out.push_back(k == kNoSurface ? 0 : k);
+  }
+  return out;
+}
+
+std::vector<int> pointsOf(const View& v, int object) {
+  const std::vector<int> objects = pointObjects(v);
+  std::vector<int> out;
+  for (size_t i = 0; i < objects.size(); ++i)
+    if (objects[i] == object) out.push_back(static_cast<int>(i));
+  return out;
+}
+
+TEST(SurfaceSegments, PatchesFollowTheObjectsOfAStack) {
+  const View v = stack();
+  ASSERT_GE(v.segments.patches, 2);
+  ASSERT_EQ(v.segments.points_table.size(), v.segments.patch.size());
+  ASSERT_EQ(v.segments.points_table.size(), v.segments.pixel.size());
+  const std::vector<int> objects = pointObjects(v);
+  // Every patch lies on one object; each object has a patch of its own.
+  std::vector<std::map<int, int>> hits(v.segments.patches);
+  for (size_t i = 0; i < objects.size(); ++i)
+    if (v.segments.patch[i] >= 0) ++hits[v.segments.patch[i]][objects[i]];
+  std::map<int, int> largest_patch_of;  // object -> points of its largest patch
+  for (const auto& h : hits) {
+    int total = 0, most = 0, object = 0;
+    for (const auto& [k, n] : h) {
+      total += n;
+      if (n > most) most = n, object = k;
+    }
+    EXPECT_GE(most, 0.95 * total) << "a patch spans two objects";
+    largest_patch_of[object] = std::max(largest_patch_of[object], most);
+  }
+  EXPECT_GE(largest_patch_of[1], 200);
+  EXPECT_GE(largest_patch_of[2], 200);
+}
+
+TEST(SurfaceSegments, TheHullOfTwoObjectsIsSeenFreeAndOneHiddenObjectsIsNot) {
+  const SurfaceSegmentConfig c;
+  const View s = stack();
+  EXPECT_GT(seenFreeShare(s.segments, pointsOf(s, 1), pointsOf(s, 2), c, 1), 0.1);
+
+  const View v = occlusion();
+  // The wide box (1) on either side of the narrow one (2), split at the narrow one's middle.
+  double u_front = 0;
+  const std::vector<int> front = pointsOf(v, 2);
+  for (int i : front) u_front += v.segments.pixel[i] % v.camera.width;
+  u_front /= front.size();
+  std::vector<int> left, right;
+  for (int i : pointsOf(v, 1))
+    (v.segments.pixel[i] % v.camera.width < u_front ? left : right).push_back(i);
+  ASSERT_GE(left.size(), 100u);
+  ASSERT_GE(right.size(), 100u);
+  EXPECT_LT(seenFreeShare(v.segments, left, right, c, 1), 0.02);
+  EXPECT_GT(seenFreeShare(v.segments, front, left, c, 1), 0.1);
+  EXPECT_GT(seenFreeShare(v.segments, front, right, c, 1), 0.1);
+  EXPECT_EQ(seenFreeShare(v.segments, {}, left, c, 1), 0.0);
+}
+
+// Hough-like instances from the true labels, with `relabel` mapping true objects (1-based)
+// to instances (-1 = free).
+InstanceSegmentation instancesFrom(const Grid3<uint8_t>& truth, const std::vector<int>& relabel) {
+  InstanceSegmentation seg;
+  seg.labels = Grid3<int>(truth.spec, -1);
+  int count = 0;
+  for (size_t i = 0; i < truth.data.size(); ++i) {
+    seg.labels.data[i] = relabel[truth.data[i]];
+    count = std::max(count, seg.labels.data[i] + 1);
+  }
+  seg.centres_table.assign(count, Vec3::Zero());
+  seg.voxel_counts.assign(count, 0);
+  for (size_t i = 0; i < truth.data.size(); ++i)
+    if (seg.labels.data[i] >= 0) ++seg.voxel_counts[seg.labels.data[i]];
+  return seg;
+}
+
+std::vector<int> truthLabels(const Grid3<uint8_t>& truth) {
+  std::vector<int> out;
+  for (uint8_t k : truth.data) out.push_back(static_cast<int>(k) - 1);
+  return out;
+}
+
+TEST(RegroupAlongSurfaceSegments, SplitsAMergedStack) {
+  const View v = stack();
+  const GridSpec grid = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 32);
+  const GroundTruthGrids gt = computeGroundTruth(v.scene, grid, 0.06);
+  const InstanceSegmentation merged = instancesFrom(gt.labels, {-1, 0, 0});
+  const InstanceSegmentation out =
+      regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, merged);
+  ASSERT_EQ(out.size(), 2);
+  EXPECT_GT(segmentationAgreement(truthLabels(gt.labels), out.labels.data).agreement, 0.9);
+  int total = 0;
+  for (int k = 0; k < 2; ++k) total += out.voxel_counts[k];
+  EXPECT_EQ(total, merged.voxel_counts[0]);
+  // Each centre near its object's centre (the lower box is the larger one).
+  const int lower = out.voxel_counts[0] > out.voxel_counts[1] ? 0 : 1;
+  EXPECT_LT((out.centres_table[lower] - Vec3(0, 0, 0.04)).norm(), 0.02);
+  EXPECT_LT((out.centres_table[1 - lower] - Vec3(-0.03, 0.02, 0.11)).norm(), 0.02);
+}
+
+TEST(RegroupAlongSurfaceSegments, KeepsTwoObjectsApartAndAnOccludedOneWhole) {
+  const View v = occlusion();
+  const GridSpec grid = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 32);
+  const GroundTruthGrids gt = computeGroundTruth(v.scene, grid, 0.06);
+  // Already right: nothing changes, although the wide box is seen in two pieces.
+  const InstanceSegmentation right = instancesFrom(gt.labels, {-1, 0, 1});
+  const InstanceSegmentation kept =
+      regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, right);
+  ASSERT_EQ(kept.size(), 2);
+  EXPECT_GT(segmentationAgreement(truthLabels(gt.labels), kept.labels.data).agreement, 0.99);
+  // Merged: split into the two, the wide box's pieces together.
+  const InstanceSegmentation out = regroupAlongSurfaceSegments(
+      v.segments, SurfaceSegmentConfig(), 5, instancesFrom(gt.labels, {-1, 0, 0}));
+  ASSERT_EQ(out.size(), 2);
+  EXPECT_GT(segmentationAgreement(truthLabels(gt.labels), out.labels.data).agreement, 0.85);
+}
+
+TEST(RegroupAlongSurfaceSegments, JoinsABoxCutInTwoAndKeepsAnUnseenInstance) {
+  const View v = stack();
+  const GridSpec grid = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 32);
+  const GroundTruthGrids gt = computeGroundTruth(v.scene, grid, 0.06);
+  InstanceSegmentation seg = instancesFrom(gt.labels, {-1, 0, 2});
+  // The lower box cut by the plane x = 0 into instances 0 and 1.
+  for (int z = 0; z < 32; ++z)
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 32; ++x)
+        if (seg.labels.at(x, y, z) == 0 && grid.voxelCentre(x, y, z).x() > 0)
+          seg.labels.at(x, y, z) = 1;
+  // And an instance where the camera sees nothing: voxels in a far corner, under the table
+  // plane's height for the points (no point is near them).
+  for (int z = 0; z < 2; ++z)
+    for (int y = 0; y < 3; ++y)
+      for (int x = 0; x < 3; ++x) seg.labels.at(x, y, z) = 3;
+  seg.centres_table.assign(4, Vec3::Zero());
+  seg.voxel_counts.assign(4, 0);
+  for (int l : seg.labels.data)
+    if (l >= 0) ++seg.voxel_counts[l];
+  ASSERT_GT(seg.voxel_counts[1], 20);
+  const InstanceSegmentation out =
+      regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, seg);
+  EXPECT_EQ(out.size(), 3);
+  // The corner instance is untouched, whatever its new index.
+  const int corner = out.labels.at(0, 0, 0);
+  ASSERT_GE(corner, 0);
+  EXPECT_EQ(out.voxel_counts[corner], 18);
+  std::vector<int> truth = truthLabels(gt.labels);
+  for (int z = 0; z < 2; ++z)
+    for (int y = 0; y < 3; ++y)
+      for (int x = 0; x < 3; ++x) truth[grid.linear(x, y, z)] = 2;
+  EXPECT_GT(segmentationAgreement(truth, out.labels.data).agreement, 0.95);
+}
+
+TEST(SurfaceSegments, EmptyViewsAndBadSettings) {
+  const View v = look({}, {0.4, -0.3, 0.5}, {0, 0, 0});
+  EXPECT_EQ(v.segments.patches, 0);  // only the table, which is left out
+  InstanceSegmentation none;
+  none.labels = Grid3<int>(GridSpec::sceneGrid(Vec2(0, 0), 0.64, 32), -1);
+  EXPECT_EQ(regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, none).size(), 0);
+
+  SurfaceSegmentConfig bad;
+  bad.seed_resolution_m = bad.voxel_resolution_m;
+  try {
+    bad.validate();
+    ADD_FAILURE() << "seed resolution <= voxel resolution must be refused";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("seed_resolution_m"), std::string::npos);
+  }
+  bad = SurfaceSegmentConfig();
+  bad.max_free_share = 1.0;
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+  DepthImage wrong(10, 10, 0.5f);
+  EXPECT_THROW(segmentVisibleSurface(wrong, PinholeCamera(), Transform::Identity(), 0.01,
+                                     SurfaceSegmentConfig()),
+               std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace simstack
