@@ -103,9 +103,12 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
   std::map<std::uint32_t, int> size;
   for (const auto& p : labelled->points)
     if (p.label != 0) ++size[p.label];
+  // Numbered in the order of their first point: PCL's labels depend on where its supervoxels
+  // land in memory, and the regrouping breaks ties by patch order.
   std::map<std::uint32_t, int> index;
-  for (const auto& [label, n] : size)
-    if (n >= config.min_segment_points) index[label] = out.patches++;
+  for (const auto& p : labelled->points)
+    if (p.label != 0 && size[p.label] >= config.min_segment_points && !index.count(p.label))
+      index[p.label] = out.patches++;
   for (size_t i = 0; i < labelled->size() && i < out.patch.size(); ++i) {
     const auto it = index.find(labelled->points[i].label);
     if (it != index.end()) out.patch[i] = it->second;
