@@ -5,7 +5,8 @@
 /// partitioning using local convexity", CVPR 2014): two patches are kept apart where they
 /// meet along a concave edge, as two convex objects resting on each other do. A Hough instance
 /// whose visible surface holds such touching patches is several objects that the votes did
-/// not separate; it is split along the patches.
+/// not separate; it is split along the patches. Hough instances that share one convex patch
+/// are one object that the votes cut, and are joined.
 ///
 /// Which patches of one instance belong together is decided by convexity and visibility: if
 /// two patches were one convex object, the object would contain every segment between their
@@ -30,8 +31,8 @@ struct SurfaceSegmentConfig {
   double seed_resolution_m = 0.03;      ///< supervoxel seed spacing
   double concavity_tolerance_deg = 10;  ///< LCCP: steeper concave edges separate patches
   int min_segment_points = 100;         ///< smaller patches take no part (at the stride)
-  /// A patch takes part in an instance's split when it holds at least this share of the
-  /// instance's visible points.
+  /// A patch is part of an instance when it holds at least this share of the instance's
+  /// visible points.
   double min_instance_share = 0.1;
   /// Hull points more than this in front of the observed depth are in space seen free.
   double free_space_margin_m = 0.02;
@@ -51,7 +52,6 @@ struct SurfaceSegments {
   std::vector<int> patch;  ///< per point: its patch, -1 = in no patch (too small)
   int patches = 0;
   std::vector<std::pair<int, int>> concave_edges;  ///< patch pairs (a < b) that meet at an edge
-  std::vector<int> patchSizes() const;
 };
 
 /// Patches of one depth view (std::invalid_argument when the image and camera disagree).

@@ -33,13 +33,6 @@ void SurfaceSegmentConfig::validate() const {
   if (hull_samples < 1) fail("hull_samples must be >= 1");
 }
 
-std::vector<int> SurfaceSegments::patchSizes() const {
-  std::vector<int> n(patches, 0);
-  for (int p : patch)
-    if (p >= 0) ++n[p];
-  return n;
-}
-
 SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCamera& camera,
                                       const Transform& T_table_camera, double min_height_m,
                                       const SurfaceSegmentConfig& config) {
