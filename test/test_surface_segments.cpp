@@ -53,6 +53,11 @@ View occlusion() {
               {0, -0.6, 0.25}, {0, 0, 0.05});
 }
 
+const GridSpec kGrid = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 32);
+
+// The view's scene on the test grid: true TSDF, votes and labels.
+GroundTruthGrids truthOf(const View& v) { return computeGroundTruth(v.scene, kGrid, 0.06); }
+
 // Object (1-based, 0 = table or nothing) of every segment point.
 std::vector<int> pointObjects(const View& v) {
   std::vector<int> out;
@@ -142,8 +147,7 @@ std::vector<int> truthLabels(const Grid3<uint8_t>& truth) {
 
 TEST(RegroupAlongSurfaceSegments, SplitsAMergedStackAlongItsVisibleSurface) {
   const View v = stack();
-  const GridSpec grid = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 32);
-  const GroundTruthGrids gt = computeGroundTruth(v.scene, grid, 0.06);
+  const GroundTruthGrids gt = truthOf(v);
   const InstanceSegmentation merged = instancesFrom(gt.labels, {-1, 0, 0});
   const InstanceSegmentation out =
       regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, merged);
@@ -179,8 +183,7 @@ TEST(RegroupAlongSurfaceSegments, SplitsAMergedStackAlongItsVisibleSurface) {
 
 TEST(RegroupAlongSurfaceSegments, KeepsTwoObjectsApartAndAnOccludedOneWhole) {
   const View v = occlusion();
-  const GridSpec grid = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 32);
-  const GroundTruthGrids gt = computeGroundTruth(v.scene, grid, 0.06);
+  const GroundTruthGrids gt = truthOf(v);
   // Already right: nothing changes, although the wide box is seen in two pieces.
   const InstanceSegmentation right = instancesFrom(gt.labels, {-1, 0, 1});
   const InstanceSegmentation kept =
@@ -196,14 +199,13 @@ TEST(RegroupAlongSurfaceSegments, KeepsTwoObjectsApartAndAnOccludedOneWhole) {
 
 TEST(RegroupAlongSurfaceSegments, JoinsABoxCutInTwoAndKeepsAnUnseenInstance) {
   const View v = stack();
-  const GridSpec grid = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 32);
-  const GroundTruthGrids gt = computeGroundTruth(v.scene, grid, 0.06);
+  const GroundTruthGrids gt = truthOf(v);
   InstanceSegmentation seg = instancesFrom(gt.labels, {-1, 0, 2});
   // The lower box cut by the plane x = 0 into instances 0 and 1.
   for (int z = 0; z < 32; ++z)
     for (int y = 0; y < 32; ++y)
       for (int x = 0; x < 32; ++x)
-        if (seg.labels.at(x, y, z) == 0 && grid.voxelCentre(x, y, z).x() > 0)
+        if (seg.labels.at(x, y, z) == 0 && kGrid.voxelCentre(x, y, z).x() > 0)
           seg.labels.at(x, y, z) = 1;
   // And an instance where the camera sees nothing: voxels in a far corner, under the table
   // plane's height for the points (no point is near them).
@@ -225,7 +227,7 @@ TEST(RegroupAlongSurfaceSegments, JoinsABoxCutInTwoAndKeepsAnUnseenInstance) {
   std::vector<int> truth = truthLabels(gt.labels);
   for (int z = 0; z < 2; ++z)
     for (int y = 0; y < 3; ++y)
-      for (int x = 0; x < 3; ++x) truth[grid.linear(x, y, z)] = 2;
+      for (int x = 0; x < 3; ++x) truth[kGrid.linear(x, y, z)] = 2;
   EXPECT_GT(segmentationAgreement(truth, out.labels.data).agreement, 0.95);
 }
 
@@ -243,7 +245,7 @@ TEST(SurfaceSegments, EmptyViewsAndBadSettings) {
   const View v = look({}, {0.4, -0.3, 0.5}, {0, 0, 0});
   EXPECT_EQ(v.segments.patches, 0);  // only the table, which is left out
   InstanceSegmentation none;
-  none.labels = Grid3<int>(GridSpec::sceneGrid(Vec2(0, 0), 0.64, 32), -1);
+  none.labels = Grid3<int>(kGrid, -1);
   EXPECT_EQ(regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, none).size(), 0);
 
   SurfaceSegmentConfig bad;

@@ -252,7 +252,6 @@ InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments
 
   // Every voxel of a grouped instance goes to the group whose visible voxels it reaches first,
   // moving through voxels of the same instance (6-connected).
-  const int r = g.resolution;
   const int n = static_cast<int>(labels.data.size());
   std::vector<int> owner(n, -1);
   std::deque<int> queue;
@@ -266,7 +265,8 @@ InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments
   while (!queue.empty()) {
     const int v = queue.front();
     queue.pop_front();
-    const int x = v % r, y = (v / r) % r, z = v / (r * r);
+    const Vec3i at = g.unravel(v);
+    const int x = at.x(), y = at.y(), z = at.z();
     const int next[6][3] = {{x - 1, y, z}, {x + 1, y, z}, {x, y - 1, z},
                             {x, y + 1, z}, {x, y, z - 1}, {x, y, z + 1}};
     for (const auto& c : next) {
@@ -313,7 +313,8 @@ InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments
   for (int v = 0; v < n; ++v) {
     const int l = out.labels.data[v];
     if (l < 0) continue;
-    out.centres_table[l] += g.voxelCentre(v % r, (v / r) % r, v / (r * r));
+    const Vec3i c = g.unravel(v);
+    out.centres_table[l] += g.voxelCentre(c.x(), c.y(), c.z());
     ++out.voxel_counts[l];
   }
   for (int l = 0; l < next_label; ++l) out.centres_table[l] /= out.voxel_counts[l];
