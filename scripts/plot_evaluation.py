@@ -17,7 +17,12 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-STYLE = {"cvae": ("C0", "C-VAE (ours)"), "fc": ("C1", "FC baseline"), "classical": ("C2", "classical")}
+STYLE = {
+    "cvae": ("C0", "C-VAE (ours)"),
+    "fc": ("C1", "C-VAE without its code"),
+    "fc_plain": ("C3", "FC baseline (paper)"),
+    "classical": ("C2", "classical"),
+}
 
 
 def bins_of(method):

@@ -51,7 +51,7 @@ struct RemoveAtExit {
 
 TEST(Cvae, OutputShapesAreRightAndFinite) {
   torch::manual_seed(0);
-  for (const std::string arch : {"cvae", "fc"}) {
+  for (const std::string arch : {"cvae", "fc", "fc_plain"}) {
     Cvae model(tiny(arch));
     const auto partial = torch::rand({2, 2, 16, 16, 16}) * 2 - 1;
     const auto tsdf = torch::rand({2, 1, 16, 16, 16}) * 2 - 1;
@@ -68,6 +68,31 @@ TEST(Cvae, OutputShapesAreRightAndFinite) {
     const CvaeLosses l = computeLosses(o, partial, tsdf, votes, model->config());
     EXPECT_TRUE(std::isfinite(l.total.item<double>())) << arch;
   }
+}
+
+// The paper's FC baseline decodes from the encoder's deepest map alone: its decoder blocks
+// below the deepest scale read only the decoder's own features, where the C-VAE's and our FC
+// ablation's also read the condition's map of that scale (twice the input channels).
+TEST(Cvae, PlainFcDecoderReadsNoFinerConditionMaps) {
+  auto inputChannels = [](const std::string& arch, int level) {
+    Cvae model(tiny(arch));
+    const std::string name = "dec_joint" + std::to_string(level) + ".a.conv.weight";
+    for (const auto& p : model->named_parameters())
+      if (p.key() == name) return p.value().size(1);
+    ADD_FAILURE() << "no parameter " << name << " in " << arch;
+    return int64_t{-1};
+  };
+  // tiny(): widths 4, 8, 16, 16, 16 over the five scales.
+  const std::vector<int64_t> widths{4, 8, 16, 16, 16};
+  for (int level = 0; level < 4; ++level) {
+    EXPECT_EQ(inputChannels("fc_plain", level), widths[level]) << level;
+    EXPECT_EQ(inputChannels("fc", level), 2 * widths[level]) << level;
+    EXPECT_EQ(inputChannels("cvae", level), 2 * widths[level]) << level;
+  }
+  EXPECT_EQ(inputChannels("fc_plain", 4), 2 * widths[4]);
+  // It has no code: one prediction, whatever the codes asked for.
+  EXPECT_FALSE(tiny("fc_plain").hasLatentCode());
+  EXPECT_TRUE(tiny("cvae").hasLatentCode());
 }
 
 TEST(Cvae, LossesMatchHandComputedValues) {

@@ -33,8 +33,9 @@ int main(int argc, char** argv) {
   app.add_flag("--resume", resume, "continue from OUTPUT/checkpoint.pt");
   app.add_option("--threads", threads, "torch threads (overrides training.threads)")
       ->check(CLI::Range(1, 256));
-  app.add_option("--architecture", architecture, "cvae or fc (overrides model.architecture)")
-      ->check(CLI::IsMember({"cvae", "fc"}));
+  app.add_option("--architecture", architecture,
+                 "cvae, fc or fc_plain (overrides model.architecture)")
+      ->check(CLI::IsMember({"cvae", "fc", "fc_plain"}));
   app.add_option("--steps", steps, "optimiser steps (overrides training.steps)")
       ->check(CLI::PositiveNumber);
   app.add_option("--init-from", init_from,
@@ -68,8 +69,7 @@ int main(int argc, char** argv) {
       std::cout << "\n  posterior on the last training batches: mu RMS " << r.posterior_mu_rms
                 << ", mean sigma " << r.posterior_sigma;
     }
-    std::cout << "\n  model: " << output
-              << "/model.pt (provenance in model.yaml)\n";
+    std::cout << "\n  model: " << output << "/model.pt (provenance in model.yaml)\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_train: error: " << e.what() << "\n";

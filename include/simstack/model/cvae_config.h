@@ -12,15 +12,19 @@ namespace simstack {
 /// Architecture and loss weights (paper section 3.1 and Appendix C). Stored inside every model
 /// file, so that a file rebuilds its own network.
 struct CvaeConfig {
-  std::string architecture = "cvae";  ///< "cvae" (the paper's model) or "fc" (section 4.1 ablation)
-  int resolution = 32;                ///< R; the paper's 64 is a configuration
-  double extent_m = 0.64;             ///< side of the scene grid
-  double truncation_vox = 3.0;        ///< tau in voxels; the network sees tsdf / tau
-  int base_channels = 8;              ///< width of the first stage; doubles per stage
-  int max_channels = 64;              ///< cap of the deepest widths (they hold most parameters)
-  int latent_size = 96;               ///< VAE latent z
-  int condition_size = 96;            ///< bottleneck of the conditioning autoencoder
-  int hidden_size = 128;              ///< width of the hidden linear layer on either side
+  /// "cvae" (the paper's model); "fc": the C-VAE without its code, decoding the conditioning
+  /// encoder's maps at every scale (our ablation: it isolates what the code adds); "fc_plain":
+  /// the FC baseline as the paper's section 4.1 and Appendix C draw it, an encoder whose
+  /// deepest features alone are decoded by two task branches (no encoder maps at finer scales).
+  std::string architecture = "cvae";
+  int resolution = 32;          ///< R; the paper's 64 is a configuration
+  double extent_m = 0.64;       ///< side of the scene grid
+  double truncation_vox = 3.0;  ///< tau in voxels; the network sees tsdf / tau
+  int base_channels = 8;        ///< width of the first stage; doubles per stage
+  int max_channels = 64;        ///< cap of the deepest widths (they hold most parameters)
+  int latent_size = 96;         ///< VAE latent z
+  int condition_size = 96;      ///< bottleneck of the conditioning autoencoder
+  int hidden_size = 128;        ///< width of the hidden linear layer on either side
   /// Normalisation in every convolution block: "batch" (the paper's BatchNorm) or "group"
   /// (GroupNorm, 4 channels per group). In training mode BatchNorm makes each sample's code
   /// depend on the rest of its batch, which the MMD estimate assumes it does not (README).
@@ -80,6 +84,8 @@ struct CvaeConfig {
   /// Throws std::invalid_argument naming the bad field.
   void validate() const;
   std::string toYaml() const;
+  /// Only the C-VAE has a latent code; the FC networks give one deterministic prediction.
+  bool hasLatentCode() const { return architecture == "cvae"; }
   /// Parses YAML text (fields absent keep their defaults); throws std::invalid_argument.
   static CvaeConfig fromYaml(const std::string& text);
   /// Takes the loss weights and settings (not the network) of `other`.

@@ -121,14 +121,17 @@ CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
   for (int i = 4; i >= 0; --i) {
     if (i < 4)
       dec_up_.push_back(register_module("dec_up" + std::to_string(i), Upsample(w[i + 1], w[i])));
-    dec_joint_.push_back(
-        register_module("dec_joint" + std::to_string(i), ResSEBlock(2 * w[i], w[i], 1, gn)));
+    // Each scale reads the condition's map of that size too, except in the plain FC baseline,
+    // which decodes from the deepest map alone.
+    const bool skip = i == 4 || config.architecture != "fc_plain";
+    dec_joint_.push_back(register_module("dec_joint" + std::to_string(i),
+                                         ResSEBlock((skip ? 2 : 1) * w[i], w[i], 1, gn)));
   }
   head_tsdf = register_module("head_tsdf", ConvBlock(w[0], w[0], 1, gn));
   head_votes = register_module("head_votes", ConvBlock(w[0], w[0], 1, gn));
   out_tsdf = register_module("out_tsdf", makeConv(w[0], 1, 1, 1, true));
   out_votes = register_module("out_votes", makeConv(w[0], 3, 1, 1, true));
-  if (config.architecture == "cvae") {
+  if (config.hasLatentCode()) {
     // Task-specific first layers, then 5 joint residual-SE layers to the latent code.
     enc_tsdf1 = register_module("enc_tsdf1", ConvBlock(1, w[0], 1, gn));
     enc_tsdf2 = register_module("enc_tsdf2", ConvBlock(w[0], w[0], 1, gn));
@@ -195,6 +198,10 @@ CvaeOutput CvaeImpl::decode(const torch::Tensor& bottleneck, const std::vector<t
   for (int level = 4, k = 0; level >= 0; --level, ++k) {
     if (level < 4) x = dec_up_[k - 1](x);
     if (!dec_code_.empty() && z.defined()) x = x + dec_code_[k](z).view({z.size(0), -1, 1, 1, 1});
+    if (level < 4 && config_.architecture == "fc_plain") {
+      x = dec_joint_[k](x);
+      continue;
+    }
     const torch::Tensor c = keep.defined() && level <= 1 ? cond[level] * keep : cond[level];
     x = dec_joint_[k](torch::cat({x, c}, 1));
   }
@@ -208,7 +215,7 @@ CvaeOutput CvaeImpl::forward(const torch::Tensor& partial, const torch::Tensor& 
                              const torch::Tensor& votes) {
   const std::vector<torch::Tensor> cond = encodeCondition(partial);
   const torch::Tensor partial_recon = decodeCondition(cond[4]);
-  if (config_.architecture == "fc") {
+  if (!config_.hasLatentCode()) {
     CvaeOutput out = decode(cond[4], cond);
     out.partial_recon = partial_recon;
     return out;
@@ -234,7 +241,7 @@ CvaeOutput CvaeImpl::forward(const torch::Tensor& partial, const torch::Tensor& 
 
 CvaeOutput CvaeImpl::generate(const torch::Tensor& partial, const torch::Tensor& z) {
   std::vector<torch::Tensor> cond = encodeCondition(partial);
-  if (config_.architecture == "fc") return decode(cond[4], cond);
+  if (!config_.hasLatentCode()) return decode(cond[4], cond);
   const auto b = z.size(0);
   if (partial.size(0) == 1 && b > 1) {
     // One condition for all codes: encode it once, share its features.

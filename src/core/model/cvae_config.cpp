@@ -77,8 +77,8 @@ void require(bool ok, const std::string& what) {
 }  // namespace
 
 void CvaeConfig::validate() const {
-  require(architecture == "cvae" || architecture == "fc",
-          "architecture must be 'cvae' or 'fc', got '" + architecture + "'");
+  require(architecture == "cvae" || architecture == "fc" || architecture == "fc_plain",
+          "architecture must be 'cvae', 'fc' or 'fc_plain', got '" + architecture + "'");
   require(resolution >= 16 && (resolution & (resolution - 1)) == 0,
           "resolution must be a power of two >= 16, got " + std::to_string(resolution));
   require(extent_m > 0.0, "extent_m must be > 0");

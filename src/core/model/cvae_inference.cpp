@@ -51,7 +51,7 @@ std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_t
   if (zero_code_first) z[0].zero_();
   // The condition is encoded once and shared by the S codes; the FC baseline has no code and
   // runs once.
-  CvaeOutput out = impl_->model->generate(one, c.architecture == "fc" ? z.narrow(0, 0, 1) : z);
+  CvaeOutput out = impl_->model->generate(one, c.hasLatentCode() ? z : z.narrow(0, 0, 1));
   if (out.tsdf.size(0) == 1 && samples > 1) {
     out.tsdf = out.tsdf.expand({samples, -1, -1, -1, -1});
     out.votes = out.votes.expand({samples, -1, -1, -1, -1});

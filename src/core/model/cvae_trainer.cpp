@@ -5,8 +5,8 @@
 
 #include <algorithm>
 #include <cctype>
-#include <cmath>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <cstdio>
 #include <deque>
@@ -216,7 +216,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
       const OccupancyScores sc = scoreOccupancy(s.tsdf, preds);
       iou += sc.iou;
       bce += sc.bce;
-      if (mc.architecture == "cvae") {
+      if (mc.hasLatentCode()) {
         // The code the encoder gives when it sees the ground truth (posterior mean): better
         // than prior codes only when the code carries what the view does not show.
         const torch::Tensor mu = model->forward(b.partial, b.tsdf, b.votes).mu;
@@ -230,9 +230,8 @@ TrainingReport CvaeTrainer::run(bool resume) {
     }
     report->validation_iou = iou / count;
     report->validation_bce = bce / count;
-    report->validation_posterior_iou = mc.architecture == "cvae"
-                                           ? posterior_iou / count
-                                           : std::numeric_limits<double>::quiet_NaN();
+    report->validation_posterior_iou =
+        mc.hasLatentCode() ? posterior_iou / count : std::numeric_limits<double>::quiet_NaN();
     report->validation_disagreement = predicted > 0 ? static_cast<double>(disagree) / predicted : 0;
     model->train();
   };
@@ -257,7 +256,8 @@ TrainingReport CvaeTrainer::run(bool resume) {
   // The encoder's posterior on the training batches (train mode; in eval mode BatchNorm's
   // running statistics give other codes): mean square of mu and mean sigma, last 50 steps.
   std::deque<std::array<double, 2>> posterior;
-  ProgressBar bar(mc.architecture == "fc" ? "training FC" : "training C-VAE", tc.steps, start);
+  ProgressBar bar(mc.hasLatentCode() ? "training C-VAE" : "training " + mc.architecture, tc.steps,
+                  start);
   auto t0 = std::chrono::steady_clock::now();
   int64_t trained = 0;
   model->train();
@@ -289,8 +289,8 @@ TrainingReport CvaeTrainer::run(bool resume) {
     if (recent.size() > 50) recent.pop_front();
     if (o.mu.defined()) {
       torch::NoGradGuard no_grad;
-      posterior.push_back({o.mu.pow(2).mean().item<double>(),
-                           torch::exp(0.5 * o.logvar).mean().item<double>()});
+      posterior.push_back(
+          {o.mu.pow(2).mean().item<double>(), torch::exp(0.5 * o.logvar).mean().item<double>()});
       if (posterior.size() > 50) posterior.pop_front();
       double mu_sq = 0.0, sigma = 0.0;
       for (const auto& p : posterior) {

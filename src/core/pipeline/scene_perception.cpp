@@ -138,7 +138,7 @@ ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Imp
   config.segments.validate();
   impl_->config = config;
   impl_->model = std::make_unique<CvaeInference>(config.model_path, config.threads);
-  if (impl_->model->config().architecture == "fc") {
+  if (!impl_->model->config().hasLatentCode()) {
     // No latent space: S hypotheses would be S copies of one.
     impl_->config.samples = 1;
     impl_->config.decompose_samples = std::min(impl_->config.decompose_samples, 1);
