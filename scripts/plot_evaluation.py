@@ -3,9 +3,11 @@
 
     scripts/plot_evaluation.py results_synthetic.json [results_ycb.json ...] --output docs/figures
 
-For every results file: Chamfer distance on the visible (VS) and full (FS) surface against the
+For every test set: Chamfer distance on the visible (VS) and full (FS) surface against the
 visible share of the pile's surface (the paper's Figure 5), IoU and the share of stable piles
-against the same bins, one line per method.
+against the same bins, one line per method. Files of the same test set (dataset seed, scenes and
+views), such as a later run of one more method, are drawn into one figure, named after the
+first of them; files without methods (the real-data report) are skipped.
 """
 import argparse
 import json
@@ -36,12 +38,14 @@ def value(b, key, scale=1.0):
     return None if v is None else v * scale
 
 
-def plot_file(path, out_dir):
-    with open(path) as f:
-        results = json.load(f)
-    name = os.path.splitext(os.path.basename(path))[0]
+def plot_set(paths, sets, out_dir):
+    results = sets[0]
+    name = os.path.splitext(os.path.basename(paths[0]))[0]
+    methods = {}
+    for r in sets:
+        methods.update(r["methods"])
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
-    for method_name, method in results["methods"].items():
+    for method_name, method in methods.items():
         colour, label = STYLE.get(method_name, (None, method_name))
         rows, x = bins_of(method)
         for key, style, suffix in (("chamfer_visible_m", "--", "VS"), ("chamfer_full_m", "-", "FS")):
@@ -71,11 +75,25 @@ def main():
     parser.add_argument("--output", default=".", help="directory for the PNG figures")
     args = parser.parse_args()
     os.makedirs(args.output, exist_ok=True)
+    groups = {}  # test set -> (paths, results), in the order given
     for path in args.results:
         try:
-            print(plot_file(path, args.output))
+            with open(path) as f:
+                results = json.load(f)
+            if "methods" not in results:
+                print(f"plot_evaluation: {path}: no methods (real-data report?), skipped")
+                continue
+            key = (results["dataset_seed"], results["scenes"], results["views"])
         except (OSError, KeyError, json.JSONDecodeError) as e:
             sys.exit(f"plot_evaluation: {path}: {e}")
+        paths, sets = groups.setdefault(key, ([], []))
+        paths.append(path)
+        sets.append(results)
+    for paths, sets in groups.values():
+        try:
+            print(plot_set(paths, sets, args.output))
+        except KeyError as e:
+            sys.exit(f"plot_evaluation: {', '.join(paths)}: missing {e}")
 
 
 if __name__ == "__main__":
