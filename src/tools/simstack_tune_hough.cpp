@@ -59,9 +59,8 @@ Score score(const std::vector<ViewGrids>& views, const HoughConfig& hough,
   Score s;
   s.hough = hough;
   for (const ViewGrids& v : views) {
-    InstanceSegmentation seg = houghInstances(v.tsdf_m, v.votes, hough);
-    if (v.segments)
-      seg = regroupAlongSurfaceSegments(*v.segments, segments, hough.min_instance_voxels, seg);
+    const InstanceSegmentation seg =
+        findInstances(v.tsdf_m, v.votes, hough, segments, v.segments ? &*v.segments : nullptr);
     const int error = seg.size() - v.objects;
     s.exact += error == 0;
     s.under += error < 0;

@@ -86,6 +86,8 @@ struct CvaeConfig {
   std::string toYaml() const;
   /// Only the C-VAE has a latent code; the FC networks give one deterministic prediction.
   bool hasLatentCode() const { return architecture == "cvae"; }
+  /// Whether the decoder reads the condition's map at every scale (all but the plain FC).
+  bool decoderReadsEveryConditionMap() const { return architecture != "fc_plain"; }
   /// Parses YAML text (fields absent keep their defaults); throws std::invalid_argument.
   static CvaeConfig fromYaml(const std::string& text);
   /// Takes the loss weights and settings (not the network) of `other`.

@@ -67,6 +67,13 @@ struct SceneEstimate {
   const std::vector<InstanceEstimate>& instances() const { return hypotheses.front().instances; }
 };
 
+/// Instances of one hypothesis as the pipeline finds them: Hough voting, then, with `segments`
+/// (the first view's convex patches) and `segment_config.enabled`, the regrouping along them.
+InstanceSegmentation findInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
+                                   const HoughConfig& hough,
+                                   const SurfaceSegmentConfig& segment_config,
+                                   const SurfaceSegments* segments);
+
 /// Splits one hypothesis into instances and fits them (Hough voting, marching cubes, Ceres).
 /// With `segments` (the first view's convex patches, surface_segments.h) and
 /// `config.segments.enabled`, instances are also split along the patches. Adds the time spent

@@ -123,7 +123,7 @@ CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
       dec_up_.push_back(register_module("dec_up" + std::to_string(i), Upsample(w[i + 1], w[i])));
     // Each scale reads the condition's map of that size too, except in the plain FC baseline,
     // which decodes from the deepest map alone.
-    const bool skip = i == 4 || config.architecture != "fc_plain";
+    const bool skip = i == 4 || config.decoderReadsEveryConditionMap();
     dec_joint_.push_back(register_module("dec_joint" + std::to_string(i),
                                          ResSEBlock((skip ? 2 : 1) * w[i], w[i], 1, gn)));
   }
@@ -198,7 +198,7 @@ CvaeOutput CvaeImpl::decode(const torch::Tensor& bottleneck, const std::vector<t
   for (int level = 4, k = 0; level >= 0; --level, ++k) {
     if (level < 4) x = dec_up_[k - 1](x);
     if (!dec_code_.empty() && z.defined()) x = x + dec_code_[k](z).view({z.size(0), -1, 1, 1, 1});
-    if (level < 4 && config_.architecture == "fc_plain") {
+    if (level < 4 && !config_.decoderReadsEveryConditionMap()) {
       x = dec_joint_[k](x);
       continue;
     }

@@ -62,14 +62,23 @@ std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>
   return fitInstances(points, fit, config.joint_refinement, config.min_instance_points);
 }
 
+InstanceSegmentation findInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
+                                   const HoughConfig& hough,
+                                   const SurfaceSegmentConfig& segment_config,
+                                   const SurfaceSegments* segments) {
+  InstanceSegmentation seg = houghInstances(tsdf_m, votes, hough);
+  if (segments && segment_config.enabled)
+    seg = regroupAlongSurfaceSegments(*segments, segment_config, hough.min_instance_voxels, seg);
+  return seg;
+}
+
 void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings* timings,
                const SurfaceSegments* segments) {
   auto t = Clock::now();
   HoughConfig hough = config.hough;
   hough.threads = std::max(1, config.threads);
-  InstanceSegmentation seg = houghInstances(h->tsdf_m, h->votes, hough);
-  if (segments && config.segments.enabled)
-    seg = regroupAlongSurfaceSegments(*segments, config.segments, hough.min_instance_voxels, seg);
+  const InstanceSegmentation seg =
+      findInstances(h->tsdf_m, h->votes, hough, config.segments, segments);
   h->labels = seg.labels;
   if (timings) timings->instances_ms += msSince(t);
 
