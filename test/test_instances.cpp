@@ -48,6 +48,18 @@ std::vector<Ball> randomBalls(const GridSpec& g, int k, std::mt19937_64& rng) {
   return balls;
 }
 
+/// The distance from each ball's centre to the nearest centre found, in voxels.
+std::vector<double> centreErrorsVox(const GridSpec& g, const std::vector<Ball>& balls,
+                                    const InstanceSegmentation& seg) {
+  std::vector<double> errors;
+  for (const Ball& b : balls) {
+    double best = 1e9;
+    for (const Vec3& c : seg.centres_table) best = std::min(best, (c - b.centre).norm());
+    errors.push_back(best / g.voxel_size_m);
+  }
+  return errors;
+}
+
 TEST(HoughVoting, RecoversOneToEightCentresWithinOneVoxel) {
   const GridSpec g = GridSpec::sceneGrid(Vec2(0.1, -0.2), 0.64, 32);
   std::mt19937_64 rng(3);
@@ -58,11 +70,7 @@ TEST(HoughVoting, RecoversOneToEightCentresWithinOneVoxel) {
     ballFields(g, balls, &tsdf, &votes);
     const InstanceSegmentation seg = houghInstances(tsdf, votes);
     ASSERT_EQ(seg.size(), k) << "k = " << k;
-    for (const Ball& b : balls) {
-      double best = 1e9;
-      for (const Vec3& c : seg.centres_table) best = std::min(best, (c - b.centre).norm());
-      EXPECT_LT(best, g.voxel_size_m) << "k = " << k;
-    }
+    for (double e : centreErrorsVox(g, balls, seg)) EXPECT_LT(e, 1.0) << "k = " << k;
     // Every occupied voxel gets the instance whose centre is its ball's.
     for (int i = 0; i < g.voxelCount(); ++i) {
       if (tsdf.data[i] > 0) {
@@ -81,6 +89,26 @@ TEST(HoughVoting, RecoversOneToEightCentresWithinOneVoxel) {
   }
 }
 
+// Past its ball's centre a ray meets votes pointing back at it: stopping there (the option
+// reversed_vote_stop_vox) keeps the centres and spares the far half of every ray.
+TEST(HoughVoting, RaysStoppedWhereVotesTurnBackFindTheSameCentres) {
+  const GridSpec g = GridSpec::sceneGrid(Vec2(0.1, -0.2), 0.64, 32);
+  std::mt19937_64 rng(11);
+  HoughConfig stop;
+  stop.reversed_vote_stop_vox = 1;
+  for (int k = 1; k <= 8; ++k) {
+    Grid3<float> tsdf;
+    Grid3<Vec3f> votes;
+    const std::vector<Ball> balls = randomBalls(g, k, rng);
+    ballFields(g, balls, &tsdf, &votes);
+    const InstanceSegmentation full = houghInstances(tsdf, votes);
+    const InstanceSegmentation stopped = houghInstances(tsdf, votes, stop);
+    ASSERT_EQ(stopped.size(), k) << "k = " << k;
+    for (double e : centreErrorsVox(g, balls, stopped)) EXPECT_LT(e, 1.0) << "k = " << k;
+    EXPECT_LT(static_cast<double>(stopped.traversals), 0.7 * full.traversals) << "k = " << k;
+  }
+}
+
 TEST(HoughVoting, SeparatesCentresCloserThanTheMeanShiftCell) {
   // Two balls 9.5 cm apart (bandwidth 7 cm) whose centres share one 7 cm cell of the table
   // frame: a single mean-shift seed per such cell would settle between them.
@@ -94,11 +122,7 @@ TEST(HoughVoting, SeparatesCentresCloserThanTheMeanShiftCell) {
   config.bandwidth_m = 0.07;
   const InstanceSegmentation seg = houghInstances(tsdf, votes, config);
   ASSERT_EQ(seg.size(), 2);
-  for (const Ball& b : balls) {
-    double best = 1e9;
-    for (const Vec3& c : seg.centres_table) best = std::min(best, (c - b.centre).norm());
-    EXPECT_LT(best, g.voxel_size_m);
-  }
+  for (double e : centreErrorsVox(g, balls, seg)) EXPECT_LT(e, 1.0);
 }
 
 TEST(HoughVoting, WorksAtR64AndIsSparse) {

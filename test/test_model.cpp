@@ -279,6 +279,54 @@ TEST(Cvae, OneSharedConditionEqualsOnePerCode) {
   EXPECT_THROW(model->generate(torch::rand({2, 2, 16, 16, 16}), z), std::invalid_argument);
 }
 
+// At inference (eval mode, no gradients) the network folds BatchNorm into the convolutions,
+// runs the shared condition's half of each decoder convolution once for all codes, and fuses
+// the two heads. It must give what the layers give one by one (eval mode with gradients on),
+// for every architecture, and again after parameters change in place (the folded weights are
+// rebuilt, not reused).
+TEST(Cvae, InferenceFastPathEqualsTheLayerByLayerPass) {
+  torch::manual_seed(5);
+  auto randomiseBatchNorm = [](Cvae& model, double var_scale) {
+    torch::NoGradGuard no_grad;
+    for (auto& b : model->named_buffers()) {
+      if (b.key().find("bn.running_var") != std::string::npos)
+        b.value().uniform_(0.5, 2.0).mul_(var_scale);
+      if (b.key().find("bn.running_mean") != std::string::npos) b.value().normal_(0.0, 0.3);
+    }
+    for (auto& p : model->named_parameters()) {
+      if (p.key().find("bn.weight") != std::string::npos) p.value().uniform_(0.5, 1.5);
+      if (p.key().find("bn.bias") != std::string::npos) p.value().normal_(0.0, 0.2);
+    }
+  };
+  for (const std::string arch : {"cvae", "fc", "fc_plain"}) {
+    Cvae model(tiny(arch));
+    randomiseBatchNorm(model, 1.0);
+    model->eval();
+    const auto partial = torch::rand({1, 2, 16, 16, 16}) * 2 - 1;
+    const auto z = torch::randn({3, 8});
+    auto expectSame = [&](const std::string& when) {
+      const CvaeOutput layers = model->generate(partial, z);  // gradients on: no fast path
+      CvaeOutput fast;
+      {
+        torch::NoGradGuard no_grad;
+        fast = model->generate(partial, z);
+      }
+      EXPECT_EQ(fast.tsdf.sizes(), layers.tsdf.sizes()) << arch << when;
+      EXPECT_EQ(fast.votes.sizes(), layers.votes.sizes()) << arch << when;
+      if (fast.tsdf.sizes() != layers.tsdf.sizes() || fast.votes.sizes() != layers.votes.sizes())
+        return layers;
+      EXPECT_LT((fast.tsdf - layers.tsdf).abs().max().item<double>(), 1e-5) << arch << when;
+      EXPECT_LT((fast.votes - layers.votes).abs().max().item<double>(), 1e-5) << arch << when;
+      return layers;
+    };
+    const CvaeOutput before = expectSame(" fresh");
+    randomiseBatchNorm(model, 4.0);
+    const CvaeOutput after = expectSame(" after an in-place change");
+    // The change matters, so a stale fold would have been caught.
+    EXPECT_GT((after.tsdf - before.tsdf).abs().max().item<double>(), 1e-2) << arch;
+  }
+}
+
 TEST(Cvae, EveryScaleCodeWarmStartsFromABottleneckModel) {
   // latent_injection "every_scale" adds one projection of z per decoder scale and nothing else:
   // a warm start from a bottleneck model copies every other tensor, and with the projections

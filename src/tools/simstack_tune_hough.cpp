@@ -82,6 +82,7 @@ bool sameSetting(const HoughConfig& a, const HoughConfig& b) {
          a.gamma == b.gamma && a.bandwidth_m == b.bandwidth_m &&
          a.min_instance_voxels == b.min_instance_voxels && a.min_vote_norm == b.min_vote_norm &&
          a.outside_tolerance_vox == b.outside_tolerance_vox &&
+         a.reversed_vote_stop_vox == b.reversed_vote_stop_vox &&
          a.split_below_solidity == b.split_below_solidity &&
          (a.split_below_solidity == 0 || a.split_accept_solidity == b.split_accept_solidity);
 }
@@ -90,11 +91,11 @@ std::string row(const Score& s) {
   std::ostringstream o;
   o << "| " << s.hough.refinement << " | " << s.hough.min_traversals << " | " << std::fixed
     << std::setprecision(3) << s.hough.bandwidth_m << " | " << s.hough.min_instance_voxels << " | "
-    << std::setprecision(1) << s.hough.min_vote_norm << " | " << std::setprecision(2)
-    << s.hough.split_below_solidity << " / " << s.hough.split_accept_solidity << " | "
-    << std::setprecision(1) << 100 * s.exact << " % | " << 100 * s.under << " % | " << 100 * s.over
-    << " % | " << std::setprecision(2) << s.abs_error << " | " << std::setprecision(3)
-    << s.agreement << " |";
+    << std::setprecision(1) << s.hough.min_vote_norm << " | " << s.hough.reversed_vote_stop_vox
+    << " | " << std::setprecision(2) << s.hough.split_below_solidity << " / "
+    << s.hough.split_accept_solidity << " | " << std::setprecision(1) << 100 * s.exact << " % | "
+    << 100 * s.under << " % | " << 100 * s.over << " % | " << std::setprecision(2) << s.abs_error
+    << " | " << std::setprecision(3) << s.agreement << " |";
   return o.str();
 }
 
@@ -110,7 +111,7 @@ int main(int argc, char** argv) {
   uint64_t seed = 7;
   bool noise = false;
   std::vector<int> refinements = {3, 5, 8, 10}, traversals = {2, 3, 4, 5, 7, 10},
-                   min_voxels = {10, 15, 25};
+                   min_voxels = {10, 15, 25}, reversed_stops = {0};
   std::vector<double> bandwidths = {0.04, 0.05, 0.06, 0.07}, min_norms = {0.0, 0.3, 0.6};
   // The split test is off unless asked for: its values multiply the other settings.
   std::vector<double> split_below = {0.0}, split_accept = {0.9};
@@ -154,6 +155,10 @@ int main(int argc, char** argv) {
                  "vote lengths to try below which a voxel casts no ray (blunt, unsure votes)")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--reversed-stop", reversed_stops,
+                 "consecutive voxels of reversed votes that stop a ray (0 = off) to try")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--split-below", split_below,
                  "split test: solidities below which an instance is cut (0 = off) to try")
       ->capture_default_str()
@@ -221,20 +226,22 @@ int main(int argc, char** argv) {
         for (double bw : bandwidths)
           for (int mv : min_voxels)
             for (double norm : min_norms)
-              for (double below : split_below)
-                for (double accept : split_accept) {
-                  HoughConfig h = pc.hough;
-                  h.split_below_solidity = below;
-                  h.split_accept_solidity = accept;
-                  h.refinement = ref;
-                  h.min_traversals = mu;
-                  h.bandwidth_m = bw;
-                  h.min_instance_voxels = mv;
-                  h.min_vote_norm = norm;
-                  h.threads = 1;                          // the settings run in parallel instead
-                  if (sameSetting(h, current)) continue;  // already the first candidate
-                  settings.push_back(h);
-                }
+              for (int stop : reversed_stops)
+                for (double below : split_below)
+                  for (double accept : split_accept) {
+                    HoughConfig h = pc.hough;
+                    h.reversed_vote_stop_vox = stop;
+                    h.split_below_solidity = below;
+                    h.split_accept_solidity = accept;
+                    h.refinement = ref;
+                    h.min_traversals = mu;
+                    h.bandwidth_m = bw;
+                    h.min_instance_voxels = mv;
+                    h.min_vote_norm = norm;
+                    h.threads = 1;                          // the settings run in parallel instead
+                    if (sameSetting(h, current)) continue;  // already the first candidate
+                    settings.push_back(h);
+                  }
     if (views.empty()) throw std::runtime_error(dataset + " holds no scene to score on");
     std::vector<Score> scores(settings.size());
     std::exception_ptr failure;  // an exception must not leave the parallel loop
@@ -259,10 +266,10 @@ int main(int argc, char** argv) {
     std::cout << "\n"
               << views.size() << " views (" << n << " scenes x " << views_per_scene << "), model "
               << pc.model_path << "\n\n"
-              << "| refinement | mu | bandwidth (m) | min voxels | min vote norm | split below / "
-                 "accept | "
-                 "count exact | under | over | mean abs error | voxel agreement |\n"
-                 "|---|---|---|---|---|---|---|---|---|---|---|\n";
+              << "| refinement | mu | bandwidth (m) | min voxels | min vote norm | reversed stop | "
+                 "split below / accept | count exact | under | over | mean abs error | voxel "
+                 "agreement |\n"
+                 "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     for (int i = 0; i < std::min<int>(top, scores.size()); ++i) std::cout << row(scores[i]) << "\n";
     std::cout << "\nthe config's setting (" << config_path << "):\n" << row(before) << "\n";
 

@@ -29,6 +29,9 @@ struct HoughConfig {
   double min_vote_norm = 0.0;
   /// Rays may leave the occupied region for this many voxels (noisy TSDF borders).
   int outside_tolerance_vox = 1;
+  /// A ray stops after this many consecutive occupied voxels whose votes point back against it
+  /// (it has passed the centre they vote for). 0 = off: rays run to the object's far side.
+  int reversed_vote_stop_vox = 0;
   /// Split test after the assignment (convex_split.h): instances whose solidity is below this
   /// are cut in two when the parts reach `split_accept_solidity` together. 0 = off.
   double split_below_solidity = 0.0;

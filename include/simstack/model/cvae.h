@@ -11,20 +11,54 @@
 
 #include <torch/torch.h>
 
+#include <functional>
+#include <memory>
+#include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "simstack/model/cvae_config.h"
 
 namespace simstack {
 
+/// Tensors computed from parameters for inference (BatchNorm folded into the convolution
+/// before it, weights split by input channels), kept until a parameter they came from changes:
+/// an in-place update bumps its version counter, a replacement changes its storage.
+class DerivedWeights {
+ public:
+  /// The cached tensors if `sources` are unchanged since they were made, else compute().
+  /// `variant` tells apart derivations of the same sources. Thread-safe.
+  std::vector<torch::Tensor> get(const std::vector<torch::Tensor>& sources, int variant,
+                                 const std::function<std::vector<torch::Tensor>()>& compute);
+
+ private:
+  std::vector<std::pair<const void*, int64_t>> keys_;
+  std::vector<torch::Tensor> values_;
+  std::shared_ptr<std::mutex> mutex_ = std::make_shared<std::mutex>();
+};
+
+/// A convolution's weight and bias with the BatchNorm (eval mode) after it folded in:
+/// conv(x, W) * s + t = conv(x, W * s) + t with s = gamma / sqrt(var + eps), t = beta - mean * s.
+struct FoldedConv {
+  torch::Tensor weight, bias;
+};
+
 /// Conv3d(3x3x3) + BatchNorm (or GroupNorm) + PReLU. At inference (no grad) the convolution
 /// calls oneDNN directly: libtorch 1.13's CPU build skips it for 3D convolutions otherwise
-/// (6-7x slower).
+/// (6-7x slower); with BatchNorm in eval mode, the normalisation is folded into it.
 class ConvBlockImpl : public torch::nn::Module {
  public:
   ConvBlockImpl(int in, int out, int stride, bool group_norm = false);
   torch::Tensor forward(const torch::Tensor& x);
+  /// The inference fast path applies: eval mode, no gradients, BatchNorm.
+  bool folds() const;
+  /// Folded weight and bias; `split` > 0 also gives the weight's input channels [0, split) and
+  /// [split, in) as contiguous tensors (elements 2 and 3).
+  std::vector<torch::Tensor> folded(int split = 0);
+  /// The PReLU's slope (one for all channels).
+  const torch::Tensor& activationWeight() const { return act->weight; }
+  int stride() const { return stride_; }
 
  private:
   torch::nn::Conv3d conv{nullptr};
@@ -32,6 +66,7 @@ class ConvBlockImpl : public torch::nn::Module {
   torch::nn::GroupNorm gn{nullptr};
   torch::nn::PReLU act{nullptr};
   int stride_;
+  DerivedWeights folded_;
 };
 TORCH_MODULE(ConvBlock);
 
@@ -40,8 +75,15 @@ class ResSEBlockImpl : public torch::nn::Module {
  public:
   ResSEBlockImpl(int in, int out, int stride, bool group_norm = false);
   torch::Tensor forward(const torch::Tensor& x);
+  /// The block applied to cat(x, c) along channels. `c` may have batch 1 against x's B (one
+  /// condition shared by B codes): at inference the convolutions that read the input then run
+  /// on x and on the single c apart and add (conv(cat(x, c), W) = conv(x, W_x) + conv(c, W_c)),
+  /// so the condition's half of the work is done once instead of B times.
+  torch::Tensor forwardWithCondition(const torch::Tensor& x, const torch::Tensor& c);
 
  private:
+  torch::Tensor finish(const torch::Tensor& a_out, const torch::Tensor& shortcut);
+
   ConvBlock a{nullptr};
   torch::nn::Conv3d b{nullptr};
   torch::nn::BatchNorm3d bn{nullptr};
@@ -49,6 +91,7 @@ class ResSEBlockImpl : public torch::nn::Module {
   torch::nn::Linear se1{nullptr}, se2{nullptr};
   torch::nn::Conv3d skip{nullptr};
   torch::nn::PReLU act{nullptr};
+  DerivedWeights folded_b_, split_skip_;
 };
 TORCH_MODULE(ResSEBlock);
 

@@ -27,9 +27,9 @@ namespace {
 /// with the cell, so the loop has no division, and the block is looked up once per voxel, not
 /// once per cell. On entering a voxel the ray already knows the voxel it will enter next, whose
 /// block is prefetched while this voxel's cells are counted.
-template <class Count, class Block>
+template <class Count, class Block, class Reversed>
 size_t marchRay(const Vec3& p, const Vec3& d, int ref, const std::vector<uint8_t>& occ, int r,
-                int tolerance, Block&& block_of) {
+                int tolerance, int reversed_stop, Block&& block_of, Reversed&& reversed) {
   int voxel[3], local[3], step[3];
   double t_max[3], t_delta[3];
   for (int a = 0; a < 3; ++a) {
@@ -58,12 +58,16 @@ size_t marchRay(const Vec3& p, const Vec3& d, int ref, const std::vector<uint8_t
   const unsigned n = static_cast<unsigned>(ref);  // as unsigned, a negative index is >= n
   const int stride[3] = {step[0], step[1] * ref, step[2] * ref * ref};
   size_t visits = 0;
-  int outside = 0;
+  int outside = 0, reversed_run = 0;
   while (true) {
     if (vx < 0 || vy < 0 || vz < 0 || vx >= r || vy >= r || vz >= r) break;
     const int index = (vz * r + vy) * r + vx;
     outside = occ[index] ? 0 : outside + 1;
     if (outside > tolerance) break;
+    if (reversed_stop > 0) {
+      reversed_run = occ[index] && reversed(index) ? reversed_run + 1 : 0;
+      if (reversed_run >= reversed_stop) break;
+    }
     Count* const block = block_of(index);
     {
       // Parameter at which each in-voxel index leaves [0, ref); the smallest one is the exit.
@@ -126,6 +130,23 @@ struct WeightedCloud {
     return false;
   }
 };
+/// A nanoflann result set that sums the weighted points of a flat window as the search finds
+/// them, instead of listing them for a second pass.
+struct WindowSum {
+  const std::vector<WeightedPoint>* pts;
+  double radius2;
+  Vec3 sum = Vec3::Zero();
+  double w = 0;
+  bool addPoint(double dist2, size_t i) {
+    if (dist2 < radius2) {
+      sum += (*pts)[i].w * (*pts)[i].p;
+      w += (*pts)[i].w;
+    }
+    return true;
+  }
+  double worstDist() const { return radius2; }
+  bool full() const { return true; }
+};
 using WeightedKdTree =
     nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, WeightedCloud>,
                                         WeightedCloud, 3, size_t>;
@@ -161,21 +182,14 @@ std::vector<Vec3> meanShift(const std::vector<WeightedPoint>& pts, double radius
   std::vector<Mode> climbed(seeds.size(), Mode{Vec3::Zero(), 0.0});
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (size_t s = 0; s < seeds.size(); ++s) {
-    std::vector<std::pair<size_t, double>> window;
     Vec3 x = seeds[s];
     double density = 0;
     for (int it = 0; it < 100; ++it) {
-      window.clear();
-      tree.radiusSearch(x.data(), r2, window, nanoflann::SearchParams(32, 0.0, false));
-      Vec3 sum = Vec3::Zero();
-      double w = 0;
-      for (const auto& [i, d2] : window) {
-        sum += pts[i].w * pts[i].p;
-        w += pts[i].w;
-      }
-      if (w <= 0) break;
-      const Vec3 next = sum / w;
-      density = w;
+      WindowSum window{&pts, r2};
+      tree.findNeighbors(window, x.data(), nanoflann::SearchParams(32, 0.0, false));
+      if (window.w <= 0) break;
+      const Vec3 next = window.sum / window.w;
+      density = window.w;
       const double shift = (next - x).norm();
       x = next;
       if (shift < 1e-3 * radius) break;
@@ -274,11 +288,14 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
     for (size_t k = 0; k < occupied.size(); ++k) {
       if (dirs[k].squaredNorm() == 0) continue;
       const Vec3 p = (g.unravel(occupied[k]).cast<double>() + Vec3::Constant(0.5)) * ref;
-      visits[t] += marchRay<FineCount>(p, dirs[k], ref, occ, r, config.outside_tolerance_vox,
-                                       [&](int voxel) {
-                                         const int b = block_of[voxel];
-                                         return b >= 0 ? counts + b * block : nullptr;
-                                       });
+      const Vec3& d = dirs[k];
+      visits[t] += marchRay<FineCount>(
+          p, d, ref, occ, r, config.outside_tolerance_vox, config.reversed_vote_stop_vox,
+          [&](int voxel) {
+            const int b = block_of[voxel];
+            return b >= 0 ? counts + b * block : nullptr;
+          },
+          [&](int voxel) { return dirs[block_of[voxel]].dot(d) < 0.0; });
     }
   }
   out.traversals = std::accumulate(visits.begin(), visits.end(), size_t{0});
@@ -287,8 +304,8 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
   out.timings.rays_ms = ms(t0);
   const auto t1 = std::chrono::steady_clock::now();
 
-  // 2. Cells above mu (the threads' counts summed), gathered per scene voxel, weighted by count,
-  //    to seed mean shift.
+  // 2. Cells above mu (the threads' counts summed), gathered per scene voxel into their
+  //    count-weighted mean position and total count: the points of mean shift.
   std::vector<WeightedPoint> per_voxel(occupied.size(), WeightedPoint{Vec3::Zero(), 0.0});
   int candidates = 0;
   std::vector<std::vector<uint32_t>> sums(threads, std::vector<uint32_t>(block));
@@ -303,24 +320,37 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
         const FineCount* counts = per_thread[t].get() + b * block;
         for (size_t i = 0; i < block; ++i) sum[i] += counts[i];
       }
-      const Vec3i v = g.unravel(occupied[b]);
-      WeightedPoint& bin = per_voxel[b];
-      for (size_t i = 0; i < block; ++i) {
-        if (static_cast<int>(sum[i]) <= config.min_traversals) continue;
-        ++candidates;
-        const int lx = static_cast<int>(i % ref), ly = static_cast<int>(i / ref % ref),
-                  lz = static_cast<int>(i / (ref * ref));
-        const Vec3 p = g.origin_table + h * Vec3(v.x() * ref + lx + 0.5, v.y() * ref + ly + 0.5,
-                                                 v.z() * ref + lz + 0.5);
-        bin.p += sum[i] * p;
-        bin.w += sum[i];
+      // Counts times in-voxel cell indices, summed exactly in integers; the voxel's weighted
+      // mean position follows from them once.
+      uint64_t weight = 0, lsum[3] = {0, 0, 0};
+      for (int lz = 0, i = 0; lz < ref; ++lz) {
+        for (int ly = 0; ly < ref; ++ly) {
+          for (int lx = 0; lx < ref; ++lx, ++i) {
+            const uint32_t c = sum[i];
+            if (static_cast<int64_t>(c) <= config.min_traversals) continue;
+            ++candidates;
+            weight += c;
+            lsum[0] += uint64_t{c} * lx;
+            lsum[1] += uint64_t{c} * ly;
+            lsum[2] += uint64_t{c} * lz;
+          }
+        }
       }
+      if (weight == 0) continue;
+      const Vec3i v = g.unravel(occupied[b]);
+      const double w = static_cast<double>(weight);
+      WeightedPoint& bin = per_voxel[b];
+      bin.w = w;
+      bin.p = g.origin_table + h * (ref * v.cast<double>() + Vec3::Constant(0.5) +
+                                    Vec3(static_cast<double>(lsum[0]), static_cast<double>(lsum[1]),
+                                         static_cast<double>(lsum[2])) /
+                                        w);
     }
   }
   out.candidate_cells = candidates;
   std::vector<WeightedPoint> bins;
   for (const WeightedPoint& bin : per_voxel)
-    if (bin.w > 0) bins.push_back({bin.p / bin.w, bin.w});
+    if (bin.w > 0) bins.push_back(bin);
   std::vector<Vec3> centres = meanShift(bins, config.bandwidth_m, threads);
   out.timings.mean_shift_ms = ms(t1);
   const auto t2 = std::chrono::steady_clock::now();

@@ -34,7 +34,58 @@ torch::nn::Conv3d makeConv(int in, int out, int kernel, int stride, bool bias) {
       torch::nn::Conv3dOptions(in, out, kernel).stride(stride).padding(kernel / 2).bias(bias));
 }
 
+// oneDNN's convolution with explicit weight and bias (inference only).
+torch::Tensor convWith(const torch::Tensor& x, const torch::Tensor& weight,
+                       const torch::Tensor& bias, int stride, int padding) {
+  return at::mkldnn_convolution(x.contiguous(), weight, bias, {padding, padding, padding},
+                                {stride, stride, stride}, {1, 1, 1}, 1);
+}
+
+// PReLU with its single slope, in place (inference only): leaky ReLU with that slope.
+torch::Tensor preluInPlace(torch::Tensor y, const torch::Tensor& slope) {
+  return torch::leaky_relu_(y, slope.item<double>());
+}
+
+bool inference(const torch::nn::Module& m) {
+  return !m.is_training() && !torch::GradMode::is_enabled();
+}
+
+// FoldedConv of `weight` and the eval-mode `bn`, as {weight, bias}; with `split` > 0 also the
+// weight's input channels [0, split) and [split, in).
+std::vector<torch::Tensor> foldBatchNorm(const torch::Tensor& weight,
+                                         const torch::nn::BatchNorm3d& bn, int split) {
+  torch::NoGradGuard no_grad;
+  const torch::Tensor s = bn->weight / torch::sqrt(bn->running_var + bn->options.eps());
+  const torch::Tensor w = (weight * s.view({-1, 1, 1, 1, 1})).contiguous();
+  std::vector<torch::Tensor> v{w, (bn->bias - bn->running_mean * s).contiguous()};
+  if (split > 0) {
+    v.push_back(w.narrow(1, 0, split).contiguous());
+    v.push_back(w.narrow(1, split, w.size(1) - split).contiguous());
+  }
+  return v;
+}
+
+std::vector<torch::Tensor> bnSources(const torch::Tensor& weight,
+                                     const torch::nn::BatchNorm3d& bn) {
+  return {weight, bn->weight, bn->bias, bn->running_mean, bn->running_var};
+}
+
 }  // namespace
+
+std::vector<torch::Tensor> DerivedWeights::get(
+    const std::vector<torch::Tensor>& sources, int variant,
+    const std::function<std::vector<torch::Tensor>()>& compute) {
+  std::vector<std::pair<const void*, int64_t>> keys;
+  keys.reserve(sources.size() + 1);
+  for (const torch::Tensor& t : sources) keys.emplace_back(t.data_ptr(), t._version());
+  keys.emplace_back(nullptr, variant);
+  std::lock_guard<std::mutex> lock(*mutex_);
+  if (keys != keys_) {
+    values_ = compute();
+    keys_ = std::move(keys);
+  }
+  return values_;
+}
 
 ConvBlockImpl::ConvBlockImpl(int in, int out, int stride, bool group_norm) : stride_(stride) {
   conv = register_module("conv", makeConv(in, out, 3, stride, false));
@@ -46,7 +97,18 @@ ConvBlockImpl::ConvBlockImpl(int in, int out, int stride, bool group_norm) : str
   act = register_module("act", torch::nn::PReLU());
 }
 
+bool ConvBlockImpl::folds() const { return bn && inference(*this); }
+
+std::vector<torch::Tensor> ConvBlockImpl::folded(int split) {
+  return folded_.get(bnSources(conv->weight, bn), split,
+                     [&] { return foldBatchNorm(conv->weight, bn, split); });
+}
+
 torch::Tensor ConvBlockImpl::forward(const torch::Tensor& x) {
+  if (folds()) {
+    const std::vector<torch::Tensor> f = folded();
+    return preluInPlace(convWith(x, f[0], f[1], stride_, 1), act->weight);
+  }
   const torch::Tensor y = conv3d(conv, x.contiguous(), stride_, 1);
   return act(bn ? bn(y) : gn(y));
 }
@@ -67,13 +129,47 @@ ResSEBlockImpl::ResSEBlockImpl(int in, int out, int stride, bool group_norm) {
 }
 
 torch::Tensor ResSEBlockImpl::forward(const torch::Tensor& x) {
-  torch::Tensor y = conv3d(b, a(x).contiguous(), 1, 1);
-  y = bn ? bn(y) : gn(y);
+  const torch::Tensor shortcut = skip ? conv3d(skip, x.contiguous(), a->stride(), 0) : x;
+  return finish(a(x), shortcut);
+}
+
+torch::Tensor ResSEBlockImpl::forwardWithCondition(const torch::Tensor& x, const torch::Tensor& c) {
+  const int64_t batch = x.size(0);
+  if (!a->folds() || !skip || c.size(0) != 1 || batch == 1) {
+    return forward(torch::cat({x, c.size(0) == batch ? c : c.expand({batch, -1, -1, -1, -1})}, 1));
+  }
+  const int split = static_cast<int>(x.size(1));
+  const std::vector<torch::Tensor> fa = a->folded(split);
+  torch::Tensor y = convWith(x, fa[2], fa[1], a->stride(), 1);
+  y.add_(convWith(c, fa[3], {}, a->stride(), 1));
+  const std::vector<torch::Tensor> s =
+      split_skip_.get({skip->weight}, split, [&]() -> std::vector<torch::Tensor> {
+        const torch::Tensor& w = skip->weight;
+        return {w.narrow(1, 0, split).contiguous(),
+                w.narrow(1, split, w.size(1) - split).contiguous()};
+      });
+  torch::Tensor shortcut = convWith(x, s[0], {}, a->stride(), 0);
+  shortcut.add_(convWith(c, s[1], {}, a->stride(), 0));
+  return finish(preluInPlace(y, a->activationWeight()), shortcut);
+}
+
+torch::Tensor ResSEBlockImpl::finish(const torch::Tensor& a_out, const torch::Tensor& shortcut) {
+  torch::Tensor y;
+  if (bn && inference(*this)) {
+    const std::vector<torch::Tensor> f =
+        folded_b_.get(bnSources(b->weight, bn), 0, [&] { return foldBatchNorm(b->weight, bn, 0); });
+    y = convWith(a_out, f[0], f[1], 1, 1);
+  } else {
+    y = conv3d(b, a_out.contiguous(), 1, 1);
+    y = bn ? bn(y) : gn(y);
+  }
   // Squeeze: global average; excite: per-channel gates.
   const torch::Tensor gates = torch::sigmoid(se2(torch::relu(se1(y.mean({2, 3, 4})))));
+  if (inference(*this)) {
+    y.mul_(gates.unsqueeze(2).unsqueeze(3).unsqueeze(4)).add_(shortcut);
+    return preluInPlace(y, act->weight);
+  }
   y = y * gates.unsqueeze(2).unsqueeze(3).unsqueeze(4);
-  const torch::Tensor shortcut =
-      skip ? conv3d(skip, x.contiguous(), skip->options.stride()->at(0), 0) : x;
   return act(y + shortcut);
 }
 
@@ -203,9 +299,29 @@ CvaeOutput CvaeImpl::decode(const torch::Tensor& bottleneck, const std::vector<t
       continue;
     }
     const torch::Tensor c = keep.defined() && level <= 1 ? cond[level] * keep : cond[level];
-    x = dec_joint_[k](torch::cat({x, c}, 1));
+    x = dec_joint_[k]->forwardWithCondition(x, c);
   }
   CvaeOutput out;
+  if (head_tsdf->folds()) {
+    // The two task heads read the same map: one convolution to both heads' channels (oneDNN
+    // fills its 16-channel blocks instead of two half-empty ones), each head's PReLU slope on
+    // its channels, and one 1x1 convolution whose block-diagonal weight gives both outputs.
+    const std::vector<torch::Tensor> ft = head_tsdf->folded(), fv = head_votes->folded();
+    const int64_t n = ft[0].size(0);
+    const torch::Tensor h =
+        convWith(x, torch::cat({ft[0], fv[0]}), torch::cat({ft[1], fv[1]}), 1, 1);
+    // PReLU with one slope is leaky ReLU with that slope; in place on each head's channels
+    // (libtorch's PReLU with a slope per channel took 4x longer than the convolution).
+    preluInPlace(h.narrow(1, 0, n), head_tsdf->activationWeight());
+    preluInPlace(h.narrow(1, n, n), head_votes->activationWeight());
+    torch::Tensor w = torch::zeros({4, 2 * n, 1, 1, 1}, h.options());
+    w.narrow(0, 0, 1).narrow(1, 0, n).copy_(out_tsdf->weight);
+    w.narrow(0, 1, 3).narrow(1, n, n).copy_(out_votes->weight);
+    const torch::Tensor o = convWith(h, w, torch::cat({out_tsdf->bias, out_votes->bias}), 1, 0);
+    out.tsdf = torch::tanh(o.narrow(1, 0, 1));
+    out.votes = o.narrow(1, 1, 3);
+    return out;
+  }
   out.tsdf = torch::tanh(conv3d(out_tsdf, head_tsdf(x).contiguous(), 1, 0));
   out.votes = conv3d(out_votes, head_votes(x).contiguous(), 1, 0);
   return out;
@@ -243,10 +359,8 @@ CvaeOutput CvaeImpl::generate(const torch::Tensor& partial, const torch::Tensor&
   std::vector<torch::Tensor> cond = encodeCondition(partial);
   if (!config_.hasLatentCode()) return decode(cond[4], cond);
   const auto b = z.size(0);
-  if (partial.size(0) == 1 && b > 1) {
-    // One condition for all codes: encode it once, share its features.
-    for (auto& c : cond) c = c.expand({b, -1, -1, -1, -1});
-  } else if (partial.size(0) != b) {
+  // One condition for all codes is encoded once; the decoder's blocks share its features.
+  if (partial.size(0) != 1 && partial.size(0) != b) {
     throw std::invalid_argument("generate: " + std::to_string(partial.size(0)) +
                                 " conditions for " + std::to_string(b) + " codes");
   }

@@ -32,6 +32,7 @@ void houghFields(C& c, F&& f) {
   f("min_instance_voxels", c.min_instance_voxels);
   f("min_vote_norm", c.min_vote_norm);
   f("outside_tolerance_vox", c.outside_tolerance_vox);
+  f("reversed_vote_stop_vox", c.reversed_vote_stop_vox);
   f("split_below_solidity", c.split_below_solidity);
   f("split_accept_solidity", c.split_accept_solidity);
   f("split_max_rounds", c.split_max_rounds);
