@@ -244,6 +244,27 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
     }
   }
   if (occupied.empty()) return out;
+  // Occupied voxels in Morton (z-order) order: neighbouring voxels' fine counts lie close in
+  // memory, so a ray's next blocks are more often in cache (rays 0.91-0.94x at R = 64), and a
+  // chunk of consecutive rays starts in one compact part of the pile.
+  {
+    auto spread = [](uint64_t v) {
+      uint64_t x = v & 0x1fffff;
+      x = (x | x << 32) & 0x1f00000000ffffULL;
+      x = (x | x << 16) & 0x1f0000ff0000ffULL;
+      x = (x | x << 8) & 0x100f00f00f00f00fULL;
+      x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
+      x = (x | x << 2) & 0x1249249249249249ULL;
+      return x;
+    };
+    std::vector<std::pair<uint64_t, int>> keyed(occupied.size());
+    for (size_t k = 0; k < occupied.size(); ++k) {
+      const Vec3i v = g.unravel(occupied[k]);
+      keyed[k] = {spread(v.x()) | spread(v.y()) << 1 | spread(v.z()) << 2, occupied[k]};
+    }
+    std::sort(keyed.begin(), keyed.end());
+    for (size_t k = 0; k < occupied.size(); ++k) occupied[k] = keyed[k].second;
+  }
 
   // 1. Rays. A ray is only counted inside occupied voxels (its `outside_tolerance_vox` steps
   //    through free space cross gaps, they do not vote), so the fine counts are ref^3 per
@@ -284,7 +305,7 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
     team = omp_get_num_threads();
     FineCount* const counts = per_thread[t].get();
     std::fill(counts, counts + occupied.size() * block, FineCount{0});
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, 512)  // rays differ in length; counts add up the same
     for (size_t k = 0; k < occupied.size(); ++k) {
       if (dirs[k].squaredNorm() == 0) continue;
       const Vec3 p = (g.unravel(occupied[k]).cast<double>() + Vec3::Constant(0.5)) * ref;
