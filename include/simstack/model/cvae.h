@@ -38,12 +38,6 @@ class DerivedWeights {
   std::shared_ptr<std::mutex> mutex_ = std::make_shared<std::mutex>();
 };
 
-/// A convolution's weight and bias with the BatchNorm (eval mode) after it folded in:
-/// conv(x, W) * s + t = conv(x, W * s) + t with s = gamma / sqrt(var + eps), t = beta - mean * s.
-struct FoldedConv {
-  torch::Tensor weight, bias;
-};
-
 /// Conv3d(3x3x3) + BatchNorm (or GroupNorm) + PReLU. At inference (no grad) the convolution
 /// calls oneDNN directly: libtorch 1.13's CPU build skips it for 3D convolutions otherwise
 /// (6-7x slower); with BatchNorm in eval mode, the normalisation is folded into it.
@@ -53,8 +47,10 @@ class ConvBlockImpl : public torch::nn::Module {
   torch::Tensor forward(const torch::Tensor& x);
   /// The inference fast path applies: eval mode, no gradients, BatchNorm.
   bool folds() const;
-  /// Folded weight and bias; `split` > 0 also gives the weight's input channels [0, split) and
-  /// [split, in) as contiguous tensors (elements 2 and 3).
+  /// The convolution's weight and bias with the eval-mode BatchNorm after it folded in:
+  /// conv(x, W) * s + t = conv(x, W * s) + t, s = gamma / sqrt(var + eps), t = beta - mean * s.
+  /// `split` > 0 also gives the folded weight's input channels [0, split) and [split, in) as
+  /// contiguous tensors (elements 2 and 3).
   std::vector<torch::Tensor> folded(int split = 0);
   /// The PReLU's slope (one for all channels).
   const torch::Tensor& activationWeight() const { return act->weight; }

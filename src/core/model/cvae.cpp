@@ -50,8 +50,8 @@ bool inference(const torch::nn::Module& m) {
   return !m.is_training() && !torch::GradMode::is_enabled();
 }
 
-// FoldedConv of `weight` and the eval-mode `bn`, as {weight, bias}; with `split` > 0 also the
-// weight's input channels [0, split) and [split, in).
+// `weight` with the eval-mode `bn` after it folded in, as {weight, bias}; with `split` > 0 also
+// the folded weight's input channels [0, split) and [split, in) (ConvBlockImpl::folded).
 std::vector<torch::Tensor> foldBatchNorm(const torch::Tensor& weight,
                                          const torch::nn::BatchNorm3d& bn, int split) {
   torch::NoGradGuard no_grad;
@@ -310,8 +310,7 @@ CvaeOutput CvaeImpl::decode(const torch::Tensor& bottleneck, const std::vector<t
     const int64_t n = ft[0].size(0);
     const torch::Tensor h =
         convWith(x, torch::cat({ft[0], fv[0]}), torch::cat({ft[1], fv[1]}), 1, 1);
-    // PReLU with one slope is leaky ReLU with that slope; in place on each head's channels
-    // (libtorch's PReLU with a slope per channel took 4x longer than the convolution).
+    // Each head's PReLU has one slope: leaky ReLU with it, in place on that head's channels.
     preluInPlace(h.narrow(1, 0, n), head_tsdf->activationWeight());
     preluInPlace(h.narrow(1, n, n), head_votes->activationWeight());
     torch::Tensor w = torch::zeros({4, 2 * n, 1, 1, 1}, h.options());
