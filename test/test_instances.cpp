@@ -1,6 +1,8 @@
 // Hough voting against synthetic vote fields whose centres are known exactly.
 #include <gtest/gtest.h>
 
+#include <array>
+#include <map>
 #include <random>
 
 #include "simstack/instances/convex_split.h"
@@ -91,6 +93,90 @@ TEST(HoughVoting, RecoversOneToEightCentresWithinOneVoxel) {
 
 // Past its ball's centre a ray meets votes pointing back at it: stopping there (the option
 // reversed_vote_stop_vox) keeps the centres and spares the far half of every ray.
+/// The fine-cell counts of Hough voting computed the plain way, as the reference: each occupied
+/// voxel's ray starts at the voxel's centre and is stepped one fine cell at a time along its
+/// vote (Amanatides & Woo, parameters accumulated), into a std::map; a ray stops on entering
+/// its (tolerance + 1)-th free voxel in a row or on leaving the grid, and only cells of occupied
+/// voxels are counted. Returns the counts; `visits` gets every cell stepped through.
+std::map<std::array<int, 3>, int> referenceCounts(const Grid3<float>& tsdf,
+                                                  const Grid3<Vec3f>& votes, int ref, int tolerance,
+                                                  size_t* visits) {
+  const GridSpec& g = tsdf.spec;
+  const int r = g.resolution;
+  std::map<std::array<int, 3>, int> counts;
+  *visits = 0;
+  for (int i = 0; i < g.voxelCount(); ++i) {
+    if (tsdf.data[i] > 0 || votes.data[i].norm() <= 1e-3f) continue;
+    const Vec3 d = votes.data[i].cast<double>().normalized();
+    const Vec3 p = (g.unravel(i).cast<double>() + Vec3::Constant(0.5)) * ref;
+    int cell[3], step[3];
+    double t_max[3], t_delta[3];
+    for (int a = 0; a < 3; ++a) {
+      cell[a] = static_cast<int>(std::floor(p[a]));
+      step[a] = d[a] > 0 ? 1 : d[a] < 0 ? -1 : 0;
+      t_delta[a] = step[a] != 0 ? 1.0 / std::abs(d[a]) : 1e300;
+      t_max[a] = step[a] > 0   ? (cell[a] + 1 - p[a]) * t_delta[a]
+                 : step[a] < 0 ? (p[a] - cell[a]) * t_delta[a]
+                               : 1e300;
+    }
+    int outside = 0, voxel = -1;
+    while (true) {
+      const Vec3i v(cell[0] / ref, cell[1] / ref, cell[2] / ref);
+      if (cell[0] < 0 || cell[1] < 0 || cell[2] < 0 || v.x() >= r || v.y() >= r || v.z() >= r)
+        break;
+      const int index = g.linear(v.x(), v.y(), v.z());
+      if (index != voxel) {
+        voxel = index;
+        outside = tsdf.data[index] <= 0 ? 0 : outside + 1;
+        if (outside > tolerance) break;
+      }
+      ++*visits;
+      if (tsdf.data[index] <= 0) ++counts[{cell[0], cell[1], cell[2]}];
+      int a = 0;  // the smallest t_max; ties to the later axis
+      for (int b = 1; b < 3; ++b)
+        if (t_max[b] <= t_max[a]) a = b;
+      cell[a] += step[a];
+      t_max[a] += t_delta[a];
+    }
+  }
+  return counts;
+}
+
+TEST(HoughVoting, FineCountsMatchAPlainTraversal) {
+  // Noisy votes (every direction, no exact ties) on balls and on a random blob of occupied
+  // voxels: the cells above each threshold and the cells stepped through equal the reference.
+  const GridSpec g = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 24);
+  std::mt19937_64 rng(11);
+  Grid3<float> tsdf;
+  Grid3<Vec3f> votes;
+  ballFields(g, randomBalls(g, 4, rng), &tsdf, &votes);
+  std::normal_distribution<float> noise(0.0f, 0.4f);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  for (size_t i = 0; i < votes.data.size(); ++i) {
+    if (uniform(rng) < 0.03) tsdf.data[i] = -0.01f;  // scattered occupied voxels
+    if (tsdf.data[i] <= 0) votes.data[i] += Vec3f(noise(rng), noise(rng), noise(rng));
+  }
+  for (const int ref : {1, 2, 3, 4, 5, 8}) {
+    for (const int tolerance : {0, 1, 2}) {
+      size_t visits = 0;
+      const std::map<std::array<int, 3>, int> counts =
+          referenceCounts(tsdf, votes, ref, tolerance, &visits);
+      for (const int mu : {0, 2, 4, 9}) {
+        HoughConfig config;
+        config.refinement = ref;
+        config.outside_tolerance_vox = tolerance;
+        config.min_traversals = mu;
+        const InstanceSegmentation seg = houghInstances(tsdf, votes, config);
+        int above = 0;
+        for (const auto& [cell, n] : counts) above += n > mu;
+        EXPECT_EQ(seg.candidate_cells, above)
+            << "ref " << ref << " tol " << tolerance << " mu " << mu;
+        EXPECT_EQ(seg.traversals, visits) << "ref " << ref << " tol " << tolerance;
+      }
+    }
+  }
+}
+
 TEST(HoughVoting, RaysStoppedWhereVotesTurnBackFindTheSameCentres) {
   const GridSpec g = GridSpec::sceneGrid(Vec2(0.1, -0.2), 0.64, 32);
   std::mt19937_64 rng(11);
