@@ -107,13 +107,13 @@ std::map<std::array<int, 3>, int> referenceCounts(const Grid3<float>& tsdf,
   *visits = 0;
   for (int i = 0; i < g.voxelCount(); ++i) {
     if (tsdf.data[i] > 0 || votes.data[i].norm() <= 1e-3f) continue;
-    const Vec3 d = votes.data[i].cast<double>().normalized();
+    const Vec3 d = (votes.data[i] / votes.data[i].norm()).cast<double>();  // as houghInstances
     const Vec3 p = (g.unravel(i).cast<double>() + Vec3::Constant(0.5)) * ref;
     int cell[3], step[3];
     double t_max[3], t_delta[3];
     for (int a = 0; a < 3; ++a) {
       cell[a] = static_cast<int>(std::floor(p[a]));
-      step[a] = d[a] > 0 ? 1 : d[a] < 0 ? -1 : 0;
+      step[a] = d[a] > 1e-12 ? 1 : d[a] < -1e-12 ? -1 : 0;
       t_delta[a] = step[a] != 0 ? 1.0 / std::abs(d[a]) : 1e300;
       t_max[a] = step[a] > 0   ? (cell[a] + 1 - p[a]) * t_delta[a]
                  : step[a] < 0 ? (p[a] - cell[a]) * t_delta[a]
@@ -143,8 +143,9 @@ std::map<std::array<int, 3>, int> referenceCounts(const Grid3<float>& tsdf,
 }
 
 TEST(HoughVoting, FineCountsMatchAPlainTraversal) {
-  // Noisy votes (every direction, no exact ties) on balls and on a random blob of occupied
-  // voxels: the cells above each threshold and the cells stepped through equal the reference.
+  // Noisy votes (every direction, no exact ties) and some along the axes, on balls and on
+  // scattered occupied voxels: the cells above each threshold and the cells stepped through
+  // equal the reference.
   const GridSpec g = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 24);
   std::mt19937_64 rng(11);
   Grid3<float> tsdf;
@@ -152,9 +153,19 @@ TEST(HoughVoting, FineCountsMatchAPlainTraversal) {
   ballFields(g, randomBalls(g, 4, rng), &tsdf, &votes);
   std::normal_distribution<float> noise(0.0f, 0.4f);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  std::uniform_int_distribution<int> axis(0, 2);
   for (size_t i = 0; i < votes.data.size(); ++i) {
     if (uniform(rng) < 0.03) tsdf.data[i] = -0.01f;  // scattered occupied voxels
-    if (tsdf.data[i] <= 0) votes.data[i] += Vec3f(noise(rng), noise(rng), noise(rng));
+    if (tsdf.data[i] > 0) continue;
+    votes.data[i] += Vec3f(noise(rng), noise(rng), noise(rng));
+    if (uniform(rng) < 0.1) {
+      // Some votes along an axis, exactly or but for a component too small to move the ray:
+      // with an even refinement their rays run along cell boundaries.
+      Vec3f v = Vec3f::Zero();
+      v[axis(rng)] = uniform(rng) < 0.5 ? 1.0f : -1.0f;
+      if (uniform(rng) < 0.5) v[(axis(rng) + 1) % 3] = uniform(rng) < 0.5 ? 1e-14f : -1e-14f;
+      votes.data[i] = v;
+    }
   }
   for (const int ref : {1, 2, 3, 4, 5, 8}) {
     for (const int tolerance : {0, 1, 2}) {
