@@ -154,6 +154,7 @@ class CvaeImpl : public torch::nn::Module {
   std::vector<Upsample> dec_up_;
   ConvBlock head_tsdf{nullptr}, head_votes{nullptr};
   torch::nn::Conv3d out_tsdf{nullptr}, out_votes{nullptr};
+  DerivedWeights heads_;  // both heads as one convolution, then one 1x1 (inference)
 };
 TORCH_MODULE(Cvae);
 

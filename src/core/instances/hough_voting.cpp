@@ -135,13 +135,12 @@ size_t marchRay(const Vec3& p, const Vec3& unit, int ref, const std::vector<uint
   return visits;
 }
 
-/// A mean-shift point: a voxel's count-weighted mean position `p` (table frame) and weight `w`,
-/// and the same in integers for exact window sums: the weight, and the position times the
-/// weight in half fine cells from the grid's origin (p = origin + h / 2 * q / wi).
+/// A mean-shift point: a voxel's count-weighted mean position `p` (table frame), its weight
+/// `w` (the counts), and for exact window sums its position times its weight in integers, in
+/// half fine cells from the grid's origin (p = origin + h / 2 * q / w).
 struct WeightedPoint {
-  Vec3 p;
-  double w;
-  int64_t wi = 0;
+  Vec3 p = Vec3::Zero();
+  int64_t w = 0;
   int64_t q[3] = {0, 0, 0};
 };
 
@@ -167,7 +166,7 @@ struct WindowSum {
   bool addPoint(double dist2, size_t i) {
     if (dist2 < radius2) {
       const WeightedPoint& pt = (*pts)[i];
-      w += pt.wi;
+      w += pt.w;
       for (int a = 0; a < 3; ++a) q[a] += pt.q[a];
     }
     return true;
@@ -206,12 +205,12 @@ std::vector<Vec3> meanShift(const std::vector<WeightedPoint>& pts, double radius
     const std::array<int64_t, 3> key = {static_cast<int64_t>(std::floor(pt.p.x() / cell)),
                                         static_cast<int64_t>(std::floor(pt.p.y() / cell)),
                                         static_cast<int64_t>(std::floor(pt.p.z() / cell))};
-    WeightedPoint& c = cells.try_emplace(key, WeightedPoint{Vec3::Zero(), 0.0}).first->second;
-    c.wi += pt.wi;
+    WeightedPoint& c = cells.try_emplace(key).first->second;
+    c.w += pt.w;
     for (int a = 0; a < 3; ++a) c.q[a] += pt.q[a];
   }
   std::vector<Vec3> seeds;
-  for (const auto& [key, c] : cells) seeds.push_back(meanOf(c.wi, c.q));
+  for (const auto& [key, c] : cells) seeds.push_back(meanOf(c.w, c.q));
   const WeightedCloud cloud{&pts};
   WeightedKdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(32));
   tree.buildIndex();
@@ -365,7 +364,7 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
 
   // 2. Cells above mu (the threads' counts summed), gathered per scene voxel into their
   //    count-weighted mean position and total count: the points of mean shift.
-  std::vector<WeightedPoint> per_voxel(occupied.size(), WeightedPoint{Vec3::Zero(), 0.0});
+  std::vector<WeightedPoint> per_voxel(occupied.size());
   int candidates = 0;
   std::vector<std::vector<uint32_t>> sums(threads, std::vector<uint32_t>(block));
 #pragma omp parallel num_threads(threads) reduction(+ : candidates)
@@ -403,8 +402,7 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
       const Vec3i v = g.unravel(occupied[b]);
       const double w = static_cast<double>(weight);
       WeightedPoint& bin = per_voxel[b];
-      bin.w = w;
-      bin.wi = static_cast<int64_t>(weight);
+      bin.w = static_cast<int64_t>(weight);
       for (int a = 0; a < 3; ++a)
         bin.q[a] = 2 * (static_cast<int64_t>(weight) * ref * v[a] + static_cast<int64_t>(lsum[a])) +
                    static_cast<int64_t>(weight);

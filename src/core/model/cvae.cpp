@@ -308,15 +308,32 @@ CvaeOutput CvaeImpl::decode(const torch::Tensor& bottleneck, const std::vector<t
     // its channels, and one 1x1 convolution whose block-diagonal weight gives both outputs.
     const std::vector<torch::Tensor> ft = head_tsdf->folded(), fv = head_votes->folded();
     const int64_t n = ft[0].size(0);
-    const torch::Tensor h =
-        convWith(x, torch::cat({ft[0], fv[0]}), torch::cat({ft[1], fv[1]}), 1, 1);
+    // {3x3x3 weight, bias, 1x1 weight, bias}, made again only when a tensor they come from
+    // changes.
+    const std::vector<torch::Tensor> f =
+        heads_.get({ft[0], ft[1], fv[0], fv[1], out_tsdf->weight, out_tsdf->bias, out_votes->weight,
+                    out_votes->bias},
+                   0, [&]() -> std::vector<torch::Tensor> {
+                     torch::NoGradGuard no_grad;
+                     torch::Tensor w = torch::zeros({4, 2 * n, 1, 1, 1}, ft[0].options());
+                     w.narrow(0, 0, 1).narrow(1, 0, n).copy_(out_tsdf->weight);
+                     w.narrow(0, 1, 3).narrow(1, n, n).copy_(out_votes->weight);
+                     // The folded tensors stay with their products: a new fold then cannot
+                     // reuse the storage address this cache is keyed on.
+                     return {torch::cat({ft[0], fv[0]}).contiguous(),
+                             torch::cat({ft[1], fv[1]}),
+                             w,
+                             torch::cat({out_tsdf->bias, out_votes->bias}),
+                             ft[0],
+                             ft[1],
+                             fv[0],
+                             fv[1]};
+                   });
+    const torch::Tensor h = convWith(x, f[0], f[1], 1, 1);
     // Each head's PReLU has one slope: leaky ReLU with it, in place on that head's channels.
     preluInPlace(h.narrow(1, 0, n), head_tsdf->activationWeight());
     preluInPlace(h.narrow(1, n, n), head_votes->activationWeight());
-    torch::Tensor w = torch::zeros({4, 2 * n, 1, 1, 1}, h.options());
-    w.narrow(0, 0, 1).narrow(1, 0, n).copy_(out_tsdf->weight);
-    w.narrow(0, 1, 3).narrow(1, n, n).copy_(out_votes->weight);
-    const torch::Tensor o = convWith(h, w, torch::cat({out_tsdf->bias, out_votes->bias}), 1, 0);
+    const torch::Tensor o = convWith(h, f[2], f[3], 1, 0);
     out.tsdf = torch::tanh(o.narrow(1, 0, 1));
     out.votes = o.narrow(1, 1, 3);
     return out;
