@@ -1,13 +1,14 @@
 #!/usr/bin/python3
 """Draws the paper's evaluation figures from simstack_evaluate JSON files.
 
-    scripts/plot_evaluation.py results_synthetic.json [results_ycb.json ...] --output docs/figures
+    scripts/plot_evaluation.py docs/results/synthetic.json [docs/results/ycb.json ...] --output docs/figures
 
 For every test set: Chamfer distance on the visible (VS) and full (FS) surface against the
 visible share of the pile's surface (the paper's Figure 5), IoU and the share of stable piles
 against the same bins, one line per method. Files of the same test set (dataset seed, scenes and
 views), such as a later run of one more method, are drawn into one figure, named after the
-first of them; files without methods (the real-data report) are skipped.
+first of them; files without methods (the real-data report) are skipped. The summaries of
+simstack_evaluate --summary are enough (the per-view rows are not read).
 """
 import argparse
 import json

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "simstack/eval/evaluator.h"
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/eval/segmentation.h"
 #include "simstack/io/scene_io.h"
@@ -12,6 +13,7 @@
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/pile_generator.h"
 #include "simstack/scene/scene.h"
+#include "simstack/tsdf/ground_truth.h"
 
 namespace simstack {
 namespace {
@@ -168,6 +170,92 @@ TEST(SceneFiles, SuperquadricsMeshesAndGridsRoundTrip) {
   }
   EXPECT_THROW(readDepthPcd((dir / "c.pcd").string()), std::runtime_error);  // not organized
   std::filesystem::remove_all(dir);
+}
+
+// The protocol against methods whose answer is known: the truth itself scores IoU 1, exact
+// counts and a Chamfer distance at the sampling floor; a method that finds nothing scores
+// IoU 0 and no exact count.
+class KnownAnswer : public EvaluatedMethod {
+ public:
+  KnownAnswer(std::string name, const DatasetReader& reader, bool truth)
+      : name_(std::move(name)), reader_(reader), truth_(truth) {}
+  const std::string& name() const override { return name_; }
+  MethodInfo info() const override { return {}; }
+  MethodEstimate estimate(const DepthView&, const GridSpec* grid, const Vec2& pile_xy) override {
+    const SceneRecord rec = reader_.read(scene_++ / 2);  // 2 views per scene
+    MethodEstimate out;
+    out.grid =
+        grid ? *grid
+             : GridSpec::sceneGrid(pile_xy, reader_.info().extent_m, reader_.info().resolution);
+    if (!truth_) {
+      out.hypotheses_tsdf.emplace_back(out.grid.voxelCount(), 1.0f);
+      out.surfaces.emplace_back();
+      return out;
+    }
+    out.hypotheses_tsdf.push_back(
+        computeGroundTruth(rec.scene, out.grid, reader_.info().truncation_m).tsdf.data);
+    TriangleMesh mesh;
+    for (const SceneObject& o : rec.scene.objects) {
+      mesh.append(o.shape->mesh().transformed(o.T_table_object));
+      out.superquadrics.push_back(o.superquadricTable());
+    }
+    out.surfaces.push_back(mesh);
+    return out;
+  }
+
+ private:
+  std::string name_;
+  const DatasetReader& reader_;
+  bool truth_;
+  int scene_ = 0;
+};
+
+TEST(Evaluator, TheTruthScoresPerfectlyAndNothingScoresNothing) {
+  const std::filesystem::path path =
+      std::filesystem::temp_directory_path() / "simstack_evaluator_test.h5";
+  DatasetInfo info;
+  info.num_scenes = 2;
+  {
+    DatasetWriter writer(path.string(), info);
+    const PileGenerator generator{PileConfig()};
+    for (int k = 0; k < 2; ++k) {
+      const Scene scene = generator.generate(31 + k).scene;
+      const GridSpec grid =
+          GridSpec::sceneGrid(scene.surfaceCentroid().head<2>(), info.extent_m, info.resolution);
+      writer.write(k, scene, computeGroundTruth(scene, grid, info.truncation_m));
+    }
+  }
+  const DatasetReader reader(path.string());
+  KnownAnswer truth("truth", reader, true), nothing("nothing", reader, false);
+  EvaluationOptions options;
+  options.views = 2;
+  options.stability = false;
+  options.chamfer_points = 4000;  // two samplings of a surface differ by ~1 cm at this count
+  int progress = 0;
+  const EvaluationResults r = evaluateDataset(
+      reader, {&truth, &nothing}, options, [&](int done, int total) { progress = done + total; });
+  EXPECT_EQ(progress, 4);
+  ASSERT_EQ(r.methods.size(), 2u);
+  ASSERT_EQ(r.methods[0].rows.size(), 4u);
+  for (const Row& row : r.methods[0].rows) {
+    EXPECT_DOUBLE_EQ(row.at("iou"), 1.0);
+    EXPECT_DOUBLE_EQ(row.at("count_exact"), 1.0);
+    EXPECT_LT(row.at("chamfer_full_m"), 0.02);  // two samplings of one surface
+    EXPECT_LT(row.at("chamfer_visible_m"), 0.02);
+    EXPECT_GT(row.at("visible_ratio"), 0.1);
+    EXPECT_LT(row.at("visible_ratio"), 0.9);
+  }
+  for (const Row& row : r.methods[1].rows) {
+    EXPECT_DOUBLE_EQ(row.at("iou"), 0.0);
+    EXPECT_DOUBLE_EQ(row.at("count_exact"), 0.0);
+  }
+  const nlohmann::json j = resultsJson(r, false);
+  EXPECT_DOUBLE_EQ(j["methods"]["truth"]["iou"]["mean"].get<double>(), 1.0);
+  EXPECT_EQ(j["methods"]["truth"]["iou"]["n"].get<int>(), 4);
+  EXPECT_FALSE(j["methods"]["truth"].contains("views"));
+  EXPECT_TRUE(resultsJson(r, true)["methods"]["nothing"].contains("views"));
+  EXPECT_NE(resultsTable(r).find("| truth | "), std::string::npos);
+  std::filesystem::remove(path);
 }
 
 }  // namespace

@@ -44,8 +44,8 @@ double lowestPoint(const Superquadric& sq) {
 
 TEST(SurfaceDistance, IsMetresAlongTheRayForEveryExponent) {
   for (double e : {2.0, 4.0, 20.0}) {
-    Superquadric sq = makeShape(Vec3(0.05, 0.08, 0.1), Vec3::Constant(e), Vec3(0.1, 0, 0.2),
-                                Vec3(0, 0, 1), 0.3);
+    Superquadric sq =
+        makeShape(Vec3(0.05, 0.08, 0.1), Vec3::Constant(e), Vec3(0.1, 0, 0.2), Vec3(0, 0, 1), 0.3);
     const Vec3 dir_object = Vec3(1, 0.5, -0.3).normalized();
     const Vec3 surface = sq.surfacePointAlong(dir_object);
     for (double offset : {-0.01, 0.0, 0.01, 0.05}) {
@@ -58,14 +58,16 @@ TEST(SurfaceDistance, IsMetresAlongTheRayForEveryExponent) {
 TEST(SurfaceDistance, StaysFiniteForExtremeExponentsAndScales) {
   // Exponents 1 and 100 with a 5 mm axis: |q/a|^e spans 1e-200..1e178 (a NaN in the evaluation
   // runs before the distance was computed in logs).
-  const Superquadric sq = makeShape(Vec3(0.005, 0.03, 0.07), Vec3(1, 100, 3.6), Vec3(0, 0, 0.07),
-                                    Vec3(1, 1, 0), 1.2);
-  for (const Vec3& p : {Vec3(0.3, -0.2, 0.5), Vec3(0.001, 0.0, 0.07), Vec3(0, 0.029, 0.07),
-                        Vec3(0.0, 0.0, 0.07)}) {
+  const Superquadric sq =
+      makeShape(Vec3(0.005, 0.03, 0.07), Vec3(1, 100, 3.6), Vec3(0, 0, 0.07), Vec3(1, 1, 0), 1.2);
+  for (const Vec3& p :
+       {Vec3(0.3, -0.2, 0.5), Vec3(0.001, 0.0, 0.07), Vec3(0, 0.029, 0.07), Vec3(0.0, 0.0, 0.07)}) {
     const double d = surfaceDistance(sq, p);
     EXPECT_TRUE(std::isfinite(d)) << p.transpose();
-    if (d > 0) EXPECT_LE(d, (p - sq.centroid()).norm() + 1e-9);  // outside: at most |OP|
-    else EXPECT_GE(d, -sq.scale_m.norm());  // inside: at most the ray to the bounding box
+    if (d > 0)
+      EXPECT_LE(d, (p - sq.centroid()).norm() + 1e-9);  // outside: at most |OP|
+    else
+      EXPECT_GE(d, -sq.scale_m.norm());  // inside: at most the ray to the bounding box
   }
   EXPECT_GT(surfaceDistance(sq, Vec3(0.3, -0.2, 0.5)), 0.0);
 }
@@ -73,7 +75,8 @@ TEST(SurfaceDistance, StaysFiniteForExtremeExponentsAndScales) {
 TEST(SuperquadricFit, RecoversKnownShapesFromNoisySamples) {
   const std::vector<Superquadric> truth = {
       makeShape(Vec3(0.05, 0.07, 0.10), Vec3(2, 2, 2), Vec3(0.1, -0.05, 0.12), Vec3(1, 2, 3), 0.7),
-      makeShape(Vec3(0.04, 0.06, 0.09), Vec3(10, 10, 10), Vec3(-0.2, 0.1, 0.08), Vec3(0, 1, 1), 1.1),
+      makeShape(Vec3(0.04, 0.06, 0.09), Vec3(10, 10, 10), Vec3(-0.2, 0.1, 0.08), Vec3(0, 1, 1),
+                1.1),
       makeShape(Vec3(0.03, 0.05, 0.12), Vec3(2, 2, 8), Vec3(0.0, 0.0, 0.05), Vec3(1, 0, 0), 0.4),
       makeShape(Vec3(0.025, 0.1, 0.14), Vec3(6, 3, 12), Vec3(0.05, 0.2, 0.1), Vec3(1, -1, 0), 2.0)};
   for (size_t i = 0; i < truth.size(); ++i) {
@@ -96,12 +99,15 @@ TEST(SuperquadricFit, RejectsTooFewPoints) {
 
 TEST(JointRefinement, RemovesAnInjectedOverlap) {
   // Two boxes whose point sets overlap by 3 cm: fitted independently they intersect.
-  const Superquadric a = makeShape(Vec3(0.05, 0.05, 0.05), Vec3(8, 8, 8), Vec3(0, 0, 0.05), Vec3(0, 0, 1), 0);
-  const Superquadric b = makeShape(Vec3(0.05, 0.05, 0.05), Vec3(8, 8, 8), Vec3(0.07, 0, 0.05), Vec3(0, 0, 1), 0);
-  const std::vector<Points3> pts = {noisySurface(a, 800, 0.0005, 1), noisySurface(b, 800, 0.0005, 2)};
+  const Superquadric a =
+      makeShape(Vec3(0.05, 0.05, 0.05), Vec3(8, 8, 8), Vec3(0, 0, 0.05), Vec3(0, 0, 1), 0);
+  const Superquadric b =
+      makeShape(Vec3(0.05, 0.05, 0.05), Vec3(8, 8, 8), Vec3(0.07, 0, 0.05), Vec3(0, 0, 1), 0);
+  const std::vector<Points3> pts = {noisySurface(a, 800, 0.0005, 1),
+                                    noisySurface(b, 800, 0.0005, 2)};
   const std::vector<Superquadric> independent = {fitSuperquadric(pts[0]), fitSuperquadric(pts[1])};
-  const double before = collisionCost(independent[0], independent[1]) +
-                        collisionCost(independent[1], independent[0]);
+  const double before =
+      collisionCost(independent[0], independent[1]) + collisionCost(independent[1], independent[0]);
   ASSERT_GT(before, 1e-5);
   const std::vector<Superquadric> joint = refineJointly(pts, independent);
   const double after = collisionCost(joint[0], joint[1]) + collisionCost(joint[1], joint[0]);
@@ -149,7 +155,8 @@ TEST(JointRefinement, RejectsBadConfig) {
 }
 
 TEST(JointRefinement, LiftsAShapePushedIntoTheFloor) {
-  const Superquadric sunk = makeShape(Vec3(0.06, 0.04, 0.05), Vec3(6, 6, 6), Vec3(0, 0, 0.03), Vec3(0, 0, 1), 0.5);
+  const Superquadric sunk =
+      makeShape(Vec3(0.06, 0.04, 0.05), Vec3(6, 6, 6), Vec3(0, 0, 0.03), Vec3(0, 0, 1), 0.5);
   const Points3 pts = noisySurface(sunk, 800, 0.0005, 3);
   const Superquadric fit = fitSuperquadric(pts);
   const double before = lowestPoint(fit);

@@ -15,6 +15,7 @@
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/pile_generator.h"
 #include "simstack/tsdf/ground_truth.h"
+#include "simstack/tsdf/network_input.h"
 #include "simstack/tsdf/projective_tsdf.h"
 #include "test_scenes.h"
 

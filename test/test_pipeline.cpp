@@ -53,6 +53,52 @@ TEST(PerceptionConfig, ShippedYamlHoldsTheDefaultsAndTyposAreErrors) {
   std::filesystem::remove(bad);
 }
 
+TEST(PerceptionConfig, ModelCardsBringTheirOwnSettings) {
+  const std::string dir = SIMSTACK_SOURCE_DIR;
+  const std::string config = dir + "/config/perception.yaml";
+  const PerceptionConfig cvae = loadPerceptionYaml(config, dir);
+  EXPECT_EQ(cvae.model_card_path, dir + "/models/simstack_r32.yaml");
+  EXPECT_EQ(cvae.samples, 3);
+  EXPECT_EQ(cvae.hough.refinement, 5);
+  EXPECT_EQ(cvae.hough.min_traversals, 4);
+  // Naming another model is enough to get its setting.
+  const PerceptionConfig plain =
+      loadPerceptionYaml(config, dir, dir + "/models/simstack_r32_fc_plain.pt");
+  EXPECT_EQ(plain.model_card_path, dir + "/models/simstack_r32_fc_plain.yaml");
+  EXPECT_EQ(plain.samples, 1);
+  EXPECT_EQ(plain.hough.refinement, 3);
+  EXPECT_EQ(plain.hough.min_traversals, 3);
+  EXPECT_DOUBLE_EQ(plain.hough.bandwidth_m, 0.04);
+  EXPECT_EQ(plain.hough.min_instance_voxels, 25);
+  EXPECT_DOUBLE_EQ(plain.hough.min_vote_norm, 0.3);
+  EXPECT_EQ(plain.fit.max_points, cvae.fit.max_points);  // the pipeline's settings are shared
+
+  const std::filesystem::path tmp = std::filesystem::temp_directory_path() / "simstack_model_cards";
+  std::filesystem::create_directories(tmp);
+  // What a config says explicitly overrides the card, field by field.
+  std::ofstream(tmp / "override.yaml") << "perception:\n  samples: 2\nhough:\n  refinement: 7\n";
+  const PerceptionConfig over = loadPerceptionYaml((tmp / "override.yaml").string(), dir,
+                                                   dir + "/models/simstack_r32_fc_plain.pt");
+  EXPECT_EQ(over.samples, 2);
+  EXPECT_EQ(over.hough.refinement, 7);
+  EXPECT_EQ(over.hough.min_traversals, 3);
+  // A model without a card keeps the defaults; a misspelt card field is an error naming it.
+  const PerceptionConfig bare = loadPerceptionYaml(config, dir, (tmp / "no_card.pt").string());
+  EXPECT_TRUE(bare.model_card_path.empty());
+  EXPECT_EQ(perceptionYaml(bare).find("refinement: 5") != std::string::npos, true);
+  std::ofstream(tmp / "typo.yaml") << "model: {}\nperception:\n  hough:\n    refinment: 3\n";
+  try {
+    loadPerceptionYaml(config, dir, (tmp / "typo.pt").string());
+    ADD_FAILURE() << "a misspelt card field must be an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("typo.yaml"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("hough.refinment"), std::string::npos) << e.what();
+  }
+  std::ofstream(tmp / "typo.yaml") << "perception:\n  sampels: 3\n";
+  EXPECT_THROW(loadPerceptionYaml(config, dir, (tmp / "typo.pt").string()), std::runtime_error);
+  std::filesystem::remove_all(tmp);
+}
+
 TEST(TablePlane, RecoversTheTableOfARenderedScene) {
   const RenderedPile p = renderPile(11);
   const TablePlane plane = estimateTablePlane(p.view.depth, p.camera);
@@ -152,8 +198,9 @@ TEST(ScenePerception, BadInputGetsClearErrors) {
   const ScenePerception perception(config);
   PinholeCamera camera;
   EXPECT_THROW(perception.perceive(std::vector<DepthView>{}), std::invalid_argument);
-  EXPECT_THROW(perception.perceive(DepthView{DepthImage(320, 240, 1.0f), camera, Transform::Identity()}),
-               std::invalid_argument);
+  EXPECT_THROW(
+      perception.perceive(DepthView{DepthImage(320, 240, 1.0f), camera, Transform::Identity()}),
+      std::invalid_argument);
   // Nothing valid and no table pose: no table to be found.
   const DepthImage nan_depth(camera.width, camera.height, std::nanf(""));
   EXPECT_THROW(perception.perceive(DepthView{nan_depth, camera, std::nullopt}), std::runtime_error);
@@ -183,9 +230,11 @@ TEST(ScenePerception, TwoViewsFuse) {
   const ScenePerception perception(config);
   const RenderedPile p = renderPile(14);
   const Vec3 centre = p.scene.surfaceCentroid();
-  const Transform second = lookAt(centre + Vec3(-0.5, 0.45, 0.5), Vec3(centre.x(), centre.y(), 0.05));
+  const Transform second =
+      lookAt(centre + Vec3(-0.5, 0.45, 0.5), Vec3(centre.x(), centre.y(), 0.05));
   const RenderResult r2 = DepthRenderer(p.scene).render(p.camera, second);
-  const SceneEstimate one = perception.perceive(DepthView{p.view.depth, p.camera, p.T_table_camera});
+  const SceneEstimate one =
+      perception.perceive(DepthView{p.view.depth, p.camera, p.T_table_camera});
   const SceneEstimate two = perception.perceive(
       {DepthView{p.view.depth, p.camera, p.T_table_camera}, DepthView{r2.depth, p.camera, second}});
   int seen_one = 0, seen_two = 0;

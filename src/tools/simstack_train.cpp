@@ -2,8 +2,11 @@
 #include <CLI/CLI.hpp>
 
 #include <cmath>
+#include <cstdio>
 #include <iostream>
+#include <memory>
 
+#include "progress.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/model/cvae_trainer.h"
 
@@ -56,7 +59,18 @@ int main(int argc, char** argv) {
     std::string command;
     for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
     CvaeTrainer trainer(dataset, model, training, output, command);
-    const TrainingReport r = trainer.run(resume);
+    std::unique_ptr<ProgressBar> bar;
+    const TrainingReport r = trainer.run(resume, [&](const TrainingProgress& p) {
+      if (!bar)
+        bar =
+            std::make_unique<ProgressBar>("training " + model.architecture, p.steps, p.first_step);
+      char suffix[160];
+      std::snprintf(suffix, sizeof(suffix),
+                    " loss %.0f (tsdf %.0f votes %.0f mmd %.2g) val IoU %.3f  %.1f samples/s",
+                    p.loss, p.tsdf, p.votes, p.mmd, p.validation_iou, p.samples_per_second);
+      bar->update(p.step, suffix);
+    });
+    if (bar) bar->finish();
     std::cout << "trained " << model.architecture << " for " << r.steps << " steps ("
               << r.samples_per_second << " samples/s)\n  final losses: total " << r.total
               << ", tsdf " << r.tsdf << ", partial " << r.partial << ", votes " << r.votes

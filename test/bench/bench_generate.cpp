@@ -27,7 +27,8 @@ static void BM_PileWithGroundTruth(benchmark::State& state) {
   for (auto _ : state) {
     for (int k = next_pile++; k < piles; k = next_pile++) {
       const Scene scene = gen.generate(1000 + k).scene;
-      const GridSpec grid = GridSpec::sceneGrid(scene.surfaceCentroid().head<2>(), 0.64, resolution);
+      const GridSpec grid =
+          GridSpec::sceneGrid(scene.surfaceCentroid().head<2>(), 0.64, resolution);
       benchmark::DoNotOptimize(
           computeGroundTruth(scene, grid, 3 * grid.voxel_size_m).tsdf.data.data());
       ++made;

@@ -23,20 +23,20 @@ namespace simstack {
 struct FitConfig {
   double min_scale_m = 0.005;
   double max_scale_m = 0.4;
-  double min_exponent = 1.0;   ///< >= 1 keeps shapes convex
+  double min_exponent = 1.0;    ///< >= 1 keeps shapes convex
   double max_exponent = 100.0;  ///< the generator's range
   double initial_exponent = 3.0;
   double lambda_dist = 100.0;  ///< eq. 7 weights (the paper's values)
   double lambda_coll = 10.0;
   double lambda_floor = 1.0;
-  int max_points = 100;        ///< points per instance used by the solver (evenly subsampled)
-  int shape_samples = 200;     ///< surface samples per shape for the collision and floor terms
-                              ///< (L_floor is a sum, so it grows with this)
+  int max_points = 100;     ///< points per instance used by the solver (evenly subsampled)
+  int shape_samples = 200;  ///< surface samples per shape for the collision and floor terms
+                            ///< (L_floor is a sum, so it grows with this)
   /// A collision or floor sample joins a joint round only when it is within this distance of
   /// penetrating at the round's start (the terms are hinges: farther samples add zeros).
   double contact_margin_m = 0.01;
-  int joint_rounds = 3;        ///< joint solves, samples redrawn and re-selected between them
-  int max_iterations = 20;     ///< Ceres iterations of each per-instance fit (stage one)
+  int joint_rounds = 3;           ///< joint solves, samples redrawn and re-selected between them
+  int max_iterations = 20;        ///< Ceres iterations of each per-instance fit (stage one)
   int joint_max_iterations = 10;  ///< Ceres iterations of each joint round
   int threads = 1;
 

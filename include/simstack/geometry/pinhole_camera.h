@@ -34,6 +34,10 @@ struct PinholeCamera {
   Vec3 ray(double u, double v) const { return {(u - cx) / fx, (v - cy) / fy, 1.0}; }
 };
 
+/// The pinhole model of a 640x480 Kinect (fx = fy = 525, principal point at the centre) scaled to
+/// `width` x `height`.
+PinholeCamera scaledKinect(int width, int height);
+
 /// Camera pose whose optical axis points from `eye_table` to `target_table`, with the image's
 /// "up" as close as possible to the table's +z. Returns T_table_camera.
 Transform lookAt(const Vec3& eye_table, const Vec3& target_table);

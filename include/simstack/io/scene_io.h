@@ -31,6 +31,8 @@ void writeLabelledCloudPcd(const std::string& path, const Points3& points,
 /// Depth (metres) from an organized PCD: z of each point, NaN where invalid. The size comes
 /// from the cloud, which must be organized.
 DepthImage readDepthPcd(const std::string& path);
+/// Depth (as readDepthPcd) and the label of every point (pcl::PointXYZL) of an organized PCD.
+DepthImage readDepthPcd(const std::string& path, Image<uint32_t>* labels);
 
 /// Grids of one prediction, all on `grid`: datasets tsdf, occupancy_probability, labels,
 /// partial_tsdf, partial_weight ([z][y][x]), with attributes origin_table, voxel_size_m,

@@ -6,6 +6,7 @@
 /// steps at which it was resumed (a resumed run reseeds torch from the seed and its step).
 
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <string>
@@ -36,6 +37,17 @@ struct TrainingReport {
   double samples_per_second = 0;
 };
 
+/// What the trainer reports after every step (for a progress display).
+struct TrainingProgress {
+  int64_t step = 0;        ///< steps done
+  int64_t steps = 0;       ///< steps of the whole run
+  int64_t first_step = 0;  ///< the step this run started from (> 0 when resumed)
+  double loss = 0, tsdf = 0, votes = 0, mmd = 0;  ///< this step's losses
+  double validation_iou = 0;                      ///< the latest validation (0 before the first)
+  double samples_per_second = 0;
+};
+using TrainingProgressCallback = std::function<void(const TrainingProgress&)>;
+
 /// Adam's step size at optimiser step `step`: a cosine from learning_rate at 0 down to
 /// final_learning_rate at training.steps.
 double learningRate(const TrainConfig& training, int64_t step);
@@ -48,8 +60,9 @@ class CvaeTrainer {
               const std::string& output_dir, const std::string& command_line);
   ~CvaeTrainer();
   /// Trains to training.steps (from the last checkpoint when `resume`) and writes
-  /// <output>/model.pt and <output>/model.yaml.
-  TrainingReport run(bool resume);
+  /// <output>/model.pt and its card <output>/model.yaml. `progress`, when given, is called
+  /// after every step from the calling thread.
+  TrainingReport run(bool resume, const TrainingProgressCallback& progress = {});
 
  private:
   struct Impl;

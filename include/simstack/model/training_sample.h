@@ -14,16 +14,6 @@
 
 namespace simstack {
 
-/// x/y centre of the visible pile: the centroid of depth points more than `min_height_m`
-/// above the table and within `radius_m` of `near_xy`; `near_xy` when there are none.
-Vec2 visiblePileCentre(const DepthImage& depth, const PinholeCamera& camera,
-                       const Transform& T_table_camera, const Vec2& near_xy, double radius_m,
-                       double min_height_m = 0.01);
-
-/// Network input channels [2][z][y][x]: partial TSDF / tau and observed (weight > 0).
-std::vector<float> partialChannels(const Grid3<float>& tsdf_m, const Grid3<float>& weight,
-                                   double truncation_m);
-
 struct TrainingSample {
   GridSpec grid;  ///< the re-centred grid the arrays live on
   Transform T_table_camera = Transform::Identity();
@@ -47,8 +37,5 @@ class TrainingSampleBuilder {
   PinholeCamera camera_;
   bool noise_;
 };
-
-/// The pinhole model of a 640x480 Kinect scaled to `width` x `height`.
-PinholeCamera scaledKinect(int width, int height);
 
 }  // namespace simstack

@@ -17,7 +17,7 @@ struct ClassicalConfig {
   double min_height_m = 0.01;         ///< points lower than this are table
   double cluster_tolerance_m = 0.01;  ///< neighbour distance within a cluster
   int min_cluster_points = 50;
-  int pixel_stride = 2;               ///< every n-th pixel along both image axes
+  int pixel_stride = 2;  ///< every n-th pixel along both image axes
   bool joint_refinement = true;
   int threads = 2;
   FitConfig fit;

@@ -1,7 +1,9 @@
 #pragma once
 /// @file perception_config.h
-/// Every parameter of ScenePerception in one plain struct, and its YAML form
-/// (config/perception.yaml), shared by the tools and the ROS nodes.
+/// Every parameter of ScenePerception in one plain struct, and its YAML forms: the pipeline's
+/// settings in config/perception.yaml, and the settings that belong to one model (its sample
+/// count and Hough setting) in the `perception:` section of its card, models/<name>.yaml beside
+/// models/<name>.pt, read with the model.
 
 #include <string>
 
@@ -14,7 +16,8 @@ namespace simstack {
 
 struct PerceptionConfig {
   std::string model_path;           ///< a model written by simstack_train (required)
-  int samples = 3;                  ///< S latent samples per frame
+  std::string model_card_path;      ///< the card samples and hough came from ("" = defaults)
+  int samples = 3;                  ///< S latent samples per frame (model card)
   bool zero_code_first = true;      ///< hypothesis 0 is the mean scene (z = 0)
   uint64_t seed = 0;                ///< latent codes; the same seed gives the same hypotheses
   int decompose_samples = 1;        ///< hypotheses split into instances and fitted (the first ones)
@@ -23,17 +26,31 @@ struct PerceptionConfig {
   bool joint_refinement = true;     ///< eqs. 7-9 after the per-instance fits
   double min_pile_height_m = 0.01;  ///< depth points lower than this are table
   int threads = 2;
-  HoughConfig hough;
+  HoughConfig hough;              ///< the model's (model card)
   SurfaceSegmentConfig segments;  ///< the split along the observed surface's convex patches
   FitConfig fit;
   TablePlaneConfig table;
 };
 
-/// Reads sections `perception:`, `hough:`, `segments:`, `fitting:` and `table:` (absent fields keep
-/// their defaults; unknown fields are errors, so that a typo is not silently ignored). A relative
-/// `model` path is taken relative to `base_dir` when given. Throws std::runtime_error naming
-/// the file and the field.
-PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& base_dir = "");
+/// Reads a perception config: sections `perception:`, `segments:`, `fitting:` and `table:`
+/// (absent fields keep their defaults; unknown fields are errors, so that a typo is not silently
+/// ignored). `model_path`, when given, replaces the file's `perception.model`. A relative model
+/// path is taken relative to `base_dir` when given. Then the model's card is read
+/// (applyModelCard), and last the file's own `perception.samples` and `hough:` section, which
+/// override the card's when present (normally they are absent). Throws std::runtime_error
+/// naming the file and the field.
+PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& base_dir = "",
+                                    const std::string& model_path = "");
+
+/// The card of a model file: the same path with the extension .yaml.
+std::string modelCardPath(const std::string& model_path);
+/// Reads `samples` and `hough` from the `perception:` section of the card of
+/// `config->model_path` into `config`. Returns the card's path, or "" when the model has no card
+/// or the card no such section (the values in `config` stay). Throws std::runtime_error naming
+/// the card and the field for an unknown or malformed field.
+std::string applyModelCard(PerceptionConfig* config);
+/// A model card's `perception:` section (YAML text) for these settings.
+std::string modelCardPerceptionYaml(int samples, const HoughConfig& hough);
 /// The YAML text of a config (all five sections).
 std::string perceptionYaml(const PerceptionConfig& config);
 

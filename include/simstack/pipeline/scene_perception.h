@@ -1,7 +1,7 @@
 #pragma once
 /// @file scene_perception.h
-/// The one entry point from depth to superquadrics (DESIGN.md section 1), used by the ROS
-/// nodelet, the tools and the evaluation:
+/// The one entry point from depth to superquadrics (DESIGN.md section 1), used by the tools,
+/// the evaluation and the benchmarks:
 ///   depth (+ table pose, or a RANSAC table) -> partial TSDF -> C-VAE samples ->
 ///   Hough-voting instances -> marching cubes -> superquadric fits.
 /// No torch and no ROS in this header.
@@ -12,25 +12,17 @@
 #include <vector>
 
 #include "simstack/fitting/superquadric_fit.h"
+#include "simstack/geometry/depth_view.h"
 #include "simstack/geometry/image.h"
 #include "simstack/geometry/pinhole_camera.h"
 #include "simstack/geometry/triangle_mesh.h"
 #include "simstack/geometry/voxel_grid.h"
-#include "simstack/instances/hough_voting.h"
 #include "simstack/instances/surface_segments.h"
 #include "simstack/model/cvae_config.h"
 #include "simstack/pipeline/perception_config.h"
 #include "simstack/pipeline/table_plane.h"
 
 namespace simstack {
-
-/// One depth image with its camera and, when known, its pose. Views after the first must
-/// carry a pose (they are fused into the first view's table frame).
-struct DepthView {
-  DepthImage depth;  ///< metres; NaN / 0 = missing
-  PinholeCamera camera;
-  std::optional<Transform> T_table_camera;
-};
 
 struct InstanceEstimate {
   Superquadric superquadric;        ///< table frame
@@ -67,25 +59,12 @@ struct SceneEstimate {
   const std::vector<InstanceEstimate>& instances() const { return hypotheses.front().instances; }
 };
 
-/// Instances of one hypothesis as the pipeline finds them: Hough voting, then, with `segments`
-/// (the first view's convex patches) and `segment_config.enabled`, the regrouping along them.
-InstanceSegmentation findInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
-                                   const HoughConfig& hough,
-                                   const SurfaceSegmentConfig& segment_config,
-                                   const SurfaceSegments* segments);
-
 /// Splits one hypothesis into instances and fits them (Hough voting, marching cubes, Ceres).
 /// With `segments` (the first view's convex patches, surface_segments.h) and
 /// `config.segments.enabled`, instances are also split along the patches. Adds the time spent
 /// to `timings` when given.
 void decompose(SceneHypothesis* hypothesis, const PerceptionConfig& config,
                StageTimings* timings = nullptr, const SurfaceSegments* segments = nullptr);
-
-/// Fits superquadrics to point sets (one per instance) with the configured fitter: per-instance
-/// fits, then the joint refinement when enabled. Sets with too few points are skipped (their
-/// entry in the result is std::nullopt).
-std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>& points,
-                                                      const PerceptionConfig& config);
 
 /// Instance of every pixel of `view` (the first view of `estimate`): the label of the labelled
 /// voxel nearest to its table-frame point among the voxel holding it and its 26 neighbours
@@ -104,8 +83,9 @@ class ScenePerception {
   ScenePerception(const ScenePerception&) = delete;
   ScenePerception& operator=(const ScenePerception&) = delete;
 
-  /// Throws std::invalid_argument for unusable input (no view, image and camera sizes differ,
-  /// a later view without pose) and std::runtime_error when no table pose is given and none
+  /// Views after the first must carry a pose (they are fused into the first view's table
+  /// frame). Throws std::invalid_argument for unusable input (no view, image and camera sizes
+  /// differ, a later view without pose) and std::runtime_error when no table pose is given and none
   /// can be estimated. A scene with nothing on the table gives hypotheses without instances.
   /// Not thread-safe (one model state): use one ScenePerception per thread.
   SceneEstimate perceive(const std::vector<DepthView>& views) const;

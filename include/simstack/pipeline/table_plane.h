@@ -13,9 +13,9 @@ namespace simstack {
 struct TablePlaneConfig {
   double inlier_distance_m = 0.01;  ///< RANSAC threshold
   int max_iterations = 1000;
-  int pixel_stride = 4;             ///< every n-th pixel along both image axes
-  double max_depth_m = 3.0;         ///< farther points are ignored
-  double min_inlier_share = 0.15;   ///< of the valid sampled points; less means "no table"
+  int pixel_stride = 4;            ///< every n-th pixel along both image axes
+  double max_depth_m = 3.0;        ///< farther points are ignored
+  double min_inlier_share = 0.15;  ///< of the valid sampled points; less means "no table"
 };
 
 struct TablePlane {

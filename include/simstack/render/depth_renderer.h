@@ -59,8 +59,8 @@ class DepthRenderer {
   /// Distance along a table-frame ray to the first surface (inf when none); `instance`
   /// receives what was hit (kNoSurface when none), `triangle` the index of the triangle hit in
   /// its mesh (-1 when none).
-  double castRay(const Vec3& origin_table, const Vec3& direction_table,
-                 int* instance = nullptr, int* triangle = nullptr) const;
+  double castRay(const Vec3& origin_table, const Vec3& direction_table, int* instance = nullptr,
+                 int* triangle = nullptr) const;
 
  private:
   struct Impl;

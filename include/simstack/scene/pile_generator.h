@@ -45,8 +45,8 @@ struct PileConfig {
   /// counts as settled (see generate()).
   int rest_check_steps = 240;
   double rest_tolerance_m = 0.005;
-  int rest_check_rounds = 4;        ///< re-simulations before a creeping pile is drawn again
-  int max_drops_per_object = 8;     ///< drops of one object before the pile is drawn again
+  int rest_check_rounds = 4;     ///< re-simulations before a creeping pile is drawn again
+  int max_drops_per_object = 8;  ///< drops of one object before the pile is drawn again
   int max_attempts = 100;
   PhysicsConfig physics = generationPhysics();
 
@@ -65,10 +65,10 @@ struct PileConfig {
 /// What generate() returns: the settled scene and bookkeeping.
 struct Pile {
   Scene scene;
-  int attempts = 0;      ///< piles drawn until this one was accepted
-  int drops = 0;         ///< object drops simulated in all attempts
-  int placed_drops = 0;  ///< drops kept (in all attempts, also of piles rejected later)
-  int undone_drops = 0;  ///< drops undone: rolled out of the grid or off the pile, no rest
+  int attempts = 0;         ///< piles drawn until this one was accepted
+  int drops = 0;            ///< object drops simulated in all attempts
+  int placed_drops = 0;     ///< drops kept (in all attempts, also of piles rejected later)
+  int undone_drops = 0;     ///< drops undone: rolled out of the grid or off the pile, no rest
   int skipped_objects = 0;  ///< objects too thick to lie on top of the pile inside the grid
   int settle_steps = 0;     ///< physics steps of the drops of the accepted pile
   /// Physics work for this pile in object-steps (steps x objects in the world), by what became
@@ -105,6 +105,18 @@ class PileGenerator {
   Superquadric randomSuperquadric(std::mt19937_64& rng) const;
 
  private:
+  struct Building;  ///< a pile being built (pile_generator.cpp)
+  enum class DropEnd { kSettled, kRestless, kEscaped, kApart, kUnfit };
+  /// One attempt: draws the object count and drops them one by one; false (the reason in
+  /// `pile->why`) when an object could not be placed.
+  bool dropAll(Building* pile, std::mt19937_64& rng) const;
+  /// Drops `object` onto the pile, up to max_drops_per_object tries; false when none stays.
+  bool place(Building* pile, SceneObject object, std::mt19937_64& rng) const;
+  /// Settles `trial` (the pile plus the dropped object, index `index`) in short runs; returns
+  /// the steps simulated and how the drop ended.
+  int settle(PhysicsWorld& trial, const Building& pile, const SceneObject& object,
+             const Vec2& centre, DropEnd* end) const;
+
   PileConfig config_;
   std::vector<std::shared_ptr<const ObjectShape>> catalogue_;
 };

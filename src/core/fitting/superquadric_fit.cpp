@@ -51,7 +51,8 @@ T rayDistance(const T* x, const T* p) {
   ceres::AngleAxisRotatePoint(inverse, d, q);
   // Everything in logs: exponents up to 100 over- and underflow doubles otherwise.
   T lw[3];  // log |q_i / a_i|^e_i
-  for (int i = 0; i < 3; ++i) lw[i] = T(0.5) * x[3 + i] * log(q[i] * q[i] / (x[i] * x[i]) + T(1e-18));
+  for (int i = 0; i < 3; ++i)
+    lw[i] = T(0.5) * x[3 + i] * log(q[i] * q[i] / (x[i] * x[i]) + T(1e-18));
   auto logSumExp = [&](const T& mu, T* weighted_exponent) {
     T terms[3];
     T top = lw[0] + mu * x[3];
@@ -103,8 +104,8 @@ void placeSample(const T* x, const SurfaceSample& w, T* p) {
   T local[3];
   for (int i = 0; i < 3; ++i) {
     const double share = std::abs(w[i]);
-    local[i] = share > 0.0 ? x[i] * T(w[i] < 0 ? -1.0 : 1.0) * exp(T(std::log(share)) / x[3 + i])
-                           : T(0.0);
+    local[i] =
+        share > 0.0 ? x[i] * T(w[i] < 0 ? -1.0 : 1.0) * exp(T(std::log(share)) / x[3 + i]) : T(0.0);
   }
   const T aa[3] = {x[9], x[10], x[11]};
   ceres::AngleAxisRotatePoint(aa, local, p);
@@ -123,6 +124,10 @@ struct DistortionResidual {
     r[0] = T(weight) * pow(x[0] * x[1] * x[2], 0.25) * rayDistance(x, p);
     return true;
   }
+  static ceres::CostFunction* Create(const Vec3& point, double weight, const Bounds& lo) {
+    return new ceres::AutoDiffCostFunction<DistortionResidual, 1, kParams>(
+        new DistortionResidual{point, weight, lo});
+  }
 };
 
 struct CollisionResidual {  // sample q of shape j penetrating shape i
@@ -140,6 +145,10 @@ struct CollisionResidual {  // sample q of shape j penetrating shape i
     r[0] = d < T(0.0) ? T(weight) * d : T(0.0);
     return true;
   }
+  static ceres::CostFunction* Create(const Vec3& q, double weight, const Bounds& lo) {
+    return new ceres::AutoDiffCostFunction<CollisionResidual, 1, kParams, kParams>(
+        new CollisionResidual{q, weight, lo});
+  }
 };
 
 struct FloorResidual {
@@ -154,6 +163,10 @@ struct FloorResidual {
     placeSample(x, q, p);
     r[0] = p[2] < T(0.0) ? T(weight) * p[2] : T(0.0);
     return true;
+  }
+  static ceres::CostFunction* Create(const Vec3& q, double weight, const Bounds& lo) {
+    return new ceres::AutoDiffCostFunction<FloorResidual, 1, kParams>(
+        new FloorResidual{q, weight, lo});
   }
 };
 
@@ -176,7 +189,8 @@ Superquadric fromParams(const Params& x) {
   sq.exponents = Vec3(x[3], x[4], x[5]);
   const Vec3 v(x[9], x[10], x[11]);
   sq.T_table_object = Transform::Identity();
-  if (v.norm() > 1e-12) sq.T_table_object.linear() = Eigen::AngleAxisd(v.norm(), v / v.norm()).toRotationMatrix();
+  if (v.norm() > 1e-12)
+    sq.T_table_object.linear() = Eigen::AngleAxisd(v.norm(), v / v.norm()).toRotationMatrix();
   sq.T_table_object.translation() = Vec3(x[6], x[7], x[8]);
   return sq;
 }
@@ -221,17 +235,15 @@ void addDistortion(ceres::Problem* problem, double* x, const Points3& points, do
   const size_t used = (n + stride - 1) / stride;
   const double weight = std::sqrt(lambda / used);
   for (size_t k = 0; k < n; k += stride) {
-    problem->AddResidualBlock(
-        new ceres::AutoDiffCostFunction<DistortionResidual, 1, kParams>(
-            new DistortionResidual{points[k], weight, lo}),
-        nullptr, x);
+    problem->AddResidualBlock(DistortionResidual::Create(points[k], weight, lo), nullptr, x);
   }
 }
 
 ceres::Solver::Options solverOptions(const FitConfig& c, int max_iterations) {
   ceres::Solver::Options o;
   o.trust_region_strategy_type = ceres::DOGLEG;
-  o.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;  // 12 parameters per shape: tiny normal equations
+  o.linear_solver_type =
+      ceres::DENSE_NORMAL_CHOLESKY;  // 12 parameters per shape: tiny normal equations
   o.max_num_iterations = max_iterations;
   // Ceres' default first trust region (1e4) is far beyond the scale of these parameters
   // (centimetres, size and exponent logits): every early step overshot, the dogleg halves the
@@ -378,9 +390,7 @@ std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
           left_out_floor.emplace_back(i, &q);
           continue;
         }
-        problem.AddResidualBlock(new ceres::AutoDiffCostFunction<FloorResidual, 1, kParams>(
-                                     new FloorResidual{q, floor_w, lo}),
-                                 nullptr, u[i].data());
+        problem.AddResidualBlock(FloorResidual::Create(q, floor_w, lo), nullptr, u[i].data());
       }
       for (size_t j = 0; j < n; ++j) {
         if (i == j) continue;
@@ -397,10 +407,8 @@ std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
             left_out_pairs.emplace_back(i, j, &q);
             continue;
           }
-          problem.AddResidualBlock(
-              new ceres::AutoDiffCostFunction<CollisionResidual, 1, kParams, kParams>(
-                  new CollisionResidual{q, w, lo}),
-              nullptr, u[i].data(), u[j].data());
+          problem.AddResidualBlock(CollisionResidual::Create(q, w, lo), nullptr, u[i].data(),
+                                   u[j].data());
         }
       }
     }

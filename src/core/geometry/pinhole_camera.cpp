@@ -17,6 +17,18 @@ void PinholeCamera::validate() const {
     throw std::invalid_argument("invalid camera intrinsics: " + s.substr(0, s.size() - 2));
 }
 
+PinholeCamera scaledKinect(int width, int height) {
+  PinholeCamera c;
+  const double s = width / 640.0;
+  c.width = width;
+  c.height = height;
+  c.fx = 525.0 * s;
+  c.fy = 525.0 * height / 480.0;
+  c.cx = (width - 1) / 2.0;
+  c.cy = (height - 1) / 2.0;
+  return c;
+}
+
 Transform lookAt(const Vec3& eye_table, const Vec3& target_table) {
   const Vec3 z = (target_table - eye_table).normalized();
   Vec3 x = z.cross(Vec3::UnitZ());         // image x: to the right when table +z is up

@@ -43,8 +43,7 @@ std::vector<uint64_t> fineAxisTable(int r, int ref, int axis) {
 /// do, the one that crosses first is visited first. These are the cells, in their order, of
 /// Amanatides & Woo's cell-by-cell traversal (a test compares the counts with one), with two
 /// independent additions per slab as the chain from one step to the next instead of a
-/// comparison, a select and an addition per cell: the rays took 0.61x the time of that
-/// traversal at R = 64, the same counts.
+/// comparison, a select and an addition per cell (docs/benchmarks.md).
 template <class Count, class Block, class Reversed>
 size_t marchRay(const Vec3& p, const Vec3& unit, int ref, const std::vector<uint8_t>& occ, int r,
                 int tolerance, int reversed_stop, const std::vector<uint64_t>* axis_tables,
@@ -155,9 +154,7 @@ struct WeightedCloud {
 };
 /// A nanoflann result set that sums the weighted points of a flat window as the search finds
 /// them, instead of listing them for a second pass. The sums are exact integers, so a window's
-/// mean depends on which points it holds, not on the order the search finds them in (with
-/// floating-point sums, a change of the points' order or of the tree's leaves moved a few
-/// evaluation views' instances).
+/// mean depends on which points it holds, not on the order the search finds them in.
 struct WindowSum {
   const std::vector<WeightedPoint>* pts;
   double radius2;
@@ -181,9 +178,8 @@ using WeightedKdTree =
 /// Mean shift with a flat kernel; converged modes closer than `radius` merge (the one with more
 /// weight in its window wins). Seeds are the weighted means of the points in each cell of a
 /// grid of side radius / 2 ("bin seeding"): points sharing a cell are closer than the radius,
-/// so two clusters that mean shift keeps apart never share a seed (cells of side `radius`
-/// merged centres 7-12 cm apart), and there are tens of seeds instead of one per point
-/// (thousands at R = 64). Window queries go through a k-d tree.
+/// so two clusters that mean shift keeps apart never share a seed, and there are tens of seeds
+/// instead of one per point (thousands at R = 64). Window queries go through a k-d tree.
 std::vector<Vec3> meanShift(const std::vector<WeightedPoint>& pts, double radius, int threads,
                             const Vec3& origin, double half_cell) {
   if (pts.empty()) return {};
@@ -246,10 +242,10 @@ std::vector<Vec3> meanShift(const std::vector<WeightedPoint>& pts, double radius
   return centres;
 }
 
-}  // namespace
+using FineCount = uint16_t;
 
-InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
-                                    const HoughConfig& config) {
+void checkHoughInput(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
+                     const HoughConfig& config) {
   if (!(tsdf_m.spec == votes.spec) || tsdf_m.data.size() != votes.data.size() ||
       static_cast<int>(tsdf_m.data.size()) != tsdf_m.spec.voxelCount())
     throw std::invalid_argument("houghInstances: the TSDF and the vote field must share a grid");
@@ -263,75 +259,67 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
     throw std::invalid_argument(
         "houghInstances: split solidities in [0, 1] (accept > 0) and "
         "split_max_rounds >= 0 are required");
-  const GridSpec& g = tsdf_m.spec;
-  const int r = g.resolution, ref = config.refinement, fine = r * ref;
-  if (static_cast<double>(fine) * fine * fine >= 4294967295.0)
+  const double fine = static_cast<double>(tsdf_m.spec.resolution) * config.refinement;
+  if (fine * fine * fine >= 4294967295.0)
     throw std::invalid_argument("houghInstances: resolution x refinement too large");
-  const double h = g.voxel_size_m / ref;
+}
 
-  InstanceSegmentation out;
-  out.labels = Grid3<int>(g, -1);
-  std::vector<uint8_t> occ(g.voxelCount(), 0);
+/// Occupied voxels (tsdf <= 0) tile by tile (4^3 voxels, tiles and the voxels inside them in
+/// raster order; a counting sort of the raster list): neighbouring voxels' fine counts lie
+/// close in memory, so a ray's next blocks are more often in cache, and a chunk of consecutive
+/// rays starts in one compact part of the pile. `occ` gets 1 per occupied voxel.
+std::vector<int> occupiedTileOrder(const Grid3<float>& tsdf_m, std::vector<uint8_t>* occ) {
+  const GridSpec& g = tsdf_m.spec;
+  occ->assign(g.voxelCount(), 0);
   std::vector<int> occupied;
   for (int i = 0; i < g.voxelCount(); ++i) {
     if (tsdf_m.data[i] <= 0.0f) {
-      occ[i] = 1;
+      (*occ)[i] = 1;
       occupied.push_back(i);
     }
   }
-  if (occupied.empty()) return out;
-  // Occupied voxels tile by tile (4^3 voxels, tiles and the voxels inside them in raster
-  // order; a counting sort of the raster list): neighbouring voxels' fine counts lie close in
-  // memory, so a ray's next blocks are more often in cache (Morton order did as well, rays
-  // 0.91-0.94x against raster order at R = 64, but its sort cost 1 ms), and a chunk of
-  // consecutive rays starts in one compact part of the pile.
-  {
-    constexpr int kTile = 4;
-    const int tiles = (r + kTile - 1) / kTile;
-    auto tileOf = [&](int index) {
-      const Vec3i v = g.unravel(index);
-      return ((v.z() / kTile) * tiles + v.y() / kTile) * tiles + v.x() / kTile;
-    };
-    std::vector<int> start(static_cast<size_t>(tiles) * tiles * tiles + 1, 0);
-    for (const int i : occupied) ++start[tileOf(i) + 1];
-    std::partial_sum(start.begin(), start.end(), start.begin());
-    std::vector<int> tiled(occupied.size());
-    for (const int i : occupied) tiled[start[tileOf(i)]++] = i;
-    occupied.swap(tiled);
-  }
-
-  // 1. Rays. A ray is only counted inside occupied voxels (its `outside_tolerance_vox` steps
-  //    through free space cross gaps, they do not vote), so the fine counts are ref^3 per
-  //    occupied voxel, in the order of `occupied`: sparse, and a ray's cells in one voxel share
-  //    a few cache lines. The march is bound by the latency of its scattered increments, so
-  //    counts are 16-bit and saturating, one array per thread, plain increments summed after
-  //    the march (shared atomic 32-bit counts: 1.25x slower at R = 64), and the next voxel's
-  //    block is prefetched (1.13x). A first pass that counted rays per voxel, to give fine
-  //    counts only to voxels crossed by more than mu rays, found nearly every occupied voxel
-  //    above mu and cost 1.3x more than it saved. Not counting the tolerance steps through free
-  //    voxels left the network's object counts unchanged (synthetic test views: 30 % exact
-  //    before and after; the same counts on the four real scenes).
-  const int threads = std::max(1, std::min(config.threads, static_cast<int>(occupied.size())));
-  std::vector<Vec3> dirs(occupied.size(), Vec3::Zero());
-  for (size_t k = 0; k < occupied.size(); ++k) {
-    const Vec3f v = votes.data[occupied[k]];
-    if (v.norm() > std::max(1e-3, config.min_vote_norm)) dirs[k] = (v / v.norm()).cast<double>();
-  }
-  const auto t0 = std::chrono::steady_clock::now();
-  auto ms = [](std::chrono::steady_clock::time_point a) {
-    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a).count();
+  constexpr int kTile = 4;
+  const int tiles = (g.resolution + kTile - 1) / kTile;
+  auto tileOf = [&](int index) {
+    const Vec3i v = g.unravel(index);
+    return ((v.z() / kTile) * tiles + v.y() / kTile) * tiles + v.x() / kTile;
   };
+  std::vector<int> start(static_cast<size_t>(tiles) * tiles * tiles + 1, 0);
+  for (const int i : occupied) ++start[tileOf(i) + 1];
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  std::vector<int> tiled(occupied.size());
+  for (const int i : occupied) tiled[start[tileOf(i)]++] = i;
+  return tiled;
+}
+
+/// The fine counts of every thread: ref^3 per occupied voxel, in the order of `occupied`.
+struct FineCounts {
+  std::vector<std::unique_ptr<FineCount[]>> per_thread;
+  int team = 1;  ///< threads that ran (the team may be smaller than asked for)
+  size_t block = 0;
+  size_t traversals = 0;
+};
+
+/// Step 1, the rays. A ray is only counted inside occupied voxels (its `outside_tolerance_vox`
+/// steps through free space cross gaps, they do not vote), so the fine counts are ref^3 per
+/// occupied voxel: sparse, and a ray's cells in one voxel share a few cache lines. The march is
+/// bound by the latency of its scattered increments, so counts are 16-bit and saturating, one
+/// array per thread, plain increments summed after the march.
+FineCounts countRays(const GridSpec& g, const std::vector<int>& occupied,
+                     const std::vector<uint8_t>& occ, const std::vector<Vec3>& dirs,
+                     const HoughConfig& config, int threads) {
+  const int r = g.resolution, ref = config.refinement;
   std::vector<int> block_of(g.voxelCount(), -1);
   for (size_t k = 0; k < occupied.size(); ++k) block_of[occupied[k]] = static_cast<int>(k);
   const std::vector<uint64_t> axis_tables[3] = {fineAxisTable(r, ref, 0), fineAxisTable(r, ref, 1),
                                                 fineAxisTable(r, ref, 2)};
-  using FineCount = uint16_t;
-  const size_t block = static_cast<size_t>(ref) * ref * ref;
+  FineCounts out;
+  out.block = static_cast<size_t>(ref) * ref * ref;
+  const size_t block = out.block;
   // Allocated here (a bad_alloc inside a parallel region would terminate), zeroed by the thread
-  // that uses it (first touch); the team may be smaller than asked for, so only the arrays of
-  // the threads that ran are summed.
-  std::vector<std::unique_ptr<FineCount[]>> per_thread(threads);
-  for (auto& counts : per_thread) counts.reset(new FineCount[occupied.size() * block]);
+  // that uses it (first touch); only the arrays of the threads that ran are summed.
+  out.per_thread.resize(threads);
+  for (auto& counts : out.per_thread) counts.reset(new FineCount[occupied.size() * block]);
   std::vector<size_t> visits(threads, 0);
   int team = 1;
 #pragma omp parallel num_threads(threads)
@@ -339,7 +327,7 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
     const int t = omp_get_thread_num();
 #pragma omp single
     team = omp_get_num_threads();
-    FineCount* const counts = per_thread[t].get();
+    FineCount* const counts = out.per_thread[t].get();
     std::fill(counts, counts + occupied.size() * block, FineCount{0});
 #pragma omp for schedule(dynamic, 512)  // rays differ in length; counts add up the same
     for (size_t k = 0; k < occupied.size(); ++k) {
@@ -356,14 +344,20 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
           [&](int voxel) { return dirs[block_of[voxel]].dot(d) < 0.0; });
     }
   }
+  out.team = team;
   out.traversals = std::accumulate(visits.begin(), visits.end(), size_t{0});
-  out.count_bytes = team * occupied.size() * block * sizeof(FineCount);
+  return out;
+}
 
-  out.timings.rays_ms = ms(t0);
-  const auto t1 = std::chrono::steady_clock::now();
-
-  // 2. Cells above mu (the threads' counts summed), gathered per scene voxel into their
-  //    count-weighted mean position and total count: the points of mean shift.
+/// Step 2: cells above mu (the threads' counts summed), gathered per scene voxel into their
+/// count-weighted mean position and total count: the points of mean shift. `candidates` gets
+/// the number of such cells.
+std::vector<WeightedPoint> centreVotes(const GridSpec& g, const std::vector<int>& occupied,
+                                       const FineCounts& fc, const HoughConfig& config, int threads,
+                                       int* candidates_out) {
+  const int ref = config.refinement;
+  const double h = g.voxel_size_m / ref;
+  const size_t block = fc.block;
   std::vector<WeightedPoint> per_voxel(occupied.size());
   int candidates = 0;
   std::vector<std::vector<uint32_t>> sums(threads, std::vector<uint32_t>(block));
@@ -372,16 +366,15 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
     std::vector<uint32_t>& sum = sums[omp_get_thread_num()];
 #pragma omp for schedule(static)
     for (size_t b = 0; b < occupied.size(); ++b) {
-      const FineCount* first = per_thread[0].get() + b * block;
+      const FineCount* first = fc.per_thread[0].get() + b * block;
       for (size_t i = 0; i < block; ++i) sum[i] = first[i];
-      for (int t = 1; t < team; ++t) {
-        const FineCount* counts = per_thread[t].get() + b * block;
+      for (int t = 1; t < fc.team; ++t) {
+        const FineCount* counts = fc.per_thread[t].get() + b * block;
         for (size_t i = 0; i < block; ++i) sum[i] += counts[i];
       }
       uint32_t most = 0;
       for (size_t i = 0; i < block; ++i) most = std::max(most, sum[i]);
-      // Most voxels have no cell above mu (84 % of them on the R = 64 benchmark pile).
-      if (static_cast<int64_t>(most) <= config.min_traversals) continue;
+      if (static_cast<int64_t>(most) <= config.min_traversals) continue;  // most voxels
       // Counts times in-voxel cell indices, summed exactly in integers; the voxel's weighted
       // mean position follows from them once.
       uint64_t weight = 0, lsum[3] = {0, 0, 0};
@@ -412,15 +405,19 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
                                         w);
     }
   }
-  out.candidate_cells = candidates;
+  *candidates_out = candidates;
   std::vector<WeightedPoint> bins;
   for (const WeightedPoint& bin : per_voxel)
     if (bin.w > 0) bins.push_back(bin);
-  std::vector<Vec3> centres = meanShift(bins, config.bandwidth_m, threads, g.origin_table, 0.5 * h);
-  out.timings.mean_shift_ms = ms(t1);
-  const auto t2 = std::chrono::steady_clock::now();
+  return bins;
+}
 
-  // 3. Assignment; instances below the size limit are dropped and their voxels re-assigned.
+/// Step 3: each occupied voxel joins the centre minimising |angle to its vote| + gamma *
+/// distance / voxel; centres with fewer than `min_instance_voxels` voxels are dropped and the
+/// assignment repeated. Instances are numbered largest first into `out`.
+void assignToCentres(const GridSpec& g, const std::vector<int>& occupied,
+                     const std::vector<Vec3>& dirs, std::vector<Vec3> centres,
+                     const HoughConfig& config, int threads, InstanceSegmentation* out) {
   std::vector<Vec3> positions(occupied.size());
   for (size_t k = 0; k < occupied.size(); ++k) {
     const Vec3i idx = g.unravel(occupied[k]);
@@ -452,7 +449,6 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
     for (size_t n = 0; n < centres.size(); ++n)
       if (counts[n] >= config.min_instance_voxels) kept.push_back(centres[n]);
     if (kept.size() == centres.size()) {
-      // Largest instance first.
       std::vector<int> order(centres.size());
       std::iota(order.begin(), order.end(), 0);
       std::stable_sort(order.begin(), order.end(),
@@ -460,15 +456,53 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
       std::vector<int> rank(centres.size());
       for (size_t i = 0; i < order.size(); ++i) {
         rank[order[i]] = static_cast<int>(i);
-        out.centres_table.push_back(centres[order[i]]);
-        out.voxel_counts.push_back(counts[order[i]]);
+        out->centres_table.push_back(centres[order[i]]);
+        out->voxel_counts.push_back(counts[order[i]]);
       }
       for (size_t k = 0; k < occupied.size(); ++k)
-        out.labels.data[occupied[k]] = rank[assignment[k]];
-      break;
+        out->labels.data[occupied[k]] = rank[assignment[k]];
+      return;
     }
     centres = std::move(kept);
   }
+}
+
+}  // namespace
+
+InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
+                                    const HoughConfig& config) {
+  checkHoughInput(tsdf_m, votes, config);
+  const GridSpec& g = tsdf_m.spec;
+  const double h = g.voxel_size_m / config.refinement;
+  InstanceSegmentation out;
+  out.labels = Grid3<int>(g, -1);
+  std::vector<uint8_t> occ;
+  const std::vector<int> occupied = occupiedTileOrder(tsdf_m, &occ);
+  if (occupied.empty()) return out;
+  const int threads = std::max(1, std::min(config.threads, static_cast<int>(occupied.size())));
+  std::vector<Vec3> dirs(occupied.size(), Vec3::Zero());
+  for (size_t k = 0; k < occupied.size(); ++k) {
+    const Vec3f v = votes.data[occupied[k]];
+    if (v.norm() > std::max(1e-3, config.min_vote_norm)) dirs[k] = (v / v.norm()).cast<double>();
+  }
+  using Clock = std::chrono::steady_clock;
+  auto ms = [](Clock::time_point a) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - a).count();
+  };
+  const auto t0 = Clock::now();
+  const FineCounts counts = countRays(g, occupied, occ, dirs, config, threads);
+  out.traversals = counts.traversals;
+  out.count_bytes = counts.team * occupied.size() * counts.block * sizeof(FineCount);
+  out.timings.rays_ms = ms(t0);
+
+  const auto t1 = Clock::now();
+  const std::vector<WeightedPoint> bins =
+      centreVotes(g, occupied, counts, config, threads, &out.candidate_cells);
+  std::vector<Vec3> centres = meanShift(bins, config.bandwidth_m, threads, g.origin_table, 0.5 * h);
+  out.timings.mean_shift_ms = ms(t1);
+
+  const auto t2 = Clock::now();
+  assignToCentres(g, occupied, dirs, std::move(centres), config, threads, &out);
   out.splits = splitNonConvexInstances(&out, config);
   out.timings.assign_ms = ms(t2);
   return out;

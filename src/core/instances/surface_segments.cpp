@@ -168,60 +168,71 @@ double seenFreeShare(const SurfaceSegments& s, const std::vector<int>& a, const 
   return checked > 0 ? static_cast<double>(free) / checked : 0.0;
 }
 
-InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments,
-                                                 const SurfaceSegmentConfig& config,
-                                                 int min_part_voxels,
-                                                 const InstanceSegmentation& hough) {
-  config.validate();
-  InstanceSegmentation out = hough;
-  const Grid3<int>& labels = hough.labels;
-  const GridSpec& g = labels.spec;
-  const int instances = hough.size();
-  if (segments.patches < 1 || instances < 1) return out;
+namespace {
 
-  // Visible points of every (instance, patch) pair, and the voxel each point falls in.
-  std::vector<std::map<int, std::vector<int>>> seen(instances);
-  std::vector<int> visible(instances, 0);
-  std::vector<int> voxel_of(segments.points_table.size(), -1);
+/// The visible points of every (instance, patch) pair, and the voxel each point falls in.
+struct VisibleParts {
+  std::vector<std::map<int, std::vector<int>>> seen;  ///< per instance: patch -> point indices
+  std::vector<int> visible;                           ///< per instance: its visible points
+  std::vector<int> voxel_of;                          ///< per point: its labelled voxel, -1 none
+};
+
+VisibleParts visibleParts(const SurfaceSegments& segments, const Grid3<int>& labels,
+                          int instances) {
+  VisibleParts out;
+  out.seen.resize(instances);
+  out.visible.assign(instances, 0);
+  out.voxel_of.assign(segments.points_table.size(), -1);
   for (size_t i = 0; i < segments.points_table.size(); ++i) {
     const int v = nearestLabelledVoxel(labels, segments.points_table[i]);
     if (v < 0) continue;
-    voxel_of[i] = v;
+    out.voxel_of[i] = v;
     const int k = labels.data[v];
-    ++visible[k];
-    if (segments.patch[i] >= 0) seen[k][segments.patch[i]].push_back(static_cast<int>(i));
+    ++out.visible[k];
+    if (segments.patch[i] >= 0) out.seen[k][segments.patch[i]].push_back(static_cast<int>(i));
   }
-  // The patches that make up a real share of some instance's visible surface, and the
-  // instances each of them is part of.
+  return out;
+}
+
+struct PatchGroup {
+  std::vector<int> points;  ///< visible points (indices), all the group's patches
+  std::set<int> instances;
+  std::vector<int> patches;
+};
+
+/// One group per patch that makes up a real share of some instance's visible surface, with
+/// the instances it is part of.
+std::vector<PatchGroup> initialGroups(const SurfaceSegments& segments, const VisibleParts& parts,
+                                      const SurfaceSegmentConfig& config) {
+  const int instances = static_cast<int>(parts.seen.size());
   std::vector<std::set<int>> part_of(segments.patches);
   for (int k = 0; k < instances; ++k)
-    for (const auto& [p, points] : seen[k])
+    for (const auto& [p, points] : parts.seen[k])
       if (points.size() >= static_cast<size_t>(config.min_segment_points) &&
-          points.size() >= config.min_instance_share * visible[k])
+          points.size() >= config.min_instance_share * parts.visible[k])
         part_of[p].insert(k);
-
-  // Groups of patches: one per patch to start; two groups that share an instance join when
-  // the hull of their points is not seen as free space, the least free pair first.
-  struct Group {
-    std::vector<int> points;  // visible points (indices), all the group's patches
-    std::set<int> instances;
-    std::vector<int> patches;
-  };
-  const std::set<std::pair<int, int>> concave_edges(segments.concave_edges.begin(),
-                                                    segments.concave_edges.end());
-  std::vector<Group> groups;
+  std::vector<PatchGroup> groups;
   for (int p = 0; p < segments.patches; ++p) {
     if (part_of[p].empty()) continue;
-    Group grp;
+    PatchGroup grp;
     grp.instances = part_of[p];
     grp.patches = {p};
     for (int k : part_of[p]) {
-      const std::vector<int>& pts = seen[k].at(p);
+      const std::vector<int>& pts = parts.seen[k].at(p);
       grp.points.insert(grp.points.end(), pts.begin(), pts.end());
     }
     groups.push_back(std::move(grp));
   }
-  if (groups.empty()) return out;
+  return groups;
+}
+
+/// Two groups that share an instance and do not meet at a concave edge join when the hull of
+/// their points is not seen as free space, the least free pair first, until none does.
+void joinGroups(const SurfaceSegments& segments, const SurfaceSegmentConfig& config,
+                std::vector<PatchGroup>* groups_io) {
+  std::vector<PatchGroup>& groups = *groups_io;
+  const std::set<std::pair<int, int>> concave_edges(segments.concave_edges.begin(),
+                                                    segments.concave_edges.end());
   for (;;) {
     int best_a = -1, best_b = -1;
     double best = config.max_free_share;
@@ -240,20 +251,22 @@ InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments
           best_b = static_cast<int>(b);
         }
       }
-    if (best_a < 0) break;
-    Group& into = groups[best_a];
-    into.points.insert(into.points.end(), groups[best_b].points.begin(),
-                       groups[best_b].points.end());
-    into.instances.insert(groups[best_b].instances.begin(), groups[best_b].instances.end());
-    into.patches.insert(into.patches.end(), groups[best_b].patches.begin(),
-                        groups[best_b].patches.end());
+    if (best_a < 0) return;
+    PatchGroup& into = groups[best_a];
+    const PatchGroup& from = groups[best_b];
+    into.points.insert(into.points.end(), from.points.begin(), from.points.end());
+    into.instances.insert(from.instances.begin(), from.instances.end());
+    into.patches.insert(into.patches.end(), from.patches.begin(), from.patches.end());
     groups.erase(groups.begin() + best_b);
   }
+}
 
-  // Every voxel of a grouped instance goes to the group whose visible voxels it reaches first,
-  // moving through voxels of the same instance (6-connected).
-  const int n = static_cast<int>(labels.data.size());
-  std::vector<int> owner(n, -1);
+/// The group of every voxel of a grouped instance: the group whose visible voxels it reaches
+/// first, moving through voxels of the same instance (6-connected); -1 where none does.
+std::vector<int> growGroups(const Grid3<int>& labels, const std::vector<PatchGroup>& groups,
+                            const std::vector<int>& voxel_of) {
+  const GridSpec& g = labels.spec;
+  std::vector<int> owner(labels.data.size(), -1);
   std::deque<int> queue;
   for (size_t j = 0; j < groups.size(); ++j)
     for (int i : groups[j].points) {
@@ -277,12 +290,21 @@ InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments
       queue.push_back(w);
     }
   }
-  // Per instance, the group owning most of its voxels takes the ones no group reached; a
-  // group left with too few voxels gives them to that group as well.
+  return owner;
+}
+
+/// New labels: per instance, the group owning most of its voxels takes the ones no group
+/// reached, and the voxels of a group left with fewer than `min_part_voxels`; the groups that
+/// keep enough voxels come first, then the instances no group took. Centres are the new parts'
+/// voxel means.
+void relabel(const Grid3<int>& labels, const std::vector<int>& owner, int groups, int instances,
+             int min_part_voxels, InstanceSegmentation* out) {
+  const GridSpec& g = labels.spec;
+  const int n = static_cast<int>(labels.data.size());
   std::vector<std::map<int, int>> owned(instances);
   for (int v = 0; v < n; ++v)
     if (labels.data[v] >= 0 && owner[v] >= 0) ++owned[labels.data[v]][owner[v]];
-  std::vector<int> group_voxels(groups.size(), 0);
+  std::vector<int> group_voxels(groups, 0);
   for (int v = 0; v < n; ++v)
     if (owner[v] >= 0) ++group_voxels[owner[v]];
   std::vector<int> main_group(instances, -1);
@@ -294,9 +316,7 @@ InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments
         main_group[k] = j;
       }
   }
-
-  // New labels: the groups that keep enough voxels, then the instances no group took.
-  std::vector<int> label_of_group(groups.size(), -1), label_of_instance(instances, -1);
+  std::vector<int> label_of_group(groups, -1), label_of_instance(instances, -1);
   int next_label = 0;
   for (int v = 0; v < n; ++v) {
     const int k = labels.data[v];
@@ -306,18 +326,36 @@ InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments
     if (j < 0) j = main_group[k];
     int& label = j >= 0 ? label_of_group[j] : label_of_instance[k];
     if (label < 0) label = next_label++;
-    out.labels.data[v] = label;
+    out->labels.data[v] = label;
   }
-  out.centres_table.assign(next_label, Vec3::Zero());
-  out.voxel_counts.assign(next_label, 0);
+  out->centres_table.assign(next_label, Vec3::Zero());
+  out->voxel_counts.assign(next_label, 0);
   for (int v = 0; v < n; ++v) {
-    const int l = out.labels.data[v];
+    const int l = out->labels.data[v];
     if (l < 0) continue;
     const Vec3i c = g.unravel(v);
-    out.centres_table[l] += g.voxelCentre(c.x(), c.y(), c.z());
-    ++out.voxel_counts[l];
+    out->centres_table[l] += g.voxelCentre(c.x(), c.y(), c.z());
+    ++out->voxel_counts[l];
   }
-  for (int l = 0; l < next_label; ++l) out.centres_table[l] /= out.voxel_counts[l];
+  for (int l = 0; l < next_label; ++l) out->centres_table[l] /= out->voxel_counts[l];
+}
+
+}  // namespace
+
+InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments,
+                                                 const SurfaceSegmentConfig& config,
+                                                 int min_part_voxels,
+                                                 const InstanceSegmentation& hough) {
+  config.validate();
+  InstanceSegmentation out = hough;
+  const int instances = hough.size();
+  if (segments.patches < 1 || instances < 1) return out;
+  const VisibleParts parts = visibleParts(segments, hough.labels, instances);
+  std::vector<PatchGroup> groups = initialGroups(segments, parts, config);
+  if (groups.empty()) return out;
+  joinGroups(segments, config, &groups);
+  const std::vector<int> owner = growGroups(hough.labels, groups, parts.voxel_of);
+  relabel(hough.labels, owner, static_cast<int>(groups.size()), instances, min_part_voxels, &out);
   return out;
 }
 

@@ -137,21 +137,41 @@ void writeLabelledCloudPcd(const std::string& path, const Points3& points,
     if (!f) throw std::runtime_error("cannot write " + path);
     return;
   }
-  if (pcl::io::savePCDFileBinary(path, cloud) != 0) throw std::runtime_error("cannot write " + path);
+  if (pcl::io::savePCDFileBinary(path, cloud) != 0)
+    throw std::runtime_error("cannot write " + path);
 }
+
+namespace {
+
+template <class Point>
+DepthImage organizedDepth(const std::string& path, pcl::PointCloud<Point>* cloud) {
+  if (pcl::io::loadPCDFile(path, *cloud) != 0)
+    throw std::runtime_error("cannot read cloud " + path);
+  if (!cloud->isOrganized() || cloud->width < 2 || cloud->height < 2)
+    throw std::runtime_error(path + " is not an organized cloud (height " +
+                             std::to_string(cloud->height) + "); a depth image needs one");
+  DepthImage depth(cloud->width, cloud->height, std::numeric_limits<float>::quiet_NaN());
+  for (uint32_t v = 0; v < cloud->height; ++v)
+    for (uint32_t u = 0; u < cloud->width; ++u) {
+      const float z = cloud->at(u, v).z;
+      if (std::isfinite(z) && z > 0) depth.at(u, v) = z;
+    }
+  return depth;
+}
+
+}  // namespace
 
 DepthImage readDepthPcd(const std::string& path) {
   pcl::PointCloud<pcl::PointXYZ> cloud;
-  if (pcl::io::loadPCDFile(path, cloud) != 0) throw std::runtime_error("cannot read cloud " + path);
-  if (!cloud.isOrganized() || cloud.width < 2 || cloud.height < 2)
-    throw std::runtime_error(path + " is not an organized cloud (height " +
-                             std::to_string(cloud.height) + "); a depth image needs one");
-  DepthImage depth(cloud.width, cloud.height, std::numeric_limits<float>::quiet_NaN());
+  return organizedDepth(path, &cloud);
+}
+
+DepthImage readDepthPcd(const std::string& path, Image<uint32_t>* labels) {
+  pcl::PointCloud<pcl::PointXYZL> cloud;
+  DepthImage depth = organizedDepth(path, &cloud);
+  *labels = Image<uint32_t>(cloud.width, cloud.height, 0);
   for (uint32_t v = 0; v < cloud.height; ++v)
-    for (uint32_t u = 0; u < cloud.width; ++u) {
-      const float z = cloud.at(u, v).z;
-      if (std::isfinite(z) && z > 0) depth.at(u, v) = z;
-    }
+    for (uint32_t u = 0; u < cloud.width; ++u) labels->at(u, v) = cloud.at(u, v).label;
   return depth;
 }
 

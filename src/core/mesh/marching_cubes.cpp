@@ -1,8 +1,8 @@
 #include "simstack/mesh/marching_cubes.h"
 
 #include <vtkCellArray.h>
-#include <vtkFlyingEdges3D.h>
 #include <vtkFloatArray.h>
+#include <vtkFlyingEdges3D.h>
 #include <vtkImageData.h>
 #include <vtkNew.h>
 #include <vtkPointData.h>
@@ -35,7 +35,8 @@ TriangleMesh extractSurface(const Grid3<float>& tsdf_m) {
       for (int x = 0; x < p; ++x) {
         const bool border = x == 0 || y == 0 || z == 0 || x == p - 1 || y == p - 1 || z == p - 1;
         const float v = border ? outside : tsdf_m.at(x - 1, y - 1, z - 1);
-        values->SetValue((static_cast<vtkIdType>(z) * p + y) * p + x, std::isfinite(v) ? v : outside);
+        values->SetValue((static_cast<vtkIdType>(z) * p + y) * p + x,
+                         std::isfinite(v) ? v : outside);
       }
   image->GetPointData()->SetScalars(values);
 
@@ -72,7 +73,8 @@ TriangleMesh extractSurface(const Grid3<float>& tsdf_m) {
     const Vec3 n = (b - a).cross(c - a);
     if (n.squaredNorm() <= 0) continue;
     const Vec3 centre = (a + b + c) / 3.0, u = n.normalized();
-    agreement += tsdf_m.sampleTrilinear(centre + eps * u) - tsdf_m.sampleTrilinear(centre - eps * u);
+    agreement +=
+        tsdf_m.sampleTrilinear(centre + eps * u) - tsdf_m.sampleTrilinear(centre - eps * u);
   }
   if (agreement < 0)
     for (auto& t : mesh.triangles) std::swap(t[1], t[2]);

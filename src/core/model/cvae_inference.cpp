@@ -3,7 +3,7 @@
 #include <stdexcept>
 
 #include "simstack/model/cvae.h"
-#include "simstack/model/training_sample.h"
+#include "simstack/tsdf/network_input.h"
 
 namespace simstack {
 

@@ -14,13 +14,13 @@
 #include <fstream>
 #include <mutex>
 #include <numeric>
+#include <sstream>
 #include <thread>
 
 #include "simstack/dataset/dataset.h"
 #include "simstack/eval/occupancy.h"
 #include "simstack/model/cvae.h"
 #include "simstack/model/training_sample.h"
-#include "simstack/tools/progress.h"
 
 namespace fs = std::filesystem;
 
@@ -58,6 +58,148 @@ Batch toBatch(const std::vector<TrainingSample>& samples, int r) {
   return batch;
 }
 
+/// Training batches made by a worker thread ahead of the optimiser. Sample (step, i) depends
+/// only on the seed, so a resumed run sees the data an uninterrupted one would have.
+class BatchQueue {
+ public:
+  BatchQueue(const TrainConfig& tc, const TrainingSampleBuilder& builder,
+             const DatasetReader& reader, int train_scenes, int resolution, int64_t start)
+      : worker_([=, &builder, &reader] {
+          omp_set_num_threads(1);
+          for (int64_t step = start; step < tc.steps; ++step) {
+            std::vector<TrainingSample> samples;
+            try {
+              for (int i = 0; i < tc.batch_size; ++i) {
+                std::mt19937_64 rng(mix(tc.seed, static_cast<uint64_t>(step) * 1024 + i));
+                std::uniform_int_distribution<int> pick(0, train_scenes - 1);
+                samples.push_back(builder.build(reader.read(pick(rng)), rng));
+              }
+            } catch (const std::exception& e) {
+              std::lock_guard<std::mutex> lock(mutex_);
+              error_ = e.what();
+              cv_.notify_all();
+              return;
+            }
+            Batch batch = toBatch(samples, resolution);
+            std::unique_lock<std::mutex> lock(mutex_);
+            cv_.wait(lock, [&] { return queue_.size() < 3 || stop_; });
+            if (stop_) return;
+            queue_.push_back(std::move(batch));
+            cv_.notify_all();
+          }
+        }) {}
+  ~BatchQueue() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    worker_.join();
+  }
+  /// The next batch; throws std::runtime_error with the worker's message when it failed.
+  Batch next() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    cv_.wait(lock, [&] { return !queue_.empty() || !error_.empty(); });
+    if (queue_.empty()) throw std::runtime_error(error_);
+    Batch batch = std::move(queue_.front());
+    queue_.pop_front();
+    cv_.notify_all();
+    return batch;
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::deque<Batch> queue_;
+  std::string error_;
+  bool stop_ = false;
+  std::thread worker_;  // last: starts after the members it uses
+};
+
+/// train_log.csv: losses every 10 steps, validation figures at validation steps.
+class TrainingLog {
+ public:
+  TrainingLog(const fs::path& path, bool append)
+      : path_(path), log_(path.string(), append ? std::ios::app : std::ios::trunc) {
+    if (!log_) throw std::runtime_error("cannot write " + path.string());
+    log_.seekp(0, std::ios::end);
+    if (log_.tellp() == 0)  // a new log (also when a finished model is trained further)
+      log_ << "step,total,tsdf,partial,votes,mmd,occupancy,samples_per_s,validation_iou,"
+              "validation_bce,validation_disagreement,posterior_mu_rms,posterior_sigma,"
+              "validation_posterior_iou\n";
+  }
+  void write(int64_t step, const std::array<double, 6>& losses, const TrainingReport& report,
+             bool validated, bool posterior_measured) {
+    log_ << step;
+    for (double v : losses) log_ << "," << v;
+    log_ << "," << report.samples_per_second;
+    if (validated) {
+      log_ << "," << report.validation_iou << "," << report.validation_bce << ","
+           << report.validation_disagreement << ",";
+      if (posterior_measured) {
+        log_ << report.posterior_mu_rms << "," << report.posterior_sigma;
+      } else {
+        log_ << ",";  // FC baseline: no posterior
+      }
+      log_ << ",";
+      if (std::isfinite(report.validation_posterior_iou)) log_ << report.validation_posterior_iou;
+    }
+    log_ << "\n";
+  }
+  void flush() { log_.flush(); }
+  /// The losses and pace of the last logged step (a resumed run that had nothing left to do).
+  bool lastRow(std::array<double, 6>* losses, double* samples_per_second) const {
+    std::ifstream previous(path_.string());
+    std::string line, last;
+    while (std::getline(previous, line))
+      if (!line.empty() && std::isdigit(static_cast<unsigned char>(line[0]))) last = line;
+    auto& l = *losses;
+    return std::sscanf(last.c_str(), "%*[^,],%lf,%lf,%lf,%lf,%lf,%lf,%lf", &l[0], &l[1], &l[2],
+                       &l[3], &l[4], &l[5], samples_per_second) == 7;
+  }
+
+ private:
+  fs::path path_;
+  std::ofstream log_;
+};
+
+/// Running means over the last 50 steps of the losses and of the encoder's posterior on the
+/// training batches (train mode; in eval mode BatchNorm's running statistics give other codes).
+struct RecentSteps {
+  std::deque<std::array<double, 6>> losses;
+  std::deque<std::array<double, 2>> posterior;  ///< mean square of mu, mean sigma
+
+  void add(const CvaeLosses& l, const CvaeOutput& o, TrainingReport* report) {
+    losses.push_back({l.total.item<double>(), l.tsdf.item<double>(), l.partial.item<double>(),
+                      l.votes.item<double>(), l.mmd.item<double>(), l.occupancy.item<double>()});
+    if (losses.size() > 50) losses.pop_front();
+    if (!o.mu.defined()) return;
+    torch::NoGradGuard no_grad;
+    posterior.push_back(
+        {o.mu.pow(2).mean().item<double>(), torch::exp(0.5 * o.logvar).mean().item<double>()});
+    if (posterior.size() > 50) posterior.pop_front();
+    double mu_sq = 0.0, sigma = 0.0;
+    for (const auto& p : posterior) {
+      mu_sq += p[0] / posterior.size();
+      sigma += p[1] / posterior.size();
+    }
+    report->posterior_mu_rms = std::sqrt(mu_sq);
+    report->posterior_sigma = sigma;
+  }
+  void meanInto(TrainingReport* report) const {
+    if (losses.empty()) return;
+    std::array<double, 6> mean{};
+    for (const auto& a : losses)
+      for (size_t i = 0; i < mean.size(); ++i) mean[i] += a[i] / losses.size();
+    report->total = mean[0];
+    report->tsdf = mean[1];
+    report->partial = mean[2];
+    report->votes = mean[3];
+    report->mmd = mean[4];
+    report->occupancy = mean[5];
+  }
+};
+
 }  // namespace
 
 double learningRate(const TrainConfig& tc, int64_t step) {
@@ -72,6 +214,12 @@ struct CvaeTrainer::Impl {
   TrainConfig config;
   std::unique_ptr<DatasetReader> reader;
   int train_scenes = 0;
+
+  Cvae loadOrCreate(bool resuming, const fs::path& checkpoint) const;
+  int64_t restore(Cvae& model, torch::optim::Adam& optimizer, const fs::path& out) const;
+  void validate(Cvae& model, const TrainingSampleBuilder& builder, TrainingReport* report) const;
+  void writeModelFiles(const fs::path& out, Cvae& model, const TrainingReport& report,
+                       bool posterior_measured) const;
 };
 
 CvaeTrainer::CvaeTrainer(const std::string& dataset_path, const CvaeConfig& model,
@@ -112,21 +260,12 @@ CvaeTrainer::CvaeTrainer(const std::string& dataset_path, const CvaeConfig& mode
 
 CvaeTrainer::~CvaeTrainer() = default;
 
-TrainingReport CvaeTrainer::run(bool resume) {
-  const TrainConfig& tc = impl_->config;
-  const CvaeConfig& mc = impl_->model_config;
-  const int r = mc.resolution;
-  const fs::path out(impl_->output_dir);
-  torch::set_num_threads(tc.threads);
-  torch::manual_seed(tc.seed);
-  int64_t start = 0;
-  const fs::path checkpoint = out / "checkpoint.pt", optim_file = out / "optimizer.pt",
-                 state_file = out / "state.yaml";
-  const bool resuming = resume && fs::exists(checkpoint) && fs::exists(state_file);
+Cvae CvaeTrainer::Impl::loadOrCreate(bool resuming, const fs::path& checkpoint) const {
+  const CvaeConfig& mc = model_config;
   Cvae model = resuming ? loadCvae(checkpoint.string(), &mc) : Cvae(mc);
-  if (!resuming && !tc.init_from.empty()) {
-    const std::vector<std::string> fresh = warmStartCvae(model, tc.init_from);
-    std::cerr << "warm start from " << tc.init_from << ": ";
+  if (!resuming && !config.init_from.empty()) {
+    const std::vector<std::string> fresh = warmStartCvae(model, config.init_from);
+    std::cerr << "warm start from " << config.init_from << ": ";
     if (fresh.empty())
       std::cerr << "every tensor of this network taken from it";
     else
@@ -134,243 +273,85 @@ TrainingReport CvaeTrainer::run(bool resume) {
     for (const std::string& name : fresh) std::cerr << " " << name;
     std::cerr << "\n";
   }
-  torch::optim::Adam optimizer(model->parameters(), torch::optim::AdamOptions(tc.learning_rate));
-  if (resuming) {
-    // The network is the checkpoint's; the losses are this config's (training a model further
-    // may change them), and the saved files say so.
-    const bool same = model->config().toYaml() == mc.toYaml();
-    try {
-      model->setConfig(mc);
-    } catch (const std::invalid_argument&) {
-      throw std::runtime_error("checkpoint " + checkpoint.string() +
-                               " has another network than the config:\n" +
-                               model->config().toYaml() + "\nagainst\n" + mc.toYaml());
-    }
-    if (!same) std::cerr << "the checkpoint's loss settings are replaced by the config's\n";
-    if (fs::exists(optim_file)) torch::load(optimizer, optim_file.string());
-    start = YAML::LoadFile(state_file.string())["step"].as<int64_t>();
-    torch::manual_seed(mix(tc.seed, static_cast<uint64_t>(start)));
-    std::cerr << "resuming from step " << start << " (" << checkpoint.string() << ")\n";
+  return model;
+}
+
+int64_t CvaeTrainer::Impl::restore(Cvae& model, torch::optim::Adam& optimizer,
+                                   const fs::path& out) const {
+  const CvaeConfig& mc = model_config;
+  const fs::path checkpoint = out / "checkpoint.pt", optim_file = out / "optimizer.pt";
+  // The network is the checkpoint's; the losses are this config's (training a model further
+  // may change them), and the saved files say so.
+  const bool same = model->config().toYaml() == mc.toYaml();
+  try {
+    model->setConfig(mc);
+  } catch (const std::invalid_argument&) {
+    throw std::runtime_error("checkpoint " + checkpoint.string() +
+                             " has another network than the config:\n" + model->config().toYaml() +
+                             "\nagainst\n" + mc.toYaml());
   }
+  if (!same) std::cerr << "the checkpoint's loss settings are replaced by the config's\n";
+  if (fs::exists(optim_file)) torch::load(optimizer, optim_file.string());
+  const int64_t start = YAML::LoadFile((out / "state.yaml").string())["step"].as<int64_t>();
+  torch::manual_seed(mix(config.seed, static_cast<uint64_t>(start)));
+  std::cerr << "resuming from step " << start << " (" << checkpoint.string() << ")\n";
+  return start;
+}
 
-  // Batches are made by a worker thread ahead of the optimiser; sample (step, i) depends only
-  // on the seed, so a resumed run sees the data an uninterrupted one would have.
-  const PinholeCamera camera = scaledKinect(tc.image_width, tc.image_height);
-  const TrainingSampleBuilder builder(mc, camera, tc.sensor_noise);
-  std::mutex mutex;
-  std::condition_variable cv;
-  std::deque<std::pair<int64_t, Batch>> queue;
-  std::string worker_error;
-  bool stop = false;
-  std::thread worker([&] {
-    omp_set_num_threads(1);
-    for (int64_t step = start; step < tc.steps; ++step) {
-      std::vector<TrainingSample> samples;
-      try {
-        for (int i = 0; i < tc.batch_size; ++i) {
-          std::mt19937_64 rng(mix(tc.seed, static_cast<uint64_t>(step) * 1024 + i));
-          std::uniform_int_distribution<int> pick(0, impl_->train_scenes - 1);
-          samples.push_back(builder.build(impl_->reader->read(pick(rng)), rng));
-        }
-      } catch (const std::exception& e) {
-        std::lock_guard<std::mutex> lock(mutex);
-        worker_error = e.what();
-        cv.notify_all();
-        return;
-      }
-      Batch batch = toBatch(samples, r);
-      std::unique_lock<std::mutex> lock(mutex);
-      cv.wait(lock, [&] { return queue.size() < 3 || stop; });
-      if (stop) return;
-      queue.emplace_back(step, std::move(batch));
-      cv.notify_all();
+// Validation set: one fixed view per held-out scene, three codes each. Besides IoU and BCE it
+// measures whether the latent space is used: how often the three hypotheses disagree.
+void CvaeTrainer::Impl::validate(Cvae& model, const TrainingSampleBuilder& builder,
+                                 TrainingReport* report) const {
+  const CvaeConfig& mc = model_config;
+  const int r = mc.resolution;
+  model->eval();
+  torch::NoGradGuard no_grad;
+  const int n = reader->size();
+  double iou = 0, bce = 0, posterior_iou = 0;
+  int64_t disagree = 0, predicted = 0;
+  int count = 0;
+  for (int k = train_scenes; k < n; ++k) {
+    std::mt19937_64 rng(mix(config.seed ^ 0xA11DA7Eull, static_cast<uint64_t>(k)));
+    const TrainingSample s = builder.build(reader->read(k), rng);
+    const Batch b = toBatch({s}, r);
+    const int samples = 3;
+    const torch::Tensor z = torch::randn({samples, mc.latent_size});
+    const CvaeOutput o = model->generate(b.partial.expand({samples, 2, r, r, r}).contiguous(), z);
+    std::vector<std::vector<float>> preds;
+    for (int j = 0; j < samples; ++j) preds.push_back(values(o.tsdf[j]));
+    const OccupancyScores sc = scoreOccupancy(s.tsdf, preds);
+    iou += sc.iou;
+    bce += sc.bce;
+    if (mc.hasLatentCode()) {
+      // The code the encoder gives when it sees the ground truth (posterior mean): better than
+      // prior codes only when the code carries what the view does not show.
+      const torch::Tensor mu = model->forward(b.partial, b.tsdf, b.votes).mu;
+      posterior_iou += scoreOccupancy(s.tsdf, {values(model->generate(b.partial, mu).tsdf[0])}).iou;
     }
-  });
-  auto finish_worker = [&] {
-    {
-      std::lock_guard<std::mutex> lock(mutex);
-      stop = true;
-    }
-    cv.notify_all();
-    worker.join();
-  };
-
-  // Validation set: one fixed view per held-out scene, three codes each. Besides IoU and BCE
-  // it measures whether the latent space is used: how often the three hypotheses disagree.
-  auto validate = [&](TrainingReport* report) {
-    model->eval();
-    torch::NoGradGuard no_grad;
-    const int n = impl_->reader->size();
-    double iou = 0, bce = 0, posterior_iou = 0;
-    int64_t disagree = 0, predicted = 0;
-    int count = 0;
-    for (int k = impl_->train_scenes; k < n; ++k) {
-      std::mt19937_64 rng(mix(tc.seed ^ 0xA11DA7Eull, static_cast<uint64_t>(k)));
-      const TrainingSample s = builder.build(impl_->reader->read(k), rng);
-      const Batch b = toBatch({s}, r);
-      const int samples = 3;
-      const torch::Tensor z = torch::randn({samples, mc.latent_size});
-      const CvaeOutput o = model->generate(b.partial.expand({samples, 2, r, r, r}).contiguous(), z);
-      std::vector<std::vector<float>> preds;
-      for (int j = 0; j < samples; ++j) preds.push_back(values(o.tsdf[j]));
-      const OccupancyScores sc = scoreOccupancy(s.tsdf, preds);
-      iou += sc.iou;
-      bce += sc.bce;
-      if (mc.hasLatentCode()) {
-        // The code the encoder gives when it sees the ground truth (posterior mean): better
-        // than prior codes only when the code carries what the view does not show.
-        const torch::Tensor mu = model->forward(b.partial, b.tsdf, b.votes).mu;
-        posterior_iou +=
-            scoreOccupancy(s.tsdf, {values(model->generate(b.partial, mu).tsdf[0])}).iou;
-      }
-      const torch::Tensor votes = (o.tsdf <= 0).sum(0);  // per voxel: hypotheses occupied
-      predicted += (votes > 0).sum().item<int64_t>();
-      disagree += ((votes > 0) & (votes < samples)).sum().item<int64_t>();
-      ++count;
-    }
-    report->validation_iou = iou / count;
-    report->validation_bce = bce / count;
-    report->validation_posterior_iou =
-        mc.hasLatentCode() ? posterior_iou / count : std::numeric_limits<double>::quiet_NaN();
-    report->validation_disagreement = predicted > 0 ? static_cast<double>(disagree) / predicted : 0;
-    model->train();
-  };
-
-  std::ofstream log((out / "train_log.csv").string(),
-                    resume && start > 0 ? std::ios::app : std::ios::trunc);
-  if (!log) throw std::runtime_error("cannot write " + (out / "train_log.csv").string());
-  log.seekp(0, std::ios::end);
-  if (log.tellp() == 0)  // a new log (also when a finished model is trained further)
-    log << "step,total,tsdf,partial,votes,mmd,occupancy,samples_per_s,validation_iou,"
-           "validation_bce,validation_disagreement,posterior_mu_rms,posterior_sigma,"
-           "validation_posterior_iou\n";
-  auto save_checkpoint = [&](int64_t step) {
-    saveCvae(checkpoint.string(), model);
-    torch::save(optimizer, optim_file.string());
-    std::ofstream(state_file.string()) << "step: " << step << "\n";
-    log.flush();
-  };
-
-  TrainingReport report;
-  std::deque<std::array<double, 6>> recent;
-  // The encoder's posterior on the training batches (train mode; in eval mode BatchNorm's
-  // running statistics give other codes): mean square of mu and mean sigma, last 50 steps.
-  std::deque<std::array<double, 2>> posterior;
-  ProgressBar bar(mc.hasLatentCode() ? "training C-VAE" : "training " + mc.architecture, tc.steps,
-                  start);
-  auto t0 = std::chrono::steady_clock::now();
-  int64_t trained = 0;
+    const torch::Tensor votes = (o.tsdf <= 0).sum(0);  // per voxel: hypotheses occupied
+    predicted += (votes > 0).sum().item<int64_t>();
+    disagree += ((votes > 0) & (votes < samples)).sum().item<int64_t>();
+    ++count;
+  }
+  report->validation_iou = iou / count;
+  report->validation_bce = bce / count;
+  report->validation_posterior_iou =
+      mc.hasLatentCode() ? posterior_iou / count : std::numeric_limits<double>::quiet_NaN();
+  report->validation_disagreement = predicted > 0 ? static_cast<double>(disagree) / predicted : 0;
   model->train();
-  for (int64_t step = start; step < tc.steps; ++step) {
-    Batch batch;
-    {
-      std::unique_lock<std::mutex> lock(mutex);
-      cv.wait(lock, [&] { return !queue.empty() || !worker_error.empty(); });
-      if (queue.empty()) {
-        lock.unlock();
-        finish_worker();
-        throw std::runtime_error("building training samples from " + impl_->dataset_path +
-                                 " failed: " + worker_error);
-      }
-      batch = std::move(queue.front().second);
-      queue.pop_front();
-      cv.notify_all();
-    }
-    for (auto& group : optimizer.param_groups())
-      static_cast<torch::optim::AdamOptions&>(group.options()).lr(learningRate(tc, step));
-    optimizer.zero_grad();
-    const CvaeOutput o = model->forward(batch.partial, batch.tsdf, batch.votes);
-    const CvaeLosses l = computeLosses(o, batch.partial, batch.tsdf, batch.votes, mc);
-    l.total.backward();
-    optimizer.step();
-    ++trained;
-    recent.push_back({l.total.item<double>(), l.tsdf.item<double>(), l.partial.item<double>(),
-                      l.votes.item<double>(), l.mmd.item<double>(), l.occupancy.item<double>()});
-    if (recent.size() > 50) recent.pop_front();
-    if (o.mu.defined()) {
-      torch::NoGradGuard no_grad;
-      posterior.push_back(
-          {o.mu.pow(2).mean().item<double>(), torch::exp(0.5 * o.logvar).mean().item<double>()});
-      if (posterior.size() > 50) posterior.pop_front();
-      double mu_sq = 0.0, sigma = 0.0;
-      for (const auto& p : posterior) {
-        mu_sq += p[0] / posterior.size();
-        sigma += p[1] / posterior.size();
-      }
-      report.posterior_mu_rms = std::sqrt(mu_sq);
-      report.posterior_sigma = sigma;
-    }
-    const double seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    report.samples_per_second = trained * tc.batch_size / seconds;
-    const bool validating = (step + 1) % tc.validate_every == 0 || step + 1 == tc.steps;
-    if (validating) validate(&report);
-    if ((step + 1) % 10 == 0 || validating) {
-      const auto& a = recent.back();
-      log << step + 1;
-      for (double v : a) log << "," << v;
-      log << "," << report.samples_per_second;
-      if (validating) {
-        log << "," << report.validation_iou << "," << report.validation_bce << ","
-            << report.validation_disagreement << ",";
-        if (posterior.empty()) {
-          log << ",";  // FC baseline: no posterior
-        } else {
-          log << report.posterior_mu_rms << "," << report.posterior_sigma;
-        }
-        log << ",";
-        if (std::isfinite(report.validation_posterior_iou)) log << report.validation_posterior_iou;
-      }
-      log << "\n";
-    }
-    if ((step + 1) % tc.checkpoint_every == 0) save_checkpoint(step + 1);
-    char suffix[160];
-    std::snprintf(suffix, sizeof(suffix),
-                  " loss %.0f (tsdf %.0f votes %.0f mmd %.2g) val IoU %.3f  %.1f samples/s",
-                  recent.back()[0], recent.back()[1], recent.back()[3], recent.back()[4],
-                  report.validation_iou, report.samples_per_second);
-    bar.update(step + 1, suffix);
-  }
-  bar.finish();
-  finish_worker();
-  save_checkpoint(tc.steps);
-  report.steps = tc.steps;
-  if (trained == 0) {
-    // Nothing left to train (a resumed run that had reached its steps): still report the
-    // figures of the model being written, from the log and a fresh validation.
-    validate(&report);
-    std::ifstream previous((out / "train_log.csv").string());
-    std::string line, last;
-    while (std::getline(previous, line)) {
-      if (!line.empty() && std::isdigit(static_cast<unsigned char>(line[0]))) last = line;
-    }
-    std::array<double, 6> row{};
-    double rate = 0.0;
-    if (std::sscanf(last.c_str(), "%*[^,],%lf,%lf,%lf,%lf,%lf,%lf,%lf", &row[0], &row[1], &row[2],
-                    &row[3], &row[4], &row[5], &rate) == 7) {
-      recent.push_back(row);
-      report.samples_per_second = rate;
-    }
-  }
-  if (!recent.empty()) {
-    std::array<double, 6> mean{};
-    for (const auto& a : recent)
-      for (size_t i = 0; i < mean.size(); ++i) mean[i] += a[i] / recent.size();
-    report.total = mean[0];
-    report.tsdf = mean[1];
-    report.partial = mean[2];
-    report.votes = mean[3];
-    report.mmd = mean[4];
-    report.occupancy = mean[5];
-  }
-  // The model file and its provenance.
+}
+
+// model.pt (weights, config and provenance in one archive) and its card, model.yaml.
+void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
+                                        const TrainingReport& report,
+                                        bool posterior_measured) const {
   YAML::Emitter meta;
   meta << YAML::BeginMap;
-  meta << YAML::Key << "command" << YAML::Value << impl_->command_line;
-  meta << YAML::Key << "dataset" << YAML::Value << impl_->dataset_path;
-  meta << YAML::Key << "dataset_seed" << YAML::Value << impl_->reader->info().seed;
-  meta << YAML::Key << "dataset_scenes" << YAML::Value << impl_->reader->size();
-  meta << YAML::Key << "validation_scenes" << YAML::Value << tc.validation_scenes;
+  meta << YAML::Key << "command" << YAML::Value << command_line;
+  meta << YAML::Key << "dataset" << YAML::Value << dataset_path;
+  meta << YAML::Key << "dataset_seed" << YAML::Value << reader->info().seed;
+  meta << YAML::Key << "dataset_scenes" << YAML::Value << reader->size();
+  meta << YAML::Key << "validation_scenes" << YAML::Value << config.validation_scenes;
   meta << YAML::Key << "steps" << YAML::Value << report.steps;
   meta << YAML::Key << "final_losses" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
        << "total" << YAML::Value << report.total << YAML::Key << "tsdf" << YAML::Value
@@ -384,7 +365,7 @@ TrainingReport CvaeTrainer::run(bool resume) {
   if (std::isfinite(report.validation_posterior_iou))
     meta << YAML::Key << "posterior_code_iou" << YAML::Value << report.validation_posterior_iou;
   meta << YAML::EndMap;
-  if (!posterior.empty()) {  // C-VAE steps trained in this run
+  if (posterior_measured) {  // C-VAE steps trained in this run
     meta << YAML::Key << "posterior" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
          << "mu_rms" << YAML::Value << report.posterior_mu_rms << YAML::Key << "sigma"
          << YAML::Value << report.posterior_sigma << YAML::EndMap;
@@ -392,16 +373,101 @@ TrainingReport CvaeTrainer::run(bool resume) {
   meta << YAML::Key << "samples_per_second" << YAML::Value << report.samples_per_second;
   meta << YAML::EndMap;
   saveCvae((out / "model.pt").string(), model, meta.c_str());
+
+  auto indented = [](std::ostream& os, const std::string& text) {
+    std::istringstream in(text);
+    for (std::string line; std::getline(in, line);) os << "  " << line << "\n";
+  };
   std::ofstream yaml((out / "model.yaml").string());
-  yaml << "# simstack model provenance (the same config is stored inside model.pt)\nmodel:\n";
-  std::istringstream cfg(mc.toYaml());
-  for (std::string line; std::getline(cfg, line);) yaml << "  " << line << "\n";
+  yaml << "# simstack model card (the network config is also stored inside model.pt)\nmodel:\n";
+  indented(yaml, model_config.toYaml());
   yaml << "training:\n";
-  std::istringstream trn(tc.toYaml());
-  for (std::string line; std::getline(trn, line);) yaml << "  " << line << "\n";
+  indented(yaml, config.toYaml());
   yaml << "provenance:\n";
-  std::istringstream m(meta.c_str());
-  for (std::string line; std::getline(m, line);) yaml << "  " << line << "\n";
+  indented(yaml, meta.c_str());
+  // The settings read with the model (perception_config.h): a model with a latent code is
+  // sampled three times; without a `hough:` map it gets the default Hough setting until
+  // simstack_tune_hough chooses one for it.
+  yaml << "perception:  # read with the model; simstack_tune_hough writes its hough: map\n"
+       << "  samples: " << (model_config.hasLatentCode() ? 3 : 1) << "\n";
+}
+
+TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& progress) {
+  const TrainConfig& tc = impl_->config;
+  const CvaeConfig& mc = impl_->model_config;
+  const fs::path out(impl_->output_dir);
+  torch::set_num_threads(tc.threads);
+  torch::manual_seed(tc.seed);
+  const fs::path checkpoint = out / "checkpoint.pt";
+  const bool resuming = resume && fs::exists(checkpoint) && fs::exists(out / "state.yaml");
+  Cvae model = impl_->loadOrCreate(resuming, checkpoint);
+  torch::optim::Adam optimizer(model->parameters(), torch::optim::AdamOptions(tc.learning_rate));
+  const int64_t start = resuming ? impl_->restore(model, optimizer, out) : 0;
+
+  const TrainingSampleBuilder builder(mc, scaledKinect(tc.image_width, tc.image_height),
+                                      tc.sensor_noise);
+  TrainingLog log(out / "train_log.csv", resume && start > 0);
+  auto save_checkpoint = [&](int64_t step) {
+    saveCvae(checkpoint.string(), model);
+    torch::save(optimizer, (out / "optimizer.pt").string());
+    std::ofstream((out / "state.yaml").string()) << "step: " << step << "\n";
+    log.flush();
+  };
+
+  TrainingReport report;
+  RecentSteps recent;
+  const auto t0 = std::chrono::steady_clock::now();
+  int64_t trained = 0;
+  model->train();
+  {
+    BatchQueue batches(tc, builder, *impl_->reader, impl_->train_scenes, mc.resolution, start);
+    for (int64_t step = start; step < tc.steps; ++step) {
+      Batch batch;
+      try {
+        batch = batches.next();
+      } catch (const std::runtime_error& e) {
+        throw std::runtime_error("building training samples from " + impl_->dataset_path +
+                                 " failed: " + e.what());
+      }
+      for (auto& group : optimizer.param_groups())
+        static_cast<torch::optim::AdamOptions&>(group.options()).lr(learningRate(tc, step));
+      optimizer.zero_grad();
+      const CvaeOutput o = model->forward(batch.partial, batch.tsdf, batch.votes);
+      const CvaeLosses l = computeLosses(o, batch.partial, batch.tsdf, batch.votes, mc);
+      l.total.backward();
+      optimizer.step();
+      ++trained;
+      recent.add(l, o, &report);
+      const double seconds =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      report.samples_per_second = trained * tc.batch_size / seconds;
+      const bool validating = (step + 1) % tc.validate_every == 0 || step + 1 == tc.steps;
+      if (validating) impl_->validate(model, builder, &report);
+      if ((step + 1) % 10 == 0 || validating)
+        log.write(step + 1, recent.losses.back(), report, validating, !recent.posterior.empty());
+      if ((step + 1) % tc.checkpoint_every == 0) save_checkpoint(step + 1);
+      if (progress) {
+        const auto& a = recent.losses.back();
+        progress({step + 1, tc.steps, start, a[0], a[1], a[3], a[4], report.validation_iou,
+                  report.samples_per_second});
+      }
+    }
+  }
+  save_checkpoint(tc.steps);
+  report.steps = tc.steps;
+  if (trained == 0) {
+    // Nothing left to train (a resumed run that had reached its steps): still report the
+    // figures of the model being written, from the log and a fresh validation.
+    impl_->validate(model, builder, &report);
+    std::array<double, 6> row{};
+    double rate = 0.0;
+    if (log.lastRow(&row, &rate)) {
+      recent.losses.push_back(row);
+      report.samples_per_second = rate;
+    }
+  }
+  recent.meanInto(&report);
+  impl_->writeModelFiles(out, model, report, !recent.posterior.empty());
   return report;
 }
 

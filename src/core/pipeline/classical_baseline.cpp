@@ -22,7 +22,8 @@ std::vector<Points3> clusterVisiblePoints(const DepthImage& depth, const Pinhole
       if (p.z() < config.min_height_m) continue;
       if (crop) {  // the x/y box of the grid, any height
         const Vec3 rel = p - crop->origin_table;
-        if (rel.x() < 0 || rel.y() < 0 || rel.x() >= crop->extent_m() || rel.y() >= crop->extent_m())
+        if (rel.x() < 0 || rel.y() < 0 || rel.x() >= crop->extent_m() ||
+            rel.y() >= crop->extent_m())
           continue;
       }
       cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
@@ -55,7 +56,8 @@ std::vector<Superquadric> classicalBaseline(const DepthImage& depth, const Pinho
   FitConfig fit = config.fit;
   fit.threads = std::max(1, config.threads);
   std::vector<Superquadric> out;
-  for (const auto& f : fitInstances(clusters, fit, config.joint_refinement, config.min_cluster_points))
+  for (const auto& f :
+       fitInstances(clusters, fit, config.joint_refinement, config.min_cluster_points))
     if (f) out.push_back(*f);
   return out;
 }

@@ -107,15 +107,51 @@ void writeSection(YAML::Emitter& e, const char* name, C& c, Fields fields) {
   e << YAML::EndMap;
 }
 
+YAML::Node loadYaml(const std::string& path, const char* what) {
+  try {
+    return YAML::LoadFile(path);
+  } catch (const YAML::Exception& e) {
+    throw std::runtime_error(std::string("cannot read ") + what + " " + path + ": " + e.what());
+  }
+}
+
+void readSamples(const YAML::Node& perception, PerceptionConfig* c, const std::string& path) {
+  if (!perception["samples"]) return;
+  try {
+    c->samples = perception["samples"].as<int>();
+  } catch (const YAML::Exception& e) {
+    throw std::runtime_error(path + ": perception.samples: " + e.what());
+  }
+}
+
 }  // namespace
 
-PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& base_dir) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::Exception& e) {
-    throw std::runtime_error("cannot read perception config " + path + ": " + e.what());
+std::string modelCardPath(const std::string& model_path) {
+  return std::filesystem::path(model_path).replace_extension(".yaml").string();
+}
+
+std::string applyModelCard(PerceptionConfig* config) {
+  const std::string path = modelCardPath(config->model_path);
+  if (config->model_path.empty() || !std::filesystem::exists(path)) return "";
+  const YAML::Node root = loadYaml(path, "model card");
+  const YAML::Node section = root.IsMap() ? root["perception"] : YAML::Node();
+  if (!section) return "";
+  if (!section.IsMap()) throw std::runtime_error(path + ": 'perception' must be a map");
+  for (const auto& kv : section) {
+    const std::string key = kv.first.as<std::string>();
+    if (key != "samples" && key != "hough")
+      throw std::runtime_error(path + ": unknown field perception." + key +
+                               " (a model card's perception section holds samples and hough)");
   }
+  readSamples(section, config, path);
+  readSection(
+      section, "hough", &config->hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
+  return path;
+}
+
+PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& base_dir,
+                                    const std::string& model_path) {
+  const YAML::Node root = loadYaml(path, "perception config");
   PerceptionConfig c;
   if (!root.IsMap()) throw std::runtime_error(path + ": expected a YAML map");
   for (const auto& kv : root) {
@@ -127,17 +163,32 @@ PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& 
   readSection(
       root, "perception", &c, [](auto& x, auto&& f) { perceptionFields(x, f); }, path);
   readSection(
-      root, "hough", &c.hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
-  readSection(
       root, "segments", &c.segments, [](auto& x, auto&& f) { segmentFields(x, f); }, path);
   readSection(
       root, "fitting", &c.fit, [](auto& x, auto&& f) { fitFields(x, f); }, path);
   readSection(
       root, "table", &c.table, [](auto& x, auto&& f) { tableFields(x, f); }, path);
+  if (!model_path.empty()) c.model_path = model_path;
   if (!c.model_path.empty() && !base_dir.empty() &&
       std::filesystem::path(c.model_path).is_relative())
     c.model_path = (std::filesystem::path(base_dir) / c.model_path).string();
+  // The model's own settings, then what this file says of them explicitly (normally nothing).
+  c.model_card_path = applyModelCard(&c);
+  if (root["perception"]) readSamples(root["perception"], &c, path);
+  readSection(
+      root, "hough", &c.hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
   return c;
+}
+
+std::string modelCardPerceptionYaml(int samples, const HoughConfig& hough) {
+  HoughConfig h = hough;
+  YAML::Emitter e;
+  e.SetDoublePrecision(10);
+  e << YAML::BeginMap << YAML::Key << "perception" << YAML::Value << YAML::BeginMap;
+  e << YAML::Key << "samples" << YAML::Value << samples;
+  writeSection(e, "hough", h, [](auto& x, auto&& f) { houghFields(x, f); });
+  e << YAML::EndMap << YAML::EndMap;
+  return e.c_str();
 }
 
 std::string perceptionYaml(const PerceptionConfig& config) {

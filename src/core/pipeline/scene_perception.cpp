@@ -6,9 +6,10 @@
 #include <random>
 #include <stdexcept>
 
+#include "simstack/instances/instance_finder.h"
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/model/cvae_inference.h"
-#include "simstack/model/training_sample.h"
+#include "simstack/tsdf/network_input.h"
 #include "simstack/tsdf/projective_tsdf.h"
 
 namespace simstack {
@@ -29,48 +30,7 @@ void checkView(const DepthView& v, size_t index) {
         std::to_string(v.camera.width) + "x" + std::to_string(v.camera.height));
 }
 
-/// x/y centre of the visible pile: the median of above-table points, then the centroid of
-/// those within half the grid of it (as the trainer centres its grids).
-Vec2 pileCentre(const DepthView& view, const Transform& T_table_camera, double extent_m,
-                double min_height_m) {
-  std::vector<double> xs, ys;
-  for (int v = 0; v < view.depth.height; v += 2)
-    for (int u = 0; u < view.depth.width; u += 2) {
-      const float d = view.depth.at(u, v);
-      if (!validDepth(d)) continue;
-      const Vec3 p = T_table_camera * view.camera.backproject(u, v, d);
-      if (p.z() < min_height_m || p.z() > extent_m) continue;
-      xs.push_back(p.x());
-      ys.push_back(p.y());
-    }
-  Vec2 near = (T_table_camera.translation()).head<2>();
-  if (!xs.empty()) {
-    std::nth_element(xs.begin(), xs.begin() + xs.size() / 2, xs.end());
-    std::nth_element(ys.begin(), ys.begin() + ys.size() / 2, ys.end());
-    near = Vec2(xs[xs.size() / 2], ys[ys.size() / 2]);
-  }
-  return visiblePileCentre(view.depth, view.camera, T_table_camera, near, 0.5 * extent_m,
-                           min_height_m);
-}
-
 }  // namespace
-
-std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>& points,
-                                                      const PerceptionConfig& config) {
-  FitConfig fit = config.fit;
-  fit.threads = std::max(1, config.threads);
-  return fitInstances(points, fit, config.joint_refinement, config.min_instance_points);
-}
-
-InstanceSegmentation findInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
-                                   const HoughConfig& hough,
-                                   const SurfaceSegmentConfig& segment_config,
-                                   const SurfaceSegments* segments) {
-  InstanceSegmentation seg = houghInstances(tsdf_m, votes, hough);
-  if (segments && segment_config.enabled)
-    seg = regroupAlongSurfaceSegments(*segments, segment_config, hough.min_instance_voxels, seg);
-  return seg;
-}
 
 void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings* timings,
                const SurfaceSegments* segments) {
@@ -78,7 +38,7 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   HoughConfig hough = config.hough;
   hough.threads = std::max(1, config.threads);
   const InstanceSegmentation seg =
-      findInstances(h->tsdf_m, h->votes, hough, config.segments, segments);
+      InstanceFinder(hough, config.segments).find(h->tsdf_m, h->votes, segments);
   h->labels = seg.labels;
   if (timings) timings->instances_ms += msSince(t);
 
@@ -96,7 +56,10 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   if (timings) timings->mesh_ms += msSince(t);
 
   t = Clock::now();
-  const std::vector<std::optional<Superquadric>> fits = fitInstances(points, config);
+  FitConfig fit = config.fit;
+  fit.threads = std::max(1, config.threads);
+  const std::vector<std::optional<Superquadric>> fits =
+      fitInstances(points, fit, config.joint_refinement, config.min_instance_points);
   h->instances.clear();
   for (size_t k = 0; k < parts.size(); ++k) {
     if (!fits[k]) continue;
@@ -182,7 +145,8 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views) con
   out.timings.table_ms = msSince(t);
 
   t = Clock::now();
-  const Vec2 centre = pileCentre(views[0], out.T_table_camera, mc.extent_m, c.min_pile_height_m);
+  const Vec2 centre = observedPileCentre(views[0].depth, views[0].camera, out.T_table_camera,
+                                         mc.extent_m, c.min_pile_height_m);
   out.grid = GridSpec::sceneGrid(centre, mc.extent_m, mc.resolution);
   ProjectiveTsdfConfig tc;
   tc.truncation_m = mc.truncation_m();
@@ -212,8 +176,9 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views) con
   std::optional<SurfaceSegments> segments;
   if (c.segments.enabled && c.decompose_samples > 0) {
     t = Clock::now();
-    segments = segmentVisibleSurface(views[0].depth, views[0].camera, out.T_table_camera,
-                                     c.min_pile_height_m, c.segments);
+    segments =
+        InstanceFinder(c.hough, c.segments)
+            .segmentView(views[0].depth, views[0].camera, out.T_table_camera, c.min_pile_height_m);
     out.timings.instances_ms += msSince(t);
   }
   for (int k = 0; k < c.decompose_samples; ++k)

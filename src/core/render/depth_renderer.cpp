@@ -125,9 +125,9 @@ DepthRenderer::~DepthRenderer() = default;
 double DepthRenderer::castRay(const Vec3& origin, const Vec3& direction, int* instance,
                               int* triangle) const {
   const double len = direction.norm();
-  const float t = impl_->intersect(origin, direction / len,
-                                   static_cast<float>(impl_->config.max_range_m), instance, nullptr,
-                                   triangle);
+  const float t =
+      impl_->intersect(origin, direction / len, static_cast<float>(impl_->config.max_range_m),
+                       instance, nullptr, triangle);
   return t;
 }
 

@@ -176,193 +176,205 @@ bool PileGenerator::verifyRest(Scene* scene, long* object_steps,
   return false;
 }
 
+struct PileGenerator::Building {
+  Pile* out;   ///< counters over every attempt
+  int* drops;  ///< drops simulated over every attempt
+  Scene scene;
+  std::unique_ptr<PhysicsWorld> world;  ///< the world of the last kept drop
+  int steps = 0;                        ///< physics steps of the kept drops
+  long object_steps = 0;                ///< object-steps of the kept drops (and rest checks)
+  std::string why;                      ///< why the last drop or attempt failed
+
+  /// The pile as it would be kept if the drop in `trial` ended now.
+  Scene withDrop(const SceneObject& o, const PhysicsWorld& trial) const {
+    Scene c = scene;
+    c.objects.push_back(o);
+    for (size_t k = 0; k < c.objects.size(); ++k)
+      c.objects[k].T_table_object = trial.pose(static_cast<int>(k));
+    return c;
+  }
+};
+
+// Settle in short runs and give up early on a drop that rolls out of the grid, that has pushed
+// any part of the pile out of the grid's sides (checked after every run), or that has come
+// down on the table clear of the pile (docs/experiments.md has what each rule saved). A drop
+// has settled when every velocity stays below the rest thresholds for rest_steps steps, or when
+// during a whole run (poses sampled every 10 steps) no object got further from where it was at
+// the start of the run than the final rest check tolerates for the run's length, nor turned
+// further than the angular rest threshold allows: contact jitter keeps the velocities of
+// slowly creeping piles above the thresholds.
+int PileGenerator::settle(PhysicsWorld& trial, const Building& pile, const SceneObject& o,
+                          const Vec2& centre, DropEnd* end) const {
+  constexpr int kRun = 60, kSample = 10;
+  const double max_shift = config_.rest_tolerance_m * kRun / config_.rest_check_steps;
+  const double max_turn = config_.physics.rest_angular_radps * kRun * config_.physics.timestep_s;
+  const int index = static_cast<int>(pile.scene.objects.size());
+  int s = 0, apart_runs = 0;
+  std::vector<Transform> start(trial.objectCount());
+  std::string why;
+  *end = DropEnd::kRestless;
+  while (s < config_.max_settle_steps) {
+    for (int k = 0; k < trial.objectCount(); ++k) start[k] = trial.pose(k);
+    double shift = 0.0, turn = 0.0;
+    const int run = trial.settle(kRun, [&](int i) {
+      if (i % kSample) return;
+      for (int k = 0; k < trial.objectCount(); ++k) {
+        const Transform T = trial.pose(k);
+        shift = std::max(shift, (T.translation() - start[k].translation()).norm());
+        turn =
+            std::max(turn, Eigen::AngleAxisd(T.linear() * start[k].linear().transpose()).angle());
+      }
+    });
+    s += run < 0 ? kRun : run;
+    if (run >= 0) {
+      *end = DropEnd::kSettled;
+      return s;
+    }
+    if ((trial.pose(index).translation().head<2>() - centre).norm() > 0.5 * config_.grid_extent_m) {
+      *end = DropEnd::kEscaped;
+      return s;
+    }
+    if (!fits(pile.withDrop(o, trial), &why, false)) {
+      *end = DropEnd::kUnfit;
+      return s;
+    }
+    if (index > 0 && config_.require_stack) {
+      const Touching t = touching(trial, index);
+      apart_runs = t.table && !t.object ? apart_runs + 1 : 0;
+      if (apart_runs >= config_.apart_runs) {
+        *end = DropEnd::kApart;
+        return s;
+      }
+    }
+    if (shift < max_shift && turn < max_turn) {
+      *end = DropEnd::kSettled;
+      return s;
+    }
+  }
+  return s;
+}
+
+bool PileGenerator::place(Building* pile, SceneObject o, std::mt19937_64& rng) const {
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  const Scene& scene = pile->scene;
+  Vec2 centre = Vec2::Zero();
+  double top = 0.0;
+  for (const auto& p : scene.objects) {
+    centre += p.T_table_object.translation().head<2>() / static_cast<double>(scene.objects.size());
+    for (const auto& h : p.shape->hullPoints()) top = std::max(top, (p.T_table_object * h).z());
+  }
+  // An object too thick, in every orientation, to lie on top of the pile inside the grid is
+  // not dropped (the attempt fails, as after max_drops_per_object failed drops): it could only
+  // be kept by sliding down beside the pile.
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const auto& p : o.shape->hullPoints()) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  if (top + (hi - lo).minCoeff() > config_.grid_extent_m - config_.grid_margin_m) {
+    pile->why = "the pile is taller than the scene grid";
+    ++pile->out->skipped_objects;
+    return false;
+  }
+  for (int drop = 0; drop < config_.max_drops_per_object; ++drop) {
+    ++*pile->drops;
+    auto trial = std::make_unique<PhysicsWorld>(config_.physics);
+    for (const auto& p : scene.objects)
+      trial->addConvexObject(p.shape->hullPoints(), p.shape->volume(), p.T_table_object);
+    const double r = config_.drop_radius_m * std::sqrt(uni(rng));
+    const double phi = 2.0 * M_PI * uni(rng);
+    o.T_table_object = Transform::Identity();
+    o.T_table_object.linear() = randomDropRotation(config_.max_tilt_deg, rng).toRotationMatrix();
+    const double bottom = minZ(o);  // of the rotated shape at the origin
+    o.T_table_object.translation() =
+        Vec3(centre.x() + r * std::cos(phi), centre.y() + r * std::sin(phi),
+             top - bottom + config_.drop_gap_m);
+    trial->addConvexObject(o.shape->hullPoints(), o.shape->volume(), o.T_table_object);
+    DropEnd end;
+    const int s = settle(*trial, *pile, o, centre, &end);
+    const long object_steps = long{s} * trial->objectCount();
+    const int index = static_cast<int>(scene.objects.size());
+    bool kept = end == DropEnd::kSettled;
+    if (end == DropEnd::kEscaped) pile->why = "the pile is wider than the scene grid";
+    if (end == DropEnd::kApart) pile->why = "the objects do not form one stack";
+    if (end == DropEnd::kRestless) pile->why = "the pile did not come to rest";
+    if (end == DropEnd::kUnfit) fits(pile->withDrop(o, *trial), &pile->why, false);
+    if (kept && index > 0 && config_.require_stack && !touching(*trial, index).object) {
+      pile->why = "the objects do not form one stack";
+      kept = false;
+    }
+    Scene candidate;
+    if (kept) {
+      candidate = pile->withDrop(o, *trial);
+      kept = fits(candidate, &pile->why);
+    }
+    if (!kept) {
+      pile->out->object_steps.undone_drops += object_steps;
+      ++pile->out->undone_drops;
+      continue;
+    }
+    pile->object_steps += object_steps;
+    ++pile->out->placed_drops;
+    pile->scene = std::move(candidate);
+    pile->world = std::move(trial);
+    pile->steps += s;
+    return true;
+  }
+  return false;
+}
+
+// Objects are dropped one at a time from just above the pile and settle before the next one
+// falls. A drop that knocks the pile out of bounds is undone and tried again from the settled
+// state before it (the world is rebuilt from the resting poses), so that one rolling object
+// does not cost the whole pile.
+bool PileGenerator::dropAll(Building* pile, std::mt19937_64& rng) const {
+  std::uniform_int_distribution<int> count(config_.min_objects, config_.max_objects);
+  const int n = count(rng);
+  for (int i = 0; i < n; ++i) {
+    SceneObject o;
+    if (catalogue_.empty()) {
+      o.shape = ObjectShape::fromSuperquadric(randomSuperquadric(rng));
+    } else {
+      std::uniform_int_distribution<size_t> pick(0, catalogue_.size() - 1);
+      o.shape = catalogue_[pick(rng)];
+    }
+    if (!place(pile, std::move(o), rng)) return false;
+  }
+  return true;
+}
+
 Pile PileGenerator::generate(uint64_t seed) const {
   std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> uni(0.0, 1.0);
   std::map<std::string, int> rejections;
   int drops = 0;
   Pile out;
   for (int attempt = 1; attempt <= config_.max_attempts; ++attempt) {
-    std::uniform_int_distribution<int> count(config_.min_objects, config_.max_objects);
-    const int n = count(rng);
-    // Objects are dropped one at a time from just above the pile and settle before the next
-    // one falls. A drop that knocks the pile out of bounds is undone and tried again from the
-    // settled state before it (the world is rebuilt from the resting poses), so that one
-    // rolling object does not cost the whole pile.
-    Scene scene;
-    std::unique_ptr<PhysicsWorld> world;
-    int steps = 0;
-    long pile_object_steps = 0;
-    std::string why;
-    for (int i = 0; i < n; ++i) {
-      SceneObject o;
-      if (catalogue_.empty()) {
-        o.shape = ObjectShape::fromSuperquadric(randomSuperquadric(rng));
-      } else {
-        std::uniform_int_distribution<size_t> pick(0, catalogue_.size() - 1);
-        o.shape = catalogue_[pick(rng)];
-      }
-      Vec2 centre = Vec2::Zero();
-      double top = 0.0;
-      for (const auto& p : scene.objects) {
-        centre +=
-            p.T_table_object.translation().head<2>() / static_cast<double>(scene.objects.size());
-        for (const auto& h : p.shape->hullPoints()) top = std::max(top, (p.T_table_object * h).z());
-      }
-      // An object too thick, in every orientation, to lie on top of the pile inside the grid
-      // is not dropped (the attempt fails, as after max_drops_per_object failed drops): it could
-      // only be kept by sliding down beside the pile. With face-down drops, tries of such objects
-      // were a third of all simulated steps; with random drops they are rare.
-      Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-      for (const auto& p : o.shape->hullPoints()) {
-        lo = lo.cwiseMin(p);
-        hi = hi.cwiseMax(p);
-      }
-      if (top + (hi - lo).minCoeff() > config_.grid_extent_m - config_.grid_margin_m) {
-        why = "the pile is taller than the scene grid";
-        ++out.skipped_objects;
-        break;
-      }
-      bool placed = false;
-      for (int drop = 0; drop < config_.max_drops_per_object && !placed; ++drop) {
-        ++drops;
-        auto trial = std::make_unique<PhysicsWorld>(config_.physics);
-        for (const auto& p : scene.objects)
-          trial->addConvexObject(p.shape->hullPoints(), p.shape->volume(), p.T_table_object);
-        const double r = config_.drop_radius_m * std::sqrt(uni(rng));
-        const double phi = 2.0 * M_PI * uni(rng);
-        o.T_table_object = Transform::Identity();
-        o.T_table_object.linear() =
-            randomDropRotation(config_.max_tilt_deg, rng).toRotationMatrix();
-        const double bottom = minZ(o);  // of the rotated shape at the origin
-        o.T_table_object.translation() =
-            Vec3(centre.x() + r * std::cos(phi), centre.y() + r * std::sin(phi),
-                 top - bottom + config_.drop_gap_m);
-        trial->addConvexObject(o.shape->hullPoints(), o.shape->volume(), o.T_table_object);
-        // The pile as it would be kept if the drop ended now.
-        const auto candidateNow = [&] {
-          Scene c = scene;
-          c.objects.push_back(o);
-          for (size_t k = 0; k < c.objects.size(); ++k)
-            c.objects[k].T_table_object = trial->pose(static_cast<int>(k));
-          return c;
-        };
-        // Settle in short runs and give up early on a drop that rolls out of the grid, that
-        // has pushed any part of the pile out of the grid's sides (checked after every run; on
-        // 300 piles such drops spent 12 % of all simulated steps after the first check that
-        // found them out, and 24 of the 3167 drops that were kept had been out and come
-        // back), or that has come down on the table clear of the pile (such drops were 30 % of all
-        // simulated steps; waiting for them to stop as well cost 15 % more time per pile, for
-        // the rare object that would roll or tip back against the pile). A drop has settled
-        // when every velocity stays below the rest thresholds for rest_steps steps, or when
-        // during a whole run (poses sampled every 10 steps) no object got further from where
-        // it was at the start of the run than the final rest check tolerates for the run's
-        // length, nor turned further than the angular rest threshold allows: contact jitter
-        // kept the velocities of slowly creeping piles above the thresholds up to
-        // max_settle_steps, and such drops were 29 % of all simulated steps (most of them
-        // undone after all).
-        constexpr int kRun = 60, kSample = 10;
-        const double max_shift = config_.rest_tolerance_m * kRun / config_.rest_check_steps;
-        const double max_turn =
-            config_.physics.rest_angular_radps * kRun * config_.physics.timestep_s;
-        int s = 0;
-        bool settled = false, escaped = false, apart = false, unfit = false;
-        int apart_runs = 0;
-        const int index = static_cast<int>(scene.objects.size());
-        std::vector<Transform> start(trial->objectCount());
-        while (!settled && s < config_.max_settle_steps) {
-          for (int k = 0; k < trial->objectCount(); ++k) start[k] = trial->pose(k);
-          double shift = 0.0, turn = 0.0;
-          const int run = trial->settle(kRun, [&](int i) {
-            if (i % kSample) return;
-            for (int k = 0; k < trial->objectCount(); ++k) {
-              const Transform T = trial->pose(k);
-              shift = std::max(shift, (T.translation() - start[k].translation()).norm());
-              turn = std::max(
-                  turn, Eigen::AngleAxisd(T.linear() * start[k].linear().transpose()).angle());
-            }
-          });
-          s += run < 0 ? kRun : run;
-          settled = run >= 0;
-          if (settled) break;
-          if ((trial->pose(index).translation().head<2>() - centre).norm() >
-              0.5 * config_.grid_extent_m) {
-            escaped = true;
-            break;
-          }
-          if (!fits(candidateNow(), &why, false)) {
-            unfit = true;
-            break;
-          }
-          if (index > 0 && config_.require_stack) {
-            const Touching t = touching(*trial, index);
-            apart_runs = t.table && !t.object ? apart_runs + 1 : 0;
-            if (apart_runs >= config_.apart_runs) {
-              apart = true;
-              break;
-            }
-          }
-          settled = shift < max_shift && turn < max_turn;
-        }
-        const long object_steps = long{s} * trial->objectCount();
-        const auto undo = [&] {
-          out.object_steps.undone_drops += object_steps;
-          ++out.undone_drops;
-        };
-        if (!settled) {
-          undo();
-          if (!unfit)
-            why = escaped ? "the pile is wider than the scene grid"
-                  : apart ? "the objects do not form one stack"
-                          : "the pile did not come to rest";
-          continue;
-        }
-        if (index > 0 && config_.require_stack) {
-          if (!touching(*trial, index).object) {
-            why = "the objects do not form one stack";
-            undo();
-            continue;
-          }
-        }
-        Scene candidate = candidateNow();
-        if (!fits(candidate, &why)) {
-          undo();
-          continue;
-        }
-        pile_object_steps += object_steps;
-        ++out.placed_drops;
-        scene = std::move(candidate);
-        world = std::move(trial);
-        steps += s;
-        placed = true;
-      }
-      if (!placed) break;
-    }
+    Building pile{&out, &drops, {}, nullptr, 0, 0, ""};
     const auto reject = [&](const std::string& reason) {
       ++rejections[reason];
-      out.object_steps.rejected_piles += pile_object_steps;
+      out.object_steps.rejected_piles += pile.object_steps;
     };
-    if (static_cast<int>(scene.objects.size()) < n) {
-      reject(why);
+    if (!dropAll(&pile, rng)) {
+      reject(pile.why);
       continue;
     }
     long rest_steps = 0;
     // The acceptance rules read the contacts of the world that verified the final poses.
-    const bool at_rest = verifyRest(&scene, &rest_steps, &world);
-    pile_object_steps += rest_steps;  // counted as rejected unless the pile is accepted
+    const bool at_rest = verifyRest(&pile.scene, &rest_steps, &pile.world);
+    pile.object_steps += rest_steps;  // counted as rejected unless the pile is accepted
     if (!at_rest) {
       reject("the pile did not come to rest");
       continue;
     }
-    if (!accept(scene, *world, &why)) {
-      reject(why);
+    if (!accept(pile.scene, *pile.world, &pile.why)) {
+      reject(pile.why);
       continue;
     }
-    out.scene = std::move(scene);
+    out.scene = std::move(pile.scene);
     out.attempts = attempt;
     out.drops = drops;
-    out.settle_steps = steps;
-    out.object_steps.placed = pile_object_steps - rest_steps;
+    out.settle_steps = pile.steps;
+    out.object_steps.placed = pile.object_steps - rest_steps;
     out.object_steps.rest_checks = rest_steps;
     return out;
   }

@@ -1,6 +1,7 @@
 #pragma once
 /// @file progress.h
-/// A text progress bar for the command-line tools (stderr; redraws only on a terminal).
+/// A text progress bar for the command-line tools (stderr; redraws only on a terminal). The
+/// library reports progress through callbacks; only the tools draw it.
 
 #include <unistd.h>
 

@@ -1,0 +1,46 @@
+#pragma once
+/// @file dataset_generation.h
+/// Making a dataset (simstack_generate): random piles settled under physics, their ground-truth
+/// grids written to HDF5 in scene order, and optionally rendered views beside it (a 16-bit depth
+/// PNG in mm, the instance mask, a YAML with intrinsics and pose, and pictures). Scene i uses a
+/// hash of (seed, i), so the dataset does not depend on the number of threads.
+
+#include <cstdint>
+#include <functional>
+#include <string>
+
+namespace simstack {
+
+struct GenerationOptions {
+  int scenes = 10;
+  uint64_t seed = 1;
+  int resolution = 32;
+  std::string output;  ///< the HDF5 file
+  int min_objects = 3, max_objects = 4;
+  std::string ycb_dir;    ///< mesh piles of <dir>/<object>/nontextured.stl ("" = superquadrics)
+  int views = 0;          ///< rendered views per scene
+  std::string views_dir;  ///< "" = <output stem>_views/
+  bool pictures = false;  ///< colour depth and shaded ground-truth PNGs per view
+  bool noise = false;     ///< Kinect-like noise in the rendered views
+  double extent_m = 0.64;
+  double truncation_vox = 3.0;
+  double max_tilt_deg = 180.0;
+  int threads = 2;
+};
+
+struct GenerationSummary {
+  long objects = 0;
+  long attempts = 0;        ///< piles drawn for the accepted ones
+  double undone_share = 0;  ///< share of the physics spent on drops and piles undone
+  double seconds = 0;
+  int threads = 0;
+  double truncation_m = 0;
+  std::string views_dir;  ///< where the views went ("" without views)
+};
+
+/// Generates `options.scenes` piles into `options.output`. `progress(done, total)` after each
+/// scene written. Throws std::runtime_error naming the scene or file that failed.
+GenerationSummary generateDataset(const GenerationOptions& options,
+                                  const std::function<void(int, int)>& progress = {});
+
+}  // namespace simstack

@@ -1,0 +1,64 @@
+#pragma once
+/// @file evaluated_methods.h
+/// The methods the evaluation (eval/evaluator.h) compares: a trained network through
+/// ScenePerception (the C-VAE and the FC baselines), and the classical baseline.
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "simstack/eval/evaluator.h"
+#include "simstack/pipeline/classical_baseline.h"
+#include "simstack/pipeline/perception_config.h"
+
+namespace simstack {
+
+class ScenePerception;
+
+/// A trained model through ScenePerception with `config`: S hypotheses per view, the first
+/// decomposed into superquadrics.
+class NetworkMethod : public EvaluatedMethod {
+ public:
+  /// Loads the model of `config` (ScenePerception's exceptions). Named by its architecture.
+  /// With `label_pixels` the estimates carry the instance of every pixel (real scenes).
+  explicit NetworkMethod(const PerceptionConfig& config, bool label_pixels = false);
+  ~NetworkMethod() override;
+  const std::string& name() const override { return name_; }
+  void rename(std::string name) { name_ = std::move(name); }
+  MethodInfo info() const override;
+  MethodEstimate estimate(const DepthView& view, const GridSpec* grid,
+                          const Vec2& pile_xy) override;
+  /// The model's architecture (cvae, fc, fc_plain).
+  const std::string& architecture() const;
+
+ private:
+  std::unique_ptr<ScenePerception> perception_;
+  std::string name_;
+  bool label_pixels_;
+};
+
+/// The classical baseline (classical_baseline.h) under the protocol. Without a grid from an
+/// earlier method it centres one of `resolution`^3 voxels over `extent_m` on the visible pile.
+class ClassicalMethod : public EvaluatedMethod {
+ public:
+  ClassicalMethod(const ClassicalConfig& config, double extent_m, int resolution);
+  const std::string& name() const override { return name_; }
+  MethodInfo info() const override { return {}; }
+  MethodEstimate estimate(const DepthView& view, const GridSpec* grid,
+                          const Vec2& pile_xy) override;
+
+ private:
+  ClassicalConfig config_;
+  double extent_m_;
+  int resolution_;
+  std::string name_ = "classical";
+};
+
+/// The methods of the dataset protocol: one NetworkMethod per config with random latent codes
+/// (not the zero code first, as the paper evaluates), named by architecture (a repeated
+/// architecture gets the method's index appended), then the classical baseline with the first
+/// config's fitter when `classical` is set.
+std::vector<std::unique_ptr<EvaluatedMethod>> evaluatedMethods(
+    const std::vector<PerceptionConfig>& configs, bool classical, double extent_m, int resolution);
+
+}  // namespace simstack

@@ -1,0 +1,195 @@
+#include "simstack/dataset/dataset_generation.h"
+
+#include <omp.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <random>
+#include <stdexcept>
+#include <thread>
+#include <vector>
+
+#include "simstack/dataset/dataset.h"
+#include "simstack/io/image_io.h"
+#include "simstack/render/depth_renderer.h"
+#include "simstack/scene/mesh_catalogue.h"
+#include "simstack/scene/pile_generator.h"
+
+namespace fs = std::filesystem;
+
+namespace simstack {
+namespace {
+
+struct SceneResult {
+  Pile pile;
+  GroundTruthGrids gt;
+};
+
+uint64_t sceneSeed(uint64_t seed, int index) {
+  uint64_t z = seed * 0x9E3779B97F4A7C15ull + static_cast<uint64_t>(index) + 1;
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+void writeViews(const GenerationOptions& o, const fs::path& dir, int index, const Scene& scene,
+                uint64_t seed) {
+  DepthRenderer renderer(scene);
+  std::mt19937_64 rng(seed ^ 0x5157u);
+  const Vec3 centre = scene.surfaceCentroid();
+  PinholeCamera camera;
+  for (int v = 0; v < o.views; ++v) {
+    ViewDescription view;
+    view.camera = camera;
+    view.T_table_camera = sampleViewpoint(centre, ViewpointRange(), rng);
+    const SensorNoiseConfig noise =
+        o.noise ? SensorNoiseConfig::kinect(seed + v) : SensorNoiseConfig();
+    const RenderResult r = renderer.render(camera, view.T_table_camera, noise);
+    char stem[64];
+    std::snprintf(stem, sizeof(stem), "scene_%06d_view_%d", index, v);
+    const std::string base = (dir / stem).string();
+    writeDepthPng(base + "_depth.png", r.depth);
+    writeMaskPng(base + "_mask.png", r.instances);
+    writeViewYaml(base + ".yaml", view);
+    if (o.pictures) {
+      writeDepthPicture(base + "_depth_colour.png", r.depth);
+      // The ground-truth picture shows the objects, not the sensor: render it without noise.
+      const RenderResult clean =
+          renderer.render(camera, view.T_table_camera, SensorNoiseConfig(), true);
+      writeShadedPicture(base + "_shaded.png", clean.instances, clean.normals_table,
+                         view.T_table_camera);
+    }
+  }
+}
+
+std::unique_ptr<PileGenerator> makeGenerator(const GenerationOptions& o, DatasetInfo* info) {
+  PileConfig config;
+  config.min_objects = o.min_objects;
+  config.max_objects = o.max_objects;
+  config.grid_extent_m = o.extent_m;
+  config.max_tilt_deg = o.max_tilt_deg;
+  if (o.ycb_dir.empty()) return std::make_unique<PileGenerator>(config);
+  if (!fs::is_directory(o.ycb_dir))
+    throw std::runtime_error("--ycb: not a directory: " + o.ycb_dir);
+  info->mesh_names = ycbObjectNames();
+  return std::make_unique<PileGenerator>(config, loadMeshCatalogue(o.ycb_dir));
+}
+
+DatasetInfo datasetInfo(const GenerationOptions& o) {
+  DatasetInfo info;
+  info.num_scenes = o.scenes;
+  info.resolution = o.resolution;
+  info.extent_m = o.extent_m;
+  info.truncation_m = o.truncation_vox * o.extent_m / o.resolution;
+  info.max_objects_per_scene = o.max_objects;
+  info.seed = o.seed;
+  info.min_objects = o.min_objects;
+  info.max_objects = o.max_objects;
+  return info;
+}
+
+/// Scenes made by worker threads in any order, taken in index order by the writer.
+class SceneWorkers {
+ public:
+  SceneWorkers(const GenerationOptions& o, const PileGenerator& generator, const DatasetInfo& info,
+               const fs::path& views_dir)
+      : scenes_(o.scenes) {
+    const int threads = std::min(o.threads, o.scenes);
+    for (int t = 0; t < threads; ++t)
+      pool_.emplace_back([this, &o, &generator, &info, views_dir, threads] {
+        omp_set_num_threads(threads > 1 ? 1 : 2);  // parallelism across scenes, not inside
+        for (int i = next_++; i < scenes_; i = next_++) {
+          try {
+            const uint64_t seed = sceneSeed(o.seed, i);
+            SceneResult r;
+            r.pile = generator.generate(seed);
+            const Vec3 centre = r.pile.scene.surfaceCentroid();
+            const GridSpec grid = GridSpec::sceneGrid(centre.head<2>(), o.extent_m, o.resolution);
+            r.gt = computeGroundTruth(r.pile.scene, grid, info.truncation_m);
+            if (o.views > 0) writeViews(o, views_dir, i, r.pile.scene, seed);
+            std::lock_guard<std::mutex> lock(mutex_);
+            done_.emplace(i, std::move(r));
+          } catch (const std::exception& e) {
+            std::lock_guard<std::mutex> lock(mutex_);
+            if (failure_.empty()) failure_ = "scene " + std::to_string(i) + ": " + e.what();
+            next_ = scenes_;
+          }
+          ready_.notify_all();
+        }
+      });
+  }
+  ~SceneWorkers() {
+    next_ = scenes_;
+    for (auto& t : pool_) t.join();
+  }
+  int threads() const { return static_cast<int>(pool_.size()); }
+  /// Scene i once made; throws std::runtime_error with the first failure.
+  SceneResult take(int i) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    ready_.wait(lock, [&] { return done_.count(i) > 0 || !failure_.empty(); });
+    if (done_.count(i) == 0) throw std::runtime_error(failure_);
+    SceneResult r = std::move(done_.at(i));
+    done_.erase(i);
+    return r;
+  }
+
+ private:
+  const int scenes_;
+  std::atomic<int> next_{0};
+  std::mutex mutex_;
+  std::condition_variable ready_;
+  std::map<int, SceneResult> done_;
+  std::string failure_;
+  std::vector<std::thread> pool_;  // last: the threads use the members above
+};
+
+}  // namespace
+
+GenerationSummary generateDataset(const GenerationOptions& o,
+                                  const std::function<void(int, int)>& progress) {
+  DatasetInfo info = datasetInfo(o);
+  const std::unique_ptr<PileGenerator> generator = makeGenerator(o, &info);
+  if (fs::path(o.output).has_parent_path()) {
+    std::error_code ec;
+    fs::create_directories(fs::path(o.output).parent_path(), ec);
+    if (ec)
+      throw std::runtime_error("cannot create the directory of --output " + o.output + ": " +
+                               ec.message());
+  }
+  DatasetWriter writer(o.output, info);
+  GenerationSummary summary;
+  summary.truncation_m = info.truncation_m;
+  if (o.views > 0) {
+    summary.views_dir = o.views_dir.empty()
+                            ? fs::path(o.output).replace_extension("").string() + "_views"
+                            : o.views_dir;
+    fs::create_directories(summary.views_dir);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  double undone_steps = 0, all_steps = 0;
+  {
+    SceneWorkers workers(o, *generator, info, summary.views_dir);
+    summary.threads = workers.threads();
+    for (int i = 0; i < o.scenes; ++i) {
+      const SceneResult r = workers.take(i);
+      writer.write(i, r.pile.scene, r.gt);
+      summary.attempts += r.pile.attempts;
+      summary.objects += static_cast<long>(r.pile.scene.objects.size());
+      const auto& st = r.pile.object_steps;
+      undone_steps += st.undone_drops + st.rejected_piles;
+      all_steps += st.placed + st.undone_drops + st.rest_checks + st.rejected_piles;
+      if (progress) progress(i + 1, o.scenes);
+    }
+  }
+  summary.undone_share = all_steps > 0 ? undone_steps / all_steps : 0.0;
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return summary;
+}
+
+}  // namespace simstack

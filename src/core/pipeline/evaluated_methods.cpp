@@ -1,0 +1,80 @@
+#include "simstack/pipeline/evaluated_methods.h"
+
+#include "simstack/eval/scene_metrics.h"
+#include "simstack/mesh/marching_cubes.h"
+#include "simstack/pipeline/scene_perception.h"
+#include "simstack/tsdf/network_input.h"
+
+namespace simstack {
+
+NetworkMethod::NetworkMethod(const PerceptionConfig& config, bool label_pixels)
+    : label_pixels_(label_pixels) {
+  perception_ = std::make_unique<ScenePerception>(config);
+  name_ = architecture();
+}
+
+NetworkMethod::~NetworkMethod() = default;
+
+const std::string& NetworkMethod::architecture() const {
+  return perception_->modelConfig().architecture;
+}
+
+MethodInfo NetworkMethod::info() const {
+  const PerceptionConfig& c = perception_->config();
+  return {c.model_path, c.samples, perceptionYaml(c)};
+}
+
+MethodEstimate NetworkMethod::estimate(const DepthView& view, const GridSpec*, const Vec2&) {
+  const SceneEstimate est = perception_->perceive(view);
+  MethodEstimate out;
+  out.grid = est.grid;
+  for (const SceneHypothesis& h : est.hypotheses) {
+    out.hypotheses_tsdf.push_back(h.tsdf_m.data);
+    out.surfaces.push_back(h.surface.empty() ? extractSurface(h.tsdf_m) : h.surface);
+  }
+  for (const InstanceEstimate& e : est.instances()) out.superquadrics.push_back(e.superquadric);
+  if (label_pixels_) out.pixel_instances = pixelInstances(view, est);
+  out.table_estimated = est.table_estimated;
+  out.perceive_ms = est.timings.total_ms;
+  return out;
+}
+
+ClassicalMethod::ClassicalMethod(const ClassicalConfig& config, double extent_m, int resolution)
+    : config_(config), extent_m_(extent_m), resolution_(resolution) {}
+
+MethodEstimate ClassicalMethod::estimate(const DepthView& view, const GridSpec* grid,
+                                         const Vec2& pile_xy) {
+  const Transform T = view.T_table_camera.value();
+  MethodEstimate out;
+  if (grid) {
+    out.grid = *grid;
+  } else {  // the grid a network would use, for the occupancy scores
+    const Vec2 c = visiblePileCentre(view.depth, view.camera, T, pile_xy, 0.5 * extent_m_);
+    out.grid = GridSpec::sceneGrid(c, extent_m_, resolution_);
+  }
+  out.superquadrics = classicalBaseline(view.depth, view.camera, T, config_, &out.grid);
+  out.hypotheses_tsdf.push_back(superquadricOccupancy(out.superquadrics, out.grid));
+  out.surfaces.push_back(superquadricsMesh(out.superquadrics));
+  return out;
+}
+
+std::vector<std::unique_ptr<EvaluatedMethod>> evaluatedMethods(
+    const std::vector<PerceptionConfig>& configs, bool classical, double extent_m, int resolution) {
+  std::vector<std::unique_ptr<EvaluatedMethod>> methods;
+  for (PerceptionConfig c : configs) {
+    c.zero_code_first = false;  // random codes, as the paper evaluates
+    auto m = std::make_unique<NetworkMethod>(c);
+    for (const auto& other : methods)
+      if (other->name() == m->name()) m->rename(m->name() + "_" + std::to_string(methods.size()));
+    methods.push_back(std::move(m));
+  }
+  if (classical && !configs.empty()) {
+    ClassicalConfig cc;
+    cc.threads = configs.front().threads;
+    cc.fit = configs.front().fit;
+    methods.push_back(std::make_unique<ClassicalMethod>(cc, extent_m, resolution));
+  }
+  return methods;
+}
+
+}  // namespace simstack

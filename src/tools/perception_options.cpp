@@ -1,0 +1,64 @@
+#include "perception_options.h"
+
+#include <filesystem>
+#include <stdexcept>
+
+namespace simstack {
+
+std::string packageDir() {
+  for (const char* dir : {SIMSTACK_SOURCE_DIR, SIMSTACK_SHARE_DIR})
+    if (std::filesystem::exists(std::filesystem::path(dir) / "config/perception.yaml")) return dir;
+  return SIMSTACK_SOURCE_DIR;
+}
+
+std::string packageFile(const std::string& relative) {
+  return (std::filesystem::path(packageDir()) / relative).string();
+}
+
+PerceptionOptions::PerceptionOptions(CLI::App& app, Which which) {
+  app.add_option("--config", config_path_,
+                 "perception config (its model, pipeline settings); the options below override it")
+      ->capture_default_str()
+      ->check(CLI::ExistingFile);
+  app.add_option("--model", models_,
+                 which.several_models
+                     ? "model file(s), each with its card (models/<name>.yaml) beside it; "
+                       "default: the config's model"
+                     : "model file, with its card (models/<name>.yaml) beside it; default: the "
+                       "config's model")
+      ->check(CLI::ExistingFile)
+      ->expected(1, which.several_models ? 1 << 16 : 1);
+  samples_opt_ =
+      app.add_option("--samples", samples_, "latent samples S (default: the model card's)")
+          ->check(CLI::PositiveNumber);
+  if (which.seed)
+    seed_opt_ = app.add_option("--seed", seed_, "latent code seed (default: the config's)");
+  threads_opt_ = app.add_option("--threads", threads_, "threads (default: the config's)")
+                     ->check(CLI::PositiveNumber);
+  if (which.joint) app.add_flag("--no-joint", no_joint_, "skip the joint refinement (eqs. 7-9)");
+}
+
+std::vector<PerceptionConfig> PerceptionOptions::configs() const {
+  const std::string base = packageDir();
+  std::vector<std::string> models = models_;
+  if (models.empty()) models.emplace_back();  // the config's own
+  std::vector<PerceptionConfig> out;
+  for (const std::string& model : models) {
+    // Relative model paths in a config are read from the package directory; a --model path
+    // is the user's, relative to the working directory.
+    PerceptionConfig c = loadPerceptionYaml(
+        config_path_, base, model.empty() ? "" : std::filesystem::absolute(model).string());
+    if (c.model_path.empty())
+      throw std::runtime_error(config_path_ + ": no perception.model given");
+    if (!std::filesystem::exists(c.model_path))
+      throw std::runtime_error(config_path_ + ": model " + c.model_path + " does not exist");
+    if (samples_opt_->count()) c.samples = samples_;
+    if (seed_opt_ && seed_opt_->count()) c.seed = seed_;
+    if (threads_opt_->count()) c.threads = threads_;
+    if (no_joint_) c.joint_refinement = false;
+    out.push_back(std::move(c));
+  }
+  return out;
+}
+
+}  // namespace simstack

@@ -1,0 +1,49 @@
+#pragma once
+/// @file perception_options.h
+/// The options every tool that runs ScenePerception shares, and the one place that turns them
+/// into a PerceptionConfig: the package's config/perception.yaml unless --config names
+/// another, the config's model unless --model names one (whose card brings its sample count
+/// and Hough setting), then --samples, --seed, --threads and --no-joint over both.
+
+#include <CLI/CLI.hpp>
+
+#include <string>
+#include <vector>
+
+#include "simstack/pipeline/perception_config.h"
+
+namespace simstack {
+
+/// The package directory: the source tree, or where `make install` put config/ and models/.
+std::string packageDir();
+/// A file shipped with the package (e.g. "config/perception.yaml"): from the source tree, or
+/// where `make install` put it.
+std::string packageFile(const std::string& relative);
+
+class PerceptionOptions {
+ public:
+  struct Which {
+    bool several_models = false;  ///< --model may be repeated (simstack_evaluate)
+    bool seed = true;             ///< --seed is the latent-code seed
+    bool joint = true;            ///< --no-joint
+  };
+  /// Adds the options to `app`.
+  PerceptionOptions(CLI::App& app, Which which);
+  PerceptionOptions(CLI::App& app) : PerceptionOptions(app, Which()) {}
+
+  /// One config per --model given (in order), or the config's own model when none is.
+  /// Throws std::runtime_error naming the file when a config, card or model is unusable.
+  std::vector<PerceptionConfig> configs() const;
+  /// The first of configs().
+  PerceptionConfig config() const { return configs().front(); }
+
+ private:
+  std::string config_path_ = packageFile("config/perception.yaml");
+  std::vector<std::string> models_;
+  int samples_ = 3, threads_ = 2;
+  uint64_t seed_ = 0;
+  bool no_joint_ = false;
+  CLI::Option *samples_opt_ = nullptr, *seed_opt_ = nullptr, *threads_opt_ = nullptr;
+};
+
+}  // namespace simstack
