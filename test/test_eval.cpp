@@ -18,8 +18,8 @@
 namespace simstack {
 namespace {
 
-Superquadric box(const Vec3& half, const Vec3& centre, double yaw = 0.0) {
-  Superquadric sq;
+SuperquadricShape box(const Vec3& half, const Vec3& centre, double yaw = 0.0) {
+  SuperquadricShape sq;
   sq.scale_m = half;
   sq.exponents = Vec3::Constant(10.0);
   sq.T_table_object = Transform::Identity();
@@ -41,7 +41,7 @@ TEST(Chamfer, ZeroForIdenticalSetsAndTwiceTheShiftForAPlane) {
 }
 
 TEST(Visibility, AboutHalfOfASphereFacesTheCamera) {
-  Superquadric sphere;
+  SuperquadricShape sphere;
   sphere.scale_m = Vec3::Constant(0.1);
   sphere.T_table_object.translation() = Vec3(0, 0, 0.2);
   const TriangleMesh mesh = sphere.meshObject(24).transformed(sphere.T_table_object);
@@ -52,7 +52,7 @@ TEST(Visibility, AboutHalfOfASphereFacesTheCamera) {
 }
 
 TEST(Occupancy, SuperquadricVoxelsMatchTheVolume) {
-  const Superquadric b = box(Vec3(0.1, 0.06, 0.04), Vec3(0.01, 0.0, 0.04), 0.3);
+  const SuperquadricShape b = box(Vec3(0.1, 0.06, 0.04), Vec3(0.01, 0.0, 0.04), 0.3);
   const GridSpec g = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 64);
   const std::vector<float> occ = superquadricOccupancy({b}, g);
   int inside = 0;
@@ -62,13 +62,14 @@ TEST(Occupancy, SuperquadricVoxelsMatchTheVolume) {
 }
 
 TEST(Stability, ARestingPileIsStableAndAFloatingTowerFalls) {
-  const std::vector<Superquadric> resting = {box(Vec3(0.08, 0.06, 0.04), Vec3(0, 0, 0.04)),
-                                             box(Vec3(0.05, 0.05, 0.03), Vec3(0.0, 0.0, 0.111))};
+  const std::vector<SuperquadricShape> resting = {
+      box(Vec3(0.08, 0.06, 0.04), Vec3(0, 0, 0.04)),
+      box(Vec3(0.05, 0.05, 0.03), Vec3(0.0, 0.0, 0.111))};
   const StabilityResult r = simulateStability(resting);
   EXPECT_TRUE(r.stable);
   EXPECT_LT(r.mean_displacement_m, 0.01);
   // A thin slab balanced on its edge, tilted: it falls over.
-  Superquadric slab = box(Vec3(0.01, 0.1, 0.15), Vec3(0, 0, 0.151));
+  SuperquadricShape slab = box(Vec3(0.01, 0.1, 0.15), Vec3(0, 0, 0.151));
   slab.T_table_object.linear() = Eigen::AngleAxisd(0.2, Vec3::UnitY()).toRotationMatrix();
   slab.T_table_object.translation().z() = 0.16;
   const StabilityResult f = simulateStability({slab});
@@ -89,7 +90,7 @@ TEST(Stability, GeneratedPilesPassTheTestOverTheSecondTheGeneratorVerified) {
     const StabilityResult r = simulateStability(scene, one_second);
     EXPECT_TRUE(r.stable) << r.max_displacement_m << " m, " << r.max_rotation_rad << " rad";
     EXPECT_LT(r.max_displacement_m, 0.02);
-    std::vector<Superquadric> shapes;
+    std::vector<SuperquadricShape> shapes;
     for (const SceneObject& o : scene.objects) shapes.push_back(o.superquadricTable());
     EXPECT_DOUBLE_EQ(simulateStability(shapes, one_second).mean_displacement_m,
                      r.mean_displacement_m);
@@ -97,7 +98,7 @@ TEST(Stability, GeneratedPilesPassTheTestOverTheSecondTheGeneratorVerified) {
 }
 
 TEST(ClassicalBaseline, SeparatedBoxesGiveOneShapeEach) {
-  const std::vector<Superquadric> truth = {
+  const std::vector<SuperquadricShape> truth = {
       box(Vec3(0.05, 0.05, 0.05), Vec3(-0.12, 0, 0.05)),
       box(Vec3(0.04, 0.06, 0.03), Vec3(0.12, 0.02, 0.03), 0.5)};
   const Scene scene = Scene::fromSuperquadrics(truth);
@@ -107,11 +108,11 @@ TEST(ClassicalBaseline, SeparatedBoxesGiveOneShapeEach) {
   ClassicalConfig config;
   const std::vector<Points3> clusters = clusterVisiblePoints(r.depth, camera, T, config);
   ASSERT_EQ(clusters.size(), 2u);
-  const std::vector<Superquadric> shapes = classicalBaseline(r.depth, camera, T, config);
+  const std::vector<SuperquadricShape> shapes = classicalBaseline(r.depth, camera, T, config);
   ASSERT_EQ(shapes.size(), 2u);
-  for (const Superquadric& t : truth) {
+  for (const SuperquadricShape& t : truth) {
     double best = 1e9;
-    for (const Superquadric& s : shapes)
+    for (const SuperquadricShape& s : shapes)
       best = std::min(best, (s.centroid() - t.centroid()).norm());
     EXPECT_LT(best, 0.03);  // visible points only: the hidden half is a guess
   }
@@ -143,10 +144,11 @@ TEST(Segmentation, OneToOneMatchingByLargestOverlap) {
 TEST(SceneFiles, SuperquadricsMeshesAndGridsRoundTrip) {
   const auto dir = std::filesystem::temp_directory_path() / "simstack_test_eval";
   std::filesystem::create_directories(dir);
-  const std::vector<Superquadric> shapes = {box(Vec3(0.05, 0.04, 0.03), Vec3(0.1, -0.2, 0.03), 0.7),
-                                            box(Vec3(0.02, 0.03, 0.04), Vec3(0, 0, 0.1), -1.2)};
+  const std::vector<SuperquadricShape> shapes = {
+      box(Vec3(0.05, 0.04, 0.03), Vec3(0.1, -0.2, 0.03), 0.7),
+      box(Vec3(0.02, 0.03, 0.04), Vec3(0, 0, 0.1), -1.2)};
   writeSuperquadricsYaml((dir / "sq.yaml").string(), shapes);
-  const std::vector<Superquadric> back = readSuperquadricsYaml((dir / "sq.yaml").string());
+  const std::vector<SuperquadricShape> back = readSuperquadricsYaml((dir / "sq.yaml").string());
   ASSERT_EQ(back.size(), 2u);
   for (int i = 0; i < 2; ++i) {
     EXPECT_TRUE(back[i].scale_m.isApprox(shapes[i].scale_m, 1e-9));

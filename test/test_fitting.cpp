@@ -1,4 +1,4 @@
-// Superquadric fitting against shapes with known parameters.
+// SuperquadricShape fitting against shapes with known parameters.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -9,9 +9,9 @@
 namespace simstack {
 namespace {
 
-Superquadric makeShape(const Vec3& scale, const Vec3& exponents, const Vec3& centre,
-                       const Vec3& axis, double angle) {
-  Superquadric sq;
+SuperquadricShape makeShape(const Vec3& scale, const Vec3& exponents, const Vec3& centre,
+                            const Vec3& axis, double angle) {
+  SuperquadricShape sq;
   sq.scale_m = scale;
   sq.exponents = exponents;
   sq.T_table_object = Transform::Identity();
@@ -20,7 +20,7 @@ Superquadric makeShape(const Vec3& scale, const Vec3& exponents, const Vec3& cen
   return sq;
 }
 
-Points3 noisySurface(const Superquadric& sq, int count, double sigma, uint64_t seed) {
+Points3 noisySurface(const SuperquadricShape& sq, int count, double sigma, uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> noise(0.0, sigma);
   Points3 pts;
@@ -34,7 +34,7 @@ Vec3 sorted(Vec3 v) {
   return v;
 }
 
-double lowestPoint(const Superquadric& sq) {
+double lowestPoint(const SuperquadricShape& sq) {
   std::mt19937_64 rng(1);
   double lo = 1e9;
   for (const SurfacePoint& s : sq.sampleSurfaceObject(2000, rng))
@@ -44,7 +44,7 @@ double lowestPoint(const Superquadric& sq) {
 
 TEST(SurfaceDistance, IsMetresAlongTheRayForEveryExponent) {
   for (double e : {2.0, 4.0, 20.0}) {
-    Superquadric sq =
+    SuperquadricShape sq =
         makeShape(Vec3(0.05, 0.08, 0.1), Vec3::Constant(e), Vec3(0.1, 0, 0.2), Vec3(0, 0, 1), 0.3);
     const Vec3 dir_object = Vec3(1, 0.5, -0.3).normalized();
     const Vec3 surface = sq.surfacePointAlong(dir_object);
@@ -58,7 +58,7 @@ TEST(SurfaceDistance, IsMetresAlongTheRayForEveryExponent) {
 TEST(SurfaceDistance, StaysFiniteForExtremeExponentsAndScales) {
   // Exponents 1 and 100 with a 5 mm axis: |q/a|^e spans 1e-200..1e178 (a NaN in the evaluation
   // runs before the distance was computed in logs).
-  const Superquadric sq =
+  const SuperquadricShape sq =
       makeShape(Vec3(0.005, 0.03, 0.07), Vec3(1, 100, 3.6), Vec3(0, 0, 0.07), Vec3(1, 1, 0), 1.2);
   for (const Vec3& p :
        {Vec3(0.3, -0.2, 0.5), Vec3(0.001, 0.0, 0.07), Vec3(0, 0.029, 0.07), Vec3(0.0, 0.0, 0.07)}) {
@@ -73,7 +73,7 @@ TEST(SurfaceDistance, StaysFiniteForExtremeExponentsAndScales) {
 }
 
 TEST(SuperquadricFit, RecoversKnownShapesFromNoisySamples) {
-  const std::vector<Superquadric> truth = {
+  const std::vector<SuperquadricShape> truth = {
       makeShape(Vec3(0.05, 0.07, 0.10), Vec3(2, 2, 2), Vec3(0.1, -0.05, 0.12), Vec3(1, 2, 3), 0.7),
       makeShape(Vec3(0.04, 0.06, 0.09), Vec3(10, 10, 10), Vec3(-0.2, 0.1, 0.08), Vec3(0, 1, 1),
                 1.1),
@@ -81,7 +81,7 @@ TEST(SuperquadricFit, RecoversKnownShapesFromNoisySamples) {
       makeShape(Vec3(0.025, 0.1, 0.14), Vec3(6, 3, 12), Vec3(0.05, 0.2, 0.1), Vec3(1, -1, 0), 2.0)};
   for (size_t i = 0; i < truth.size(); ++i) {
     const Points3 pts = noisySurface(truth[i], 1000, 0.001, 10 + i);
-    const Superquadric fit = fitSuperquadric(pts);
+    const SuperquadricShape fit = fitSuperquadric(pts);
     const Vec3 want = sorted(truth[i].scale_m), got = sorted(fit.scale_m);
     for (int a = 0; a < 3; ++a) EXPECT_NEAR(got[a], want[a], 0.05 * want[a]) << "shape " << i;
     EXPECT_LT((fit.centroid() - truth[i].centroid()).norm(), 0.005) << "shape " << i;
@@ -99,17 +99,18 @@ TEST(SuperquadricFit, RejectsTooFewPoints) {
 
 TEST(JointRefinement, RemovesAnInjectedOverlap) {
   // Two boxes whose point sets overlap by 3 cm: fitted independently they intersect.
-  const Superquadric a =
+  const SuperquadricShape a =
       makeShape(Vec3(0.05, 0.05, 0.05), Vec3(8, 8, 8), Vec3(0, 0, 0.05), Vec3(0, 0, 1), 0);
-  const Superquadric b =
+  const SuperquadricShape b =
       makeShape(Vec3(0.05, 0.05, 0.05), Vec3(8, 8, 8), Vec3(0.07, 0, 0.05), Vec3(0, 0, 1), 0);
   const std::vector<Points3> pts = {noisySurface(a, 800, 0.0005, 1),
                                     noisySurface(b, 800, 0.0005, 2)};
-  const std::vector<Superquadric> independent = {fitSuperquadric(pts[0]), fitSuperquadric(pts[1])};
+  const std::vector<SuperquadricShape> independent = {fitSuperquadric(pts[0]),
+                                                      fitSuperquadric(pts[1])};
   const double before =
       collisionCost(independent[0], independent[1]) + collisionCost(independent[1], independent[0]);
   ASSERT_GT(before, 1e-5);
-  const std::vector<Superquadric> joint = refineJointly(pts, independent);
+  const std::vector<SuperquadricShape> joint = refineJointly(pts, independent);
   const double after = collisionCost(joint[0], joint[1]) + collisionCost(joint[1], joint[0]);
   EXPECT_LT(after, 0.1 * before);
   // The shapes still describe their points.
@@ -122,16 +123,16 @@ TEST(JointRefinement, RemovesOverlapsAcrossExponentsAndPoses) {
   // of these returned their starting point unchanged.
   for (int k = 0; k < 8; ++k) {
     const double e = 4.0 + 2.0 * k;
-    const Superquadric a = makeShape(Vec3(0.05, 0.05, 0.05), Vec3::Constant(e), Vec3(0, 0, 0.05),
-                                     Vec3(0, 0, 1), 0.1 * k);
-    const Superquadric b = makeShape(Vec3(0.05, 0.04, 0.05), Vec3::Constant(e),
-                                     Vec3(0.07, 0.01 * k, 0.05), Vec3(0, 0, 1), 0);
+    const SuperquadricShape a = makeShape(Vec3(0.05, 0.05, 0.05), Vec3::Constant(e),
+                                          Vec3(0, 0, 0.05), Vec3(0, 0, 1), 0.1 * k);
+    const SuperquadricShape b = makeShape(Vec3(0.05, 0.04, 0.05), Vec3::Constant(e),
+                                          Vec3(0.07, 0.01 * k, 0.05), Vec3(0, 0, 1), 0);
     const std::vector<Points3> pts = {noisySurface(a, 800, 0.0005, 1 + 10 * k),
                                       noisySurface(b, 800, 0.0005, 2 + 10 * k)};
-    const std::vector<Superquadric> fits = {fitSuperquadric(pts[0]), fitSuperquadric(pts[1])};
+    const std::vector<SuperquadricShape> fits = {fitSuperquadric(pts[0]), fitSuperquadric(pts[1])};
     const double before = collisionCost(fits[0], fits[1]) + collisionCost(fits[1], fits[0]);
     ASSERT_GT(before, 1e-6) << "case " << k;
-    const std::vector<Superquadric> joint = refineJointly(pts, fits);
+    const std::vector<SuperquadricShape> joint = refineJointly(pts, fits);
     EXPECT_LT(collisionCost(joint[0], joint[1]) + collisionCost(joint[1], joint[0]), 0.1 * before)
         << "case " << k << " (exponent " << e << ")";
     // Still the shapes of their points: the 3 cm overlap is shared out between the shapes (2-9
@@ -155,13 +156,13 @@ TEST(JointRefinement, RejectsBadConfig) {
 }
 
 TEST(JointRefinement, LiftsAShapePushedIntoTheFloor) {
-  const Superquadric sunk =
+  const SuperquadricShape sunk =
       makeShape(Vec3(0.06, 0.04, 0.05), Vec3(6, 6, 6), Vec3(0, 0, 0.03), Vec3(0, 0, 1), 0.5);
   const Points3 pts = noisySurface(sunk, 800, 0.0005, 3);
-  const Superquadric fit = fitSuperquadric(pts);
+  const SuperquadricShape fit = fitSuperquadric(pts);
   const double before = lowestPoint(fit);
   ASSERT_LT(before, -0.015);
-  const Superquadric lifted = refineJointly({pts}, {fit}).front();
+  const SuperquadricShape lifted = refineJointly({pts}, {fit}).front();
   EXPECT_GT(lowestPoint(lifted), 0.5 * before);  // at least half of the penetration removed
 }
 

@@ -11,8 +11,8 @@
 using namespace simstack;
 
 namespace {
-Superquadric ellipsoid() {
-  Superquadric sq;
+SuperquadricShape ellipsoid() {
+  SuperquadricShape sq;
   sq.scale_m = Vec3(0.10, 0.07, 0.05);
   sq.exponents = Vec3(2, 2, 2);
   sq.T_table_object.translation() = Vec3(0.3, -0.2, 0.1);
@@ -22,8 +22,8 @@ Superquadric ellipsoid() {
 }
 }  // namespace
 
-TEST(Superquadric, EllipsoidVolumeIsAnalytic) {
-  const Superquadric sq = ellipsoid();
+TEST(SuperquadricShape, EllipsoidVolumeIsAnalytic) {
+  const SuperquadricShape sq = ellipsoid();
   const double analytic = 4.0 / 3.0 * M_PI * 0.10 * 0.07 * 0.05;
   EXPECT_NEAR(sq.volume(), analytic, 1e-12);
   const TriangleMesh mesh = sq.meshObject(24);
@@ -31,8 +31,8 @@ TEST(Superquadric, EllipsoidVolumeIsAnalytic) {
   EXPECT_LT(mesh.volumeCentroid().norm(), 1e-6);
 }
 
-TEST(Superquadric, EllipsoidInsideTestAndNormals) {
-  const Superquadric sq = ellipsoid();
+TEST(SuperquadricShape, EllipsoidInsideTestAndNormals) {
+  const SuperquadricShape sq = ellipsoid();
   std::mt19937_64 rng(42);
   std::uniform_real_distribution<double> uni(-0.12, 0.12);
   int inside = 0;
@@ -53,8 +53,8 @@ TEST(Superquadric, EllipsoidInsideTestAndNormals) {
   }
 }
 
-TEST(Superquadric, SurfaceSamplesAreNearUniform) {
-  Superquadric sphere;
+TEST(SuperquadricShape, SurfaceSamplesAreNearUniform) {
+  SuperquadricShape sphere;
   sphere.scale_m = Vec3::Constant(0.1);
   std::mt19937_64 rng(3);
   const auto samples = sphere.sampleSurfaceObject(40000, rng);
@@ -69,22 +69,22 @@ TEST(Superquadric, SurfaceSamplesAreNearUniform) {
   EXPECT_LT((mean / 40000.0).norm(), 0.002);
 }
 
-TEST(Superquadric, MeshVolumeMatchesFormulaForAnyExponents) {
+TEST(SuperquadricShape, MeshVolumeMatchesFormulaForAnyExponents) {
   for (const Vec3& e : {Vec3(2, 5, 40), Vec3(100, 100, 100), Vec3(3, 3, 8), Vec3(1.5, 2, 2)}) {
-    Superquadric sq;
+    SuperquadricShape sq;
     sq.scale_m = Vec3(0.12, 0.05, 0.08);
     sq.exponents = e;
     const double v = sq.volume();
     EXPECT_NEAR(sq.meshObject(32).volume(), v, 0.01 * v) << "exponents " << e.transpose();
   }
-  Superquadric box;
+  SuperquadricShape box;
   box.scale_m = Vec3(0.1, 0.05, 0.02);
   box.exponents = Vec3::Constant(100);
   EXPECT_NEAR(box.volume(), 8 * 0.1 * 0.05 * 0.02, 0.03 * 8 * 0.1 * 0.05 * 0.02);
 }
 
-TEST(Superquadric, RadialDistanceFollowsThePaper) {
-  Superquadric sphere;
+TEST(SuperquadricShape, RadialDistanceFollowsThePaper) {
+  SuperquadricShape sphere;
   sphere.scale_m = Vec3::Constant(0.1);
   sphere.T_table_object.translation() = Vec3(1, 2, 3);
   // f = 4 at twice the radius: d = |OP| (f - 1) / f = 0.2 * 3 / 4.

@@ -32,7 +32,7 @@ double displacementAfter(const Scene& scene, int steps) {
 }  // namespace
 
 TEST(Physics, BoxComesToRestOnTheTable) {
-  Superquadric box;
+  SuperquadricShape box;
   box.scale_m = Vec3(0.08, 0.05, 0.03);
   box.exponents = Vec3::Constant(100);
   const auto shape = ObjectShape::fromSuperquadric(box);
@@ -49,7 +49,7 @@ TEST(Physics, BoxComesToRestOnTheTable) {
 
 TEST(ObjectShape, PhysicsHullIsCompactOnTheSurfaceAndSurvivesTinyShapes) {
   // Box-like: the snapped lattice's face points are coplanar and leave the hull.
-  Superquadric box;
+  SuperquadricShape box;
   box.scale_m = Vec3(0.10, 0.05, 0.08);
   box.exponents = Vec3::Constant(80.0);
   const auto shape = ObjectShape::fromSuperquadric(box);
@@ -57,7 +57,7 @@ TEST(ObjectShape, PhysicsHullIsCompactOnTheSurfaceAndSurvivesTinyShapes) {
   for (const Vec3& p : shape->hullPoints())  // the snap moves a point by at most 0.87 mm
     EXPECT_LT((p - box.surfacePointAlong(p)).norm(), 1e-3) << p.transpose();
   // Thinner than the 1 mm snap: the unsnapped lattice is kept instead of a flat hull.
-  Superquadric tiny;
+  SuperquadricShape tiny;
   tiny.scale_m = Vec3(0.0003, 0.02, 0.02);
   tiny.exponents = Vec3::Constant(2.0);
   std::shared_ptr<const ObjectShape> thin;
@@ -124,7 +124,7 @@ TEST(PileGenerator, DeterministicForASeed) {
 TEST(PileGenerator, RejectsScatteredObjects) {
   PileConfig config;
   PileGenerator gen(config);
-  Superquadric sq;
+  SuperquadricShape sq;
   sq.scale_m = Vec3::Constant(0.04);
   sq.exponents = Vec3::Constant(50);
   Scene scene;
@@ -148,7 +148,7 @@ TEST(PileGenerator, FitsTestsTheGridWithOrWithoutItsTop) {
   // A drop under way is checked without the grid's top (its object may still be falling from
   // above it), but a pile pushed out sideways fails either way.
   const PileGenerator gen{PileConfig()};
-  Superquadric sq;
+  SuperquadricShape sq;
   sq.scale_m = Vec3::Constant(0.05);
   sq.exponents = Vec3::Constant(2);
   Scene scene;

@@ -8,7 +8,7 @@ namespace test {
 
 /// One sphere (a superquadric with r = s = t = 2) of `radius` centred at `centre`.
 inline Scene sphereScene(double radius, const Vec3& centre) {
-  Superquadric sq;
+  SuperquadricShape sq;
   sq.scale_m = Vec3::Constant(radius);
   SceneObject o;
   o.shape = ObjectShape::fromSuperquadric(sq);
@@ -21,7 +21,7 @@ inline Scene sphereScene(double radius, const Vec3& centre) {
 /// benchmarks that must not change when the pile generator does.
 inline Scene fourObjectPile() {
   auto object = [](const Vec3& half_m, const Vec3& exponents, const Vec3& centre, double yaw) {
-    Superquadric sq;
+    SuperquadricShape sq;
     sq.scale_m = half_m;
     sq.exponents = exponents;
     SceneObject o;

@@ -13,8 +13,8 @@
 namespace simstack {
 namespace {
 
-Superquadric box(const Vec3& semi_axes, const Vec3& centre) {
-  Superquadric s;
+SuperquadricShape box(const Vec3& semi_axes, const Vec3& centre) {
+  SuperquadricShape s;
   s.scale_m = semi_axes;
   s.exponents = Vec3(10, 10, 10);
   s.T_table_object = Transform::Identity();
@@ -30,7 +30,7 @@ struct View {
   SurfaceSegments segments;
 };
 
-View look(const std::vector<Superquadric>& shapes, const Vec3& eye, const Vec3& target) {
+View look(const std::vector<SuperquadricShape>& shapes, const Vec3& eye, const Vec3& target) {
   View v;
   v.scene = Scene::fromSuperquadrics(shapes);
   v.T_table_camera = lookAt(eye, target);

@@ -1,15 +1,25 @@
 #pragma once
 /// @file conversions.h
-/// ROS message <-> core type conversions (free functions, no algorithm). Each throws
-/// std::invalid_argument with a message fit for a throttled ROS warning.
+/// ROS message <-> core type conversions (free functions, no algorithm). The input conversions
+/// throw std::invalid_argument with a message fit for a throttled ROS warning.
 
+#include <geometry_msgs/Pose.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <simstack/ObjectArray.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <vector>
 
 #include "simstack/geometry/image.h"
 #include "simstack/geometry/pinhole_camera.h"
+#include "simstack/geometry/superquadric.h"
+#include "simstack/geometry/voxel_grid.h"
 
 namespace simstack {
+
+struct SceneEstimate;
 
 /// Depth in metres from a 16UC1 (mm) or 32FC1 (m) image; 0 and NaN stay missing (0).
 /// Rejects other encodings, big-endian data and a step or data size that does not fit.
@@ -18,5 +28,34 @@ DepthImage depthFromImage(const sensor_msgs::Image& msg);
 /// Pinhole intrinsics from a CameraInfo (the rectified P matrix, K when P is zero).
 /// Rejects zero focal lengths and empty sizes.
 PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg);
+
+geometry_msgs::Pose poseMsg(const Transform& T);
+Transform transformFromPose(const geometry_msgs::Pose& pose);
+/// The message of a core superquadric (same frame).
+simstack::Superquadric superquadricMsg(const SuperquadricShape& sq);
+
+/// x y z (float32) of `points` (metres) in `header.frame_id`.
+sensor_msgs::PointCloud2 pointCloud(const std_msgs::Header& header, const Points3& points);
+
+/// The objects of hypothesis 0 of `estimate`, in the table frame named by `header`.
+ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& estimate, int views,
+                           int samples);
+
+/// Every object's surface samples: x y z label rgb (label k + 1 for object k; rgb packed as
+/// rviz reads it, the colour of the object's marker).
+sensor_msgs::PointCloud2 instancesCloud(const std_msgs::Header& header,
+                                        const SceneEstimate& estimate);
+
+/// Voxel centres whose occupancy probability is at least `min_probability`: x y z probability.
+sensor_msgs::PointCloud2 occupancyCloud(const std_msgs::Header& header,
+                                        const Grid3<float>& probability, double min_probability);
+
+/// DELETEALL, then per object a triangle mesh of its superquadric (namespace "superquadrics")
+/// and a text label with its id ("labels"), in the colours of instancesCloud().
+visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
+                                              const SceneEstimate& estimate);
+
+/// 16UC1 image of pixel labels: 0 none, k + 1 object k (labels of -1 are 0).
+sensor_msgs::Image labelImage(const std_msgs::Header& header, const Image<int>& labels);
 
 }  // namespace simstack

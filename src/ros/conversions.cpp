@@ -2,10 +2,14 @@
 
 #include <sensor_msgs/image_encodings.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
 #include <string>
+
+#include "simstack/io/image_io.h"
+#include "simstack/pipeline/scene_perception.h"
 
 namespace simstack {
 
@@ -58,6 +62,227 @@ PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg) {
   c.cy = has_p ? msg.P[6] : msg.K[5];
   c.validate();
   return c;
+}
+
+}  // namespace simstack
+
+namespace simstack {
+namespace {
+
+/// An empty cloud of `points` points with float32 fields of the given names.
+sensor_msgs::PointCloud2 cloudWithFields(const std_msgs::Header& header, size_t points,
+                                         const std::vector<std::string>& names) {
+  sensor_msgs::PointCloud2 cloud;
+  cloud.header = header;
+  cloud.height = 1;
+  cloud.width = static_cast<uint32_t>(points);
+  cloud.is_bigendian = false;
+  cloud.is_dense = true;
+  for (size_t i = 0; i < names.size(); ++i) {
+    sensor_msgs::PointField f;
+    f.name = names[i];
+    f.offset = static_cast<uint32_t>(4 * i);
+    f.datatype = sensor_msgs::PointField::FLOAT32;
+    f.count = 1;
+    cloud.fields.push_back(f);
+  }
+  cloud.point_step = static_cast<uint32_t>(4 * names.size());
+  cloud.row_step = cloud.point_step * cloud.width;
+  cloud.data.resize(static_cast<size_t>(cloud.row_step));
+  return cloud;
+}
+
+void putFloats(sensor_msgs::PointCloud2* cloud, size_t point, std::initializer_list<float> v) {
+  std::memcpy(cloud->data.data() + point * cloud->point_step, v.begin(), 4 * v.size());
+}
+
+/// rviz's packed rgb: 0x00RRGGBB read as the bytes of a float.
+float packedColour(int k) {
+  const Eigen::Vector3f c = instanceColour(k) * 255.0f;
+  const uint32_t rgb = static_cast<uint32_t>(c.x()) << 16 | static_cast<uint32_t>(c.y()) << 8 |
+                       static_cast<uint32_t>(c.z());
+  float f;
+  std::memcpy(&f, &rgb, 4);
+  return f;
+}
+
+std_msgs::ColorRGBA colourMsg(int k) {
+  const Eigen::Vector3f c = instanceColour(k);
+  std_msgs::ColorRGBA out;
+  out.r = c.x();
+  out.g = c.y();
+  out.b = c.z();
+  out.a = 1.0f;
+  return out;
+}
+
+}  // namespace
+
+geometry_msgs::Pose poseMsg(const Transform& T) {
+  geometry_msgs::Pose p;
+  p.position.x = T.translation().x();
+  p.position.y = T.translation().y();
+  p.position.z = T.translation().z();
+  const Quat q(T.linear());
+  p.orientation.w = q.w();
+  p.orientation.x = q.x();
+  p.orientation.y = q.y();
+  p.orientation.z = q.z();
+  return p;
+}
+
+Transform transformFromPose(const geometry_msgs::Pose& p) {
+  Transform T = Transform::Identity();
+  T.translation() = Vec3(p.position.x, p.position.y, p.position.z);
+  T.linear() =
+      Quat(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z).toRotationMatrix();
+  return T;
+}
+
+simstack::Superquadric superquadricMsg(const SuperquadricShape& sq) {
+  simstack::Superquadric m;
+  m.semi_axes.x = sq.scale_m.x();
+  m.semi_axes.y = sq.scale_m.y();
+  m.semi_axes.z = sq.scale_m.z();
+  m.exponents.x = sq.exponents.x();
+  m.exponents.y = sq.exponents.y();
+  m.exponents.z = sq.exponents.z();
+  m.pose = poseMsg(sq.T_table_object);
+  return m;
+}
+
+sensor_msgs::PointCloud2 pointCloud(const std_msgs::Header& header, const Points3& points) {
+  sensor_msgs::PointCloud2 cloud = cloudWithFields(header, points.size(), {"x", "y", "z"});
+  for (size_t i = 0; i < points.size(); ++i)
+    putFloats(&cloud, i,
+              {static_cast<float>(points[i].x()), static_cast<float>(points[i].y()),
+               static_cast<float>(points[i].z())});
+  return cloud;
+}
+
+ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& est, int views,
+                           int samples) {
+  ObjectArray out;
+  out.header = header;
+  out.table_pose = poseMsg(est.T_table_camera.inverse());
+  out.table_estimated = est.table_estimated;
+  out.views = static_cast<uint32_t>(views);
+  out.samples = static_cast<uint32_t>(samples);
+  out.voxel_size_m = static_cast<float>(est.grid.voxel_size_m);
+  const StageTimings& t = est.timings;
+  out.table_ms = static_cast<float>(t.table_ms);
+  out.tsdf_ms = static_cast<float>(t.tsdf_ms);
+  out.network_ms = static_cast<float>(t.network_ms);
+  out.instances_ms = static_cast<float>(t.instances_ms);
+  out.mesh_ms = static_cast<float>(t.mesh_ms);
+  out.fitting_ms = static_cast<float>(t.fitting_ms);
+  out.total_ms = static_cast<float>(t.total_ms);
+  const std::vector<InstanceEstimate>& instances = est.instances();
+  for (size_t k = 0; k < instances.size(); ++k) {
+    Object o;
+    o.id = static_cast<uint32_t>(k);
+    o.superquadric = superquadricMsg(instances[k].superquadric);
+    o.surface = pointCloud(header, instances[k].points);
+    o.voxels = static_cast<uint32_t>(instances[k].voxels);
+    o.visible_fraction = static_cast<float>(instances[k].visible_fraction);
+    out.objects.push_back(std::move(o));
+  }
+  return out;
+}
+
+sensor_msgs::PointCloud2 instancesCloud(const std_msgs::Header& header, const SceneEstimate& est) {
+  size_t n = 0;
+  for (const InstanceEstimate& e : est.instances()) n += e.points.size();
+  sensor_msgs::PointCloud2 cloud = cloudWithFields(header, n, {"x", "y", "z", "label", "rgb"});
+  size_t i = 0;
+  for (size_t k = 0; k < est.instances().size(); ++k) {
+    const float rgb = packedColour(static_cast<int>(k) + 1);
+    for (const Vec3& p : est.instances()[k].points)
+      putFloats(&cloud, i++,
+                {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()),
+                 static_cast<float>(k + 1), rgb});
+  }
+  return cloud;
+}
+
+sensor_msgs::PointCloud2 occupancyCloud(const std_msgs::Header& header,
+                                        const Grid3<float>& probability, double min_probability) {
+  const GridSpec& g = probability.spec;
+  std::vector<int> kept;
+  for (int i = 0; i < static_cast<int>(probability.data.size()); ++i)
+    if (probability.data[i] >= min_probability) kept.push_back(i);
+  sensor_msgs::PointCloud2 cloud =
+      cloudWithFields(header, kept.size(), {"x", "y", "z", "probability"});
+  for (size_t j = 0; j < kept.size(); ++j) {
+    const Vec3i v = g.unravel(kept[j]);
+    const Vec3 c = g.voxelCentre(v.x(), v.y(), v.z());
+    putFloats(&cloud, j,
+              {static_cast<float>(c.x()), static_cast<float>(c.y()), static_cast<float>(c.z()),
+               probability.data[kept[j]]});
+  }
+  return cloud;
+}
+
+visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
+                                              const SceneEstimate& est) {
+  visualization_msgs::MarkerArray out;
+  visualization_msgs::Marker clear;
+  clear.header = header;
+  clear.action = visualization_msgs::Marker::DELETEALL;
+  out.markers.push_back(clear);
+  for (size_t k = 0; k < est.instances().size(); ++k) {
+    const SuperquadricShape& sq = est.instances()[k].superquadric;
+    visualization_msgs::Marker mesh;
+    mesh.header = header;
+    mesh.ns = "superquadrics";
+    mesh.id = static_cast<int>(k);
+    mesh.type = visualization_msgs::Marker::TRIANGLE_LIST;
+    mesh.action = visualization_msgs::Marker::ADD;
+    mesh.pose = poseMsg(sq.T_table_object);
+    mesh.scale.x = mesh.scale.y = mesh.scale.z = 1.0;
+    mesh.color = colourMsg(static_cast<int>(k) + 1);
+    const TriangleMesh m = sq.meshObject(8);
+    for (const auto& t : m.triangles)
+      for (int c = 0; c < 3; ++c) {
+        geometry_msgs::Point p;
+        p.x = m.vertices[t[c]].x();
+        p.y = m.vertices[t[c]].y();
+        p.z = m.vertices[t[c]].z();
+        mesh.points.push_back(p);
+      }
+    out.markers.push_back(mesh);
+    visualization_msgs::Marker text;
+    text.header = header;
+    text.ns = "labels";
+    text.id = static_cast<int>(k);
+    text.type = visualization_msgs::Marker::TEXT_VIEW_FACING;
+    text.action = visualization_msgs::Marker::ADD;
+    text.pose.position.x = sq.T_table_object.translation().x();
+    text.pose.position.y = sq.T_table_object.translation().y();
+    text.pose.position.z = sq.T_table_object.translation().z() + sq.scale_m.maxCoeff() + 0.03;
+    text.pose.orientation.w = 1.0;
+    text.scale.z = 0.04;
+    text.color.r = text.color.g = text.color.b = text.color.a = 1.0f;
+    text.text = std::to_string(k);
+    out.markers.push_back(text);
+  }
+  return out;
+}
+
+sensor_msgs::Image labelImage(const std_msgs::Header& header, const Image<int>& labels) {
+  sensor_msgs::Image img;
+  img.header = header;
+  img.width = static_cast<uint32_t>(labels.width);
+  img.height = static_cast<uint32_t>(labels.height);
+  img.encoding = sensor_msgs::image_encodings::TYPE_16UC1;
+  img.is_bigendian = false;
+  img.step = 2 * img.width;
+  img.data.resize(static_cast<size_t>(img.step) * img.height);
+  for (size_t i = 0; i < labels.pixels.size(); ++i) {
+    const uint16_t v = static_cast<uint16_t>(std::max(0, std::min(labels.pixels[i] + 1, 65535)));
+    std::memcpy(img.data.data() + 2 * i, &v, 2);
+  }
+  return img;
 }
 
 }  // namespace simstack

@@ -30,7 +30,7 @@ struct MethodEstimate {
   GridSpec grid;                       ///< the grid `hypotheses_tsdf` lie on
   std::vector<TriangleMesh> surfaces;  ///< the predicted full surface of each hypothesis
   std::vector<std::vector<float>> hypotheses_tsdf;  ///< per hypothesis on `grid`; <= 0 occupied
-  std::vector<Superquadric> superquadrics;          ///< the objects found, table frame
+  std::vector<SuperquadricShape> superquadrics;     ///< the objects found, table frame
   Image<int> pixel_instances;  ///< instance per pixel of the view, -1 none (may stay empty)
   bool table_estimated = false;
   double perceive_ms = std::numeric_limits<double>::quiet_NaN();

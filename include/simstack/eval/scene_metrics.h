@@ -31,11 +31,11 @@ TriangleMesh subMesh(const TriangleMesh& mesh, const std::vector<bool>& mask);
 Points3 samplePoints(const TriangleMesh& mesh, int count, std::mt19937_64& rng);
 
 /// One closed mesh of all shapes (table frame).
-TriangleMesh superquadricsMesh(const std::vector<Superquadric>& shapes, int subdivisions = 16);
+TriangleMesh superquadricsMesh(const std::vector<SuperquadricShape>& shapes, int subdivisions = 16);
 
 /// Signed occupancy of shapes at the voxel centres of `grid`: -1 inside any shape, +1 outside
 /// (a TSDF sign, for scoreOccupancy).
-std::vector<float> superquadricOccupancy(const std::vector<Superquadric>& shapes,
+std::vector<float> superquadricOccupancy(const std::vector<SuperquadricShape>& shapes,
                                          const GridSpec& grid);
 
 /// The protocol of DESIGN.md section 5: the shapes as rigid bodies of uniform density on the
@@ -58,7 +58,7 @@ struct StabilityResult {
   double max_rotation_rad = 0.0;
   bool stable = true;
 };
-StabilityResult simulateStability(const std::vector<Superquadric>& shapes,
+StabilityResult simulateStability(const std::vector<SuperquadricShape>& shapes,
                                   const StabilityConfig& config = StabilityConfig());
 /// The same test for any scene (e.g. a generated pile of superquadrics or meshes, as the
 /// reference that predictions are held against).

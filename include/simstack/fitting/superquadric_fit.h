@@ -45,33 +45,34 @@ struct FitConfig {
 };
 
 /// Signed distance along the ray from the centre (see the file comment), metres, table frame.
-double surfaceDistance(const Superquadric& sq, const Vec3& p_table);
+double surfaceDistance(const SuperquadricShape& sq, const Vec3& p_table);
 
 /// eq. 5 for one shape and its points.
-double meanDistortion(const Superquadric& sq, const Points3& points_table);
+double meanDistortion(const SuperquadricShape& sq, const Points3& points_table);
 
 /// Oriented bounding box of the points (principal axes): centre, axes and half extents, with
 /// exponents `initial_exponent`. Requires at least 4 points (std::invalid_argument).
-Superquadric initialGuess(const Points3& points_table, double initial_exponent = 3.0);
+SuperquadricShape initialGuess(const Points3& points_table, double initial_exponent = 3.0);
 
 /// Stage one: fits one superquadric to the points of one instance (eqs. 5-6).
-Superquadric fitSuperquadric(const Points3& points_table, const FitConfig& config = FitConfig());
+SuperquadricShape fitSuperquadric(const Points3& points_table,
+                                  const FitConfig& config = FitConfig());
 
 /// Stage two: all shapes together with collision and floor penalties (eqs. 7-9).
 /// `points_table[i]` belongs to `shapes[i]`.
-std::vector<Superquadric> refineJointly(const std::vector<Points3>& points_table,
-                                        const std::vector<Superquadric>& shapes,
-                                        const FitConfig& config = FitConfig());
+std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points_table,
+                                             const std::vector<SuperquadricShape>& shapes,
+                                             const FitConfig& config = FitConfig());
 
 /// Both stages for a scene: per-instance fits (in parallel over `threads`), then, when
 /// `joint`, the joint refinement of all fitted shapes. Sets with fewer than `min_points`
 /// points are skipped (std::nullopt).
-std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>& points,
-                                                      const FitConfig& config, bool joint,
-                                                      int min_points = 30);
+std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Points3>& points,
+                                                           const FitConfig& config, bool joint,
+                                                           int min_points = 30);
 
 /// Mean squared penetration of `samples` surface samples of `b` into `a` (eq. 8 without
 /// the weight), for reporting and tests.
-double collisionCost(const Superquadric& a, const Superquadric& b, int samples = 400);
+double collisionCost(const SuperquadricShape& a, const SuperquadricShape& b, int samples = 400);
 
 }  // namespace simstack

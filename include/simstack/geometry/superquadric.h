@@ -12,7 +12,9 @@
 
 namespace simstack {
 
-struct Superquadric {
+/// A posed superquadric. (Named SuperquadricShape so that it does not collide with the ROS
+/// message simstack::Superquadric, which lives in the same namespace.)
+struct SuperquadricShape {
   /// Semi-axes a1, a2, a3 in metres (half the extent along each object axis).
   Vec3 scale_m{0.05, 0.05, 0.05};
   /// Exponents r, s, t (2 = ellipsoid, large = box-like; >= 1 keeps the shape convex).

@@ -17,9 +17,9 @@ namespace simstack {
 
 /// `objects:` list of {id, scale [a1,a2,a3], exponents [r,s,t], position [x,y,z],
 /// orientation [qw,qx,qy,qz]} in `frame` (the table frame).
-void writeSuperquadricsYaml(const std::string& path, const std::vector<Superquadric>& shapes,
+void writeSuperquadricsYaml(const std::string& path, const std::vector<SuperquadricShape>& shapes,
                             const std::string& frame = "table");
-std::vector<Superquadric> readSuperquadricsYaml(const std::string& path);
+std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path);
 
 void writeMeshPly(const std::string& path, const TriangleMesh& mesh);
 TriangleMesh readMeshPly(const std::string& path);

@@ -30,9 +30,10 @@ std::vector<Points3> clusterVisiblePoints(const DepthImage& depth, const Pinhole
                                           const GridSpec* crop = nullptr);
 
 /// One superquadric per cluster.
-std::vector<Superquadric> classicalBaseline(const DepthImage& depth, const PinholeCamera& camera,
-                                            const Transform& T_table_camera,
-                                            const ClassicalConfig& config,
-                                            const GridSpec* crop = nullptr);
+std::vector<SuperquadricShape> classicalBaseline(const DepthImage& depth,
+                                                 const PinholeCamera& camera,
+                                                 const Transform& T_table_camera,
+                                                 const ClassicalConfig& config,
+                                                 const GridSpec* crop = nullptr);
 
 }  // namespace simstack

@@ -34,13 +34,18 @@ struct PerceptionConfig {
 
 /// Reads a perception config: sections `perception:`, `segments:`, `fitting:` and `table:`
 /// (absent fields keep their defaults; unknown fields are errors, so that a typo is not silently
-/// ignored). `model_path`, when given, replaces the file's `perception.model`. A relative model
-/// path is taken relative to `base_dir` when given. Then the model's card is read
-/// (applyModelCard), and last the file's own `perception.samples` and `hough:` section, which
-/// override the card's when present (normally they are absent). Throws std::runtime_error
-/// naming the file and the field.
+/// ignored); a `node:` section holds the ROS node's own parameters and is not read here.
+/// `model_path`, when given, replaces the file's `perception.model`. A relative model path is taken
+/// relative to `base_dir` when given. Then the model's card is read (applyModelCard), and last the
+/// file's own `perception.samples` and `hough:` section, which override the card's when present
+/// (normally they are absent). Throws std::runtime_error naming the file and the field.
 PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& base_dir = "",
                                     const std::string& model_path = "");
+
+/// The same from YAML text (`source` names it in errors), as the ROS node reads its parameters.
+PerceptionConfig parsePerceptionYaml(const std::string& text, const std::string& source,
+                                     const std::string& base_dir = "",
+                                     const std::string& model_path = "");
 
 /// The card of a model file: the same path with the extension .yaml.
 std::string modelCardPath(const std::string& model_path);

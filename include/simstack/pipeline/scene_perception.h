@@ -25,11 +25,13 @@
 namespace simstack {
 
 struct InstanceEstimate {
-  Superquadric superquadric;        ///< table frame
+  SuperquadricShape superquadric;   ///< table frame
   TriangleMesh mesh;                ///< this instance's part of the predicted surface
   Points3 points;                   ///< surface samples of `mesh` (what was fitted)
   Vec3 vote_centre = Vec3::Zero();  ///< Hough centre
   int voxels = 0;
+  /// Share of `mesh`'s area that the first view's camera sees (0..1): the rest was completed.
+  double visible_fraction = 0.0;
 };
 
 /// One generated scene: the network's grids and, when decomposed, its instances.
@@ -66,7 +68,8 @@ struct SceneEstimate {
 void decompose(SceneHypothesis* hypothesis, const PerceptionConfig& config,
                StageTimings* timings = nullptr, const SurfaceSegments* segments = nullptr);
 
-/// Instance of every pixel of `view` (the first view of `estimate`): the label of the labelled
+/// Instance of every pixel of `view` (posed by its own T_table_camera, else by the estimate's
+/// first view's): the label of the labelled
 /// voxel nearest to its table-frame point among the voxel holding it and its 26 neighbours
 /// (observed points lie on the surface, which the prediction places up to a voxel off); -1 for
 /// table, free space or missing depth.

@@ -81,7 +81,7 @@ struct Pile {
 
 class PileGenerator {
  public:
-  /// Superquadric piles.
+  /// SuperquadricShape piles.
   explicit PileGenerator(const PileConfig& config);
   /// Piles of the given mesh shapes (e.g. the YCB catalogue), drawn with replacement.
   PileGenerator(const PileConfig& config,
@@ -102,7 +102,7 @@ class PileGenerator {
   /// it).
   bool fits(const Scene& scene, std::string* why, bool check_height = true) const;
   /// A random superquadric shape of this config's ranges.
-  Superquadric randomSuperquadric(std::mt19937_64& rng) const;
+  SuperquadricShape randomSuperquadric(std::mt19937_64& rng) const;
 
  private:
   struct Building;  ///< a pile being built (pile_generator.cpp)

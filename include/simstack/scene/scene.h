@@ -23,7 +23,7 @@ class ObjectShape {
   enum class Kind { kSuperquadric, kMesh };
 
   /// A superquadric shape; the pose of `sq` is ignored.
-  static std::shared_ptr<const ObjectShape> fromSuperquadric(const Superquadric& sq);
+  static std::shared_ptr<const ObjectShape> fromSuperquadric(const SuperquadricShape& sq);
   /// A mesh shape (e.g. a YCB object), re-centred on its volume centroid. `catalogue_index`
   /// identifies the mesh in a dataset's mesh list. Throws std::invalid_argument for a mesh
   /// that encloses no volume.
@@ -33,8 +33,8 @@ class ObjectShape {
   Kind kind() const { return kind_; }
   const std::string& name() const { return name_; }
   int catalogueIndex() const { return catalogue_index_; }
-  /// Superquadric parameters (pose = identity); only for Kind::kSuperquadric.
-  const Superquadric& superquadric() const { return superquadric_; }
+  /// SuperquadricShape parameters (pose = identity); only for Kind::kSuperquadric.
+  const SuperquadricShape& superquadric() const { return superquadric_; }
   /// Render mesh, object frame.
   const TriangleMesh& mesh() const { return mesh_; }
   /// At most a few hundred points whose convex hull is the physics shape.
@@ -62,7 +62,7 @@ class ObjectShape {
   Kind kind_ = Kind::kSuperquadric;
   std::string name_;
   int catalogue_index_ = -1;
-  Superquadric superquadric_;
+  SuperquadricShape superquadric_;
   TriangleMesh mesh_;
   std::vector<Vec3> hull_points_;
   uint64_t sample_seed_ = 0;
@@ -85,8 +85,8 @@ struct SceneObject {
     return shape->containsObject(T_table_object.inverse() * p_table);
   }
   /// The object as a superquadric in the table frame (Kind::kSuperquadric only).
-  Superquadric superquadricTable() const {
-    Superquadric sq = shape->superquadric();
+  SuperquadricShape superquadricTable() const {
+    SuperquadricShape sq = shape->superquadric();
     sq.T_table_object = T_table_object;
     return sq;
   }
@@ -97,7 +97,7 @@ struct Scene {
   std::vector<SceneObject> objects;
 
   /// A scene of superquadrics given in the table frame (e.g. fitted shapes).
-  static Scene fromSuperquadrics(const std::vector<Superquadric>& shapes);
+  static Scene fromSuperquadrics(const std::vector<SuperquadricShape>& shapes);
 
   /// Area-weighted centroid of all object surfaces: the x/y centre of the scene grid.
   Vec3 surfaceCentroid() const;

@@ -285,7 +285,7 @@ SceneRecord DatasetReader::readScene(int index) const {
     const double* row = &objects[static_cast<size_t>(k) * kColumns];
     SceneObject o;
     if (row[0] == 0.0) {
-      Superquadric sq;
+      SuperquadricShape sq;
       sq.scale_m = Vec3(row[2], row[3], row[4]);
       sq.exponents = Vec3(row[5], row[6], row[7]);
       o.shape = ObjectShape::fromSuperquadric(sq);

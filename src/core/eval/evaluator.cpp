@@ -77,7 +77,7 @@ void scoreEstimate(const MethodEstimate& est, const SceneRecord& rec, const Scen
   const OccupancyScores sc = scoreOccupancy(gt.tsdf.data, est.hypotheses_tsdf);
   (*row)["iou"] = sc.iou;
   (*row)["bce"] = sc.bce;
-  const std::vector<Superquadric>& shapes = est.superquadrics;
+  const std::vector<SuperquadricShape>& shapes = est.superquadrics;
   (*row)["chamfer_full_sq_m"] =
       chamferDistance(samplePoints(superquadricsMesh(shapes), points, rng), scene.full);
   const double objects = static_cast<double>(rec.scene.objects.size());

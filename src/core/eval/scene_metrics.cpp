@@ -85,17 +85,17 @@ Points3 samplePoints(const TriangleMesh& mesh, int count, std::mt19937_64& rng) 
   return out;
 }
 
-TriangleMesh superquadricsMesh(const std::vector<Superquadric>& shapes, int subdivisions) {
+TriangleMesh superquadricsMesh(const std::vector<SuperquadricShape>& shapes, int subdivisions) {
   TriangleMesh all;
-  for (const Superquadric& sq : shapes)
+  for (const SuperquadricShape& sq : shapes)
     all.append(sq.meshObject(subdivisions).transformed(sq.T_table_object));
   return all;
 }
 
-std::vector<float> superquadricOccupancy(const std::vector<Superquadric>& shapes,
+std::vector<float> superquadricOccupancy(const std::vector<SuperquadricShape>& shapes,
                                          const GridSpec& grid) {
   std::vector<float> out(grid.voxelCount(), 1.0f);
-  for (const Superquadric& sq : shapes) {
+  for (const SuperquadricShape& sq : shapes) {
     const double reach = sq.scale_m.maxCoeff() * std::sqrt(3.0);
     const Vec3i lo = grid.voxelIndex(sq.centroid() - Vec3::Constant(reach));
     const Vec3i hi = grid.voxelIndex(sq.centroid() + Vec3::Constant(reach));
@@ -136,7 +136,7 @@ StabilityResult simulateStability(const Scene& scene, const StabilityConfig& con
   return r;
 }
 
-StabilityResult simulateStability(const std::vector<Superquadric>& shapes,
+StabilityResult simulateStability(const std::vector<SuperquadricShape>& shapes,
                                   const StabilityConfig& config) {
   return simulateStability(Scene::fromSuperquadrics(shapes), config);
 }

@@ -170,7 +170,7 @@ struct FloorResidual {
   }
 };
 
-Params toParams(const Superquadric& sq) {
+Params toParams(const SuperquadricShape& sq) {
   Params x;
   for (int i = 0; i < 3; ++i) {
     x[i] = sq.scale_m[i];
@@ -183,8 +183,8 @@ Params toParams(const Superquadric& sq) {
   return x;
 }
 
-Superquadric fromParams(const Params& x) {
-  Superquadric sq;
+SuperquadricShape fromParams(const Params& x) {
+  SuperquadricShape sq;
   sq.scale_m = Vec3(x[0], x[1], x[2]);
   sq.exponents = Vec3(x[3], x[4], x[5]);
   const Vec3 v(x[9], x[10], x[11]);
@@ -257,7 +257,7 @@ ceres::Solver::Options solverOptions(const FitConfig& c, int max_iterations) {
 
 /// Near-uniform surface samples of the shape with the given exponents, as SurfaceSamples.
 std::vector<SurfaceSample> unitSamples(const Vec3& exponents, int count, uint64_t seed) {
-  Superquadric unit;
+  SuperquadricShape unit;
   unit.scale_m = Vec3::Ones();
   unit.exponents = exponents;
   std::mt19937_64 rng(seed);
@@ -299,13 +299,13 @@ void FitConfig::validate() const {
           "joint_rounds, max_iterations, joint_max_iterations and threads must be >= 1");
 }
 
-double surfaceDistance(const Superquadric& sq, const Vec3& p_table) {
+double surfaceDistance(const SuperquadricShape& sq, const Vec3& p_table) {
   const Params x = toParams(sq);
   const double p[3] = {p_table.x(), p_table.y(), p_table.z()};
   return rayDistance(x.data(), p);
 }
 
-double meanDistortion(const Superquadric& sq, const Points3& points_table) {
+double meanDistortion(const SuperquadricShape& sq, const Points3& points_table) {
   if (points_table.empty()) return 0.0;
   double sum = 0;
   for (const Vec3& p : points_table) {
@@ -315,7 +315,7 @@ double meanDistortion(const Superquadric& sq, const Points3& points_table) {
   return std::sqrt(sq.scale_m.prod()) * sum / points_table.size();
 }
 
-Superquadric initialGuess(const Points3& points, double initial_exponent) {
+SuperquadricShape initialGuess(const Points3& points, double initial_exponent) {
   checkPoints(points);
   Vec3 mean = Vec3::Zero();
   for (const Vec3& p : points) mean += p;
@@ -330,7 +330,7 @@ Superquadric initialGuess(const Points3& points, double initial_exponent) {
     lo = lo.cwiseMin(l);
     hi = hi.cwiseMax(l);
   }
-  Superquadric sq;
+  SuperquadricShape sq;
   sq.scale_m = (0.5 * (hi - lo)).cwiseMax(1e-3);
   sq.exponents = Vec3::Constant(initial_exponent);
   sq.T_table_object = Transform::Identity();
@@ -339,7 +339,7 @@ Superquadric initialGuess(const Points3& points, double initial_exponent) {
   return sq;
 }
 
-Superquadric fitSuperquadric(const Points3& points, const FitConfig& c) {
+SuperquadricShape fitSuperquadric(const Points3& points, const FitConfig& c) {
   c.validate();
   checkPoints(points);
   Params u = toSolver(toParams(initialGuess(points, c.initial_exponent)), c);
@@ -350,9 +350,9 @@ Superquadric fitSuperquadric(const Points3& points, const FitConfig& c) {
   return fromParams(fromSolver(u, c));
 }
 
-std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
-                                        const std::vector<Superquadric>& shapes,
-                                        const FitConfig& c) {
+std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points,
+                                             const std::vector<SuperquadricShape>& shapes,
+                                             const FitConfig& c) {
   c.validate();
   if (points.size() != shapes.size())
     throw std::invalid_argument("refineJointly: one point set per shape is required");
@@ -373,7 +373,7 @@ std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
     std::vector<std::pair<size_t, const SurfaceSample*>> left_out_floor;
     std::vector<std::tuple<size_t, size_t, const SurfaceSample*>> left_out_pairs;
     std::vector<std::vector<SurfaceSample>> samples(n);
-    std::vector<Superquadric> current(n);
+    std::vector<SuperquadricShape> current(n);
     for (size_t i = 0; i < n; ++i) {
       problem.AddParameterBlock(u[i].data(), kParams);
       if (!points[i].empty())
@@ -432,17 +432,17 @@ std::vector<Superquadric> refineJointly(const std::vector<Points3>& points,
       if (new_contact) ++rounds;
     }
   }
-  std::vector<Superquadric> out;
+  std::vector<SuperquadricShape> out;
   for (const Params& p : x) out.push_back(fromParams(p));
   return out;
 }
 
-std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>& points,
-                                                      const FitConfig& c, bool joint,
-                                                      int min_points) {
+std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Points3>& points,
+                                                           const FitConfig& c, bool joint,
+                                                           int min_points) {
   c.validate();  // here: an exception must not leave the parallel loop below
   const int n = static_cast<int>(points.size());
-  std::vector<std::optional<Superquadric>> fits(n);
+  std::vector<std::optional<SuperquadricShape>> fits(n);
   FitConfig single = c;
   single.threads = 1;
 #pragma omp parallel for schedule(dynamic) num_threads(std::max(1, c.threads))
@@ -452,7 +452,7 @@ std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>
   }
   if (!joint) return fits;
   std::vector<Points3> pts;
-  std::vector<Superquadric> shapes;
+  std::vector<SuperquadricShape> shapes;
   std::vector<int> index;
   for (int i = 0; i < n; ++i) {
     if (!fits[i]) continue;
@@ -461,12 +461,12 @@ std::vector<std::optional<Superquadric>> fitInstances(const std::vector<Points3>
     index.push_back(i);
   }
   if (shapes.empty()) return fits;
-  const std::vector<Superquadric> refined = refineJointly(pts, shapes, c);
+  const std::vector<SuperquadricShape> refined = refineJointly(pts, shapes, c);
   for (size_t k = 0; k < index.size(); ++k) fits[index[k]] = refined[k];
   return fits;
 }
 
-double collisionCost(const Superquadric& a, const Superquadric& b, int samples) {
+double collisionCost(const SuperquadricShape& a, const SuperquadricShape& b, int samples) {
   const Params xb = toParams(b);
   double sum = 0;
   const std::vector<SurfaceSample> q = unitSamples(b.exponents, samples, 12345);

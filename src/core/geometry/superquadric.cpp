@@ -16,24 +16,24 @@ struct RayTerms {
 
 }  // namespace
 
-double Superquadric::insideOutsideObject(const Vec3& p) const {
+double SuperquadricShape::insideOutsideObject(const Vec3& p) const {
   double f = 0.0;
   for (int i = 0; i < 3; ++i) f += std::pow(std::abs(p[i] / scale_m[i]), exponents[i]);
   return f;
 }
 
-double Superquadric::insideOutside(const Vec3& p_table) const {
+double SuperquadricShape::insideOutside(const Vec3& p_table) const {
   return insideOutsideObject(T_table_object.inverse() * p_table);
 }
 
-double Superquadric::radialDistance(const Vec3& p_table) const {
+double SuperquadricShape::radialDistance(const Vec3& p_table) const {
   const Vec3 p = T_table_object.inverse() * p_table;
   const double f = insideOutsideObject(p);
   if (f <= std::numeric_limits<double>::min()) return -scale_m.minCoeff();
   return p.norm() * (f - 1.0) / f;
 }
 
-Vec3 Superquadric::surfacePointAlong(const Vec3& direction_object) const {
+Vec3 SuperquadricShape::surfacePointAlong(const Vec3& direction_object) const {
   // Solve f(lambda d) = 1. With u = log(lambda), h(u) = log sum_i c_i exp(e_i u) is convex and
   // increasing, so Newton started where h >= 0 decreases monotonically onto the root.
   RayTerms t;
@@ -69,7 +69,7 @@ Vec3 Superquadric::surfacePointAlong(const Vec3& direction_object) const {
   return std::exp(u) * direction_object;
 }
 
-Vec3 Superquadric::normalObject(const Vec3& p) const {
+Vec3 SuperquadricShape::normalObject(const Vec3& p) const {
   Vec3 g;
   for (int i = 0; i < 3; ++i) {
     const double q = std::abs(p[i] / scale_m[i]);
@@ -80,14 +80,14 @@ Vec3 Superquadric::normalObject(const Vec3& p) const {
   return n > 0.0 ? Vec3(g / n) : Vec3(p.normalized());
 }
 
-double Superquadric::volume() const {
+double SuperquadricShape::volume() const {
   const double r = 1.0 / exponents[0], s = 1.0 / exponents[1], t = 1.0 / exponents[2];
   return 8.0 * scale_m.prod() *
          std::exp(std::lgamma(1.0 + r) + std::lgamma(1.0 + s) + std::lgamma(1.0 + t) -
                   std::lgamma(1.0 + r + s + t));
 }
 
-TriangleMesh Superquadric::meshObject(int n) const {
+TriangleMesh SuperquadricShape::meshObject(int n) const {
   // Six cube faces, each an (n+1)^2 vertex lattice; shared edge vertices are duplicated,
   // which keeps the code simple and does not change area, volume or rendering.
   TriangleMesh mesh;
@@ -124,7 +124,8 @@ TriangleMesh Superquadric::meshObject(int n) const {
   return mesh;
 }
 
-std::vector<SurfacePoint> Superquadric::sampleSurfaceObject(int count, std::mt19937_64& rng) const {
+std::vector<SurfacePoint> SuperquadricShape::sampleSurfaceObject(int count,
+                                                                 std::mt19937_64& rng) const {
   std::vector<SurfacePoint> samples = meshObject(32).sampleSurface(count, rng);
   for (auto& s : samples) {
     s.position = surfacePointAlong(s.position);

@@ -26,13 +26,13 @@ std::vector<double> seq(const YAML::Node& n, size_t size, const std::string& wha
 
 }  // namespace
 
-void writeSuperquadricsYaml(const std::string& path, const std::vector<Superquadric>& shapes,
+void writeSuperquadricsYaml(const std::string& path, const std::vector<SuperquadricShape>& shapes,
                             const std::string& frame) {
   YAML::Emitter out;
   out << YAML::BeginMap << YAML::Key << "frame" << YAML::Value << frame;
   out << YAML::Key << "objects" << YAML::Value << YAML::BeginSeq;
   for (size_t i = 0; i < shapes.size(); ++i) {
-    const Superquadric& s = shapes[i];
+    const SuperquadricShape& s = shapes[i];
     const Quat q(s.T_table_object.linear());
     const Vec3 t = s.T_table_object.translation();
     out << YAML::BeginMap << YAML::Key << "id" << YAML::Value << i;
@@ -55,7 +55,7 @@ void writeSuperquadricsYaml(const std::string& path, const std::vector<Superquad
   if (!f) throw std::runtime_error("cannot write " + path);
 }
 
-std::vector<Superquadric> readSuperquadricsYaml(const std::string& path) {
+std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path) {
   YAML::Node root;
   try {
     root = YAML::LoadFile(path);
@@ -64,12 +64,12 @@ std::vector<Superquadric> readSuperquadricsYaml(const std::string& path) {
   }
   if (!root["objects"] || !root["objects"].IsSequence())
     throw std::runtime_error(path + ": no 'objects' list");
-  std::vector<Superquadric> out;
+  std::vector<SuperquadricShape> out;
   for (const auto& o : root["objects"]) {
     const auto a = seq(o["scale"], 3, "scale", path), e = seq(o["exponents"], 3, "exponents", path),
                p = seq(o["position"], 3, "position", path),
                q = seq(o["orientation"], 4, "orientation", path);
-    Superquadric s;
+    SuperquadricShape s;
     s.scale_m = Vec3(a[0], a[1], a[2]);
     s.exponents = Vec3(e[0], e[1], e[2]);
     if ((s.scale_m.array() <= 0).any() || (s.exponents.array() <= 0).any())

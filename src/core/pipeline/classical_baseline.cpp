@@ -48,14 +48,16 @@ std::vector<Points3> clusterVisiblePoints(const DepthImage& depth, const Pinhole
   return clusters;
 }
 
-std::vector<Superquadric> classicalBaseline(const DepthImage& depth, const PinholeCamera& camera,
-                                            const Transform& T_table_camera,
-                                            const ClassicalConfig& config, const GridSpec* crop) {
+std::vector<SuperquadricShape> classicalBaseline(const DepthImage& depth,
+                                                 const PinholeCamera& camera,
+                                                 const Transform& T_table_camera,
+                                                 const ClassicalConfig& config,
+                                                 const GridSpec* crop) {
   const std::vector<Points3> clusters =
       clusterVisiblePoints(depth, camera, T_table_camera, config, crop);
   FitConfig fit = config.fit;
   fit.threads = std::max(1, config.threads);
-  std::vector<Superquadric> out;
+  std::vector<SuperquadricShape> out;
   for (const auto& f :
        fitInstances(clusters, fit, config.joint_refinement, config.min_cluster_points))
     if (f) out.push_back(*f);

@@ -124,6 +124,36 @@ void readSamples(const YAML::Node& perception, PerceptionConfig* c, const std::s
   }
 }
 
+PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& path,
+                                    const std::string& base_dir, const std::string& model_path) {
+  PerceptionConfig c;
+  if (!root.IsMap()) throw std::runtime_error(path + ": expected a YAML map");
+  for (const auto& kv : root) {
+    const std::string section = kv.first.as<std::string>();
+    if (section != "perception" && section != "hough" && section != "segments" &&
+        section != "fitting" && section != "table" && section != "node")
+      throw std::runtime_error(path + ": unknown section '" + section + "'");
+  }
+  readSection(
+      root, "perception", &c, [](auto& x, auto&& f) { perceptionFields(x, f); }, path);
+  readSection(
+      root, "segments", &c.segments, [](auto& x, auto&& f) { segmentFields(x, f); }, path);
+  readSection(
+      root, "fitting", &c.fit, [](auto& x, auto&& f) { fitFields(x, f); }, path);
+  readSection(
+      root, "table", &c.table, [](auto& x, auto&& f) { tableFields(x, f); }, path);
+  if (!model_path.empty()) c.model_path = model_path;
+  if (!c.model_path.empty() && !base_dir.empty() &&
+      std::filesystem::path(c.model_path).is_relative())
+    c.model_path = (std::filesystem::path(base_dir) / c.model_path).string();
+  // The model's own settings, then what this file says of them explicitly (normally nothing).
+  c.model_card_path = applyModelCard(&c);
+  if (root["perception"]) readSamples(root["perception"], &c, path);
+  readSection(
+      root, "hough", &c.hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
+  return c;
+}
+
 }  // namespace
 
 std::string modelCardPath(const std::string& model_path) {
@@ -151,33 +181,18 @@ std::string applyModelCard(PerceptionConfig* config) {
 
 PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& base_dir,
                                     const std::string& model_path) {
-  const YAML::Node root = loadYaml(path, "perception config");
-  PerceptionConfig c;
-  if (!root.IsMap()) throw std::runtime_error(path + ": expected a YAML map");
-  for (const auto& kv : root) {
-    const std::string section = kv.first.as<std::string>();
-    if (section != "perception" && section != "hough" && section != "segments" &&
-        section != "fitting" && section != "table")
-      throw std::runtime_error(path + ": unknown section '" + section + "'");
+  return perceptionFromYaml(loadYaml(path, "perception config"), path, base_dir, model_path);
+}
+
+PerceptionConfig parsePerceptionYaml(const std::string& text, const std::string& source,
+                                     const std::string& base_dir, const std::string& model_path) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw std::runtime_error("cannot parse perception config " + source + ": " + e.what());
   }
-  readSection(
-      root, "perception", &c, [](auto& x, auto&& f) { perceptionFields(x, f); }, path);
-  readSection(
-      root, "segments", &c.segments, [](auto& x, auto&& f) { segmentFields(x, f); }, path);
-  readSection(
-      root, "fitting", &c.fit, [](auto& x, auto&& f) { fitFields(x, f); }, path);
-  readSection(
-      root, "table", &c.table, [](auto& x, auto&& f) { tableFields(x, f); }, path);
-  if (!model_path.empty()) c.model_path = model_path;
-  if (!c.model_path.empty() && !base_dir.empty() &&
-      std::filesystem::path(c.model_path).is_relative())
-    c.model_path = (std::filesystem::path(base_dir) / c.model_path).string();
-  // The model's own settings, then what this file says of them explicitly (normally nothing).
-  c.model_card_path = applyModelCard(&c);
-  if (root["perception"]) readSamples(root["perception"], &c, path);
-  readSection(
-      root, "hough", &c.hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
-  return c;
+  return perceptionFromYaml(root, source, base_dir, model_path);
 }
 
 std::string modelCardPerceptionYaml(int samples, const HoughConfig& hough) {

@@ -13,7 +13,7 @@ namespace simstack {
 namespace {
 
 /// Renders superquadrics from a camera and writes the shaded picture.
-void renderShapes(const std::string& path, const std::vector<Superquadric>& shapes,
+void renderShapes(const std::string& path, const std::vector<SuperquadricShape>& shapes,
                   const PinholeCamera& camera, const Transform& T_table_camera) {
   const Scene scene = Scene::fromSuperquadrics(shapes);
   RenderConfig rc;
@@ -64,7 +64,7 @@ std::vector<std::string> writeReconstruction(const std::string& dir, const Depth
   const std::filesystem::path out(dir);
   const SceneHypothesis& h = est.hypotheses.front();
   std::vector<std::string> written;
-  std::vector<Superquadric> shapes;
+  std::vector<SuperquadricShape> shapes;
   for (size_t k = 0; k < h.instances.size(); ++k) {
     shapes.push_back(h.instances[k].superquadric);
     const std::string name = "instance_" + std::to_string(k) + ".ply";

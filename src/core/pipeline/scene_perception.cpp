@@ -6,6 +6,7 @@
 #include <random>
 #include <stdexcept>
 
+#include "simstack/eval/scene_metrics.h"
 #include "simstack/instances/instance_finder.h"
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/model/cvae_inference.h"
@@ -28,6 +29,31 @@ void checkView(const DepthView& v, size_t index) {
         "view " + std::to_string(index) + ": the depth image is " + std::to_string(v.depth.width) +
         "x" + std::to_string(v.depth.height) + " but its camera is " +
         std::to_string(v.camera.width) + "x" + std::to_string(v.camera.height));
+}
+
+/// Each instance's visible share: its triangles that are the first surface a ray from the
+/// camera meets, among all instances' triangles.
+void setVisibleFractions(SceneHypothesis* h, const PinholeCamera& camera,
+                         const Transform& T_table_camera) {
+  TriangleMesh all;
+  std::vector<int> owner;
+  for (size_t k = 0; k < h->instances.size(); ++k) {
+    all.append(h->instances[k].mesh);
+    owner.resize(all.triangles.size(), static_cast<int>(k));
+  }
+  if (all.empty()) return;
+  const std::vector<bool> seen = visibleTriangles(all, camera, T_table_camera);
+  std::vector<double> area(h->instances.size(), 0.0), visible(h->instances.size(), 0.0);
+  for (size_t i = 0; i < all.triangles.size(); ++i) {
+    const auto& t = all.triangles[i];
+    const double a = 0.5 * (all.vertices[t[1]] - all.vertices[t[0]])
+                               .cross(all.vertices[t[2]] - all.vertices[t[0]])
+                               .norm();
+    area[owner[i]] += a;
+    if (seen[i]) visible[owner[i]] += a;
+  }
+  for (size_t k = 0; k < h->instances.size(); ++k)
+    h->instances[k].visible_fraction = area[k] > 0 ? visible[k] / area[k] : 0.0;
 }
 
 }  // namespace
@@ -58,7 +84,7 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   t = Clock::now();
   FitConfig fit = config.fit;
   fit.threads = std::max(1, config.threads);
-  const std::vector<std::optional<Superquadric>> fits =
+  const std::vector<std::optional<SuperquadricShape>> fits =
       fitInstances(points, fit, config.joint_refinement, config.min_instance_points);
   h->instances.clear();
   for (size_t k = 0; k < parts.size(); ++k) {
@@ -82,11 +108,12 @@ Image<int> pixelInstances(const DepthView& view, const SceneEstimate& est, int h
   const Grid3<int>& labels = est.hypotheses[hypothesis].labels;
   const GridSpec& g = labels.spec;
   if (static_cast<int>(labels.data.size()) != g.voxelCount()) return out;
+  const Transform T_table_camera = view.T_table_camera.value_or(est.T_table_camera);
   for (int v = 0; v < view.depth.height; ++v)
     for (int u = 0; u < view.depth.width; ++u) {
       const float d = view.depth.at(u, v);
       if (!validDepth(d)) continue;
-      const Vec3 p = est.T_table_camera * view.camera.backproject(u, v, d);
+      const Vec3 p = T_table_camera * view.camera.backproject(u, v, d);
       if (p.z() < min_height_m) continue;
       const int i = nearestLabelledVoxel(labels, p);
       if (i >= 0) out.at(u, v) = labels.data[i];
@@ -181,8 +208,12 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views) con
             .segmentView(views[0].depth, views[0].camera, out.T_table_camera, c.min_pile_height_m);
     out.timings.instances_ms += msSince(t);
   }
-  for (int k = 0; k < c.decompose_samples; ++k)
+  for (int k = 0; k < c.decompose_samples; ++k) {
     decompose(&out.hypotheses[k], c, &out.timings, segments ? &*segments : nullptr);
+    t = Clock::now();
+    setVisibleFractions(&out.hypotheses[k], views[0].camera, out.T_table_camera);
+    out.timings.mesh_ms += msSince(t);
+  }
   out.timings.total_ms = msSince(start);
   return out;
 }

@@ -76,11 +76,11 @@ PileGenerator::PileGenerator(const PileConfig& config,
   catalogue_ = std::move(catalogue);
 }
 
-Superquadric PileGenerator::randomSuperquadric(std::mt19937_64& rng) const {
+SuperquadricShape PileGenerator::randomSuperquadric(std::mt19937_64& rng) const {
   std::uniform_real_distribution<double> size(config_.min_size_m, config_.max_size_m);
   std::uniform_real_distribution<double> log_e(std::log(config_.min_exponent),
                                                std::log(config_.max_exponent));
-  Superquadric sq;
+  SuperquadricShape sq;
   for (int i = 0; i < 3; ++i) {
     sq.scale_m[i] = 0.5 * size(rng);
     sq.exponents[i] = std::exp(log_e(rng));

@@ -10,7 +10,7 @@ constexpr int kMaxSamples = 60000;
 constexpr double kHullQuantum_m = 0.001;
 }  // namespace
 
-std::shared_ptr<const ObjectShape> ObjectShape::fromSuperquadric(const Superquadric& sq) {
+std::shared_ptr<const ObjectShape> ObjectShape::fromSuperquadric(const SuperquadricShape& sq) {
   if (!(sq.scale_m.array() > 0.0).all())
     throw std::invalid_argument("superquadric scales must be > 0");
   if (!(sq.exponents.array() > 0.0).all())
@@ -119,9 +119,9 @@ bool ObjectShape::containsObject(const Vec3& p_object) const {
   return hull_->contains(p_object);
 }
 
-Scene Scene::fromSuperquadrics(const std::vector<Superquadric>& shapes) {
+Scene Scene::fromSuperquadrics(const std::vector<SuperquadricShape>& shapes) {
   Scene scene;
-  for (const Superquadric& sq : shapes) {
+  for (const SuperquadricShape& sq : shapes) {
     SceneObject o;
     o.shape = ObjectShape::fromSuperquadric(sq);
     o.T_table_object = sq.T_table_object;

@@ -1,0 +1,90 @@
+#pragma once
+/// @file perception_server.h
+/// The ROS face of ScenePerception, one class shared by the perception node and nodelet (as
+/// octomap_server's OctomapServer is): it subscribes depth/image_rect + depth/camera_info,
+/// finds the table (tf, or a RANSAC plane it then broadcasts), runs the pipeline on a worker
+/// thread and publishes the objects, their instance cloud, markers, the occupancy and the label
+/// image; services ~reset and ~save_octomap. Parameters: ros_params.h. Frames reach the worker
+/// through a one-slot mailbox: the newest frame wins, callbacks never block, and the frames
+/// replaced before the worker took them are counted as dropped.
+
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <image_transport/image_transport.h>
+#include <ros/ros.h>
+#include <simstack/SaveOctomap.h>
+#include <std_srvs/Empty.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "simstack/pipeline/scene_perception.h"
+#include "simstack_ros/ros_params.h"
+
+namespace simstack {
+
+class PerceptionServer {
+ public:
+  /// Reads the parameters and loads the model: throws std::runtime_error naming the file or
+  /// parameter when it cannot. Then advertises, subscribes and starts the worker.
+  PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh, const std::string& package_dir);
+  /// Stops the worker (the frame it is on is finished first).
+  ~PerceptionServer();
+  PerceptionServer(const PerceptionServer&) = delete;
+  PerceptionServer& operator=(const PerceptionServer&) = delete;
+
+ private:
+  struct Frame {
+    sensor_msgs::ImageConstPtr image;
+    sensor_msgs::CameraInfoConstPtr info;
+  };
+  void onFrame(const sensor_msgs::ImageConstPtr& image,
+               const sensor_msgs::CameraInfoConstPtr& info);
+  void work();
+  void process(const Frame& frame);
+  /// The frame as a DepthView with its table pose (std::nullopt pose with estimate_table);
+  /// false, with the reason, when the frame must be skipped.
+  bool toView(const Frame& frame, DepthView* view, std::string* why);
+  void publish(const Frame& frame, const DepthView& view, const SceneEstimate& estimate, int views);
+  void skip(const Frame& frame, const std::string& why);
+  bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
+  bool saveOctomap(SaveOctomap::Request& req, SaveOctomap::Response& res);
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+
+  ros::NodeHandle nh_, pnh_;
+  NodeConfig node_;
+  std::unique_ptr<ScenePerception> perception_;
+  tf2_ros::Buffer tf_buffer_;
+  tf2_ros::TransformListener tf_listener_;
+  tf2_ros::TransformBroadcaster tf_broadcaster_;
+  image_transport::ImageTransport it_;
+  image_transport::CameraSubscriber depth_sub_;
+  ros::Publisher objects_pub_, instances_pub_, markers_pub_, occupancy_pub_;
+  image_transport::Publisher labels_pub_;
+  ros::ServiceServer reset_srv_, save_srv_;
+  diagnostic_updater::Updater diagnostics_;
+  ros::Timer diagnostics_timer_;
+
+  std::mutex mutex_;  ///< guards the mailbox, the counters, the last scene and the views
+  std::condition_variable wake_;
+  std::optional<Frame> mailbox_;
+  bool stop_ = false;
+  long received_ = 0, dropped_ = 0, processed_ = 0, skipped_ = 0;
+  std::string last_error_;
+  ros::WallTime last_warning_;
+  StageTimings last_timings_;
+  std::shared_ptr<const SceneEstimate> last_scene_;
+  std::vector<DepthView> views_;  ///< accumulated views (accumulate_views)
+  bool reset_requested_ = false;
+  ros::WallTime started_;
+  std::thread worker_;  ///< last: starts after everything it uses
+};
+
+}  // namespace simstack

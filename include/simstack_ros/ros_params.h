@@ -1,0 +1,38 @@
+#pragma once
+/// @file ros_params.h
+/// Every parameter of the perception node, read in one place. The pipeline's settings come
+/// from the same file as the tools' (config/perception.yaml, loaded into the node's private
+/// namespace by the launch file) and are parsed by the core's loader, so a field has one name,
+/// one default and one check; the node's own settings are its `node:` section.
+
+#include <ros/node_handle.h>
+
+#include <string>
+
+#include "simstack/pipeline/perception_config.h"
+
+namespace simstack {
+
+/// The node's own settings (`node:` in config/perception.yaml).
+struct NodeConfig {
+  std::string table_frame = "table";  ///< tf frame of the table (z up, plane z = 0); output frame
+  bool estimate_table = false;        ///< RANSAC plane per frame instead of tf, broadcast on tf
+  double tf_timeout_s = 0.2;          ///< wait for table_frame <- camera at the image's stamp
+  std::string image_transport = "raw";
+  double occupancy_min = 0.5;     ///< voxels at least this probably occupied go to ~occupancy
+  bool accumulate_views = false;  ///< fuse every frame (pose from tf) until ~reset
+  int max_views = 6;              ///< at most this many views fused (the newest kept)
+  std::string output_dir = "~/.ros/simstack";  ///< where ~save_octomap writes
+  /// Throws std::invalid_argument naming the field.
+  void validate() const;
+};
+
+/// The pipeline's settings from the parameters under `pnh` (sections perception, segments,
+/// fitting, table; a relative model path is taken from `package_dir`). Throws
+/// std::runtime_error naming the parameter when one is misspelt or of the wrong type.
+PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
+                                            const std::string& package_dir);
+/// The node's settings from `pnh`'s `node/` parameters (absent ones keep their defaults).
+NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh);
+
+}  // namespace simstack

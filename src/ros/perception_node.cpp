@@ -1,0 +1,26 @@
+// perception_node: PerceptionServer in a process of its own (`rosrun simstack perception_node`).
+#include <ros/package.h>
+#include <ros/ros.h>
+
+#include <cstdlib>
+
+#include "simstack_ros/perception_server.h"
+
+int main(int argc, char** argv) {
+  // OpenMP workers that spin would fight the camera driver and the planner for the cores.
+  setenv("OMP_WAIT_POLICY", "passive", 0);
+  ros::init(argc, argv, "simstack_perception");
+  ros::NodeHandle nh, pnh("~");
+  std::unique_ptr<simstack::PerceptionServer> server;
+  try {
+    server =
+        std::make_unique<simstack::PerceptionServer>(nh, pnh, ros::package::getPath("simstack"));
+  } catch (const std::exception& e) {
+    ROS_FATAL("simstack perception: %s", e.what());
+    return 1;
+  }
+  ros::AsyncSpinner spinner(2);  // frames and service calls in parallel with the worker
+  spinner.start();
+  ros::waitForShutdown();
+  return 0;
+}

@@ -1,0 +1,275 @@
+#include "simstack_ros/perception_server.h"
+
+#include <geometry_msgs/TransformStamped.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <simstack/ObjectArray.h>
+#include <tf2_eigen/tf2_eigen.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+
+#include "simstack/io/octomap_io.h"
+#include "simstack_ros/conversions.h"
+
+namespace simstack {
+namespace {
+
+std::string expandHome(const std::string& path) {
+  if (path.rfind("~/", 0) != 0 && path != "~") return path;
+  const char* home = std::getenv("HOME");
+  return std::string(home ? home : "") + path.substr(1);
+}
+
+/// Why a file name given to ~save_octomap is refused ("" when it is fine).
+std::string badFileName(const std::string& name) {
+  if (name.empty()) return "no file name given";
+  if (name.find('/') != std::string::npos || name.find('\\') != std::string::npos)
+    return "'" + name + "' is not a plain file name (no directories)";
+  if (name == "." || name == ".." || name.find("..") != std::string::npos)
+    return "'" + name + "' may not contain '..'";
+  const std::string ext = std::filesystem::path(name).extension().string();
+  if (ext != ".ot" && ext != ".bt") return "'" + name + "' must end in .ot or .bt";
+  return "";
+}
+
+}  // namespace
+
+PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
+                                   const std::string& package_dir)
+    : nh_(nh),
+      pnh_(pnh),
+      node_(nodeConfigFromParams(pnh)),
+      perception_(std::make_unique<ScenePerception>(perceptionConfigFromParams(pnh, package_dir))),
+      tf_listener_(tf_buffer_),
+      it_(nh),
+      started_(ros::WallTime::now()) {
+  objects_pub_ = pnh_.advertise<ObjectArray>("objects", 1);
+  instances_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("instances", 1);
+  markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("markers", 1);
+  occupancy_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("occupancy", 1);
+  image_transport::ImageTransport private_it(pnh_);
+  labels_pub_ = private_it.advertise("labels", 1);
+  reset_srv_ = pnh_.advertiseService("reset", &PerceptionServer::reset, this);
+  save_srv_ = pnh_.advertiseService("save_octomap", &PerceptionServer::saveOctomap, this);
+  diagnostics_.setHardwareID("simstack_perception");
+  diagnostics_.add("perception", this, &PerceptionServer::diagnose);
+  diagnostics_timer_ = nh_.createTimer(ros::Duration(1.0),
+                                       [this](const ros::TimerEvent&) { diagnostics_.update(); });
+  worker_ = std::thread(&PerceptionServer::work, this);
+  depth_sub_ = it_.subscribeCamera("depth/image_rect", 1, &PerceptionServer::onFrame, this,
+                                   image_transport::TransportHints(node_.image_transport));
+  ROS_INFO("simstack perception: model %s (%d samples), table %s '%s', listening on %s",
+           perception_->config().model_path.c_str(), perception_->config().samples,
+           node_.estimate_table ? "estimated and broadcast as" : "from tf frame",
+           node_.table_frame.c_str(), depth_sub_.getTopic().c_str());
+}
+
+PerceptionServer::~PerceptionServer() {
+  depth_sub_.shutdown();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  if (worker_.joinable()) worker_.join();
+}
+
+void PerceptionServer::onFrame(const sensor_msgs::ImageConstPtr& image,
+                               const sensor_msgs::CameraInfoConstPtr& info) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++received_;
+    if (mailbox_) ++dropped_;
+    mailbox_ = Frame{image, info};
+  }
+  wake_.notify_one();
+}
+
+void PerceptionServer::work() {
+  for (;;) {
+    Frame frame;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      wake_.wait(lock, [&] { return stop_ || mailbox_.has_value(); });
+      if (stop_) return;
+      frame = std::move(*mailbox_);
+      mailbox_.reset();
+    }
+    try {
+      process(frame);
+    } catch (const std::exception& e) {  // nothing may escape the worker
+      skip(frame, e.what());
+    }
+  }
+}
+
+void PerceptionServer::skip(const Frame& frame, const std::string& why) {
+  bool warn = false;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++skipped_;
+    // One warning per kind of problem, then at most one every 5 s while it lasts.
+    const ros::WallTime now = ros::WallTime::now();
+    warn = why != last_error_ || (now - last_warning_).toSec() > 5.0;
+    if (warn) last_warning_ = now;
+    last_error_ = why;
+  }
+  if (warn)
+    ROS_WARN("simstack perception: frame %u of %s skipped: %s", frame.image->header.seq,
+             depth_sub_.getTopic().c_str(), why.c_str());
+}
+
+bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* why) {
+  try {
+    view->depth = depthFromImage(*frame.image);
+    view->camera = cameraFromInfo(*frame.info);
+  } catch (const std::invalid_argument& e) {
+    *why = e.what();
+    return false;
+  }
+  if (view->depth.width != view->camera.width || view->depth.height != view->camera.height) {
+    *why = "the depth image is " + std::to_string(view->depth.width) + "x" +
+           std::to_string(view->depth.height) + " but its camera_info " +
+           std::to_string(view->camera.width) + "x" + std::to_string(view->camera.height);
+    return false;
+  }
+  size_t valid = 0;
+  for (float d : view->depth.pixels) valid += validDepth(d);
+  if (valid == 0) {
+    *why = "the depth image holds no valid depth (all zero or NaN)";
+    return false;
+  }
+  if (node_.estimate_table) return true;  // the pipeline fits the plane
+  const std::string camera_frame = frame.image->header.frame_id;
+  try {
+    const geometry_msgs::TransformStamped t =
+        tf_buffer_.lookupTransform(node_.table_frame, camera_frame, frame.image->header.stamp,
+                                   ros::Duration(node_.tf_timeout_s));
+    view->T_table_camera = tf2::transformToEigen(t);
+  } catch (const tf2::TransformException& e) {
+    *why = "no transform " + node_.table_frame + " <- '" + camera_frame + "': " + e.what();
+    return false;
+  }
+  return true;
+}
+
+void PerceptionServer::process(const Frame& frame) {
+  DepthView view;
+  std::string why;
+  if (!toView(frame, &view, &why)) return skip(frame, why);
+  std::vector<DepthView> views;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (reset_requested_) views_.clear();
+    reset_requested_ = false;
+    if (node_.accumulate_views && view.T_table_camera) {
+      views_.push_back(view);
+      if (static_cast<int>(views_.size()) > node_.max_views) views_.erase(views_.begin());
+      views = views_;
+    }
+  }
+  if (views.empty()) views = {view};
+  SceneEstimate estimate;
+  try {
+    estimate = perception_->perceive(views);
+  } catch (const std::exception& e) {
+    return skip(frame, e.what());
+  }
+  publish(frame, view, estimate, static_cast<int>(views.size()));
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++processed_;
+  last_timings_ = estimate.timings;
+  last_scene_ = std::make_shared<const SceneEstimate>(std::move(estimate));
+}
+
+void PerceptionServer::publish(const Frame& frame, const DepthView& view,
+                               const SceneEstimate& estimate, int views) {
+  std_msgs::Header header;
+  header.stamp = frame.image->header.stamp;
+  header.frame_id = node_.table_frame;
+  if (estimate.table_estimated) {
+    geometry_msgs::TransformStamped t = tf2::eigenToTransform(estimate.T_table_camera.inverse());
+    t.header.stamp = header.stamp;
+    t.header.frame_id = frame.image->header.frame_id;
+    t.child_frame_id = node_.table_frame;
+    tf_broadcaster_.sendTransform(t);
+  }
+  objects_pub_.publish(
+      objectArrayMsg(header, estimate, views, static_cast<int>(estimate.hypotheses.size())));
+  instances_pub_.publish(instancesCloud(header, estimate));
+  markers_pub_.publish(objectMarkers(header, estimate));
+  occupancy_pub_.publish(
+      occupancyCloud(header, estimate.occupancy_probability, node_.occupancy_min));
+  if (labels_pub_.getNumSubscribers() > 0) {
+    DepthView posed = view;
+    posed.T_table_camera = view.T_table_camera.value_or(estimate.T_table_camera);
+    labels_pub_.publish(labelImage(frame.image->header, pixelInstances(posed, estimate)));
+  }
+}
+
+bool PerceptionServer::reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  reset_requested_ = true;
+  ROS_INFO("simstack perception: accumulated views cleared");
+  return true;
+}
+
+bool PerceptionServer::saveOctomap(SaveOctomap::Request& req, SaveOctomap::Response& res) {
+  res.success = false;
+  res.message = badFileName(req.file_name);
+  if (!res.message.empty()) return true;
+  std::shared_ptr<const SceneEstimate> scene;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    scene = last_scene_;
+  }
+  if (!scene) {
+    res.message = "no scene perceived yet";
+    return true;
+  }
+  namespace fs = std::filesystem;
+  try {
+    const fs::path dir = expandHome(node_.output_dir);
+    fs::create_directories(dir);
+    const fs::path target = dir / req.file_name;
+    if (fs::is_symlink(target)) {
+      res.message = "'" + req.file_name + "' in " + dir.string() + " is a symbolic link: refused";
+      return true;
+    }
+    writeOccupancyOctomap(target.string(), scene->occupancy_probability, node_.occupancy_min);
+    res.path = fs::absolute(target).string();
+    res.success = true;
+    res.message = "wrote " + res.path;
+  } catch (const std::exception& e) {
+    res.message = e.what();
+  }
+  return true;
+}
+
+void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const double seconds = std::max(1e-3, (ros::WallTime::now() - started_).toSec());
+  if (processed_ == 0 && skipped_ > 0)
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "no frame processed: " + last_error_);
+  else if (!last_error_.empty())
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "last skipped frame: " + last_error_);
+  else
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK, "perceiving");
+  status.add("frames received", received_);
+  status.add("frames processed", processed_);
+  status.add("frames dropped (newer frame came first)", dropped_);
+  status.add("frames skipped (bad input)", skipped_);
+  status.add("frames processed per second", processed_ / seconds);
+  status.add("last error", last_error_);
+  status.add("table ms", last_timings_.table_ms);
+  status.add("tsdf ms", last_timings_.tsdf_ms);
+  status.add("network ms", last_timings_.network_ms);
+  status.add("instances ms", last_timings_.instances_ms);
+  status.add("mesh ms", last_timings_.mesh_ms);
+  status.add("fitting ms", last_timings_.fitting_ms);
+  status.add("total ms", last_timings_.total_ms);
+}
+
+}  // namespace simstack

@@ -1,0 +1,102 @@
+#include "simstack_ros/ros_params.h"
+
+#include <xmlrpcpp/XmlRpcValue.h>
+
+#include <cmath>
+#include <iomanip>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+
+namespace simstack {
+namespace {
+
+/// XmlRpc (what rosparam loaded from the YAML file) back to YAML text for the core's loader.
+void emit(std::ostream& out, XmlRpc::XmlRpcValue& v, int indent) {
+  const std::string pad(indent, ' ');
+  switch (v.getType()) {
+    case XmlRpc::XmlRpcValue::TypeStruct:
+      for (auto& kv : v) {
+        out << "\n" << pad << kv.first << ":";
+        emit(out, kv.second, indent + 2);
+      }
+      break;
+    case XmlRpc::XmlRpcValue::TypeArray:
+      for (int i = 0; i < v.size(); ++i) {
+        out << "\n" << pad << "-";
+        emit(out, v[i], indent + 2);
+      }
+      break;
+    case XmlRpc::XmlRpcValue::TypeBoolean:
+      out << " " << (static_cast<bool>(v) ? "true" : "false");
+      break;
+    case XmlRpc::XmlRpcValue::TypeInt:
+      out << " " << static_cast<int>(v);
+      break;
+    case XmlRpc::XmlRpcValue::TypeDouble:
+      out << " " << std::setprecision(17) << static_cast<double>(v);
+      break;
+    case XmlRpc::XmlRpcValue::TypeString: {
+      std::string s = static_cast<std::string>(v), quoted = "\"";
+      for (char c : s)
+        quoted += (c == '"' || c == '\\') ? std::string("\\") + c : std::string(1, c);
+      out << " " << quoted << "\"";
+      break;
+    }
+    default:
+      throw std::runtime_error("parameter of an unsupported type");
+  }
+}
+
+}  // namespace
+
+void NodeConfig::validate() const {
+  if (table_frame.empty()) throw std::invalid_argument("node/table_frame is empty");
+  if (!(tf_timeout_s >= 0.0 && tf_timeout_s <= 10.0))
+    throw std::invalid_argument("node/tf_timeout_s must lie in [0, 10] s");
+  if (!(occupancy_min > 0.0 && occupancy_min <= 1.0))
+    throw std::invalid_argument("node/occupancy_min must lie in (0, 1]");
+  if (max_views < 1 || max_views > 64)
+    throw std::invalid_argument("node/max_views must lie in [1, 64]");
+}
+
+PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
+                                            const std::string& package_dir) {
+  std::ostringstream yaml;
+  for (const char* section : {"perception", "hough", "segments", "fitting", "table"}) {
+    XmlRpc::XmlRpcValue v;
+    if (!pnh.getParam(section, v)) continue;
+    if (v.getType() != XmlRpc::XmlRpcValue::TypeStruct)
+      throw std::runtime_error(pnh.resolveName(section) + " must be a map of parameters");
+    yaml << section << ":";
+    emit(yaml, v, 2);
+    yaml << "\n";
+  }
+  return parsePerceptionYaml(yaml.str(), "the parameters under " + pnh.getNamespace(), package_dir);
+}
+
+NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh) {
+  NodeConfig c;
+  XmlRpc::XmlRpcValue given;
+  if (pnh.getParam("node", given)) {
+    if (given.getType() != XmlRpc::XmlRpcValue::TypeStruct)
+      throw std::runtime_error(pnh.resolveName("node") + " must be a map of parameters");
+    for (auto& kv : given)
+      if (!std::set<std::string>{"table_frame", "estimate_table", "tf_timeout_s", "image_transport",
+                                 "occupancy_min", "accumulate_views", "max_views", "output_dir"}
+               .count(kv.first))
+        throw std::runtime_error("unknown parameter " + pnh.resolveName("node/" + kv.first));
+  }
+  pnh.param("node/table_frame", c.table_frame, c.table_frame);
+  pnh.param("node/estimate_table", c.estimate_table, c.estimate_table);
+  pnh.param("node/tf_timeout_s", c.tf_timeout_s, c.tf_timeout_s);
+  pnh.param("node/image_transport", c.image_transport, c.image_transport);
+  pnh.param("node/occupancy_min", c.occupancy_min, c.occupancy_min);
+  pnh.param("node/accumulate_views", c.accumulate_views, c.accumulate_views);
+  pnh.param("node/max_views", c.max_views, c.max_views);
+  pnh.param("node/output_dir", c.output_dir, c.output_dir);
+  c.validate();
+  return c;
+}
+
+}  // namespace simstack

@@ -1,0 +1,272 @@
+// rostest (test/ros/perception.test): the perception node on synthetic depth frames of known
+// scenes. Every frame carries its own stamp, so an output is matched to the frame it answers.
+#include <gtest/gtest.h>
+#include <octomap/OcTree.h>
+#include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <sensor_msgs/image_encodings.h>
+#include <simstack/ObjectArray.h>
+#include <simstack/SaveOctomap.h>
+#include <std_srvs/Empty.h>
+#include <tf2_eigen/tf2_eigen.h>
+#include <tf2_ros/static_transform_broadcaster.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <functional>
+#include <mutex>
+#include <optional>
+
+#include "simstack/render/depth_renderer.h"
+#include "simstack/scene/scene.h"
+
+namespace simstack {
+namespace {
+
+const char* kCameraFrame = "camera_depth_optical_frame";
+
+SuperquadricShape box(const Vec3& half, const Vec3& centre, double yaw) {
+  SuperquadricShape sq;
+  sq.scale_m = half;
+  sq.exponents = Vec3::Constant(12.0);
+  sq.T_table_object = Transform::Identity();
+  sq.T_table_object.linear() = Eigen::AngleAxisd(yaw, Vec3::UnitZ()).toRotationMatrix();
+  sq.T_table_object.translation() = centre;
+  return sq;
+}
+
+/// Two boxes resting apart on the table, seen from above at an angle.
+std::vector<SuperquadricShape> knownPile() {
+  return {box(Vec3(0.06, 0.04, 0.05), Vec3(0.02, -0.08, 0.05), 0.3),
+          box(Vec3(0.05, 0.05, 0.04), Vec3(0.0, 0.09, 0.04), -0.2)};
+}
+
+class PerceptionNodeTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    image_pub_ = nh_.advertise<sensor_msgs::Image>("/camera/depth/image_rect", 1, true);
+    info_pub_ = nh_.advertise<sensor_msgs::CameraInfo>("/camera/depth/camera_info", 1, true);
+    objects_sub_ =
+        nh_.subscribe("/camera/perception/objects", 10, &PerceptionNodeTest::onObjects, this);
+    markers_sub_ =
+        nh_.subscribe("/camera/perception/markers", 10, &PerceptionNodeTest::onMarkers, this);
+    T_table_camera_ = lookAt(Vec3(0.45, -0.3, 0.55), Vec3(0.0, 0.0, 0.04));
+    geometry_msgs::TransformStamped t = tf2::eigenToTransform(T_table_camera_);
+    t.header.stamp = ros::Time::now();
+    t.header.frame_id = "table";
+    t.child_frame_id = kCameraFrame;
+    tf_.sendTransform(t);
+    ASSERT_TRUE(ros::service::waitForService("/camera/perception/save_octomap", 60000))
+        << "the perception node did not come up";
+  }
+
+  /// The depth of `shapes` (metres), as the node's camera sees them.
+  DepthImage render(const std::vector<SuperquadricShape>& shapes) const {
+    const DepthRenderer renderer(Scene::fromSuperquadrics(shapes));
+    return renderer.render(camera_, T_table_camera_).depth;
+  }
+
+  sensor_msgs::Image imageMsg(const DepthImage& depth, ros::Time stamp) const {
+    sensor_msgs::Image img;
+    img.header.stamp = stamp;
+    img.header.frame_id = kCameraFrame;
+    img.width = depth.width;
+    img.height = depth.height;
+    img.encoding = sensor_msgs::image_encodings::TYPE_16UC1;
+    img.step = 2 * img.width;
+    img.data.resize(img.step * img.height);
+    for (size_t i = 0; i < depth.pixels.size(); ++i) {
+      const float d = depth.pixels[i];
+      const uint16_t mm = validDepth(d) ? static_cast<uint16_t>(std::lround(d * 1000.0f)) : 0;
+      std::memcpy(img.data.data() + 2 * i, &mm, 2);
+    }
+    return img;
+  }
+
+  sensor_msgs::CameraInfo infoMsg(ros::Time stamp) const {
+    sensor_msgs::CameraInfo info;
+    info.header.stamp = stamp;
+    info.header.frame_id = kCameraFrame;
+    info.width = camera_.width;
+    info.height = camera_.height;
+    info.K = {camera_.fx, 0, camera_.cx, 0, camera_.fy, camera_.cy, 0, 0, 1};
+    info.P = {camera_.fx, 0, camera_.cx, 0, 0, camera_.fy, camera_.cy, 0, 0, 0, 1, 0};
+    return info;
+  }
+
+  /// Publishes a frame under a fresh stamp and waits up to `seconds` for the objects that
+  /// answer it (std::nullopt when none came).
+  std::optional<ObjectArray> send(sensor_msgs::Image image, sensor_msgs::CameraInfo info,
+                                  double seconds = 30.0) {
+    const ros::Time stamp = ros::Time::now();
+    image.header.stamp = info.header.stamp = stamp;
+    info_pub_.publish(info);
+    image_pub_.publish(image);
+    const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(seconds);
+    while (ros::ok() && ros::WallTime::now() < until) {
+      ros::spinOnce();
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        for (const ObjectArray& o : received_)
+          if (o.header.stamp == stamp) return o;
+      }
+      ros::WallDuration(0.02).sleep();
+    }
+    return std::nullopt;
+  }
+  std::optional<ObjectArray> sendDepth(const DepthImage& depth, double seconds = 30.0) {
+    return send(imageMsg(depth, ros::Time(0)), infoMsg(ros::Time(0)), seconds);
+  }
+
+  void onObjects(const ObjectArray::ConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    received_.push_back(*msg);
+  }
+  void onMarkers(const visualization_msgs::MarkerArray::ConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    markers_[msg->markers.empty() ? ros::Time() : msg->markers.front().header.stamp] = *msg;
+  }
+
+  ros::NodeHandle nh_;
+  ros::Publisher image_pub_, info_pub_;
+  ros::Subscriber objects_sub_, markers_sub_;
+  tf2_ros::StaticTransformBroadcaster tf_;
+  PinholeCamera camera_;
+  Transform T_table_camera_;
+  std::mutex mutex_;
+  std::vector<ObjectArray> received_;
+  std::map<ros::Time, visualization_msgs::MarkerArray> markers_;
+};
+
+TEST_F(PerceptionNodeTest, AKnownPileGivesItsObjects) {
+  const std::vector<SuperquadricShape> truth = knownPile();
+  const std::optional<ObjectArray> out = sendDepth(render(truth), 60.0);
+  ASSERT_TRUE(out) << "no objects within 60 s";
+  EXPECT_EQ(out->header.frame_id, "table");
+  EXPECT_FALSE(out->table_estimated);
+  EXPECT_EQ(out->samples, 3u);
+  EXPECT_GT(out->total_ms, 0.0f);
+  ASSERT_EQ(out->objects.size(), truth.size());
+  for (const SuperquadricShape& t : truth) {
+    double nearest = 1e9;
+    for (const Object& o : out->objects) {
+      const auto& p = o.superquadric.pose.position;
+      nearest = std::min(nearest, (Vec3(p.x, p.y, p.z) - t.T_table_object.translation()).norm());
+      EXPECT_GT(o.surface.width, 0u);
+      EXPECT_GT(o.voxels, 0u);
+      EXPECT_GT(o.visible_fraction, 0.05f);
+      EXPECT_LT(o.visible_fraction, 0.95f);
+    }
+    EXPECT_LT(nearest, 0.02) << "no object centre within 2 cm of "
+                             << t.T_table_object.translation().transpose();
+  }
+}
+
+TEST_F(PerceptionNodeTest, BadInputIsSkippedAndTheNodeKeepsPublishing) {
+  const DepthImage depth = render(knownPile());
+  const sensor_msgs::CameraInfo info = infoMsg(ros::Time(0));
+  std::vector<
+      std::pair<std::string, std::function<void(sensor_msgs::Image*, sensor_msgs::CameraInfo*)>>>
+      cases = {
+          {"rgb8", [](sensor_msgs::Image* i, sensor_msgs::CameraInfo*) { i->encoding = "rgb8"; }},
+          {"8UC1", [](sensor_msgs::Image* i, sensor_msgs::CameraInfo*) { i->encoding = "8UC1"; }},
+          {"big-endian",
+           [](sensor_msgs::Image* i, sensor_msgs::CameraInfo*) { i->is_bigendian = 1; }},
+          {"size differs from camera_info",
+           [](sensor_msgs::Image*, sensor_msgs::CameraInfo* c) { c->width = 320; }},
+          {"all zero",
+           [](sensor_msgs::Image* i, sensor_msgs::CameraInfo*) {
+             std::fill(i->data.begin(), i->data.end(), 0);
+           }},
+          {"all NaN (32FC1)",
+           [](sensor_msgs::Image* i, sensor_msgs::CameraInfo*) {
+             i->encoding = "32FC1";
+             i->step = 4 * i->width;
+             i->data.assign(size_t(i->step) * i->height, 0);
+             const float nan = std::nanf("");
+             for (size_t k = 0; k < size_t(i->width) * i->height; ++k)
+               std::memcpy(i->data.data() + 4 * k, &nan, 4);
+           }},
+          {"zero focal length",
+           [](sensor_msgs::Image*, sensor_msgs::CameraInfo* c) { c->K[0] = c->P[0] = 0; }},
+          {"no tf for the frame",
+           [](sensor_msgs::Image* i, sensor_msgs::CameraInfo* c) {
+             i->header.frame_id = c->header.frame_id = "nowhere";
+           }},
+      };
+  for (auto& [name, spoil] : cases) {
+    sensor_msgs::Image image = imageMsg(depth, ros::Time(0));
+    sensor_msgs::CameraInfo bad_info = info;
+    spoil(&image, &bad_info);
+    EXPECT_FALSE(send(image, bad_info, 2.0)) << name << ": published for a bad frame";
+  }
+  EXPECT_TRUE(sendDepth(depth, 60.0)) << "the node stopped publishing after bad input";
+}
+
+TEST_F(PerceptionNodeTest, AnEmptyTableGivesAnEmptyScene) {
+  const std::optional<ObjectArray> out = sendDepth(render({}), 60.0);
+  ASSERT_TRUE(out);
+  EXPECT_TRUE(out->objects.empty());
+  ros::WallDuration(0.5).sleep();
+  ros::spinOnce();
+  std::lock_guard<std::mutex> lock(mutex_);
+  ASSERT_TRUE(markers_.count(out->header.stamp)) << "no markers for the empty scene";
+  const auto& markers = markers_.at(out->header.stamp).markers;
+  ASSERT_EQ(markers.size(), 1u);
+  EXPECT_EQ(markers[0].action, visualization_msgs::Marker::DELETEALL);
+}
+
+TEST_F(PerceptionNodeTest, ResetAndSaveOctomap) {
+  ASSERT_TRUE(sendDepth(render(knownPile()), 60.0));
+  std_srvs::Empty empty;
+  EXPECT_TRUE(ros::service::call("/camera/perception/reset", empty));
+  std::string dir;
+  ASSERT_TRUE(nh_.getParam("/camera/perception/node/output_dir", dir));
+  SaveOctomap save;
+  for (const char* bad :
+       {"../escape.ot", "/tmp/absolute.ot", "sub/dir.ot", "", "scene.txt", ".."}) {
+    save.request.file_name = bad;
+    ASSERT_TRUE(ros::service::call("/camera/perception/save_octomap", save));
+    EXPECT_FALSE(save.response.success) << bad;
+    EXPECT_FALSE(save.response.message.empty());
+  }
+  std::filesystem::create_directories(dir);
+  std::filesystem::remove(std::filesystem::path(dir) / "link.ot");
+  std::filesystem::create_symlink("/tmp/simstack_link_target.ot",
+                                  std::filesystem::path(dir) / "link.ot");
+  save.request.file_name = "link.ot";
+  ASSERT_TRUE(ros::service::call("/camera/perception/save_octomap", save));
+  EXPECT_FALSE(save.response.success) << "wrote through a symbolic link";
+  EXPECT_FALSE(std::filesystem::exists("/tmp/simstack_link_target.ot"));
+  for (const char* name : {"scene.ot", "scene.ot", "scene.bt"}) {  // the second replaces the first
+    save.request.file_name = name;
+    ASSERT_TRUE(ros::service::call("/camera/perception/save_octomap", save));
+    ASSERT_TRUE(save.response.success) << save.response.message;
+    EXPECT_EQ(save.response.path, (std::filesystem::path(dir) / name).string());
+  }
+  std::unique_ptr<octomap::AbstractOcTree> read(
+      octomap::AbstractOcTree::read((std::filesystem::path(dir) / "scene.ot").string()));
+  ASSERT_TRUE(read);
+  auto* tree = dynamic_cast<octomap::OcTree*>(read.get());
+  ASSERT_TRUE(tree);
+  size_t occupied = 0;
+  for (auto it = tree->begin_leafs(); it != tree->end_leafs(); ++it)
+    occupied += tree->isNodeOccupied(*it);
+  EXPECT_GT(occupied, 10u);
+  octomap::OcTree binary(0.1);
+  ASSERT_TRUE(binary.readBinary((std::filesystem::path(dir) / "scene.bt").string()));
+  EXPECT_GT(binary.getNumLeafNodes(), 0u);
+}
+
+}  // namespace
+}  // namespace simstack
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_perception_node");
+  ros::NodeHandle nh;
+  return RUN_ALL_TESTS();
+}
