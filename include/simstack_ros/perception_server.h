@@ -4,13 +4,16 @@
 /// octomap_server's OctomapServer is): it subscribes depth/image_rect + depth/camera_info,
 /// finds the table (tf, or a RANSAC plane it then broadcasts), runs the pipeline on a worker
 /// thread and publishes the objects, their instance cloud, markers, the occupancy and the label
-/// image; services ~reset and ~save_octomap. Parameters: ros_params.h. Frames reach the worker
+/// image; services ~reset and ~save_octomap; live settings through dynamic_reconfigure
+/// (config/LiveSettings.cfg); diagnostics. Parameters: ros_params.h. Frames reach the worker
 /// through a one-slot mailbox: the newest frame wins, callbacks never block, and the frames
 /// replaced before the worker took them are counted as dropped.
 
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <dynamic_reconfigure/server.h>
 #include <image_transport/image_transport.h>
 #include <ros/ros.h>
+#include <simstack/LiveSettingsConfig.h>
 #include <simstack/SaveOctomap.h>
 #include <std_srvs/Empty.h>
 #include <tf2_ros/buffer.h>
@@ -57,6 +60,9 @@ class PerceptionServer {
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   bool saveOctomap(SaveOctomap::Request& req, SaveOctomap::Response& res);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+  void onSettings(LiveSettingsConfig& settings, uint32_t level);
+  /// Applies settings changed by dynamic_reconfigure (worker thread, between frames).
+  void applySettings();
 
   ros::NodeHandle nh_, pnh_;
   NodeConfig node_;
@@ -70,6 +76,8 @@ class PerceptionServer {
   image_transport::Publisher labels_pub_;
   ros::ServiceServer reset_srv_, save_srv_;
   diagnostic_updater::Updater diagnostics_;
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<LiveSettingsConfig>> reconfigure_;
   ros::Timer diagnostics_timer_;
 
   std::mutex mutex_;  ///< guards the mailbox, the counters, the last scene and the views
@@ -83,6 +91,7 @@ class PerceptionServer {
   std::shared_ptr<const SceneEstimate> last_scene_;
   std::vector<DepthView> views_;  ///< accumulated views (accumulate_views)
   bool reset_requested_ = false;
+  std::optional<LiveSettingsConfig> pending_settings_;
   ros::WallTime started_;
   std::thread worker_;  ///< last: starts after everything it uses
 };

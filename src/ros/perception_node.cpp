@@ -2,13 +2,20 @@
 #include <ros/package.h>
 #include <ros/ros.h>
 
+#include <unistd.h>
+
 #include <cstdlib>
 
 #include "simstack_ros/perception_server.h"
 
 int main(int argc, char** argv) {
-  // OpenMP workers that spin would fight the camera driver and the planner for the cores.
-  setenv("OMP_WAIT_POLICY", "passive", 0);
+  // OpenMP workers that spin would fight the camera driver and the planner for the cores. The
+  // OpenMP runtime reads its wait policy when it is loaded, before main: so the process starts
+  // itself again with the policy set, unless the environment already chose one.
+  if (!std::getenv("OMP_WAIT_POLICY")) {
+    setenv("OMP_WAIT_POLICY", "passive", 1);
+    execv("/proc/self/exe", argv);  // returns only on failure: then run as we are
+  }
   ros::init(argc, argv, "simstack_perception");
   ros::NodeHandle nh, pnh("~");
   std::unique_ptr<simstack::PerceptionServer> server;

@@ -57,6 +57,22 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   diagnostics_.add("perception", this, &PerceptionServer::diagnose);
   diagnostics_timer_ = nh_.createTimer(ros::Duration(1.0),
                                        [this](const ros::TimerEvent&) { diagnostics_.update(); });
+  const PerceptionConfig& c = perception_->config();
+  LiveSettingsConfig live;
+  live.samples = c.samples;
+  live.hough_refinement = c.hough.refinement;
+  live.hough_min_traversals = c.hough.min_traversals;
+  live.hough_bandwidth_m = c.hough.bandwidth_m;
+  live.hough_min_instance_voxels = c.hough.min_instance_voxels;
+  live.hough_min_vote_norm = c.hough.min_vote_norm;
+  live.min_instance_points = c.min_instance_points;
+  live.joint_refinement = c.joint_refinement;
+  live.occupancy_min = node_.occupancy_min;
+  reconfigure_ =
+      std::make_unique<dynamic_reconfigure::Server<LiveSettingsConfig>>(reconfigure_mutex_, pnh_);
+  reconfigure_->updateConfig(live);  // the node's parameters, not the .cfg's defaults
+  reconfigure_->setCallback(
+      [this](LiveSettingsConfig& settings, uint32_t level) { onSettings(settings, level); });
   worker_ = std::thread(&PerceptionServer::work, this);
   depth_sub_ = it_.subscribeCamera("depth/image_rect", 1, &PerceptionServer::onFrame, this,
                                    image_transport::TransportHints(node_.image_transport));
@@ -155,7 +171,38 @@ bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* 
   return true;
 }
 
+void PerceptionServer::onSettings(LiveSettingsConfig& settings, uint32_t) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  pending_settings_ = settings;
+}
+
+void PerceptionServer::applySettings() {
+  std::optional<LiveSettingsConfig> s;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    s.swap(pending_settings_);
+    if (s) node_.occupancy_min = s->occupancy_min;
+  }
+  if (!s) return;
+  PerceptionConfig c = perception_->config();
+  c.samples = s->samples;
+  c.hough.refinement = s->hough_refinement;
+  c.hough.min_traversals = s->hough_min_traversals;
+  c.hough.bandwidth_m = s->hough_bandwidth_m;
+  c.hough.min_instance_voxels = s->hough_min_instance_voxels;
+  c.hough.min_vote_norm = s->hough_min_vote_norm;
+  c.min_instance_points = s->min_instance_points;
+  c.joint_refinement = s->joint_refinement;
+  c.decompose_samples = std::min(c.decompose_samples, c.samples);
+  try {
+    perception_->updateSettings(c);
+  } catch (const std::invalid_argument& e) {
+    ROS_ERROR("simstack perception: new settings refused, the previous ones stay: %s", e.what());
+  }
+}
+
 void PerceptionServer::process(const Frame& frame) {
+  applySettings();
   DepthView view;
   std::string why;
   if (!toView(frame, &view, &why)) return skip(frame, why);
@@ -200,8 +247,12 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
       objectArrayMsg(header, estimate, views, static_cast<int>(estimate.hypotheses.size())));
   instances_pub_.publish(instancesCloud(header, estimate));
   markers_pub_.publish(objectMarkers(header, estimate));
-  occupancy_pub_.publish(
-      occupancyCloud(header, estimate.occupancy_probability, node_.occupancy_min));
+  double occupancy_min;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    occupancy_min = node_.occupancy_min;
+  }
+  occupancy_pub_.publish(occupancyCloud(header, estimate.occupancy_probability, occupancy_min));
   if (labels_pub_.getNumSubscribers() > 0) {
     DepthView posed = view;
     posed.T_table_camera = view.T_table_camera.value_or(estimate.T_table_camera);
@@ -221,9 +272,11 @@ bool PerceptionServer::saveOctomap(SaveOctomap::Request& req, SaveOctomap::Respo
   res.message = badFileName(req.file_name);
   if (!res.message.empty()) return true;
   std::shared_ptr<const SceneEstimate> scene;
+  double occupancy_min;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     scene = last_scene_;
+    occupancy_min = node_.occupancy_min;
   }
   if (!scene) {
     res.message = "no scene perceived yet";
@@ -238,7 +291,7 @@ bool PerceptionServer::saveOctomap(SaveOctomap::Request& req, SaveOctomap::Respo
       res.message = "'" + req.file_name + "' in " + dir.string() + " is a symbolic link: refused";
       return true;
     }
-    writeOccupancyOctomap(target.string(), scene->occupancy_probability, node_.occupancy_min);
+    writeOccupancyOctomap(target.string(), scene->occupancy_probability, occupancy_min);
     res.path = fs::absolute(target).string();
     res.success = true;
     res.message = "wrote " + res.path;

@@ -1,5 +1,6 @@
 // rostest (test/ros/perception.test): the perception node on synthetic depth frames of known
 // scenes. Every frame carries its own stamp, so an output is matched to the frame it answers.
+#include <dynamic_reconfigure/Reconfigure.h>
 #include <gtest/gtest.h>
 #include <octomap/OcTree.h>
 #include <ros/ros.h>
@@ -11,6 +12,7 @@
 #include <std_srvs/Empty.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/static_transform_broadcaster.h>
+#include <tf2_ros/transform_listener.h>
 #include <visualization_msgs/MarkerArray.h>
 
 #include <cmath>
@@ -19,6 +21,7 @@
 #include <functional>
 #include <mutex>
 #include <optional>
+#include <random>
 
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/scene.h"
@@ -53,6 +56,8 @@ class PerceptionNodeTest : public ::testing::Test {
         nh_.subscribe("/camera/perception/objects", 10, &PerceptionNodeTest::onObjects, this);
     markers_sub_ =
         nh_.subscribe("/camera/perception/markers", 10, &PerceptionNodeTest::onMarkers, this);
+    estimated_sub_ =
+        nh_.subscribe("/estimating/perception/objects", 10, &PerceptionNodeTest::onEstimated, this);
     T_table_camera_ = lookAt(Vec3(0.45, -0.3, 0.55), Vec3(0.0, 0.0, 0.04));
     geometry_msgs::TransformStamped t = tf2::eigenToTransform(T_table_camera_);
     t.header.stamp = ros::Time::now();
@@ -61,6 +66,14 @@ class PerceptionNodeTest : public ::testing::Test {
     tf_.sendTransform(t);
     ASSERT_TRUE(ros::service::waitForService("/camera/perception/save_octomap", 60000))
         << "the perception node did not come up";
+    // An answer published before a subscription is connected would be lost.
+    for (int i = 0;
+         i < 300 && (objects_sub_.getNumPublishers() == 0 || markers_sub_.getNumPublishers() == 0 ||
+                     estimated_sub_.getNumPublishers() == 0);
+         ++i) {
+      ros::spinOnce();
+      ros::WallDuration(0.1).sleep();
+    }
   }
 
   /// The depth of `shapes` (metres), as the node's camera sees them.
@@ -125,6 +138,24 @@ class PerceptionNodeTest : public ::testing::Test {
     std::lock_guard<std::mutex> lock(mutex_);
     received_.push_back(*msg);
   }
+  void onEstimated(const ObjectArray::ConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    estimated_.push_back(*msg);
+  }
+  /// The estimating node's answer to the frame of `stamp`, waiting up to `seconds`.
+  std::optional<ObjectArray> estimatedFor(ros::Time stamp, double seconds) {
+    const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(seconds);
+    while (ros::ok() && ros::WallTime::now() < until) {
+      ros::spinOnce();
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        for (const ObjectArray& o : estimated_)
+          if (o.header.stamp == stamp) return o;
+      }
+      ros::WallDuration(0.02).sleep();
+    }
+    return std::nullopt;
+  }
   void onMarkers(const visualization_msgs::MarkerArray::ConstPtr& msg) {
     std::lock_guard<std::mutex> lock(mutex_);
     markers_[msg->markers.empty() ? ros::Time() : msg->markers.front().header.stamp] = *msg;
@@ -132,12 +163,12 @@ class PerceptionNodeTest : public ::testing::Test {
 
   ros::NodeHandle nh_;
   ros::Publisher image_pub_, info_pub_;
-  ros::Subscriber objects_sub_, markers_sub_;
+  ros::Subscriber objects_sub_, markers_sub_, estimated_sub_;
   tf2_ros::StaticTransformBroadcaster tf_;
   PinholeCamera camera_;
   Transform T_table_camera_;
   std::mutex mutex_;
-  std::vector<ObjectArray> received_;
+  std::vector<ObjectArray> received_, estimated_;
   std::map<ros::Time, visualization_msgs::MarkerArray> markers_;
 };
 
@@ -259,6 +290,54 @@ TEST_F(PerceptionNodeTest, ResetAndSaveOctomap) {
   octomap::OcTree binary(0.1);
   ASSERT_TRUE(binary.readBinary((std::filesystem::path(dir) / "scene.bt").string()));
   EXPECT_GT(binary.getNumLeafNodes(), 0u);
+}
+
+TEST_F(PerceptionNodeTest, LiveSettingsChangeTheNextFrame) {
+  const DepthImage depth = render(knownPile());
+  auto set_samples = [&](int samples) {
+    dynamic_reconfigure::Reconfigure srv;
+    dynamic_reconfigure::IntParameter p;
+    p.name = "samples";
+    p.value = samples;
+    srv.request.config.ints.push_back(p);
+    return ros::service::call("/camera/perception/set_parameters", srv);
+  };
+  ASSERT_TRUE(set_samples(1));
+  std::optional<ObjectArray> out = sendDepth(depth, 60.0);
+  ASSERT_TRUE(out);
+  EXPECT_EQ(out->samples, 1u);
+  ASSERT_TRUE(set_samples(3));
+  out = sendDepth(depth, 60.0);
+  ASSERT_TRUE(out);
+  EXPECT_EQ(out->samples, 3u);
+}
+
+TEST_F(PerceptionNodeTest, AnEstimatedTableIsUsedBroadcastAndRefusedWhenThereIsNone) {
+  tf2_ros::Buffer buffer;
+  tf2_ros::TransformListener listener(buffer);
+  ros::WallDuration(1.0).sleep();  // the listener connects before the frame is sent
+  std::optional<ObjectArray> out = sendDepth(render(knownPile()), 60.0);
+  ASSERT_TRUE(out);
+  const std::optional<ObjectArray> est = estimatedFor(out->header.stamp, 60.0);
+  ASSERT_TRUE(est) << "the estimating node published nothing";
+  EXPECT_TRUE(est->table_estimated);
+  EXPECT_EQ(est->header.frame_id, "table_estimated");
+  EXPECT_EQ(est->objects.size(), knownPile().size());
+  EXPECT_TRUE(
+      buffer.canTransform("table_estimated", kCameraFrame, est->header.stamp, ros::Duration(5.0)))
+      << "the estimated table is not on tf";
+  // Depth with no plane in it (random distances): no table, so nothing published for it.
+  DepthImage noise(camera_.width, camera_.height, 0.0f);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> range(0.5f, 1.5f);
+  for (float& d : noise.pixels) d = range(rng);
+  out = sendDepth(noise, 30.0);
+  ASSERT_TRUE(out);  // the tf node has a table for it
+  EXPECT_FALSE(estimatedFor(out->header.stamp, 5.0)) << "published a frame without a table";
+  out = sendDepth(render(knownPile()), 60.0);
+  ASSERT_TRUE(out);
+  EXPECT_TRUE(estimatedFor(out->header.stamp, 60.0))
+      << "stopped publishing after a tableless frame";
 }
 
 }  // namespace

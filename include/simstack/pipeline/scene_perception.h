@@ -96,6 +96,11 @@ class ScenePerception {
     return perceive(std::vector<DepthView>{view});
   }
 
+  /// Replaces the settings, keeping the model and the thread count (std::invalid_argument for
+  /// another model or thread count, or a bad value; the settings in use then stay). Not
+  /// thread-safe: call it between perceive() calls.
+  void updateSettings(const PerceptionConfig& config);
+
   const PerceptionConfig& config() const;
   const CvaeConfig& modelConfig() const;
 

@@ -126,7 +126,9 @@ struct ScenePerception::Impl {
   std::unique_ptr<CvaeInference> model;
 };
 
-ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Impl) {
+namespace {
+
+void validate(const PerceptionConfig& config) {
   if (config.samples < 1) throw std::invalid_argument("samples must be >= 1");
   if (config.decompose_samples < 0 || config.decompose_samples > config.samples)
     throw std::invalid_argument("decompose_samples must lie in [0, samples]");
@@ -135,13 +137,33 @@ ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Imp
   if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
   config.fit.validate();
   config.segments.validate();
-  impl_->config = config;
-  impl_->model = std::make_unique<CvaeInference>(config.model_path, config.threads);
-  if (!impl_->model->config().hasLatentCode()) {
-    // No latent space: S hypotheses would be S copies of one.
-    impl_->config.samples = 1;
-    impl_->config.decompose_samples = std::min(impl_->config.decompose_samples, 1);
+}
+
+/// No latent space: S hypotheses would be S copies of one.
+PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
+  if (!model.hasLatentCode()) {
+    config.samples = 1;
+    config.decompose_samples = std::min(config.decompose_samples, 1);
   }
+  return config;
+}
+
+}  // namespace
+
+ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Impl) {
+  validate(config);
+  impl_->model = std::make_unique<CvaeInference>(config.model_path, config.threads);
+  impl_->config = forModel(config, impl_->model->config());
+}
+
+void ScenePerception::updateSettings(const PerceptionConfig& config) {
+  if (config.model_path != impl_->config.model_path)
+    throw std::invalid_argument("updateSettings keeps the model: " + impl_->config.model_path +
+                                ", not " + config.model_path);
+  if (config.threads != impl_->config.threads)
+    throw std::invalid_argument("updateSettings keeps the thread count");
+  validate(config);
+  impl_->config = forModel(config, impl_->model->config());
 }
 
 ScenePerception::~ScenePerception() = default;

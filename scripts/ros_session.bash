@@ -1,0 +1,62 @@
+# Sourced by scripts/demo and the rviz test: a ROS master of our own on a free port, an Xvfb
+# display, and everything started here stopped again on exit, Ctrl-C or failure.
+# Usage: source scripts/ros_session.bash BUILD_DIR; ros_session_start; ros_session_xvfb; ...
+
+# shellcheck disable=SC1091
+source "$1/devel/setup.bash"  # (Debian's ROS profile reads unset variables: no set -u before)
+export PATH=/usr/bin:$PATH    # ROS Python tools need the system interpreter, not a pyenv one
+export ROS_HOSTNAME=localhost
+export ROS_HOME=${ROS_HOME:-$(mktemp -d)}
+ROS_SESSION_PIDS=()
+
+ros_session_stop() {
+  local pid
+  for pid in "${ROS_SESSION_PIDS[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
+  sleep 1
+  for pid in "${ROS_SESSION_PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
+  sleep 1
+  for pid in "${ROS_SESSION_PIDS[@]}"; do kill -KILL "$pid" 2>/dev/null || true; done
+  ROS_SESSION_PIDS=()
+}
+trap ros_session_stop EXIT
+trap 'exit 130' INT TERM
+
+free_port() {
+  /usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("localhost", 0)); print(s.getsockname()[1])'
+}
+
+# Runs a command in the background (its own process group) and remembers it for the cleanup.
+ros_session_spawn() {  # ros_session_spawn LOG COMMAND...
+  local log=$1; shift
+  setsid "$@" > "$log" 2>&1 &
+  ROS_SESSION_PIDS+=($!)
+}
+
+ros_session_start() {  # a master on a free port
+  local port
+  port=$(free_port)
+  export ROS_MASTER_URI=http://localhost:$port
+  ros_session_spawn "$ROS_HOME/roscore.log" roscore -p "$port"
+  for _ in $(seq 50); do rostopic list > /dev/null 2>&1 && return 0; sleep 0.2; done
+  echo "the ROS master did not start (log: $ROS_HOME/roscore.log)" >&2
+  return 1
+}
+
+ros_session_xvfb() {  # a virtual display for rviz
+  local n
+  for n in $(seq 90 120); do [ -e "/tmp/.X11-unix/X$n" ] || [ -e "/tmp/.X$n-lock" ] || break; done
+  export DISPLAY=:$n
+  ros_session_spawn "$ROS_HOME/xvfb.log" Xvfb "$DISPLAY" -screen 0 1280x800x24
+  for _ in $(seq 50); do xwd -root -silent > /dev/null 2>&1 && return 0; sleep 0.2; done
+  echo "Xvfb did not start (log: $ROS_HOME/xvfb.log)" >&2
+  return 1
+}
+
+# Waits until TOPIC carries a message (at most SECONDS).
+ros_session_wait_topic() {  # ros_session_wait_topic TOPIC SECONDS
+  timeout "$2" rostopic echo -n 1 --noarr "$1" > /dev/null 2>&1
+}
+
+ros_session_screenshot() {  # ros_session_screenshot FILE.png
+  xwd -root -silent | convert xwd:- "$1"
+}

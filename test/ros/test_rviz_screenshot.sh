@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# rviz with config/simstack.rviz under Xvfb, on the example bag replayed into the perception
+# nodelet: the screenshot must show the superquadric markers (pixels in the objects' colours).
+# Usage: test_rviz_screenshot.sh BUILD_DIR SOURCE_DIR
+set -e
+source_dir=$2
+# shellcheck disable=SC1091
+source "$source_dir/scripts/ros_session.bash" "$1"
+set -u
+ROS_HOME=$(mktemp -d)
+ros_session_start
+ros_session_xvfb
+ros_session_spawn "$ROS_HOME/replay.log" roslaunch simstack replay.launch rviz:=true loop:=true
+if ! ros_session_wait_topic /camera/perception/markers 120; then
+  echo "no markers within 120 s"; tail -30 "$ROS_HOME/replay.log"; exit 1
+fi
+sleep 15  # rviz draws with software GL
+shot=$ROS_HOME/rviz.png
+ros_session_screenshot "$shot"
+/usr/bin/python3 - "$shot" <<'PY'
+import sys
+import matplotlib.image as mpimg
+import numpy as np
+img = mpimg.imread(sys.argv[1])[:, :, :3]
+if img.dtype != np.float32:
+    img = img.astype(np.float32) / 255.0
+# The render area (right of the panels); the objects' colours (io/image_io.cpp instanceColour)
+# lit by rviz's light: a pixel counts when its hue and saturation are those of a colour.
+view = img[60:760, 370:1270]
+r, g, b = view[..., 0], view[..., 1], view[..., 2]
+mx, mn = view.max(axis=2), view.min(axis=2)
+sat = np.where(mx > 0, (mx - mn) / np.maximum(mx, 1e-6), 0)
+hue = np.zeros_like(mx)
+d = np.maximum(mx - mn, 1e-6)
+hue = np.where(mx == r, ((g - b) / d) % 6, hue)
+hue = np.where(mx == g, (b - r) / d + 2, hue)
+hue = np.where(mx == b, (r - g) / d + 4, hue)
+hue *= 60
+colours = {"object 1 (red)": 6.6, "object 2 (blue)": 213.0, "object 3 (green)": 120.0}
+found = {}
+for name, h in colours.items():
+    near = np.minimum(np.abs(hue - h), 360 - np.abs(hue - h)) < 12
+    found[name] = int(np.count_nonzero(near & (sat > 0.35) & (mx > 0.2)))
+print("pixels per object colour:", found)
+ok = sum(n > 300 for n in found.values())
+sys.exit(0 if ok >= 2 else 1)
+PY
+echo "rviz shows the markers: $shot"
