@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# The perception node under load (issue: 640x480 depth at 30 Hz for 60 s): answers per second,
+# latency from image stamp to ~objects (median, 95th percentile), frames not answered (dropped
+# by the one-slot mailbox) and the node's resident memory at 10 s and at the end; once on idle
+# cores and once beside one busy process (the camera driver and the planner of a workcell), with
+# OpenMP's passive wait policy (the node's default) and with spinning workers.
+# Usage: bench_perception_node.sh BUILD_DIR [SECONDS]
+set -e
+build=$1
+seconds=${2:-60}
+root=$(cd "$(dirname "$0")/../.." && pwd)
+# shellcheck disable=SC1091
+source "$root/scripts/ros_session.bash" "$build"
+set -u
+ros_session_start
+results=()
+for case in idle busy_passive busy_spinning; do
+  policy=passive
+  [ "$case" = busy_spinning ] && policy=active
+  rosparam delete /camera/perception > /dev/null 2>&1 || true
+  rosparam load "$root/config/perception.yaml" /camera/perception
+  OMP_WAIT_POLICY=$policy ros_session_spawn "$ROS_HOME/node_$case.log" \
+    "$build/devel/lib/simstack/perception_node" __ns:=camera __name:=perception
+  node_pid=${ROS_SESSION_PIDS[-1]}
+  timeout 60 bash -c 'until rosservice list 2>/dev/null | grep -q /camera/perception/save_octomap; do sleep 0.5; done'
+  busy_pid=
+  if [ "$case" != idle ]; then
+    yes > /dev/null &
+    busy_pid=$!
+  fi
+  line=$("$build/devel/lib/simstack/bench_node_driver" --pid "$node_pid" --label "$case" \
+           --seconds "$seconds" --early "$(( seconds < 20 ? seconds / 2 : 10 ))" | tail -1)
+  echo "$line"
+  results+=("$line")
+  [ -n "$busy_pid" ] && kill "$busy_pid"
+  kill -INT "$node_pid"; sleep 2; kill -KILL "$node_pid" 2>/dev/null || true
+done
+/usr/bin/python3 - "${results[@]}" <<'PY'
+import json, sys
+r = {d["case"]: d for d in map(json.loads, sys.argv[1:])}
+print("\n== perception node, 640x480 depth at 30 Hz (same run)")
+for name, d in r.items():
+    growth = 100 * (d["rss_end_mb"] / d["rss_early_mb"] - 1) if d["rss_early_mb"] > 0 else float("nan")
+    print(f"{name}: {d['answers_per_s']:.1f} frames/s answered, latency median {d['latency_median_ms']:.0f} ms, "
+          f"p95 {d['latency_p95_ms']:.0f} ms, {d['not_answered']} of {d['sent']} frames not answered, "
+          f"RSS {d['rss_early_mb']:.0f} -> {d['rss_end_mb']:.0f} MB ({growth:+.1f} %)")
+idle = r.get("idle")
+for name in ("busy_passive", "busy_spinning"):
+    if idle and name in r:
+        print(f"{name} / idle: {r[name]['latency_median_ms'] / idle['latency_median_ms']:.2f}x median latency, "
+              f"{idle['answers_per_s'] / max(r[name]['answers_per_s'], 1e-9):.2f}x fewer frames per second")
+PY

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# A missing or corrupt model at start: perception_node exits non-zero with a ROS_FATAL that names
+# the file (no crash); the nodelet reports it and its manager keeps running.
+# Usage: test_bad_model.sh BUILD_DIR SOURCE_DIR
+set -e
+build=$1
+# shellcheck disable=SC1091
+source "$2/scripts/ros_session.bash" "$build"
+set -u
+ROS_HOME=$(mktemp -d)
+ros_session_start
+node="$build/devel/lib/simstack/perception_node"
+echo "not a model" > "$ROS_HOME/corrupt.pt"
+for model in "$ROS_HOME/missing.pt" "$ROS_HOME/corrupt.pt"; do
+  set +e
+  timeout 60 "$node" __ns:=bad _perception/model:="$model" > "$ROS_HOME/node.log" 2>&1
+  status=$?
+  set -e
+  if [ "$status" -ne 1 ]; then
+    echo "perception_node with $model exited with $status, not 1"; cat "$ROS_HOME/node.log"; exit 1
+  fi
+  grep -q "FATAL.*$(basename "$model")" "$ROS_HOME/node.log" ||
+    { echo "no FATAL naming $model:"; cat "$ROS_HOME/node.log"; exit 1; }
+done
+ros_session_spawn "$ROS_HOME/manager.log" rosrun nodelet nodelet manager __name:=manager
+sleep 2
+rosparam set /perception/perception/model "$ROS_HOME/corrupt.pt"
+timeout 60 rosrun nodelet nodelet load simstack/PerceptionNodelet manager __name:=perception \
+  --no-bond > "$ROS_HOME/load.log" 2>&1 &
+sleep 8
+grep -q "FATAL.*corrupt.pt" "$ROS_HOME/manager.log" ||
+  { echo "the manager did not report the model:"; cat "$ROS_HOME/manager.log"; exit 1; }
+rosnode ping -c 1 /manager > /dev/null || { echo "the manager died"; cat "$ROS_HOME/manager.log"; exit 1; }
+echo "bad models refused: node exits 1, nodelet reports and its manager lives"
