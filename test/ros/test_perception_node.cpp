@@ -340,6 +340,62 @@ TEST_F(PerceptionNodeTest, AnEstimatedTableIsUsedBroadcastAndRefusedWhenThereIsN
       << "stopped publishing after a tableless frame";
 }
 
+TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
+  // Three cameras around the pile, each on tf; the accumulating node's own topics.
+  ros::Publisher image = nh_.advertise<sensor_msgs::Image>("/accumulating/depth/image_rect", 1);
+  ros::Publisher info =
+      nh_.advertise<sensor_msgs::CameraInfo>("/accumulating/depth/camera_info", 1);
+  std::vector<ObjectArray> answers;
+  std::mutex answers_mutex;
+  ros::Subscriber sub = nh_.subscribe<ObjectArray>(
+      "/accumulating/perception/objects", 10, [&](const ObjectArray::ConstPtr& msg) {
+        std::lock_guard<std::mutex> lock(answers_mutex);
+        answers.push_back(*msg);
+      });
+  std::vector<geometry_msgs::TransformStamped> cameras;
+  std::vector<Transform> poses;
+  for (int k = 0; k < 4; ++k) {
+    const double a = 2.0 * M_PI * k / 4 + 0.3;
+    poses.push_back(lookAt(Vec3(0.6 * std::cos(a), 0.6 * std::sin(a), 0.55), Vec3(0, 0, 0.04)));
+    geometry_msgs::TransformStamped t = tf2::eigenToTransform(poses.back());
+    t.header.stamp = ros::Time::now();
+    t.header.frame_id = "table";
+    t.child_frame_id = "accumulating_camera_" + std::to_string(k);
+    cameras.push_back(t);
+  }
+  tf2_ros::StaticTransformBroadcaster tf;
+  tf.sendTransform(cameras);
+  for (int i = 0; i < 100 && (sub.getNumPublishers() == 0 || image.getNumSubscribers() == 0); ++i)
+    ros::WallDuration(0.1).sleep();
+  const DepthRenderer renderer(Scene::fromSuperquadrics(knownPile()));
+  // The views fused for the frame of camera k (0 when no answer came within 60 s).
+  auto send = [&](int k) -> unsigned {
+    const ros::Time stamp = ros::Time::now();
+    sensor_msgs::Image img = imageMsg(renderer.render(camera_, poses[k]).depth, stamp);
+    sensor_msgs::CameraInfo ci = infoMsg(stamp);
+    img.header.frame_id = ci.header.frame_id = cameras[k].child_frame_id;
+    info.publish(ci);
+    image.publish(img);
+    for (int i = 0; i < 3000; ++i) {
+      ros::spinOnce();
+      {
+        std::lock_guard<std::mutex> lock(answers_mutex);
+        for (const ObjectArray& o : answers)
+          if (o.header.stamp == stamp) return o.views;
+      }
+      ros::WallDuration(0.02).sleep();
+    }
+    return 0;
+  };
+  EXPECT_EQ(send(0), 1u);
+  EXPECT_EQ(send(1), 2u);
+  EXPECT_EQ(send(2), 3u);
+  EXPECT_EQ(send(3), 3u) << "max_views is 3";
+  std_srvs::Empty empty;
+  ASSERT_TRUE(ros::service::call("/accumulating/perception/reset", empty));
+  EXPECT_EQ(send(0), 1u) << "~reset did not clear the views";
+}
+
 }  // namespace
 }  // namespace simstack
 
