@@ -365,8 +365,11 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
   }
   tf2_ros::StaticTransformBroadcaster tf;
   tf.sendTransform(cameras);
-  for (int i = 0; i < 100 && (sub.getNumPublishers() == 0 || image.getNumSubscribers() == 0); ++i)
+  for (int i = 0; i < 300 && (sub.getNumPublishers() == 0 || image.getNumSubscribers() == 0 ||
+                              info.getNumSubscribers() == 0);
+       ++i)
     ros::WallDuration(0.1).sleep();
+  ros::WallDuration(0.5).sleep();
   const DepthRenderer renderer(Scene::fromSuperquadrics(knownPile()));
   // The views fused for the frame of camera k (0 when no answer came within 60 s).
   auto send = [&](int k) -> unsigned {
