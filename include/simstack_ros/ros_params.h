@@ -28,7 +28,8 @@ struct NodeConfig {
 };
 
 /// The pipeline's settings from the parameters under `pnh` (sections perception, segments,
-/// fitting, table; a relative model path is taken from `package_dir`). Throws
+/// fitting, table; a relative model path is taken from `package_dir`); with none of them set,
+/// `package_dir`/config/perception.yaml. Throws
 /// std::runtime_error naming the parameter when one is misspelt or of the wrong type.
 PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
                                             const std::string& package_dir);

@@ -1,4 +1,5 @@
-// perception_node: PerceptionServer in a process of its own (`rosrun simstack perception_node`).
+// perception_node: PerceptionServer in a process of its own (`rosrun simstack perception_node` in a
+// catkin workspace; rosrun skips a build directory inside the package, as scripts/ make it).
 #include <ros/package.h>
 #include <ros/ros.h>
 
@@ -16,7 +17,7 @@ int main(int argc, char** argv) {
     setenv("OMP_WAIT_POLICY", "passive", 1);
     execv("/proc/self/exe", argv);  // returns only on failure: then run as we are
   }
-  ros::init(argc, argv, "simstack_perception");
+  ros::init(argc, argv, "perception");  // topics under <namespace>/perception/, as launched
   ros::NodeHandle nh, pnh("~");
   std::unique_ptr<simstack::PerceptionServer> server;
   try {

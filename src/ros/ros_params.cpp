@@ -62,6 +62,10 @@ void NodeConfig::validate() const {
 
 PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
                                             const std::string& package_dir) {
+  // Nothing loaded (a node started by hand): the package's own config, as the tools do.
+  if (!pnh.hasParam("perception") && !pnh.hasParam("segments") && !pnh.hasParam("fitting") &&
+      !pnh.hasParam("table") && !pnh.hasParam("hough"))
+    return loadPerceptionYaml(package_dir + "/config/perception.yaml", package_dir);
   std::ostringstream yaml;
   for (const char* section : {"perception", "hough", "segments", "fitting", "table"}) {
     XmlRpc::XmlRpcValue v;
