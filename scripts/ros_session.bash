@@ -1,6 +1,7 @@
 # Sourced by scripts/demo and the rviz test: a ROS master of our own on a free port, an Xvfb
 # display, and everything started here stopped again on exit, Ctrl-C or failure.
 # Usage: source scripts/ros_session.bash BUILD_DIR; ros_session_start; ros_session_xvfb; ...
+# With ROS_SESSION_REMOVE_HOME=1 the ROS_HOME (logs) is removed at the end too.
 
 # shellcheck disable=SC1091
 source "$1/devel/setup.bash"  # (Debian's ROS profile reads unset variables: no set -u before)
@@ -9,14 +10,28 @@ export ROS_HOSTNAME=localhost
 export ROS_HOME=${ROS_HOME:-$(mktemp -d)}
 ROS_SESSION_PIDS=()
 
-ros_session_stop() {
-  local pid
-  for pid in "${ROS_SESSION_PIDS[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
-  sleep 1
-  for pid in "${ROS_SESSION_PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
-  sleep 1
-  for pid in "${ROS_SESSION_PIDS[@]}"; do kill -KILL "$pid" 2>/dev/null || true; done
+ros_session_stop() {  # every process group started here: INT, then TERM, then KILL
+  local pid signal
+  for signal in INT TERM KILL; do
+    for pid in "${ROS_SESSION_PIDS[@]}"; do kill -"$signal" -- -"$pid" 2>/dev/null || true; done
+    for _ in $(seq 30); do
+      local alive=0
+      for pid in "${ROS_SESSION_PIDS[@]}"; do kill -0 -- -"$pid" 2>/dev/null && alive=1; done
+      [ $alive -eq 0 ] && break
+      sleep 0.5
+    done
+  done
   ROS_SESSION_PIDS=()
+  if [ "${ROS_SESSION_REMOVE_HOME:-0}" = 1 ]; then rm -rf "$ROS_HOME"; fi
+}
+# Stops one process group started by ros_session_spawn and forgets it.
+ros_session_kill() {  # ros_session_kill PID
+  local pid=$1 keep=()
+  kill -INT -- -"$pid" 2>/dev/null || true
+  for _ in $(seq 20); do kill -0 -- -"$pid" 2>/dev/null || break; sleep 0.5; done
+  kill -KILL -- -"$pid" 2>/dev/null || true
+  for p in "${ROS_SESSION_PIDS[@]}"; do [ "$p" != "$pid" ] && keep+=("$p"); done
+  ROS_SESSION_PIDS=("${keep[@]}")
 }
 trap ros_session_stop EXIT
 trap 'exit 130' INT TERM

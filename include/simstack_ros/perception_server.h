@@ -85,14 +85,18 @@ class PerceptionServer {
   std::optional<Frame> mailbox_;
   bool stop_ = false;
   long received_ = 0, dropped_ = 0, processed_ = 0, skipped_ = 0;
-  std::string last_error_;
+  std::string last_error_, last_kind_;
+  bool failing_ = false;  ///< the last frame was skipped
   ros::WallTime last_warning_;
+  long processed_before_ = 0;
+  ros::WallTime rate_since_;
+  int decompose_samples_ = 1;  ///< as configured at start (samples may change live)
+  std::mutex save_mutex_;
   StageTimings last_timings_;
   std::shared_ptr<const SceneEstimate> last_scene_;
   std::vector<DepthView> views_;  ///< accumulated views (accumulate_views)
   bool reset_requested_ = false;
   std::optional<LiveSettingsConfig> pending_settings_;
-  ros::WallTime started_;
   std::thread worker_;  ///< last: starts after everything it uses
 };
 

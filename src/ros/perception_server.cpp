@@ -22,6 +22,19 @@ std::string expandHome(const std::string& path) {
   return std::string(home ? home : "") + path.substr(1);
 }
 
+LiveSettingsConfig liveSettings(const PerceptionConfig& c) {
+  LiveSettingsConfig live;
+  live.samples = c.samples;
+  live.hough_refinement = c.hough.refinement;
+  live.hough_min_traversals = c.hough.min_traversals;
+  live.hough_bandwidth_m = c.hough.bandwidth_m;
+  live.hough_min_instance_voxels = c.hough.min_instance_voxels;
+  live.hough_min_vote_norm = c.hough.min_vote_norm;
+  live.min_instance_points = c.min_instance_points;
+  live.joint_refinement = c.joint_refinement;
+  return live;
+}
+
 /// Why a file name given to ~save_octomap is refused ("" when it is fine).
 std::string badFileName(const std::string& name) {
   if (name.empty()) return "no file name given";
@@ -44,7 +57,7 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
       perception_(std::make_unique<ScenePerception>(perceptionConfigFromParams(pnh, package_dir))),
       tf_listener_(tf_buffer_),
       it_(nh),
-      started_(ros::WallTime::now()) {
+      rate_since_(ros::WallTime::now()) {
   objects_pub_ = pnh_.advertise<ObjectArray>("objects", 1);
   instances_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("instances", 1);
   markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("markers", 1);
@@ -57,25 +70,22 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   diagnostics_.add("perception", this, &PerceptionServer::diagnose);
   diagnostics_timer_ = nh_.createTimer(ros::Duration(1.0),
                                        [this](const ros::TimerEvent&) { diagnostics_.update(); });
-  const PerceptionConfig& c = perception_->config();
-  LiveSettingsConfig live;
-  live.samples = c.samples;
-  live.hough_refinement = c.hough.refinement;
-  live.hough_min_traversals = c.hough.min_traversals;
-  live.hough_bandwidth_m = c.hough.bandwidth_m;
-  live.hough_min_instance_voxels = c.hough.min_instance_voxels;
-  live.hough_min_vote_norm = c.hough.min_vote_norm;
-  live.min_instance_points = c.min_instance_points;
-  live.joint_refinement = c.joint_refinement;
+  decompose_samples_ = perception_->config().decompose_samples;
+  LiveSettingsConfig live = liveSettings(perception_->config());
   live.occupancy_min = node_.occupancy_min;
   reconfigure_ =
       std::make_unique<dynamic_reconfigure::Server<LiveSettingsConfig>>(reconfigure_mutex_, pnh_);
   reconfigure_->updateConfig(live);  // the node's parameters, not the .cfg's defaults
   reconfigure_->setCallback(
       [this](LiveSettingsConfig& settings, uint32_t level) { onSettings(settings, level); });
-  worker_ = std::thread(&PerceptionServer::work, this);
-  depth_sub_ = it_.subscribeCamera("depth/image_rect", 1, &PerceptionServer::onFrame, this,
-                                   image_transport::TransportHints(node_.image_transport));
+  try {
+    depth_sub_ = it_.subscribeCamera("depth/image_rect", 1, &PerceptionServer::onFrame, this,
+                                     image_transport::TransportHints(node_.image_transport));
+  } catch (const image_transport::TransportLoadException& e) {
+    throw std::runtime_error("node/image_transport '" + node_.image_transport +
+                             "' cannot be loaded: " + e.what());
+  }
+  worker_ = std::thread(&PerceptionServer::work, this);  // last: onFrame only fills the mailbox
   ROS_INFO("simstack perception: model %s (%d samples), table %s '%s', listening on %s",
            perception_->config().model_path.c_str(), perception_->config().samples,
            node_.estimate_table ? "estimated and broadcast as" : "from tf frame",
@@ -83,7 +93,12 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
 }
 
 PerceptionServer::~PerceptionServer() {
+  // Nothing may call back into this object once its state starts going away.
   depth_sub_.shutdown();
+  diagnostics_timer_.stop();
+  reset_srv_.shutdown();
+  save_srv_.shutdown();
+  reconfigure_.reset();
   {
     std::lock_guard<std::mutex> lock(mutex_);
     stop_ = true;
@@ -126,11 +141,15 @@ void PerceptionServer::skip(const Frame& frame, const std::string& why) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     ++skipped_;
-    // One warning per kind of problem, then at most one every 5 s while it lasts.
+    // One warning per kind of problem (the reason up to its first ':', without the details
+    // that change from frame to frame), then at most one every 5 s while it lasts.
+    const std::string kind = why.substr(0, why.find(':'));
     const ros::WallTime now = ros::WallTime::now();
-    warn = why != last_error_ || (now - last_warning_).toSec() > 5.0;
+    warn = kind != last_kind_ || (now - last_warning_).toSec() > 5.0;
     if (warn) last_warning_ = now;
+    last_kind_ = kind;
     last_error_ = why;
+    failing_ = true;
   }
   if (warn)
     ROS_WARN("simstack perception: frame %u of %s skipped: %s", frame.image->header.seq,
@@ -193,12 +212,16 @@ void PerceptionServer::applySettings() {
   c.hough.min_vote_norm = s->hough_min_vote_norm;
   c.min_instance_points = s->min_instance_points;
   c.joint_refinement = s->joint_refinement;
-  c.decompose_samples = std::min(c.decompose_samples, c.samples);
+  c.decompose_samples = std::min(decompose_samples_, c.samples);
   try {
     perception_->updateSettings(c);
   } catch (const std::invalid_argument& e) {
     ROS_ERROR("simstack perception: new settings refused, the previous ones stay: %s", e.what());
   }
+  // What is in effect (a refused value, or an FC model's single sample) shown back.
+  LiveSettingsConfig shown = liveSettings(perception_->config());
+  shown.occupancy_min = s->occupancy_min;
+  reconfigure_->updateConfig(shown);
 }
 
 void PerceptionServer::process(const Frame& frame) {
@@ -227,6 +250,7 @@ void PerceptionServer::process(const Frame& frame) {
   publish(frame, view, estimate, static_cast<int>(views.size()));
   std::lock_guard<std::mutex> lock(mutex_);
   ++processed_;
+  failing_ = false;
   last_timings_ = estimate.timings;
   last_scene_ = std::make_shared<const SceneEstimate>(std::move(estimate));
 }
@@ -268,6 +292,7 @@ bool PerceptionServer::reset(std_srvs::Empty::Request&, std_srvs::Empty::Respons
 }
 
 bool PerceptionServer::saveOctomap(SaveOctomap::Request& req, SaveOctomap::Response& res) {
+  std::lock_guard<std::mutex> saving(save_mutex_);  // two calls for one name: one after the other
   res.success = false;
   res.message = badFileName(req.file_name);
   if (!res.message.empty()) return true;
@@ -303,18 +328,22 @@ bool PerceptionServer::saveOctomap(SaveOctomap::Request& req, SaveOctomap::Respo
 
 void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   std::lock_guard<std::mutex> lock(mutex_);
-  const double seconds = std::max(1e-3, (ros::WallTime::now() - started_).toSec());
+  const ros::WallTime now = ros::WallTime::now();
+  const double seconds = std::max(1e-3, (now - rate_since_).toSec());
+  const double rate = (processed_ - processed_before_) / seconds;
+  rate_since_ = now;
+  processed_before_ = processed_;
   if (processed_ == 0 && skipped_ > 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "no frame processed: " + last_error_);
-  else if (!last_error_.empty())
-    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "last skipped frame: " + last_error_);
+  else if (failing_)
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "frames skipped: " + last_error_);
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "perceiving");
   status.add("frames received", received_);
   status.add("frames processed", processed_);
   status.add("frames dropped (newer frame came first)", dropped_);
   status.add("frames skipped (bad input)", skipped_);
-  status.add("frames processed per second", processed_ / seconds);
+  status.add("frames processed per second (since the last report)", rate);
   status.add("last error", last_error_);
   status.add("table ms", last_timings_.table_ms);
   status.add("tsdf ms", last_timings_.tsdf_ms);

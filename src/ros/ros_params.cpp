@@ -1,5 +1,6 @@
 #include "simstack_ros/ros_params.h"
 
+#include <ros/param.h>
 #include <xmlrpcpp/XmlRpcValue.h>
 
 #include <cmath>
@@ -62,6 +63,16 @@ void NodeConfig::validate() const {
 
 PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
                                             const std::string& package_dir) {
+  // A map under the node's namespace is a config section: a misspelt one is an error (the
+  // scalars there are dynamic_reconfigure's).
+  XmlRpc::XmlRpcValue all;
+  if (ros::param::get(pnh.getNamespace(), all) && all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
+    for (auto& kv : all)
+      if (kv.second.getType() == XmlRpc::XmlRpcValue::TypeStruct &&
+          !std::set<std::string>{"perception", "hough", "segments", "fitting", "table", "node"}
+               .count(kv.first))
+        throw std::runtime_error("unknown parameter section " + pnh.resolveName(kv.first) +
+                                 " (perception, hough, segments, fitting, table or node)");
   // Nothing loaded (a node started by hand): the package's own config, as the tools do.
   if (!pnh.hasParam("perception") && !pnh.hasParam("segments") && !pnh.hasParam("fitting") &&
       !pnh.hasParam("table") && !pnh.hasParam("hough"))

@@ -5,13 +5,15 @@
 # cores and once beside one busy process (the camera driver and the planner of a workcell), with
 # OpenMP's passive wait policy (the node's default) and with spinning workers.
 # Usage: bench_perception_node.sh BUILD_DIR [SECONDS]
-set -e
+set -eo pipefail
 build=$1
 seconds=${2:-60}
 root=$(cd "$(dirname "$0")/../.." && pwd)
 # shellcheck disable=SC1091
 source "$root/scripts/ros_session.bash" "$build"
 set -u
+ROS_HOME=$(mktemp -d)
+ROS_SESSION_REMOVE_HOME=1
 ros_session_start
 results=()
 for case in idle busy_passive busy_spinning; do
@@ -25,15 +27,15 @@ for case in idle busy_passive busy_spinning; do
   timeout 60 bash -c 'until rosservice list 2>/dev/null | grep -q /camera/perception/save_octomap; do sleep 0.5; done'
   busy_pid=
   if [ "$case" != idle ]; then
-    yes > /dev/null &
-    busy_pid=$!
+    ros_session_spawn /dev/null yes
+    busy_pid=${ROS_SESSION_PIDS[-1]}
   fi
   line=$("$build/devel/lib/simstack/bench_node_driver" --pid "$node_pid" --label "$case" \
            --seconds "$seconds" --early "$(( seconds < 20 ? seconds / 2 : 10 ))" | tail -1)
   echo "$line"
   results+=("$line")
-  [ -n "$busy_pid" ] && kill "$busy_pid"
-  kill -INT "$node_pid"; sleep 2; kill -KILL "$node_pid" 2>/dev/null || true
+  if [ -n "$busy_pid" ]; then ros_session_kill "$busy_pid"; fi
+  ros_session_kill "$node_pid"
 done
 /usr/bin/python3 - "${results[@]}" <<'PY'
 import json, sys

@@ -6,7 +6,9 @@ build=$1
 source_dir=$2
 # shellcheck disable=SC1091
 source "$build/devel/setup.bash"
-export ROS_HOME=${ROS_HOME:-$(mktemp -d)}
+ROS_HOME=$(mktemp -d)
+export ROS_HOME
+trap 'rm -rf "$ROS_HOME"' EXIT
 status=0
 for f in "$source_dir"/launch/*.launch "$source_dir"/test/ros/*.test; do
   if out=$(/usr/bin/python3 /usr/share/roslaunch/scripts/roslaunch-check "$f" 2>&1); then

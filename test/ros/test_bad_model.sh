@@ -8,6 +8,7 @@ build=$1
 source "$2/scripts/ros_session.bash" "$build"
 set -u
 ROS_HOME=$(mktemp -d)
+ROS_SESSION_REMOVE_HOME=1
 ros_session_start
 node="$build/devel/lib/simstack/perception_node"
 echo "not a model" > "$ROS_HOME/corrupt.pt"
@@ -23,11 +24,11 @@ for model in "$ROS_HOME/missing.pt" "$ROS_HOME/corrupt.pt"; do
     { echo "no FATAL naming $model:"; cat "$ROS_HOME/node.log"; exit 1; }
 done
 ros_session_spawn "$ROS_HOME/manager.log" rosrun nodelet nodelet manager __name:=manager
-sleep 2
+timeout 30 bash -c 'until rosnode list 2>/dev/null | grep -q /manager; do sleep 0.3; done'
 rosparam set /perception/perception/model "$ROS_HOME/corrupt.pt"
-timeout 60 rosrun nodelet nodelet load simstack/PerceptionNodelet manager __name:=perception \
-  --no-bond > "$ROS_HOME/load.log" 2>&1 &
-sleep 8
+ros_session_spawn "$ROS_HOME/load.log" rosrun nodelet nodelet load simstack/PerceptionNodelet \
+  manager __name:=perception --no-bond
+for _ in $(seq 120); do grep -q "FATAL.*corrupt.pt" "$ROS_HOME/manager.log" && break; sleep 0.5; done
 grep -q "FATAL.*corrupt.pt" "$ROS_HOME/manager.log" ||
   { echo "the manager did not report the model:"; cat "$ROS_HOME/manager.log"; exit 1; }
 rosnode ping -c 1 /manager > /dev/null || { echo "the manager died"; cat "$ROS_HOME/manager.log"; exit 1; }

@@ -8,6 +8,7 @@ source_dir=$2
 source "$source_dir/scripts/ros_session.bash" "$1"
 set -u
 ROS_HOME=$(mktemp -d)
+ROS_SESSION_REMOVE_HOME=1
 ros_session_start
 ros_session_xvfb
 ros_session_spawn "$ROS_HOME/replay.log" roslaunch simstack replay.launch rviz:=true loop:=true
@@ -45,4 +46,4 @@ print("pixels per object colour:", found)
 ok = sum(n > 300 for n in found.values())
 sys.exit(0 if ok >= 2 else 1)
 PY
-echo "rviz shows the markers: $shot"
+echo "rviz shows the markers"

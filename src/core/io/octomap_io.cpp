@@ -1,12 +1,16 @@
 #include "simstack/io/octomap_io.h"
 
 #include <octomap/OcTree.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
-#include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
+#include <sstream>
 #include <stdexcept>
 
 namespace simstack {
@@ -33,17 +37,30 @@ void writeOccupancyOctomap(const std::string& path, const Grid3<float>& probabil
         const double p = std::clamp<double>(probability.data[g.linear(x, y, z)], 1e-3, 1 - 1e-3);
         tree.setNodeValue(c.x(), c.y(), c.z(), static_cast<float>(std::log(p / (1.0 - p))));
       }
-  const std::string temp = path + ".tmp." + std::to_string(::getpid());
-  const bool written = ext == ".ot" ? tree.write(temp) : tree.writeBinary(temp);
-  std::error_code ec;
-  if (!written) {
-    std::filesystem::remove(temp, ec);
-    throw std::runtime_error("cannot write " + path);
+  std::ostringstream bytes;
+  const bool serialised = ext == ".ot" ? tree.write(bytes) : tree.writeBinary(bytes);
+  if (!serialised)
+    throw std::runtime_error("cannot write " + path + ": OctoMap serialisation failed");
+  // A new file of a unique name beside the target (O_EXCL: never an existing file or a link
+  // planted there), renamed over the target when complete.
+  std::string temp = path + ".XXXXXX";
+  const int fd = ::mkstemp(temp.data());
+  if (fd < 0) throw std::runtime_error("cannot write " + path + ": " + std::strerror(errno));
+  ::fchmod(fd, 0644);  // mkstemp's 0600 would hide the map from other users
+  const std::string data = bytes.str();
+  size_t done = 0;
+  while (done < data.size()) {
+    const ssize_t n = ::write(fd, data.data() + done, data.size() - done);
+    if (n <= 0) break;
+    done += static_cast<size_t>(n);
   }
-  std::filesystem::rename(temp, path, ec);
-  if (ec) {
+  const bool complete = done == data.size() && ::fsync(fd) == 0;
+  ::close(fd);
+  std::error_code ec;
+  if (complete) std::filesystem::rename(temp, path, ec);
+  if (!complete || ec) {
     std::filesystem::remove(temp);
-    throw std::runtime_error("cannot write " + path + ": " + ec.message());
+    throw std::runtime_error("cannot write " + path + (ec ? ": " + ec.message() : ""));
   }
 }
 
