@@ -65,3 +65,26 @@ TEST(Conversions, CameraInfo) {
   info.K[0] = 0;
   EXPECT_THROW(cameraFromInfo(info), std::invalid_argument);
 }
+
+TEST(Conversions, DepthAndCameraInfoRoundTrip) {
+  DepthImage depth(3, 2, 0.0f);
+  depth.at(0, 0) = 0.5f;
+  depth.at(1, 0) = 1.2344f;  // to the millimetre
+  depth.at(2, 1) = std::numeric_limits<float>::quiet_NaN();
+  std_msgs::Header header;
+  header.frame_id = "cam";
+  const sensor_msgs::Image msg = depthImageMsg(header, depth);
+  EXPECT_EQ(msg.encoding, sensor_msgs::image_encodings::TYPE_16UC1);
+  const DepthImage back = depthFromImage(msg);
+  EXPECT_FLOAT_EQ(back.at(0, 0), 0.5f);
+  EXPECT_FLOAT_EQ(back.at(1, 0), 1.234f);
+  EXPECT_EQ(back.at(2, 1), 0.0f);
+  EXPECT_EQ(back.at(1, 1), 0.0f);
+  PinholeCamera camera;
+  camera.fx = 600;
+  camera.cy = 250;
+  const PinholeCamera c = cameraFromInfo(cameraInfoMsg(header, camera));
+  EXPECT_DOUBLE_EQ(c.fx, 600);
+  EXPECT_DOUBLE_EQ(c.cy, 250);
+  EXPECT_EQ(c.width, 640);
+}

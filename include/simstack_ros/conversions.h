@@ -29,6 +29,11 @@ DepthImage depthFromImage(const sensor_msgs::Image& msg);
 /// Rejects zero focal lengths and empty sizes.
 PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg);
 
+/// The inverses, as a depth camera publishes: 16UC1 in mm (missing = 0) and its CameraInfo
+/// (K and P of `camera`, no distortion).
+sensor_msgs::Image depthImageMsg(const std_msgs::Header& header, const DepthImage& depth);
+sensor_msgs::CameraInfo cameraInfoMsg(const std_msgs::Header& header, const PinholeCamera& camera);
+
 geometry_msgs::Pose poseMsg(const Transform& T);
 Transform transformFromPose(const geometry_msgs::Pose& pose);
 /// The message of a core superquadric (same frame).

@@ -118,6 +118,36 @@ std_msgs::ColorRGBA colourMsg(int k) {
 
 }  // namespace
 
+sensor_msgs::Image depthImageMsg(const std_msgs::Header& header, const DepthImage& depth) {
+  sensor_msgs::Image img;
+  img.header = header;
+  img.width = static_cast<uint32_t>(depth.width);
+  img.height = static_cast<uint32_t>(depth.height);
+  img.encoding = sensor_msgs::image_encodings::TYPE_16UC1;
+  img.is_bigendian = false;
+  img.step = 2 * img.width;
+  img.data.resize(static_cast<size_t>(img.step) * img.height);
+  for (size_t i = 0; i < depth.pixels.size(); ++i) {
+    const float d = depth.pixels[i];
+    const uint16_t mm = validDepth(d) ? static_cast<uint16_t>(std::lround(d * 1000.0f)) : 0;
+    std::memcpy(img.data.data() + 2 * i, &mm, 2);
+  }
+  return img;
+}
+
+sensor_msgs::CameraInfo cameraInfoMsg(const std_msgs::Header& header, const PinholeCamera& c) {
+  sensor_msgs::CameraInfo info;
+  info.header = header;
+  info.width = static_cast<uint32_t>(c.width);
+  info.height = static_cast<uint32_t>(c.height);
+  info.distortion_model = "plumb_bob";
+  info.D.assign(5, 0.0);
+  info.K = {c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1};
+  info.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  info.P = {c.fx, 0, c.cx, 0, 0, c.fy, c.cy, 0, 0, 0, 1, 0};
+  return info;
+}
+
 geometry_msgs::Pose poseMsg(const Transform& T) {
   geometry_msgs::Pose p;
   p.position.x = T.translation().x();

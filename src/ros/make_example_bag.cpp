@@ -17,41 +17,9 @@
 
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/pile_generator.h"
+#include "simstack_ros/conversions.h"
 
 using namespace simstack;
-
-namespace {
-
-sensor_msgs::Image depthMsg(const DepthImage& depth, const std_msgs::Header& header) {
-  sensor_msgs::Image img;
-  img.header = header;
-  img.width = depth.width;
-  img.height = depth.height;
-  img.encoding = sensor_msgs::image_encodings::TYPE_16UC1;
-  img.step = 2 * img.width;
-  img.data.resize(static_cast<size_t>(img.step) * img.height);
-  for (size_t i = 0; i < depth.pixels.size(); ++i) {
-    const float d = depth.pixels[i];
-    const uint16_t mm = validDepth(d) ? static_cast<uint16_t>(std::lround(d * 1000.0f)) : 0;
-    std::memcpy(img.data.data() + 2 * i, &mm, 2);
-  }
-  return img;
-}
-
-sensor_msgs::CameraInfo infoMsg(const PinholeCamera& c, const std_msgs::Header& header) {
-  sensor_msgs::CameraInfo info;
-  info.header = header;
-  info.width = c.width;
-  info.height = c.height;
-  info.distortion_model = "plumb_bob";
-  info.D.assign(5, 0.0);
-  info.K = {c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1};
-  info.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-  info.P = {c.fx, 0, c.cx, 0, 0, c.fy, c.cy, 0, 0, 0, 1, 0};
-  return info;
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   std::string output, camera_ns = "camera", table_frame = "table",
@@ -117,9 +85,10 @@ int main(int argc, char** argv) {
         tf2_msgs::TFMessage tf;
         tf.transforms.push_back(t);
         bag.write("/tf", header.stamp, tf);
-        bag.write("/" + camera_ns + "/depth/camera_info", header.stamp, infoMsg(camera, header));
+        bag.write("/" + camera_ns + "/depth/camera_info", header.stamp,
+                  cameraInfoMsg(header, camera));
         bag.write("/" + camera_ns + "/depth/image_rect", header.stamp,
-                  depthMsg(image.depth, header));
+                  depthImageMsg(header, image.depth));
       }
     }
     bag.close();

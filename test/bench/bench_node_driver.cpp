@@ -22,6 +22,7 @@
 
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/pile_generator.h"
+#include "simstack_ros/conversions.h"
 
 using namespace simstack;
 
@@ -84,25 +85,10 @@ int main(int argc, char** argv) {
   t.header.frame_id = "table";
   t.child_frame_id = "camera_depth_optical_frame";
   tf.sendTransform(t);
-  sensor_msgs::Image img;
-  img.header.frame_id = t.child_frame_id;
-  img.width = depth.width;
-  img.height = depth.height;
-  img.encoding = sensor_msgs::image_encodings::TYPE_16UC1;
-  img.step = 2 * img.width;
-  img.data.resize(img.step * img.height);
-  for (size_t i = 0; i < depth.pixels.size(); ++i) {
-    const uint16_t mm = validDepth(depth.pixels[i])
-                            ? static_cast<uint16_t>(std::lround(depth.pixels[i] * 1000.0f))
-                            : 0;
-    std::memcpy(img.data.data() + 2 * i, &mm, 2);
-  }
-  sensor_msgs::CameraInfo info;
-  info.header.frame_id = img.header.frame_id;
-  info.width = camera.width;
-  info.height = camera.height;
-  info.K = {camera.fx, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1};
-  info.P = {camera.fx, 0, camera.cx, 0, 0, camera.fy, camera.cy, 0, 0, 0, 1, 0};
+  std_msgs::Header header;
+  header.frame_id = t.child_frame_id;
+  sensor_msgs::Image img = depthImageMsg(header, depth);
+  sensor_msgs::CameraInfo info = cameraInfoMsg(header, camera);
   ros::WallDuration(2.0).sleep();  // connections
 
   long sent = 0, rss_early = -1;

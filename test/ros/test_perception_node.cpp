@@ -25,6 +25,7 @@
 
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/scene.h"
+#include "simstack_ros/conversions.h"
 
 namespace simstack {
 namespace {
@@ -82,32 +83,17 @@ class PerceptionNodeTest : public ::testing::Test {
     return renderer.render(camera_, T_table_camera_).depth;
   }
 
-  sensor_msgs::Image imageMsg(const DepthImage& depth, ros::Time stamp) const {
-    sensor_msgs::Image img;
-    img.header.stamp = stamp;
-    img.header.frame_id = kCameraFrame;
-    img.width = depth.width;
-    img.height = depth.height;
-    img.encoding = sensor_msgs::image_encodings::TYPE_16UC1;
-    img.step = 2 * img.width;
-    img.data.resize(img.step * img.height);
-    for (size_t i = 0; i < depth.pixels.size(); ++i) {
-      const float d = depth.pixels[i];
-      const uint16_t mm = validDepth(d) ? static_cast<uint16_t>(std::lround(d * 1000.0f)) : 0;
-      std::memcpy(img.data.data() + 2 * i, &mm, 2);
-    }
-    return img;
+  std_msgs::Header header(ros::Time stamp) const {
+    std_msgs::Header h;
+    h.stamp = stamp;
+    h.frame_id = kCameraFrame;
+    return h;
   }
-
+  sensor_msgs::Image imageMsg(const DepthImage& depth, ros::Time stamp) const {
+    return depthImageMsg(header(stamp), depth);
+  }
   sensor_msgs::CameraInfo infoMsg(ros::Time stamp) const {
-    sensor_msgs::CameraInfo info;
-    info.header.stamp = stamp;
-    info.header.frame_id = kCameraFrame;
-    info.width = camera_.width;
-    info.height = camera_.height;
-    info.K = {camera_.fx, 0, camera_.cx, 0, camera_.fy, camera_.cy, 0, 0, 1};
-    info.P = {camera_.fx, 0, camera_.cx, 0, 0, camera_.fy, camera_.cy, 0, 0, 0, 1, 0};
-    return info;
+    return cameraInfoMsg(header(stamp), camera_);
   }
 
   /// Publishes a frame under a fresh stamp and waits up to `seconds` for the objects that
