@@ -116,23 +116,31 @@ std_msgs::ColorRGBA colourMsg(int k) {
   return out;
 }
 
-}  // namespace
-
-sensor_msgs::Image depthImageMsg(const std_msgs::Header& header, const DepthImage& depth) {
+/// A 16UC1 image (little-endian) whose pixel i is value(i).
+template <class Value>
+sensor_msgs::Image image16(const std_msgs::Header& header, int width, int height, Value value) {
   sensor_msgs::Image img;
   img.header = header;
-  img.width = static_cast<uint32_t>(depth.width);
-  img.height = static_cast<uint32_t>(depth.height);
+  img.width = static_cast<uint32_t>(width);
+  img.height = static_cast<uint32_t>(height);
   img.encoding = sensor_msgs::image_encodings::TYPE_16UC1;
   img.is_bigendian = false;
   img.step = 2 * img.width;
   img.data.resize(static_cast<size_t>(img.step) * img.height);
-  for (size_t i = 0; i < depth.pixels.size(); ++i) {
-    const float d = depth.pixels[i];
-    const uint16_t mm = validDepth(d) ? static_cast<uint16_t>(std::lround(d * 1000.0f)) : 0;
-    std::memcpy(img.data.data() + 2 * i, &mm, 2);
+  for (size_t i = 0; i < static_cast<size_t>(width) * height; ++i) {
+    const uint16_t v = value(i);
+    std::memcpy(img.data.data() + 2 * i, &v, 2);
   }
   return img;
+}
+
+}  // namespace
+
+sensor_msgs::Image depthImageMsg(const std_msgs::Header& header, const DepthImage& depth) {
+  return image16(header, depth.width, depth.height, [&](size_t i) {
+    const float d = depth.pixels[i];
+    return validDepth(d) ? static_cast<uint16_t>(std::lround(d * 1000.0f)) : uint16_t{0};
+  });
 }
 
 sensor_msgs::CameraInfo cameraInfoMsg(const std_msgs::Header& header, const PinholeCamera& c) {
@@ -300,19 +308,9 @@ visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
 }
 
 sensor_msgs::Image labelImage(const std_msgs::Header& header, const Image<int>& labels) {
-  sensor_msgs::Image img;
-  img.header = header;
-  img.width = static_cast<uint32_t>(labels.width);
-  img.height = static_cast<uint32_t>(labels.height);
-  img.encoding = sensor_msgs::image_encodings::TYPE_16UC1;
-  img.is_bigendian = false;
-  img.step = 2 * img.width;
-  img.data.resize(static_cast<size_t>(img.step) * img.height);
-  for (size_t i = 0; i < labels.pixels.size(); ++i) {
-    const uint16_t v = static_cast<uint16_t>(std::max(0, std::min(labels.pixels[i] + 1, 65535)));
-    std::memcpy(img.data.data() + 2 * i, &v, 2);
-  }
-  return img;
+  return image16(header, labels.width, labels.height, [&](size_t i) {
+    return static_cast<uint16_t>(std::max(0, std::min(labels.pixels[i] + 1, 65535)));
+  });
 }
 
 }  // namespace simstack

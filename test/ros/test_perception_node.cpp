@@ -104,17 +104,7 @@ class PerceptionNodeTest : public ::testing::Test {
     image.header.stamp = info.header.stamp = stamp;
     info_pub_.publish(info);
     image_pub_.publish(image);
-    const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(seconds);
-    while (ros::ok() && ros::WallTime::now() < until) {
-      ros::spinOnce();
-      {
-        std::lock_guard<std::mutex> lock(mutex_);
-        for (const ObjectArray& o : received_)
-          if (o.header.stamp == stamp) return o;
-      }
-      ros::WallDuration(0.02).sleep();
-    }
-    return std::nullopt;
+    return answerTo(received_, stamp, seconds);
   }
   std::optional<ObjectArray> sendDepth(const DepthImage& depth, double seconds = 30.0) {
     return send(imageMsg(depth, ros::Time(0)), infoMsg(ros::Time(0)), seconds);
@@ -130,12 +120,18 @@ class PerceptionNodeTest : public ::testing::Test {
   }
   /// The estimating node's answer to the frame of `stamp`, waiting up to `seconds`.
   std::optional<ObjectArray> estimatedFor(ros::Time stamp, double seconds) {
+    return answerTo(estimated_, stamp, seconds);
+  }
+  /// The message of `answers` (filled by a callback under mutex_) stamped `stamp`, waiting up
+  /// to `seconds` for it.
+  std::optional<ObjectArray> answerTo(const std::vector<ObjectArray>& answers, ros::Time stamp,
+                                      double seconds) {
     const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(seconds);
     while (ros::ok() && ros::WallTime::now() < until) {
       ros::spinOnce();
       {
         std::lock_guard<std::mutex> lock(mutex_);
-        for (const ObjectArray& o : estimated_)
+        for (const ObjectArray& o : answers)
           if (o.header.stamp == stamp) return o;
       }
       ros::WallDuration(0.02).sleep();
@@ -332,12 +328,11 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
   ros::Publisher info =
       nh_.advertise<sensor_msgs::CameraInfo>("/accumulating/depth/camera_info", 1);
   std::vector<ObjectArray> answers;
-  std::mutex answers_mutex;
-  ros::Subscriber sub = nh_.subscribe<ObjectArray>(
-      "/accumulating/perception/objects", 10, [&](const ObjectArray::ConstPtr& msg) {
-        std::lock_guard<std::mutex> lock(answers_mutex);
-        answers.push_back(*msg);
-      });
+  ros::Subscriber sub = nh_.subscribe<ObjectArray>("/accumulating/perception/objects", 10,
+                                                   [&](const ObjectArray::ConstPtr& msg) {
+                                                     std::lock_guard<std::mutex> lock(mutex_);
+                                                     answers.push_back(*msg);
+                                                   });
   std::vector<geometry_msgs::TransformStamped> cameras;
   std::vector<Transform> poses;
   for (int k = 0; k < 4; ++k) {
@@ -365,16 +360,8 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
     img.header.frame_id = ci.header.frame_id = cameras[k].child_frame_id;
     info.publish(ci);
     image.publish(img);
-    for (int i = 0; i < 3000; ++i) {
-      ros::spinOnce();
-      {
-        std::lock_guard<std::mutex> lock(answers_mutex);
-        for (const ObjectArray& o : answers)
-          if (o.header.stamp == stamp) return o.views;
-      }
-      ros::WallDuration(0.02).sleep();
-    }
-    return 0;
+    const std::optional<ObjectArray> out = answerTo(answers, stamp, 60.0);
+    return out ? out->views : 0u;
   };
   EXPECT_EQ(send(0), 1u);
   EXPECT_EQ(send(1), 2u);
