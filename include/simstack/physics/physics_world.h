@@ -29,6 +29,18 @@ struct PhysicsConfig {
   int rest_steps = 20;  ///< consecutive steps at rest that end settle()
   bool allow_sleeping = true;
   int solver_iterations = 10;  ///< Bullet's default; more reduce creep on slopes
+  /// Bullet's split impulse: overlapping objects (estimated scenes have them) are pushed apart
+  /// by a position correction that adds no velocity, instead of being shot apart.
+  bool split_impulse = false;
+  /// Bullet's two friction directions per contact, kept from step to step: objects resting
+  /// on slopes hold instead of creeping a few mm/s down them.
+  bool friction_direction_caching = false;
+};
+
+/// What a suction cup transmitted to its object during the last step (table frame).
+struct CupLoad {
+  Vec3 force_n = Vec3::Zero();    ///< on the object, at the contact point
+  Vec3 torque_nm = Vec3::Zero();  ///< on the object, about the contact point
 };
 
 class PhysicsWorld {
@@ -56,6 +68,25 @@ class PhysicsWorld {
   void setVelocity(int index, const Vec3& linear_mps, const Vec3& angular_radps);
   /// Applies a force (N) at a table-frame point for the next step.
   void applyForce(int index, const Vec3& force_n, const Vec3& point_table);
+  /// Mass of an object (kg).
+  double mass(int index) const;
+
+  /// A suction cup: object `index` held at table point `contact_table` by a compliant joint
+  /// (the cup's bellows) to an anchor that moves only where moveCup() puts it (a kinematic
+  /// body that collides with nothing). The joint is a spring in all six directions whose
+  /// stiffness gives the held object the natural frequency `stiffness_hz`, critically damped:
+  /// the object keeps resting on what supports it until the anchor pulls it away. One cup per
+  /// world; attaching again moves the cup to the new object.
+  void attachCup(int index, const Vec3& contact_table, double stiffness_hz = 10.0);
+  /// Places the anchor for the next step: the contact point is driven to `contact_table`
+  /// keeping the object's orientation at attachment.
+  void moveCup(const Vec3& contact_table);
+  /// Load on the held object during the last step (zero without a cup).
+  CupLoad cupLoad() const;
+  bool cupAttached() const;
+  /// Lets go of the object (a seal that broke).
+  void releaseCup();
+
   /// Pairs of objects in contact (distance below 2 margins); index -1 is the table.
   std::vector<std::pair<int, int>> contacts() const;
 

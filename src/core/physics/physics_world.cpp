@@ -2,6 +2,8 @@
 
 #include <btBulletDynamicsCommon.h>
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace simstack {
@@ -32,6 +34,13 @@ btDefaultCollisionConstructionInfo smallPools() {
   return info;
 }
 
+void zero(btJointFeedback* f) {
+  f->m_appliedForceBodyA.setZero();
+  f->m_appliedTorqueBodyA.setZero();
+  f->m_appliedForceBodyB.setZero();
+  f->m_appliedTorqueBodyB.setZero();
+}
+
 }  // namespace
 
 struct PhysicsWorld::Impl {
@@ -46,10 +55,26 @@ struct PhysicsWorld::Impl {
   std::vector<std::unique_ptr<btConvexHullShape>> shapes;
   std::vector<std::unique_ptr<btDefaultMotionState>> states;
   std::vector<std::unique_ptr<btRigidBody>> bodies;
+  // The suction cup: a kinematic anchor holding one object through a fixed joint.
+  std::unique_ptr<btSphereShape> cup_shape;
+  std::unique_ptr<btDefaultMotionState> cup_state;
+  std::unique_ptr<btRigidBody> cup;
+  std::unique_ptr<btGeneric6DofSpring2Constraint> cup_joint;
+  btJointFeedback cup_feedback;
+  int cup_object = -1;
+  Transform T_object_cup = Transform::Identity();  // the anchor in the held object's frame
 
   ~Impl() {
+    removeCupJoint();
+    if (cup) world.removeRigidBody(cup.get());
     for (auto& b : bodies) world.removeRigidBody(b.get());
     if (table) world.removeRigidBody(table.get());
+  }
+  void removeCupJoint() {
+    if (cup_joint) world.removeConstraint(cup_joint.get());
+    cup_joint.reset();
+    if (cup_object >= 0) bodies[cup_object]->forceActivationState(ACTIVE_TAG);
+    cup_object = -1;
   }
   void configure(btRigidBody* body) const {
     body->setFriction(config.friction);
@@ -63,6 +88,10 @@ PhysicsWorld::PhysicsWorld(const PhysicsConfig& config) : impl_(std::make_unique
   impl_->config = config;
   impl_->world.setGravity(btVector3(0, 0, -config.gravity_mps2));
   impl_->world.getSolverInfo().m_numIterations = config.solver_iterations;
+  impl_->world.getSolverInfo().m_splitImpulse = config.split_impulse ? 1 : 0;
+  if (config.friction_direction_caching)
+    impl_->world.getSolverInfo().m_solverMode |=
+        SOLVER_USE_2_FRICTION_DIRECTIONS | SOLVER_ENABLE_FRICTION_DIRECTION_CACHING;
   impl_->table_shape = std::make_unique<btStaticPlaneShape>(btVector3(0, 0, 1), 0.0);
   impl_->table_shape->setMargin(config.collision_margin_m);
   btRigidBody::btRigidBodyConstructionInfo info(0.0, nullptr, impl_->table_shape.get());
@@ -108,7 +137,11 @@ int PhysicsWorld::objectCount() const { return static_cast<int>(impl_->bodies.si
 
 void PhysicsWorld::step(int steps) {
   const double dt = impl_->config.timestep_s;
-  for (int i = 0; i < steps; ++i) impl_->world.stepSimulation(dt, 1, dt);
+  for (int i = 0; i < steps; ++i) {
+    // Bullet adds to the joint feedback; cupLoad() reports one step.
+    zero(&impl_->cup_feedback);
+    impl_->world.stepSimulation(dt, 1, dt);
+  }
 }
 
 bool PhysicsWorld::atRest() const {
@@ -161,6 +194,80 @@ void PhysicsWorld::applyForce(int index, const Vec3& f, const Vec3& point_table)
   b->activate(true);
   b->applyForce(btVector3(f.x(), f.y(), f.z()), rel);
 }
+
+double PhysicsWorld::mass(int index) const {
+  const btScalar inverse = impl_->bodies.at(index)->getInvMass();
+  return inverse > 0 ? 1.0 / inverse : 0.0;
+}
+
+void PhysicsWorld::attachCup(int index, const Vec3& contact_table, double stiffness_hz) {
+  Impl& m = *impl_;
+  btRigidBody* object = m.bodies.at(index).get();
+  m.removeCupJoint();
+  Transform T_table_cup = pose(index);
+  T_table_cup.translation() = contact_table;
+  if (!m.cup) {
+    m.cup_shape = std::make_unique<btSphereShape>(0.005);
+    m.cup_state = std::make_unique<btDefaultMotionState>(toBt(T_table_cup));
+    btRigidBody::btRigidBodyConstructionInfo info(0.0, m.cup_state.get(), m.cup_shape.get());
+    m.cup = std::make_unique<btRigidBody>(info);
+    m.cup->setCollisionFlags(m.cup->getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT |
+                             btCollisionObject::CF_NO_CONTACT_RESPONSE);
+    m.cup->setActivationState(DISABLE_DEACTIVATION);
+    m.cup->setUserIndex(-2);
+    m.world.addRigidBody(m.cup.get(), 0, 0);  // collides with nothing
+  }
+  m.cup_state->setWorldTransform(toBt(T_table_cup));
+  m.cup->setWorldTransform(toBt(T_table_cup));
+  m.T_object_cup = pose(index).inverse() * T_table_cup;
+  m.cup_joint = std::make_unique<btGeneric6DofSpring2Constraint>(
+      *m.cup, *object, btTransform::getIdentity(), toBt(m.T_object_cup));
+  const double omega = 2.0 * M_PI * stiffness_hz, mass = 1.0 / object->getInvMass();
+  const btVector3 inertia = object->getLocalInertia();
+  const double turn = std::max({inertia.x(), inertia.y(), inertia.z()});
+  for (int axis = 0; axis < 6; ++axis) {
+    const double m_axis = axis < 3 ? mass : turn;
+    m.cup_joint->setLimit(axis, 1.0, -1.0);  // free: the spring alone holds
+    m.cup_joint->enableSpring(axis, true);
+    m.cup_joint->setStiffness(axis, m_axis * omega * omega);
+    m.cup_joint->setDamping(axis, 2.0 * m_axis * omega);
+    m.cup_joint->setEquilibriumPoint(axis, 0.0);
+  }
+  zero(&m.cup_feedback);
+  m.cup_joint->setJointFeedback(&m.cup_feedback);
+  m.cup_joint->enableFeedback(true);
+  m.world.addConstraint(m.cup_joint.get(), true);
+  object->forceActivationState(DISABLE_DEACTIVATION);
+  m.cup_object = index;
+}
+
+void PhysicsWorld::moveCup(const Vec3& contact_table) {
+  Impl& m = *impl_;
+  if (!m.cup) throw std::logic_error("moveCup without attachCup");
+  btTransform t = m.cup->getWorldTransform();
+  t.setOrigin(btVector3(contact_table.x(), contact_table.y(), contact_table.z()));
+  m.cup_state->setWorldTransform(t);
+}
+
+CupLoad PhysicsWorld::cupLoad() const {
+  const Impl& m = *impl_;
+  CupLoad load;
+  if (!m.cup_joint) return load;
+  const btVector3& f = m.cup_feedback.m_appliedForceBodyB;
+  const btVector3& t = m.cup_feedback.m_appliedTorqueBodyB;
+  load.force_n = Vec3(f.x(), f.y(), f.z());
+  // Bullet reports the torque about the object's centre of mass; the seal feels it about the
+  // contact point.
+  const Transform T_table_object = pose(m.cup_object);
+  const Vec3 contact = T_table_object * m.T_object_cup.translation();
+  load.torque_nm =
+      Vec3(t.x(), t.y(), t.z()) + (T_table_object.translation() - contact).cross(load.force_n);
+  return load;
+}
+
+bool PhysicsWorld::cupAttached() const { return impl_->cup_joint != nullptr; }
+
+void PhysicsWorld::releaseCup() { impl_->removeCupJoint(); }
 
 std::vector<std::pair<int, int>> PhysicsWorld::contacts() const {
   std::vector<std::pair<int, int>> out;

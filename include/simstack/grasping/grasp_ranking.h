@@ -1,0 +1,69 @@
+#pragma once
+/// @file grasp_ranking.h
+/// Suction grasps for one target of a superquadric scene, ranked by how little the rest of the
+/// pile moves when the target is pulled out (the SIMstack paper's section 4.3), over one or
+/// more scene hypotheses (the perception's latent samples): each candidate is simulated in
+/// each hypothesis and ranked by its mean and its worst case over them.
+
+#include <string>
+#include <vector>
+
+#include "simstack/grasping/suction_candidates.h"
+#include "simstack/grasping/suction_pull.h"
+
+namespace simstack {
+
+struct GraspRankingConfig {
+  CandidateConfig candidates;
+  PullConfig pull;
+  /// Threads simulating candidates (0: all cores). The ranking does not depend on it.
+  int threads = 1;
+  /// A hypothesis's object matches the target when their centres are this close (metres),
+  /// or within the target's largest semi-axis, whichever is larger.
+  double match_distance_m = 0.05;
+};
+
+/// One candidate and what its pull did in each hypothesis.
+struct RankedGrasp {
+  SuctionCandidate candidate;         ///< in hypothesis 0 (the scene the robot will act on)
+  std::vector<PullOutcome> outcomes;  ///< per hypothesis used
+  double mean_displacement_m = 0.0;   ///< mean over hypotheses of the others' mean displacement
+  double worst_displacement_m = 0.0;  ///< largest over hypotheses of the same
+  double max_displacement_m = 0.0;    ///< largest single object's displacement in any hypothesis
+  double mean_toppled = 0.0;          ///< toppled objects, mean over hypotheses
+  double failed_share = 0.0;          ///< hypotheses where the seal broke
+  double freed_share = 0.0;           ///< hypotheses where the target came free
+  /// What the ranking sorts by after failures and topples: (mean + worst) / 2 of the mean
+  /// displacement, which is the paper's score for one hypothesis.
+  double score_m = 0.0;
+};
+
+struct GraspRanking {
+  std::vector<RankedGrasp> grasps;   ///< best first
+  CandidateSet candidates;           ///< the candidate search (counts) on hypothesis 0
+  std::vector<SceneDrift> baseline;  ///< per hypothesis used: the scene left alone
+  std::vector<int> hypotheses;       ///< indices of the hypotheses used (0 first)
+  int pulls = 0;                     ///< pulls simulated
+  std::string message;               ///< what the caller should know (empty when all is well)
+};
+
+/// The index of the object of `scene` that matches `reference` (nearest centre within the
+/// match distance), or -1.
+int matchObject(const SuperquadricShape& reference, const std::vector<SuperquadricShape>& scene,
+                double match_distance_m);
+
+/// Ranks grasps on hypotheses[0][target]. The target of each further hypothesis is its object
+/// matching it (hypotheses without one are left out, said in the message); a candidate is
+/// carried into a hypothesis along its approach axis onto that hypothesis's target (a miss is
+/// a failed pull there). `camera_positions` empty: the five default cameras. Throws
+/// std::invalid_argument for a bad target, shape or config.
+GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypotheses, int target,
+                        const std::vector<Vec3>& camera_positions,
+                        const GraspRankingConfig& config);
+
+/// A scene that the grasp simulation accepts: finite poses with unit rotations, semi-axes in
+/// (0, 1] m and exponents in [1, 200]. Empty string when valid, else what is wrong, naming the
+/// object by its index.
+std::string checkScene(const std::vector<SuperquadricShape>& scene);
+
+}  // namespace simstack

@@ -1,0 +1,71 @@
+#pragma once
+/// @file suction_candidates.h
+/// Where a suction cup can hold an object of a superquadric scene: points of the target's
+/// surface that a camera sees, approached along the surface normal, where the cup's rim lands
+/// close enough to flat to seal (the seal model of Dex-Net 3.0, in spirit), spread over the
+/// surface by farthest-point sampling.
+
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <vector>
+
+#include "simstack/geometry/superquadric.h"
+#include "simstack/types.h"
+
+namespace simstack {
+
+struct CandidateConfig {
+  double cup_radius_m = 0.015;      ///< radius of the suction cup's rim
+  double seal_tolerance_m = 0.003;  ///< how far the rim may lie off the cup's plane and seal
+  int rim_points = 16;              ///< points of the rim checked
+  int max_candidates = 64;          ///< candidates kept (farthest-point spread)
+  int surface_samples = 3000;       ///< points drawn on the target's surface before filtering
+  /// The gripper stands along the approach axis: this far out from the contact it must be
+  /// above the table (an approach from below the table is impossible).
+  double tool_length_m = 0.05;
+  uint64_t seed = 0;  ///< surface samples; the same seed gives the same candidates
+};
+
+/// A place to hold the target. The cup comes in along -approach and pulls along +approach.
+struct SuctionCandidate {
+  Vec3 contact_table = Vec3::Zero();
+  Vec3 approach_table = Vec3::UnitZ();  ///< unit outward surface normal at the contact
+  double rim_deviation_m = 0.0;         ///< largest distance of the rim from the cup's plane
+  double seal_score = 1.0;              ///< 1 - rim_deviation / seal_tolerance, in [0, 1]
+};
+
+struct CandidateSet {
+  std::vector<SuctionCandidate> candidates;
+  int surface_samples = 0;  ///< drawn on the target
+  int visible = 0;          ///< of them seen by a camera
+  int reachable = 0;        ///< of those, approachable from above the table
+  int sealable = 0;         ///< of those, where the rim seals
+};
+
+/// The five virtual cameras of the paper's section 4.3: one above the scene's centre and four
+/// around it at 45 degrees elevation, `distance_m` from the centre.
+std::vector<Vec3> defaultCameraPositions(const std::vector<SuperquadricShape>& scene,
+                                         double distance_m = 1.0);
+
+/// Where the line origin + t direction (t >= 0) first enters `sq`, if it does within
+/// `max_distance_m` (table frame). Exact for the convex superquadrics (exponents >= 1): the
+/// inside-outside function is convex along any line.
+std::optional<Vec3> enterSuperquadric(const SuperquadricShape& sq, const Vec3& origin,
+                                      const Vec3& direction, double max_distance_m);
+
+/// The rim's largest distance from the plane of the cup (through the contact, normal to the
+/// approach axis) once projected onto `sq` along the axis; infinity when part of the rim lands
+/// deeper than `limit_m` (or twice the cup's radius) or misses the object (the cup overhangs
+/// an edge).
+double rimDeviation(const SuperquadricShape& sq, const Vec3& contact_table,
+                    const Vec3& approach_table, double cup_radius_m, int rim_points,
+                    double limit_m = std::numeric_limits<double>::infinity());
+
+/// Candidates on scene[target] seen from any of `camera_positions` (table frame; the other
+/// objects and the table occlude). Throws std::invalid_argument for a bad target or config.
+CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int target,
+                               const std::vector<Vec3>& camera_positions,
+                               const CandidateConfig& config);
+
+}  // namespace simstack

@@ -1,0 +1,96 @@
+#pragma once
+/// @file suction_pull.h
+/// One suction pull simulated in Bullet on a superquadric scene: the cup holds the target at
+/// the contact, moves out along the approach axis, then holds while the scene settles; what
+/// the other objects did is measured against the same scene left alone for the same time.
+
+#include <vector>
+
+#include "simstack/geometry/superquadric.h"
+#include "simstack/physics/physics_world.h"
+#include "simstack/types.h"
+
+namespace simstack {
+
+struct PullConfig {
+  double pull_distance_m = 0.10;
+  double pull_speed_mps = 0.20;
+  double ramp_s = 0.05;         ///< the cup accelerates to pull_speed over this time
+  double settle_s = 0.25;       ///< held still after the pull while the others settle
+  double max_force_n = 30.0;    ///< the seal breaks above this force...
+  double cup_radius_m = 0.015;  ///< ...or above max_force x cup radius of moment (peeling)
+  /// The cup's compliance: the held object's natural frequency on it (PhysicsWorld::attachCup).
+  double cup_stiffness_hz = 10.0;
+  /// Consecutive steps over the limits that break the seal: one step's impulse spike at an
+  /// impact is not a pull the seal feels.
+  int break_steps = 3;
+  double topple_rad = 30.0 * M_PI / 180.0;  ///< an object turned further has toppled
+  /// An estimated scene is not exactly at rest (objects overlap or float by millimetres): it
+  /// settles first, for at most this long, and every run starts from the settled state.
+  double presettle_s = 1.0;
+  PhysicsConfig physics = pullPhysics();
+
+  /// The generator's physics (friction 1, rolling friction 0.01) with sleeping, split impulse
+  /// and cached friction directions on: objects at rest stay put (true piles left alone move
+  /// under 2 mm over a pull; docs/experiments.md), and overlaps are resolved without being
+  /// shot apart.
+  static PhysicsConfig pullPhysics();
+  /// Throws std::invalid_argument naming the first bad value.
+  void validate() const;
+  /// Physics steps of the pull and of the hold after it.
+  int pullSteps() const;
+  int settleSteps() const;
+};
+
+/// What a pull did to the scene, relative to the scene left alone (translations of the
+/// centres, rotations as angles).
+struct PullOutcome {
+  double mean_displacement_m = 0.0;  ///< over the other objects (the paper's score)
+  double max_displacement_m = 0.0;
+  double max_rotation_rad = 0.0;
+  int toppled = 0;             ///< other objects turned beyond topple_rad
+  bool cup_held = true;        ///< the seal held to the end
+  bool target_freed = false;   ///< held, and touching no other object at the end
+  double peak_force_n = 0.0;   ///< largest force the seal carried
+  double target_lift_m = 0.0;  ///< the target's rise (its centre's z) at the end
+  /// A failed pull: the seal broke and the target was not freed. Ranked last.
+  bool failed() const { return !cup_held; }
+};
+
+/// How far the scene moves by itself over a pull's duration, from its settled state.
+struct SceneDrift {
+  double mean_displacement_m = 0.0;
+  double max_displacement_m = 0.0;
+  double presettle_displacement_m = 0.0;  ///< largest centre motion while settling first
+  bool settled = true;                    ///< came to rest within presettle_s
+};
+
+/// A scene's bodies, built once and simulated many times (each run in a fresh world, so runs
+/// are independent and deterministic). Thread-safe: run pulls from several threads.
+class PullSimulator {
+ public:
+  /// Throws std::invalid_argument for a bad config or shape.
+  PullSimulator(const std::vector<SuperquadricShape>& scene, const PullConfig& config);
+
+  /// The scene after settling (start of every run).
+  const std::vector<Transform>& settledPoses() const { return settled_; }
+  const SceneDrift& drift() const { return drift_; }
+  /// A contact point of the perceived scene moved with its object into the settled scene.
+  Vec3 settledPoint(int object, const Vec3& p_table) const;
+
+  /// Pulls `target` at `contact_table` (of the settled scene) along `approach_table`.
+  PullOutcome pull(int target, const Vec3& contact_table, const Vec3& approach_table) const;
+
+ private:
+  std::unique_ptr<PhysicsWorld> world(const std::vector<Transform>& poses) const;
+
+  PullConfig config_;
+  std::vector<SuperquadricShape> scene_;
+  std::vector<std::vector<Vec3>> hulls_;
+  std::vector<double> volumes_;
+  std::vector<Transform> settled_;  ///< after presettling
+  std::vector<Transform> alone_;    ///< settled, then left alone for a pull's duration
+  SceneDrift drift_;
+};
+
+}  // namespace simstack

@@ -1,0 +1,176 @@
+#include "simstack/grasping/grasp_ranking.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <exception>
+#include <mutex>
+#include <numeric>
+#include <stdexcept>
+#include <thread>
+
+namespace simstack {
+namespace {
+
+// Runs job(i) for i in [0, count) on `threads` threads. Each job writes only its own result,
+// so the outcome does not depend on the thread count. The first exception is rethrown.
+template <typename Job>
+void parallelFor(int count, int threads, const Job& job) {
+  std::atomic<int> next{0};
+  std::exception_ptr error;
+  std::mutex error_mutex;
+  const auto work = [&] {
+    for (int i = next++; i < count; i = next++) {
+      try {
+        job(i);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(error_mutex);
+        if (!error) error = std::current_exception();
+      }
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int t = 1; t < std::min(threads, count); ++t) pool.emplace_back(work);
+  work();
+  for (auto& t : pool) t.join();
+  if (error) std::rethrow_exception(error);
+}
+
+int threadCount(int requested) {
+  const int cores = std::max(1u, std::thread::hardware_concurrency());
+  if (requested < 0) throw std::invalid_argument("threads must be >= 0 (0: all cores)");
+  return requested == 0 ? cores : std::min(requested, cores);
+}
+
+// The candidate of hypothesis 0 as the robot would execute it in hypothesis h: the same
+// approach line, onto h's target. False when the line misses it.
+bool carryOver(const SuctionCandidate& c, const SuperquadricShape& target, double tool_length_m,
+               Vec3* contact) {
+  const double reach = tool_length_m + 2.0 * target.scale_m.maxCoeff() + 0.1;
+  const Vec3 start = c.contact_table + (tool_length_m + 0.05) * c.approach_table;
+  const auto hit = enterSuperquadric(target, start, -c.approach_table, reach);
+  if (!hit) return false;
+  *contact = *hit;
+  return true;
+}
+
+void summarise(RankedGrasp* g) {
+  const double n = static_cast<double>(g->outcomes.size());
+  for (const PullOutcome& o : g->outcomes) {
+    g->mean_displacement_m += o.mean_displacement_m / n;
+    g->worst_displacement_m = std::max(g->worst_displacement_m, o.mean_displacement_m);
+    g->max_displacement_m = std::max(g->max_displacement_m, o.max_displacement_m);
+    g->mean_toppled += o.toppled / n;
+    g->failed_share += (o.failed() ? 1.0 : 0.0) / n;
+    g->freed_share += (o.target_freed ? 1.0 : 0.0) / n;
+  }
+  g->score_m = 0.5 * (g->mean_displacement_m + g->worst_displacement_m);
+}
+
+}  // namespace
+
+std::string checkScene(const std::vector<SuperquadricShape>& scene) {
+  for (size_t i = 0; i < scene.size(); ++i) {
+    const SuperquadricShape& sq = scene[i];
+    const std::string name = "object " + std::to_string(i) + ": ";
+    if (!sq.scale_m.allFinite() || (sq.scale_m.array() <= 0.0).any() ||
+        (sq.scale_m.array() > 1.0).any())
+      return name + "semi-axes must be finite and in (0, 1] m";
+    if (!sq.exponents.allFinite() || (sq.exponents.array() < 1.0).any() ||
+        (sq.exponents.array() > 200.0).any())
+      return name + "exponents must be finite and in [1, 200]";
+    if (!sq.T_table_object.matrix().allFinite()) return name + "pose is not finite";
+    const Mat3 R = sq.T_table_object.linear();
+    if (!(R.transpose() * R).isIdentity(1e-6) || !(std::abs(R.determinant() - 1.0) < 1e-6))
+      return name + "orientation is not a rotation";
+  }
+  return {};
+}
+
+int matchObject(const SuperquadricShape& reference, const std::vector<SuperquadricShape>& scene,
+                double match_distance_m) {
+  const double gate = std::max(match_distance_m, reference.scale_m.maxCoeff());
+  int best = -1;
+  double best_d = gate;
+  for (size_t i = 0; i < scene.size(); ++i) {
+    const double d = (scene[i].centroid() - reference.centroid()).norm();
+    if (d <= best_d) best = static_cast<int>(i), best_d = d;
+  }
+  return best;
+}
+
+GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypotheses, int target,
+                        const std::vector<Vec3>& camera_positions,
+                        const GraspRankingConfig& config) {
+  if (hypotheses.empty()) throw std::invalid_argument("no scene to rank grasps in");
+  for (const auto& scene : hypotheses)
+    if (const std::string why = checkScene(scene); !why.empty()) throw std::invalid_argument(why);
+  if (target < 0 || target >= static_cast<int>(hypotheses[0].size()))
+    throw std::invalid_argument("target " + std::to_string(target) + " is not an object of the " +
+                                std::to_string(hypotheses[0].size()) + "-object scene");
+  config.pull.validate();
+  const int threads = threadCount(config.threads);
+  GraspRanking out;
+  const auto& scene0 = hypotheses[0];
+  out.candidates = suctionCandidates(
+      scene0, target, camera_positions.empty() ? defaultCameraPositions(scene0) : camera_positions,
+      config.candidates);
+  std::vector<int> targets;
+  for (size_t h = 0; h < hypotheses.size(); ++h) {
+    const int t =
+        h == 0 ? target : matchObject(scene0[target], hypotheses[h], config.match_distance_m);
+    if (t < 0) continue;
+    out.hypotheses.push_back(static_cast<int>(h));
+    targets.push_back(t);
+  }
+  if (out.hypotheses.size() < hypotheses.size())
+    out.message = std::to_string(hypotheses.size() - out.hypotheses.size()) +
+                  " hypotheses without a match for the target were left out";
+  if (out.candidates.candidates.empty()) {
+    out.message = "no sealable surface on the target: " + std::to_string(out.candidates.visible) +
+                  " of " + std::to_string(out.candidates.surface_samples) + " samples seen, " +
+                  std::to_string(out.candidates.reachable) + " reachable, none where a " +
+                  std::to_string(config.candidates.cup_radius_m * 1000.0) + " mm cup seals";
+    return out;
+  }
+  const int H = static_cast<int>(out.hypotheses.size());
+  std::vector<std::unique_ptr<PullSimulator>> sims(H);
+  parallelFor(H, threads, [&](int k) {
+    sims[k] = std::make_unique<PullSimulator>(hypotheses[out.hypotheses[k]], config.pull);
+  });
+  for (const auto& s : sims) out.baseline.push_back(s->drift());
+  const auto& cands = out.candidates.candidates;
+  const int C = static_cast<int>(cands.size());
+  std::vector<PullOutcome> outcomes(static_cast<size_t>(C) * H);
+  parallelFor(C * H, threads, [&](int job) {
+    const int c = job / H, k = job % H;
+    const SuperquadricShape& t = hypotheses[out.hypotheses[k]][targets[k]];
+    Vec3 contact = cands[c].contact_table;
+    PullOutcome& o = outcomes[job];
+    if (k > 0 && !carryOver(cands[c], t, config.candidates.tool_length_m, &contact)) {
+      o.cup_held = false;  // nothing to hold where this hypothesis puts the target
+      return;
+    }
+    const Mat3 turn =
+        sims[k]->settledPoses()[targets[k]].linear() * t.T_table_object.linear().transpose();
+    o = sims[k]->pull(targets[k], sims[k]->settledPoint(targets[k], contact),
+                      turn * cands[c].approach_table);
+  });
+  out.pulls = C * H;
+  for (int c = 0; c < C; ++c) {
+    RankedGrasp g;
+    g.candidate = cands[c];
+    g.outcomes.assign(outcomes.begin() + c * H, outcomes.begin() + (c + 1) * H);
+    summarise(&g);
+    out.grasps.push_back(g);
+  }
+  std::stable_sort(out.grasps.begin(), out.grasps.end(),
+                   [](const RankedGrasp& a, const RankedGrasp& b) {
+                     if (a.failed_share != b.failed_share) return a.failed_share < b.failed_share;
+                     if (a.mean_toppled != b.mean_toppled) return a.mean_toppled < b.mean_toppled;
+                     return a.score_m < b.score_m;
+                   });
+  return out;
+}
+
+}  // namespace simstack

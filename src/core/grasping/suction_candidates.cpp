@@ -1,0 +1,199 @@
+#include "simstack/grasping/suction_candidates.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <stdexcept>
+
+#include "simstack/render/depth_renderer.h"
+#include "simstack/scene/scene.h"
+
+namespace simstack {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// log f of eq. 4 at an object-frame point: finite far outside, where f itself overflows for
+// box-like exponents, and monotone in f, so the line searches below can compare it.
+double logInsideOutside(const SuperquadricShape& sq, const Vec3& p) {
+  double terms[3], m = -kInf;
+  for (int i = 0; i < 3; ++i) {
+    const double q = std::max(std::abs(p[i] / sq.scale_m[i]), 1e-300);
+    terms[i] = sq.exponents[i] * std::log(q);
+    m = std::max(m, terms[i]);
+  }
+  double s = 0.0;
+  for (double t : terms) s += std::exp(t - m);
+  return m + std::log(s);
+}
+
+Vec3 perpendicular(const Vec3& a) {
+  const Vec3 helper = std::abs(a.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+  return a.cross(helper).normalized();
+}
+
+bool seenFromAny(const DepthRenderer& renderer, int instance, const Vec3& p, const Vec3& normal,
+                 const std::vector<Vec3>& cameras) {
+  // The renderer meshes each superquadric with flat facets inside its exact surface; a point
+  // of the exact surface counts as seen when the ray towards it hits this object no more than
+  // this much before reaching it.
+  constexpr double kFacetTolerance_m = 0.004;
+  for (const Vec3& c : cameras) {
+    const Vec3 d = p - c;
+    const double range = d.norm();
+    if (!(range > 1e-6) || d.dot(normal) >= 0.0) continue;  // behind the surface
+    int hit = -1;
+    const double t = renderer.castRay(c, d / range, &hit);
+    if (hit == instance && t >= range - kFacetTolerance_m) return true;
+  }
+  return false;
+}
+
+// Farthest-point spread: starts from the best seal, then adds the candidate farthest from
+// those kept, `count` in all (ties to the lower index, so the result is deterministic).
+std::vector<SuctionCandidate> spread(const std::vector<SuctionCandidate>& all, int count) {
+  std::vector<SuctionCandidate> kept;
+  if (all.empty() || count <= 0) return kept;
+  size_t first = 0;
+  for (size_t i = 1; i < all.size(); ++i)
+    if (all[i].seal_score > all[first].seal_score) first = i;
+  std::vector<double> nearest(all.size(), kInf);
+  size_t next = first;
+  while (static_cast<int>(kept.size()) < count) {
+    const Vec3 added = all[next].contact_table;
+    kept.push_back(all[next]);
+    double best = 0.0;
+    for (size_t i = 0; i < all.size(); ++i) {
+      nearest[i] = std::min(nearest[i], (all[i].contact_table - added).norm());
+      if (nearest[i] > best) {
+        best = nearest[i];
+        next = i;
+      }
+    }
+    if (best <= 0.0) break;  // every point kept
+  }
+  return kept;
+}
+
+void validate(const std::vector<SuperquadricShape>& scene, int target,
+              const CandidateConfig& config) {
+  if (target < 0 || target >= static_cast<int>(scene.size()))
+    throw std::invalid_argument("target " + std::to_string(target) + " is not an object of the " +
+                                std::to_string(scene.size()) + "-object scene");
+  if (!(config.cup_radius_m > 0.0) || !std::isfinite(config.cup_radius_m))
+    throw std::invalid_argument("cup_radius_m must be > 0");
+  if (!(config.seal_tolerance_m > 0.0) || !std::isfinite(config.seal_tolerance_m))
+    throw std::invalid_argument("seal_tolerance_m must be > 0");
+  if (config.rim_points < 3) throw std::invalid_argument("rim_points must be >= 3");
+  if (config.surface_samples < 1) throw std::invalid_argument("surface_samples must be >= 1");
+  if (!std::isfinite(config.tool_length_m) || config.tool_length_m < 0.0)
+    throw std::invalid_argument("tool_length_m must be >= 0");
+}
+
+}  // namespace
+
+std::vector<Vec3> defaultCameraPositions(const std::vector<SuperquadricShape>& scene,
+                                         double distance_m) {
+  Vec3 centre = Vec3::Zero();
+  for (const SuperquadricShape& sq : scene) centre += sq.centroid();
+  if (!scene.empty()) centre /= static_cast<double>(scene.size());
+  centre.z() = 0.0;
+  std::vector<Vec3> cameras{centre + Vec3(0, 0, distance_m)};
+  const double s = distance_m * std::sqrt(0.5);
+  for (int k = 0; k < 4; ++k) {
+    const double yaw = k * M_PI / 2.0;
+    cameras.push_back(centre + Vec3(s * std::cos(yaw), s * std::sin(yaw), s));
+  }
+  return cameras;
+}
+
+std::optional<Vec3> enterSuperquadric(const SuperquadricShape& sq, const Vec3& origin,
+                                      const Vec3& direction, double max_distance_m) {
+  const Transform T_object_table = sq.T_table_object.inverse();
+  const Vec3 o = T_object_table * origin;
+  const Vec3 d = T_object_table.linear() * direction.normalized();
+  const auto h = [&](double t) { return logInsideOutside(sq, o + t * d); };
+  if (h(0.0) <= 0.0) return origin;
+  // Golden-section search for the line's deepest point (log f is unimodal along a line
+  // through a convex superquadric), then bisection for the entry between 0 and it.
+  const double g = (std::sqrt(5.0) - 1.0) / 2.0;
+  double a = 0.0, b = max_distance_m;
+  double c = b - g * (b - a), e = a + g * (b - a), hc = h(c), he = h(e);
+  for (int i = 0; i < 60; ++i) {
+    if (hc < he) {
+      b = e, e = c, he = hc, c = b - g * (b - a), hc = h(c);
+    } else {
+      a = c, c = e, hc = he, e = a + g * (b - a), he = h(e);
+    }
+  }
+  double lo = 0.0, hi = 0.5 * (a + b);
+  if (h(hi) > 0.0) return std::nullopt;
+  for (int i = 0; i < 50; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (h(mid) > 0.0 ? lo : hi) = mid;
+  }
+  return origin + hi * direction.normalized();
+}
+
+double rimDeviation(const SuperquadricShape& sq, const Vec3& contact, const Vec3& approach,
+                    double cup_radius_m, int rim_points, double limit_m) {
+  const Vec3 a = approach.normalized();
+  const Vec3 u = perpendicular(a), v = a.cross(u);
+  const Transform T_object_table = sq.T_table_object.inverse();
+  const Vec3 a_object = T_object_table.linear() * a;
+  // Each rim point is searched for along -a from just above the cup's plane down to the
+  // limit. The object is convex and lies below its tangent plane, so the rim point is outside
+  // at the start; inside at the limit means it lands within it, found by bisection.
+  const double lift = 0.001, reach = lift + std::min(limit_m, 2.0 * cup_radius_m);
+  double worst = 0.0;
+  for (int k = 0; k < rim_points; ++k) {
+    const double phi = 2.0 * M_PI * k / rim_points;
+    const Vec3 rim = contact + cup_radius_m * (std::cos(phi) * u + std::sin(phi) * v);
+    const Vec3 o = T_object_table * (rim + lift * a);
+    const auto h = [&](double t) { return logInsideOutside(sq, o - t * a_object); };
+    if (h(reach) > 0.0) return kInf;
+    double lo = 0.0, hi = reach;
+    if (h(0.0) <= 0.0) hi = 0.0;
+    for (int i = 0; i < 30 && hi > 0.0; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      (h(mid) > 0.0 ? lo : hi) = mid;
+    }
+    worst = std::max(worst, std::abs(hi - lift));
+  }
+  return worst;
+}
+
+CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int target,
+                               const std::vector<Vec3>& camera_positions,
+                               const CandidateConfig& config) {
+  validate(scene, target, config);
+  const SuperquadricShape& sq = scene[target];
+  RenderConfig render;
+  render.table_half_size_m = 10.0;
+  const DepthRenderer renderer(Scene::fromSuperquadrics(scene), render);
+  std::mt19937_64 rng(config.seed);
+  CandidateSet out;
+  std::vector<SuctionCandidate> sealable;
+  for (const SurfacePoint& s : sq.sampleSurfaceObject(config.surface_samples, rng)) {
+    ++out.surface_samples;
+    SuctionCandidate c;
+    c.contact_table = sq.T_table_object * s.position;
+    c.approach_table = (sq.T_table_object.linear() * s.normal).normalized();
+    if (!seenFromAny(renderer, target + 1, c.contact_table, c.approach_table, camera_positions))
+      continue;
+    ++out.visible;
+    if ((c.contact_table + config.tool_length_m * c.approach_table).z() <= 0.0) continue;
+    ++out.reachable;
+    c.rim_deviation_m = rimDeviation(sq, c.contact_table, c.approach_table, config.cup_radius_m,
+                                     config.rim_points, config.seal_tolerance_m);
+    if (!(c.rim_deviation_m <= config.seal_tolerance_m)) continue;
+    c.seal_score = 1.0 - c.rim_deviation_m / config.seal_tolerance_m;
+    sealable.push_back(c);
+  }
+  out.sealable = static_cast<int>(sealable.size());
+  out.candidates = spread(sealable, config.max_candidates);
+  return out;
+}
+
+}  // namespace simstack

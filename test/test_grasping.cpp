@@ -1,0 +1,219 @@
+// The grasping module against scenes whose right answer is known from mechanics.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "simstack/grasping/grasp_ranking.h"
+#include "simstack/scene/pile_generator.h"
+#include "test_scenes.h"
+
+namespace simstack {
+namespace {
+
+SuperquadricShape box(const Vec3& half_m, const Vec3& centre, double exponent = 20.0) {
+  SuperquadricShape sq;
+  sq.scale_m = half_m;
+  sq.exponents = Vec3::Constant(exponent);
+  sq.T_table_object.translation() = centre;
+  return sq;
+}
+
+// A tall narrow box carrying a wide heavy one (the target). Dragging the target sideways puts
+// its friction at the top of the narrow box, whose base is too small to resist the moment:
+// mu m_top g h = 4.2 N x 0.12 m against (m_top + m_bottom) g w = 6.4 N x 0.03 m.
+std::vector<SuperquadricShape> twoBoxStack() {
+  return {box({0.03, 0.03, 0.06}, {0, 0, 0.06}), box({0.06, 0.06, 0.03}, {0, 0, 0.1505})};
+}
+
+// A box (the target, 0) beside a support of the same height, bridged by a third box that
+// rests mostly on the support: sliding the target out leaves the bridge in place, lifting it
+// raises the bridge's edge.
+std::vector<SuperquadricShape> bridgedTarget() {
+  return {box({0.05, 0.05, 0.03}, {-0.055, 0, 0.03}), box({0.05, 0.05, 0.03}, {0.055, 0, 0.03}),
+          box({0.05, 0.04, 0.02}, {0.03, 0, 0.0805})};
+}
+
+PullOutcome pullAt(const std::vector<SuperquadricShape>& scene, int target, const Vec3& contact,
+                   const Vec3& approach) {
+  PullSimulator sim(scene, PullConfig());
+  return sim.pull(target, sim.settledPoint(target, contact), approach);
+}
+
+TEST(SuctionCandidates, RimOfAFlatFaceSealsAndASphereCapDeviatesByItsSagitta) {
+  const SuperquadricShape b = box({0.05, 0.05, 0.05}, {0, 0, 0.05});
+  EXPECT_LT(rimDeviation(b, {0, 0, 0.1}, Vec3::UnitZ(), 0.015, 16), 1e-4);
+  EXPECT_TRUE(std::isinf(rimDeviation(b, {0.045, 0, 0.1}, Vec3::UnitZ(), 0.015, 16)));
+  SuperquadricShape sphere;
+  sphere.scale_m = Vec3::Constant(0.03);
+  const double sagitta = 0.03 - std::sqrt(0.03 * 0.03 - 0.015 * 0.015);
+  EXPECT_NEAR(rimDeviation(sphere, {0, 0, 0.03}, Vec3::UnitZ(), 0.015, 16), sagitta, 1e-5);
+  const auto hit = enterSuperquadric(sphere, {0, 0, 1}, -Vec3::UnitZ(), 2.0);
+  ASSERT_TRUE(hit.has_value());
+  EXPECT_NEAR(hit->z(), 0.03, 1e-6);
+  EXPECT_FALSE(enterSuperquadric(sphere, {0.05, 0, 1}, -Vec3::UnitZ(), 2.0).has_value());
+}
+
+TEST(SuctionCandidates, ASphereSealsLessThanABoxFace) {
+  CandidateConfig config;
+  // A 6 cm ball: the cap under a 15 mm cup is 4 mm high, over the 3 mm tolerance.
+  const std::vector<SuperquadricShape> sphere{box({0.03, 0.03, 0.03}, {0, 0, 0.03}, 2.0)};
+  const std::vector<SuperquadricShape> cube{box({0.03, 0.03, 0.03}, {0, 0, 0.03}, 20.0)};
+  const CandidateSet s = suctionCandidates(sphere, 0, defaultCameraPositions(sphere), config);
+  const CandidateSet c = suctionCandidates(cube, 0, defaultCameraPositions(cube), config);
+  EXPECT_GT(s.visible, 0);
+  EXPECT_GT(c.sealable, 2 * s.sealable) << s.sealable << " of " << s.visible << " on the sphere, "
+                                        << c.sealable << " of " << c.visible << " on the box";
+  for (const SuctionCandidate& k : c.candidates) {
+    EXPECT_GT((k.contact_table + config.tool_length_m * k.approach_table).z(), 0.0);
+    EXPECT_LE(k.rim_deviation_m, config.seal_tolerance_m);
+  }
+}
+
+TEST(SuctionPull, LiftingTheTopBoxBeatsDraggingItSideways) {
+  const auto scene = twoBoxStack();
+  const PullOutcome up = pullAt(scene, 1, {0, 0, 0.1805}, Vec3::UnitZ());
+  const PullOutcome side = pullAt(scene, 1, {0.06, 0, 0.1505}, Vec3::UnitX());
+  EXPECT_TRUE(up.cup_held);
+  EXPECT_TRUE(up.target_freed);
+  EXPECT_LT(up.mean_displacement_m, 0.005);
+  EXPECT_GT(side.mean_displacement_m, 3.0 * up.mean_displacement_m);
+}
+
+TEST(SuctionPull, SlidingASupportOutBeatsLiftingIt) {
+  const auto scene = bridgedTarget();
+  const PullOutcome lift = pullAt(scene, 0, {-0.08, 0, 0.06}, Vec3::UnitZ());
+  const PullOutcome slide = pullAt(scene, 0, {-0.105, 0, 0.03}, -Vec3::UnitX());
+  EXPECT_TRUE(slide.cup_held);
+  EXPECT_LT(slide.mean_displacement_m, lift.mean_displacement_m);
+}
+
+TEST(GraspRanking, RanksAStraightLiftFirstOnTheStack) {
+  GraspRankingConfig config;
+  config.candidates.max_candidates = 16;
+  const GraspRanking r = rankGrasps({twoBoxStack()}, 1, {}, config);
+  ASSERT_FALSE(r.grasps.empty()) << r.message;
+  EXPECT_GT(r.grasps.front().candidate.approach_table.z(), 0.9);
+}
+
+TEST(GraspRanking, RanksASlideOutFirstUnderABridge) {
+  GraspRankingConfig config;
+  config.candidates.max_candidates = 16;
+  const GraspRanking r = rankGrasps({bridgedTarget()}, 0, {}, config);
+  ASSERT_FALSE(r.grasps.empty()) << r.message;
+  EXPECT_LT(std::abs(r.grasps.front().candidate.approach_table.z()), 0.5);
+}
+
+// 36 of 40 generated piles (docs/experiments.md); these eight all do.
+TEST(GraspRanking, TruePilesLeftAloneMoveUnderTwoMillimetres) {
+  PileGenerator gen{PileConfig()};
+  for (uint64_t seed = 1; seed <= 8; ++seed) {
+    std::vector<SuperquadricShape> shapes;
+    for (const SceneObject& o : gen.generate(seed).scene.objects)
+      shapes.push_back(o.superquadricTable());
+    PullSimulator sim(shapes, PullConfig());
+    EXPECT_LT(sim.drift().max_displacement_m, 0.002) << "pile " << seed;
+  }
+}
+
+std::vector<SuperquadricShape> fourObjects() {
+  std::vector<SuperquadricShape> shapes;
+  for (const SceneObject& o : test::fourObjectPile().objects)
+    shapes.push_back(o.superquadricTable());
+  return shapes;
+}
+
+bool sameRanking(const GraspRanking& a, const GraspRanking& b) {
+  if (a.grasps.size() != b.grasps.size()) return false;
+  for (size_t i = 0; i < a.grasps.size(); ++i) {
+    const RankedGrasp &x = a.grasps[i], &y = b.grasps[i];
+    if (x.candidate.contact_table != y.candidate.contact_table || x.score_m != y.score_m ||
+        x.max_displacement_m != y.max_displacement_m || x.failed_share != y.failed_share)
+      return false;
+  }
+  return true;
+}
+
+TEST(GraspRanking, IdenticalAcrossRunsAndThreadCounts) {
+  GraspRankingConfig config;
+  config.candidates.max_candidates = 12;
+  auto other = fourObjects();
+  other[2].T_table_object.translation() += Vec3(0.01, -0.005, 0.002);  // a second hypothesis
+  const std::vector<std::vector<SuperquadricShape>> scenes{fourObjects(), other};
+  config.threads = 1;
+  const GraspRanking one = rankGrasps(scenes, 2, {}, config);
+  config.threads = 2;
+  const GraspRanking two = rankGrasps(scenes, 2, {}, config);
+  const GraspRanking again = rankGrasps(scenes, 2, {}, config);
+  ASSERT_EQ(one.grasps.size(), 12u);
+  EXPECT_EQ(one.pulls, 24);
+  EXPECT_TRUE(sameRanking(one, two));
+  EXPECT_TRUE(sameRanking(two, again));
+  for (const RankedGrasp& g : one.grasps) {
+    ASSERT_EQ(g.outcomes.size(), 2u);
+    EXPECT_GE(g.worst_displacement_m, g.mean_displacement_m);
+  }
+  for (size_t i = 1; i < one.grasps.size(); ++i)
+    EXPECT_LE(one.grasps[i - 1].failed_share, one.grasps[i].failed_share);
+}
+
+TEST(GraspRanking, AHypothesisWithoutTheTargetIsLeftOutAndSaidSo) {
+  GraspRankingConfig config;
+  config.candidates.max_candidates = 4;
+  auto far = fourObjects();
+  far.erase(far.begin() + 2);  // the target is missing from this hypothesis
+  const GraspRanking r = rankGrasps({fourObjects(), far}, 2, {}, config);
+  EXPECT_EQ(r.hypotheses, std::vector<int>{0});
+  EXPECT_NE(r.message.find("left out"), std::string::npos) << r.message;
+  EXPECT_EQ(r.baseline.size(), 1u);
+}
+
+TEST(GraspRanking, ATargetWithNoSealableSurfaceGivesNoGraspsAndSaysWhy) {
+  const std::vector<SuperquadricShape> ball{box({0.02, 0.02, 0.02}, {0, 0, 0.02}, 2.0)};
+  const GraspRanking r = rankGrasps({ball}, 0, {}, GraspRankingConfig());
+  EXPECT_TRUE(r.grasps.empty());
+  EXPECT_NE(r.message.find("no sealable surface"), std::string::npos) << r.message;
+}
+
+TEST(GraspRanking, RejectsBadScenesAndSettings) {
+  const auto good = fourObjects();
+  const GraspRankingConfig config;
+  const auto rejects = [&](const std::vector<SuperquadricShape>& scene, int target,
+                           const GraspRankingConfig& c, const std::string& expected) {
+    try {
+      rankGrasps({scene}, target, {}, c);
+      ADD_FAILURE() << "accepted: " << expected;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+    }
+  };
+  rejects(good, 7, config, "target 7");
+  rejects(good, -1, config, "target -1");
+  auto bad = good;
+  bad[1].scale_m.x() = std::nan("");
+  rejects(bad, 0, config, "object 1: semi-axes");
+  bad = good, bad[1].scale_m.y() = 0.0;
+  rejects(bad, 0, config, "object 1: semi-axes");
+  bad = good, bad[3].scale_m.z() = -0.1;
+  rejects(bad, 0, config, "object 3: semi-axes");
+  bad = good, bad[0].exponents.x() = 0.5;
+  rejects(bad, 1, config, "object 0: exponents");
+  bad = good, bad[0].exponents.y() = std::numeric_limits<double>::infinity();
+  rejects(bad, 1, config, "object 0: exponents");
+  bad = good, bad[2].T_table_object.linear() *= 1.5;
+  rejects(bad, 0, config, "object 2: orientation");
+  bad = good, bad[2].T_table_object.translation().x() = std::nan("");
+  rejects(bad, 0, config, "object 2: pose");
+  GraspRankingConfig c = config;
+  c.pull.pull_distance_m = 0.0;
+  rejects(good, 0, c, "pull_distance_m");
+  c = config, c.pull.pull_distance_m = -0.1;
+  rejects(good, 0, c, "pull_distance_m");
+  c = config, c.pull.pull_speed_mps = std::nan("");
+  rejects(good, 0, c, "pull_speed_mps");
+  EXPECT_THROW(rankGrasps({}, 0, {}, config), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace simstack
