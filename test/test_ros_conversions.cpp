@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "simstack_ros/conversions.h"
+#include "simstack_ros/grasp_conversions.h"
 
 using namespace simstack;
 
@@ -87,4 +88,44 @@ TEST(Conversions, DepthAndCameraInfoRoundTrip) {
   EXPECT_DOUBLE_EQ(c.fx, 600);
   EXPECT_DOUBLE_EQ(c.cy, 250);
   EXPECT_EQ(c.width, 640);
+}
+
+TEST(GraspConversions, ScenesComeFromObjectsThenHypotheses) {
+  ObjectArray msg;
+  SuperquadricShape sq;
+  sq.scale_m = Vec3(0.05, 0.04, 0.03);
+  sq.exponents = Vec3(2, 4, 8);
+  sq.T_table_object.linear() = Eigen::AngleAxisd(0.3, Vec3::UnitZ()).toRotationMatrix();
+  sq.T_table_object.translation() = Vec3(0.1, -0.2, 0.03);
+  Object o;
+  o.superquadric = superquadricMsg(sq);
+  msg.objects.push_back(o);
+  SceneSample other;
+  other.superquadrics.push_back(superquadricMsg(sq));
+  other.superquadrics.push_back(superquadricMsg(sq));
+  msg.hypotheses.push_back(other);
+  const auto one = graspScenes(msg, 1);
+  ASSERT_EQ(one.size(), 1u);
+  EXPECT_TRUE(one[0][0].scale_m.isApprox(sq.scale_m));
+  EXPECT_TRUE(one[0][0].T_table_object.isApprox(sq.T_table_object, 1e-9));
+  const auto three = graspScenes(msg, 3);  // only one further hypothesis exists
+  ASSERT_EQ(three.size(), 2u);
+  EXPECT_EQ(three[1].size(), 2u);
+  msg.objects[0].superquadric.pose.orientation.w = 3.0;
+  EXPECT_THROW(graspScenes(msg, 1), std::invalid_argument);
+}
+
+TEST(GraspConversions, GraspPoseLooksAlongTheApproach) {
+  RankedGrasp g;
+  g.candidate.contact_table = Vec3(0.1, 0.2, 0.3);
+  g.candidate.approach_table = Vec3(1, 0, 0);
+  const Grasp m = graspMsg(g);
+  const Transform T = transformFromPose(m.contact);
+  EXPECT_TRUE((T.linear() * Vec3::UnitZ()).isApprox(Vec3::UnitX(), 1e-9));
+  EXPECT_TRUE(T.translation().isApprox(g.candidate.contact_table));
+  std_msgs::Header h;
+  const auto markers = graspMarkers(h, {g, g});
+  ASSERT_EQ(markers.markers.size(), 5u);        // clear, two arrows, two ranks
+  EXPECT_EQ(markers.markers[1].color.g, 1.0f);  // best: green
+  EXPECT_EQ(markers.markers[3].color.r, 1.0f);  // worst: red
 }

@@ -42,7 +42,8 @@ simstack::Superquadric superquadricMsg(const SuperquadricShape& sq);
 /// x y z (float32) of `points` (metres) in `header.frame_id`.
 sensor_msgs::PointCloud2 pointCloud(const std_msgs::Header& header, const Points3& points);
 
-/// The objects of hypothesis 0 of `estimate`, in the table frame named by `header`.
+/// The objects of hypothesis 0 of `estimate`, in the table frame named by `header`, and the
+/// superquadrics of the further decomposed hypotheses.
 ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& estimate, int views,
                            int samples);
 

@@ -9,6 +9,7 @@
 
 #include <string>
 
+#include "simstack/grasping/grasp_ranking.h"
 #include "simstack/pipeline/perception_config.h"
 
 namespace simstack {
@@ -35,5 +36,20 @@ PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
                                             const std::string& package_dir);
 /// The node's settings from `pnh`'s `node/` parameters (absent ones keep their defaults).
 NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh);
+
+/// The grasp server's settings (config/grasps.yaml, loaded into its private namespace).
+struct GraspServerConfig {
+  std::string objects_topic = "perception/objects";  ///< scene of requests without one
+  int max_candidates = 64;                           ///< grasps simulated when a request asks for 0
+  int max_candidates_limit = 256;                    ///< requests for more are clamped to this
+  double max_pull_distance_m = 0.5;                  ///< longer pulls are rejected
+  GraspRankingConfig ranking;                        ///< cup, seal, physics, threads
+  /// Throws std::invalid_argument naming the parameter.
+  void validate() const;
+};
+/// The grasp server's settings from `pnh` (absent ones keep their defaults); throws
+/// std::runtime_error naming an unknown or mistyped parameter, std::invalid_argument for a bad
+/// value.
+GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh);
 
 }  // namespace simstack

@@ -225,6 +225,12 @@ ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& 
     o.visible_fraction = static_cast<float>(instances[k].visible_fraction);
     out.objects.push_back(std::move(o));
   }
+  for (size_t h = 1; h < est.hypotheses.size() && est.hypotheses[h].decomposed; ++h) {
+    SceneSample hypothesis;
+    for (const InstanceEstimate& e : est.hypotheses[h].instances)
+      hypothesis.superquadrics.push_back(superquadricMsg(e.superquadric));
+    out.hypotheses.push_back(std::move(hypothesis));
+  }
   return out;
 }
 

@@ -114,4 +114,68 @@ NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh) {
   return c;
 }
 
+namespace {
+template <class T>
+void read(const ros::NodeHandle& pnh, const std::string& name, T* value) {
+  if (pnh.hasParam(name) && !pnh.getParam(name, *value))
+    throw std::runtime_error(pnh.resolveName(name) + " has the wrong type");
+}
+}  // namespace
+
+void GraspServerConfig::validate() const {
+  const auto positive = [](double v, const char* name) {
+    if (!(v > 0.0) || !std::isfinite(v))
+      throw std::invalid_argument(std::string(name) + " must be a positive number");
+  };
+  if (objects_topic.empty()) throw std::invalid_argument("objects_topic must not be empty");
+  if (max_candidates < 1) throw std::invalid_argument("max_candidates must be >= 1");
+  if (max_candidates_limit < max_candidates)
+    throw std::invalid_argument("max_candidates_limit must be >= max_candidates");
+  positive(max_pull_distance_m, "max_pull_distance_m");
+  positive(ranking.candidates.cup_radius_m, "cup_radius_m");
+  positive(ranking.candidates.seal_tolerance_m, "seal_tolerance_m");
+  positive(ranking.candidates.tool_length_m, "tool_length_m");
+  positive(ranking.match_distance_m, "match_distance_m");
+  if (ranking.candidates.surface_samples < 100 || ranking.candidates.surface_samples > 100000)
+    throw std::invalid_argument("surface_samples must lie in [100, 100000]");
+  if (ranking.threads < 0) throw std::invalid_argument("threads must be >= 0 (0: all cores)");
+  ranking.pull.validate();
+}
+
+GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
+  static const std::set<std::string> known{
+      "objects_topic",       "threads",         "max_candidates",   "max_candidates_limit",
+      "max_pull_distance_m", "cup_radius_m",    "seal_tolerance_m", "surface_samples",
+      "tool_length_m",       "max_force_n",     "cup_stiffness_hz", "settle_s",
+      "topple_deg",          "match_distance_m"};
+  XmlRpc::XmlRpcValue all;
+  if (ros::param::get(pnh.getNamespace(), all) && all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
+    for (auto& kv : all)
+      if (!known.count(kv.first))
+        throw std::runtime_error("unknown parameter " + pnh.resolveName(kv.first));
+  GraspServerConfig c;
+  CandidateConfig& k = c.ranking.candidates;
+  PullConfig& p = c.ranking.pull;
+  double topple_deg = p.topple_rad * 180.0 / M_PI;
+  read(pnh, "objects_topic", &c.objects_topic);
+  c.ranking.threads = 2;
+  read(pnh, "threads", &c.ranking.threads);
+  read(pnh, "max_candidates", &c.max_candidates);
+  read(pnh, "max_candidates_limit", &c.max_candidates_limit);
+  read(pnh, "max_pull_distance_m", &c.max_pull_distance_m);
+  read(pnh, "cup_radius_m", &k.cup_radius_m);
+  read(pnh, "seal_tolerance_m", &k.seal_tolerance_m);
+  read(pnh, "surface_samples", &k.surface_samples);
+  read(pnh, "tool_length_m", &k.tool_length_m);
+  read(pnh, "max_force_n", &p.max_force_n);
+  read(pnh, "cup_stiffness_hz", &p.cup_stiffness_hz);
+  read(pnh, "settle_s", &p.settle_s);
+  read(pnh, "topple_deg", &topple_deg);
+  read(pnh, "match_distance_m", &c.ranking.match_distance_m);
+  p.cup_radius_m = k.cup_radius_m;
+  p.topple_rad = topple_deg * M_PI / 180.0;
+  c.validate();
+  return c;
+}
+
 }  // namespace simstack

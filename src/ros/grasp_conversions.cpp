@@ -1,0 +1,111 @@
+#include "simstack_ros/grasp_conversions.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "simstack_ros/conversions.h"
+
+namespace simstack {
+
+Transform rigidFromPose(const geometry_msgs::Pose& p, const std::string& what) {
+  const Quat q(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z);
+  const Vec3 t(p.position.x, p.position.y, p.position.z);
+  if (!t.allFinite() || !q.coeffs().allFinite())
+    throw std::invalid_argument(what + ": pose is not finite");
+  if (std::abs(q.norm() - 1.0) > 1e-3)
+    throw std::invalid_argument(what + ": orientation quaternion has norm " +
+                                std::to_string(q.norm()) + ", not 1");
+  return transformFromPose(p);
+}
+
+SuperquadricShape superquadricFromMsg(const simstack::Superquadric& m, const std::string& what) {
+  SuperquadricShape sq;
+  sq.scale_m = Vec3(m.semi_axes.x, m.semi_axes.y, m.semi_axes.z);
+  sq.exponents = Vec3(m.exponents.x, m.exponents.y, m.exponents.z);
+  sq.T_table_object = rigidFromPose(m.pose, what);
+  return sq;
+}
+
+std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, int hypotheses) {
+  std::vector<std::vector<SuperquadricShape>> scenes(1);
+  for (const Object& o : msg.objects)
+    scenes[0].push_back(superquadricFromMsg(o.superquadric, "object " + std::to_string(o.id)));
+  for (size_t h = 0; h < msg.hypotheses.size() && static_cast<int>(scenes.size()) < hypotheses;
+       ++h) {
+    std::vector<SuperquadricShape> scene;
+    for (size_t k = 0; k < msg.hypotheses[h].superquadrics.size(); ++k)
+      scene.push_back(superquadricFromMsg(
+          msg.hypotheses[h].superquadrics[k],
+          "hypothesis " + std::to_string(h + 1) + " object " + std::to_string(k)));
+    scenes.push_back(std::move(scene));
+  }
+  return scenes;
+}
+
+Grasp graspMsg(const RankedGrasp& g) {
+  Grasp m;
+  const Vec3 z = g.candidate.approach_table.normalized();
+  Transform T = Transform::Identity();
+  T.linear() = Quat::FromTwoVectors(Vec3::UnitZ(), z).toRotationMatrix();
+  T.translation() = g.candidate.contact_table;
+  m.contact = poseMsg(T);
+  m.approach.x = z.x(), m.approach.y = z.y(), m.approach.z = z.z();
+  m.seal_score = static_cast<float>(g.candidate.seal_score);
+  m.mean_displacement_m = static_cast<float>(g.mean_displacement_m);
+  m.worst_displacement_m = static_cast<float>(g.worst_displacement_m);
+  m.max_displacement_m = static_cast<float>(g.max_displacement_m);
+  m.toppled = static_cast<float>(g.mean_toppled);
+  m.freed_share = static_cast<float>(g.freed_share);
+  m.failed_share = static_cast<float>(g.failed_share);
+  m.score_m = static_cast<float>(g.score_m);
+  for (const PullOutcome& o : g.outcomes)
+    m.hypothesis_displacement_m.push_back(static_cast<float>(o.mean_displacement_m));
+  return m;
+}
+
+visualization_msgs::MarkerArray graspMarkers(const std_msgs::Header& header,
+                                             const std::vector<RankedGrasp>& grasps) {
+  visualization_msgs::MarkerArray out;
+  visualization_msgs::Marker clear;
+  clear.header = header;
+  clear.action = visualization_msgs::Marker::DELETEALL;
+  out.markers.push_back(clear);
+  const double length_m = 0.06;
+  for (size_t i = 0; i < grasps.size(); ++i) {
+    const Vec3 tip = grasps[i].candidate.contact_table;
+    const Vec3 tail = tip + length_m * grasps[i].candidate.approach_table.normalized();
+    visualization_msgs::Marker arrow;
+    arrow.header = header;
+    arrow.ns = "grasps";
+    arrow.id = static_cast<int>(i);
+    arrow.type = visualization_msgs::Marker::ARROW;
+    arrow.action = visualization_msgs::Marker::ADD;
+    arrow.pose.orientation.w = 1.0;
+    for (const Vec3& p : {tail, tip}) {
+      geometry_msgs::Point q;
+      q.x = p.x(), q.y = p.y(), q.z = p.z();
+      arrow.points.push_back(q);
+    }
+    arrow.scale.x = 0.004;  // shaft diameter
+    arrow.scale.y = 0.008;  // head diameter
+    arrow.scale.z = 0.012;  // head length
+    const float rank = grasps.size() > 1 ? static_cast<float>(i) / (grasps.size() - 1) : 0.0f;
+    arrow.color.r = rank, arrow.color.g = 1.0f - rank, arrow.color.b = 0.0f, arrow.color.a = 1.0f;
+    out.markers.push_back(arrow);
+    if (i >= 3) continue;
+    visualization_msgs::Marker text = arrow;
+    text.ns = "grasp_ranks";
+    text.type = visualization_msgs::Marker::TEXT_VIEW_FACING;
+    text.points.clear();
+    text.pose.position.x = tail.x(), text.pose.position.y = tail.y();
+    text.pose.position.z = tail.z() + 0.01;
+    text.scale.x = text.scale.y = 0.0, text.scale.z = 0.02;
+    text.color.r = text.color.g = text.color.b = 1.0f;
+    text.text = std::to_string(i + 1);
+    out.markers.push_back(text);
+  }
+  return out;
+}
+
+}  // namespace simstack

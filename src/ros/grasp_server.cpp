@@ -1,0 +1,139 @@
+#include "simstack_ros/grasp_server.h"
+
+#include <visualization_msgs/MarkerArray.h>
+
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include "simstack_ros/grasp_conversions.h"
+
+namespace simstack {
+namespace {
+
+bool positiveFinite(double v) { return std::isfinite(v) && v > 0.0; }
+
+}  // namespace
+
+GraspServer::GraspServer(ros::NodeHandle nh, ros::NodeHandle pnh)
+    : nh_(nh), pnh_(pnh), config_(graspServerConfigFromParams(pnh)) {
+  objects_sub_ = nh_.subscribe(config_.objects_topic, 1, &GraspServer::onObjects, this);
+  markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("grasps", 1, true);
+  rank_srv_ = pnh_.advertiseService("rank_grasps", &GraspServer::rank, this);
+  ROS_INFO("simstack grasp_server: scenes from %s, ~rank_grasps ready (%d candidates, %d threads)",
+           nh_.resolveName(config_.objects_topic).c_str(), config_.max_candidates,
+           config_.ranking.threads);
+}
+
+void GraspServer::onObjects(const ObjectArray::ConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(latest_mutex_);
+  latest_ = msg;
+}
+
+bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& res,
+                          std::vector<std::vector<SuperquadricShape>>* scenes, int* target,
+                          GraspRankingConfig* config, std::vector<Vec3>* cameras) {
+  ObjectArray::ConstPtr scene;
+  if (!req.scene.objects.empty()) {
+    scene = boost::make_shared<ObjectArray>(req.scene);
+  } else {
+    std::lock_guard<std::mutex> lock(latest_mutex_);
+    scene = latest_;
+  }
+  if (!scene || scene->objects.empty()) {
+    res.message = "the request has no objects and no scene with objects has arrived on " +
+                  nh_.resolveName(config_.objects_topic) + " yet";
+    return false;
+  }
+  res.header = scene->header;
+  *target = -1;
+  std::string ids;
+  for (size_t k = 0; k < scene->objects.size(); ++k) {
+    if (scene->objects[k].id == req.target_id) *target = static_cast<int>(k);
+    ids += (k ? ", " : "") + std::to_string(scene->objects[k].id);
+  }
+  if (*target < 0) {
+    res.message =
+        "unknown target id " + std::to_string(req.target_id) + " (the scene's ids: " + ids + ")";
+    return false;
+  }
+  if (!positiveFinite(req.pull_distance_m) || req.pull_distance_m > config_.max_pull_distance_m) {
+    res.message = "pull_distance_m must lie in (0, " + std::to_string(config_.max_pull_distance_m) +
+                  "] m, not " + std::to_string(req.pull_distance_m) + " (e.g. 0.10)";
+    return false;
+  }
+  if (!positiveFinite(req.pull_speed_mps) || req.pull_speed_mps > 2.0) {
+    res.message = "pull_speed_mps must lie in (0, 2] m/s, not " +
+                  std::to_string(req.pull_speed_mps) + " (e.g. 0.20)";
+    return false;
+  }
+  const int wanted =
+      req.hypotheses == 0 ? 1 : static_cast<int>(std::min<uint32_t>(req.hypotheses, 64));
+  *scenes = graspScenes(*scene, wanted);  // throws for a bad pose (caught by rank())
+  for (const auto& s : *scenes)
+    if (const std::string why = checkScene(s); !why.empty()) {
+      res.message = why;
+      return false;
+    }
+  std::string notes;
+  if (static_cast<int>(scenes->size()) < wanted)
+    notes += std::to_string(wanted) + " hypotheses asked for, the scene has " +
+             std::to_string(scenes->size()) + "; ";
+  *config = config_.ranking;
+  int count = req.candidates == 0 ? config_.max_candidates
+                                  : static_cast<int>(std::min<uint32_t>(req.candidates, 1u << 20));
+  if (count > config_.max_candidates_limit) {
+    notes += std::to_string(count) + " candidates asked for, clamped to max_candidates_limit " +
+             std::to_string(config_.max_candidates_limit) + "; ";
+    count = config_.max_candidates_limit;
+  }
+  config->candidates.max_candidates = count;
+  config->pull.pull_distance_m = req.pull_distance_m;
+  config->pull.pull_speed_mps = req.pull_speed_mps;
+  cameras->clear();
+  if (req.use_camera_pose)
+    cameras->push_back(rigidFromPose(req.camera_pose, "camera_pose").translation());
+  res.message = notes;
+  return true;
+}
+
+bool GraspServer::rank(RankGrasps::Request& req, RankGrasps::Response& res) {
+  std::lock_guard<std::mutex> lock(rank_mutex_);
+  const auto start = std::chrono::steady_clock::now();
+  res.success = false;
+  try {
+    std::vector<std::vector<SuperquadricShape>> scenes;
+    int target = -1;
+    GraspRankingConfig config;
+    std::vector<Vec3> cameras;
+    if (!prepare(req, res, &scenes, &target, &config, &cameras)) {
+      ROS_WARN("simstack grasp_server: %s", res.message.c_str());
+      return true;
+    }
+    const GraspRanking ranking = rankGrasps(scenes, target, cameras, config);
+    for (const RankedGrasp& g : ranking.grasps) res.grasps.push_back(graspMsg(g));
+    for (const SceneDrift& d : ranking.baseline)
+      res.baseline_displacement_m.push_back(static_cast<float>(d.max_displacement_m));
+    res.candidates_seen = static_cast<uint32_t>(ranking.candidates.visible);
+    res.candidates_sealable = static_cast<uint32_t>(ranking.candidates.sealable);
+    res.hypotheses_used = static_cast<uint32_t>(ranking.hypotheses.size());
+    res.pulls = static_cast<uint32_t>(ranking.pulls);
+    res.message += ranking.message.empty()
+                       ? std::to_string(ranking.grasps.size()) + " grasps ranked"
+                       : ranking.message;
+    res.success = true;
+    markers_pub_.publish(graspMarkers(res.header, ranking.grasps));
+    ROS_INFO("simstack grasp_server: object %u: %zu grasps ranked, %d pulls in %zu hypotheses",
+             req.target_id, ranking.grasps.size(), ranking.pulls, ranking.hypotheses.size());
+  } catch (const std::invalid_argument& e) {
+    res.message = e.what();
+    ROS_WARN("simstack grasp_server: %s", e.what());
+  } catch (const std::exception& e) {
+    res.message = std::string("ranking failed: ") + e.what();
+    ROS_ERROR("simstack grasp_server: %s", res.message.c_str());
+  }
+  res.time_s = std::chrono::duration<float>(std::chrono::steady_clock::now() - start).count();
+  return true;
+}
+
+}  // namespace simstack

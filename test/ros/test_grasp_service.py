@@ -1,0 +1,125 @@
+#!/usr/bin/env python3
+"""rostest node of test/ros/grasps.test: the grasp service on the replayed example bag."""
+import copy
+import math
+import unittest
+
+import rospy
+import rostest
+from simstack.msg import ObjectArray, Object
+from simstack.srv import RankGrasps, RankGraspsRequest
+from visualization_msgs.msg import Marker, MarkerArray
+
+
+def request(**fields):
+    req = RankGraspsRequest(target_id=0, candidates=12, pull_distance_m=0.1, pull_speed_mps=0.2)
+    for name, value in fields.items():
+        setattr(req, name, value)
+    return req
+
+
+class GraspService(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("test_grasp_service")
+        cls.scene = rospy.wait_for_message("/camera/perception/objects", ObjectArray, timeout=180)
+        for name in ("grasps", "lonely_grasps"):
+            rospy.wait_for_service("/camera/%s/rank_grasps" % name, timeout=60)
+        cls.rank = rospy.ServiceProxy("/camera/grasps/rank_grasps", RankGrasps)
+        cls.lonely = rospy.ServiceProxy("/camera/lonely_grasps/rank_grasps", RankGrasps)
+
+    def scene_with(self, change):
+        scene = copy.deepcopy(self.scene)
+        change(scene.objects[0].superquadric)
+        return scene
+
+    def test_1_latest_objects_give_ranked_grasps_and_markers(self):
+        self.assertGreater(len(self.scene.objects), 0)
+        markers = []
+        sub = rospy.Subscriber("/camera/grasps/grasps", MarkerArray, markers.append)
+        res = self.rank(request())
+        self.assertTrue(res.success, res.message)
+        self.assertGreater(len(res.grasps), 0, res.message)
+        self.assertLessEqual(len(res.grasps), 12)
+        self.assertEqual(res.hypotheses_used, 1)
+        self.assertEqual(len(res.baseline_displacement_m), 1)
+        self.assertEqual(res.pulls, len(res.grasps))
+        for better, worse in zip(res.grasps, res.grasps[1:]):
+            self.assertLessEqual(better.failed_share, worse.failed_share)
+        for g in res.grasps:
+            self.assertAlmostEqual(math.sqrt(g.approach.x ** 2 + g.approach.y ** 2 + g.approach.z ** 2), 1.0, 4)
+        deadline = rospy.Time.now() + rospy.Duration(10)
+        while not markers and rospy.Time.now() < deadline:
+            rospy.sleep(0.1)
+        sub.unregister()
+        self.assertTrue(markers, "no ~grasps markers")
+        arrows = [m for m in markers[-1].markers if m.ns == "grasps" and m.type == Marker.ARROW]
+        self.assertEqual(len(arrows), len(res.grasps))
+
+    def expect_rejected(self, req, words, service=None):
+        res = (service or self.rank)(req)
+        self.assertFalse(res.success, "accepted: %s" % words)
+        self.assertIn(words, res.message)
+        self.assertEqual(len(res.grasps), 0)
+
+    def test_2_bad_requests_are_answered_and_the_service_keeps_serving(self):
+        self.expect_rejected(request(target_id=99), "unknown target id 99")
+        self.expect_rejected(request(pull_distance_m=0.0), "pull_distance_m")
+        self.expect_rejected(request(pull_distance_m=-0.1), "pull_distance_m")
+        self.expect_rejected(request(pull_speed_mps=float("nan")), "pull_speed_mps")
+
+        def nan_axis(sq):
+            sq.semi_axes.x = float("nan")
+
+        def zero_axis(sq):
+            sq.semi_axes.y = 0.0
+
+        def negative_axis(sq):
+            sq.semi_axes.z = -0.05
+
+        def low_exponent(sq):
+            sq.exponents.x = 0.3
+
+        def infinite_exponent(sq):
+            sq.exponents.y = float("inf")
+
+        def long_quaternion(sq):
+            sq.pose.orientation.w *= 2.0
+
+        def nan_position(sq):
+            sq.pose.position.x = float("nan")
+
+        for change, words in ((nan_axis, "semi-axes"), (zero_axis, "semi-axes"),
+                              (negative_axis, "semi-axes"), (low_exponent, "exponents"),
+                              (infinite_exponent, "exponents"), (long_quaternion, "quaternion"),
+                              (nan_position, "not finite")):
+            self.expect_rejected(request(scene=self.scene_with(change)), words)
+        self.expect_rejected(request(use_camera_pose=True), "camera_pose")  # all-zero quaternion
+        self.expect_rejected(request(), "no scene with objects", self.lonely)
+        res = self.rank(request())
+        self.assertTrue(res.success, res.message)
+        self.assertGreater(len(res.grasps), 0)
+
+    def test_3_too_many_candidates_are_clamped_and_said(self):
+        res = self.lonely(request(scene=self.scene, candidates=1000))
+        self.assertTrue(res.success, res.message)
+        self.assertIn("clamped", res.message)
+        self.assertLessEqual(len(res.grasps), 8)
+
+    def test_4_a_target_without_sealable_surface_gives_no_grasps_and_says_why(self):
+        scene = copy.deepcopy(self.scene)
+        ball = scene.objects[0]
+        ball.superquadric.semi_axes.x = ball.superquadric.semi_axes.y = 0.02
+        ball.superquadric.semi_axes.z = 0.02
+        ball.superquadric.exponents.x = ball.superquadric.exponents.y = 2.0
+        ball.superquadric.exponents.z = 2.0
+        ball.superquadric.pose.position.z = 0.02
+        scene.objects = [ball]
+        res = self.rank(request(scene=scene))
+        self.assertTrue(res.success, res.message)
+        self.assertEqual(len(res.grasps), 0)
+        self.assertIn("no sealable surface", res.message)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("simstack", "grasp_service", GraspService)
