@@ -170,6 +170,7 @@ GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
   read(pnh, "max_force_n", &p.max_force_n);
   read(pnh, "cup_stiffness_hz", &p.cup_stiffness_hz);
   read(pnh, "settle_s", &p.settle_s);
+  read(pnh, "density_kgpm3", &p.physics.density_kgpm3);
   read(pnh, "topple_deg", &topple_deg);
   read(pnh, "match_distance_m", &c.ranking.match_distance_m);
   p.cup_radius_m = k.cup_radius_m;

@@ -4,6 +4,7 @@
 /// Every function throws std::runtime_error naming the file on failure.
 
 #include <string>
+#include <vector>
 
 #include "simstack/geometry/image.h"
 #include "simstack/geometry/pinhole_camera.h"
@@ -23,6 +24,16 @@ void writeDepthPicture(const std::string& path, const DepthImage& depth);
 /// Shaded picture: one colour per instance, Lambertian light from the camera.
 void writeShadedPicture(const std::string& path, const InstanceImage& instances,
                         const Image<Vec3f>& normals_table, const Transform& T_table_camera);
+/// An arrow drawn over a picture (table frame), with an optional label at its tail.
+struct PictureArrow {
+  Vec3 tail_table = Vec3::Zero(), tip_table = Vec3::Zero();
+  Eigen::Vector3f colour{0.0f, 1.0f, 0.0f};  ///< RGB in [0, 1]
+  std::string label;
+};
+/// The shaded picture with arrows projected through `camera` (posed by T_table_camera).
+void writeShadedPicture(const std::string& path, const InstanceImage& instances,
+                        const Image<Vec3f>& normals_table, const Transform& T_table_camera,
+                        const PinholeCamera& camera, const std::vector<PictureArrow>& arrows);
 /// RGB colour of instance k (0 = table) used by every picture and marker.
 Eigen::Vector3f instanceColour(int k);
 

@@ -19,7 +19,10 @@ namespace simstack {
 /// orientation [qw,qx,qy,qz]} in `frame` (the table frame).
 void writeSuperquadricsYaml(const std::string& path, const std::vector<SuperquadricShape>& shapes,
                             const std::string& frame = "table");
-std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path);
+/// Reads what writeSuperquadricsYaml wrote; `ids` (when given) receives each object's `id`
+/// (its index when the file has none). Throws std::runtime_error naming the file and field.
+std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path,
+                                                     std::vector<int>* ids = nullptr);
 
 void writeMeshPly(const std::string& path, const TriangleMesh& mesh);
 TriangleMesh readMeshPly(const std::string& path);

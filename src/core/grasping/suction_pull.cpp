@@ -24,6 +24,7 @@ void check(const PullConfig& c) {
   requirePositive(c.cup_stiffness_hz, "cup_stiffness_hz");
   requirePositive(c.topple_rad, "topple_rad");
   requirePositive(c.physics.timestep_s, "physics timestep_s");
+  requirePositive(c.physics.density_kgpm3, "density_kgpm3");
   if (!std::isfinite(c.ramp_s) || c.ramp_s < 0.0)
     throw std::invalid_argument("ramp_s must be >= 0");
   if (!std::isfinite(c.settle_s) || c.settle_s < 0.0)
@@ -52,6 +53,7 @@ PhysicsConfig PullConfig::pullPhysics() {
   p.allow_sleeping = true;
   p.split_impulse = true;
   p.friction_direction_caching = true;
+  p.density_kgpm3 = 200.0;
   return p;
 }
 

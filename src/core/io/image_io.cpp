@@ -106,8 +106,10 @@ Eigen::Vector3f instanceColour(int k) {
   return {c[0], c[1], c[2]};
 }
 
-void writeShadedPicture(const std::string& path, const InstanceImage& instances,
-                        const Image<Vec3f>& normals_table, const Transform& T_table_camera) {
+namespace {
+
+cv::Mat shadedPicture(const InstanceImage& instances, const Image<Vec3f>& normals_table,
+                      const Transform& T_table_camera) {
   if (normals_table.width != instances.width || normals_table.height != instances.height) {
     throw std::invalid_argument("shaded picture needs normals of the mask's size");
   }
@@ -125,6 +127,36 @@ void writeShadedPicture(const std::string& path, const InstanceImage& instances,
           cv::Vec3b(cv::saturate_cast<uint8_t>(c.z()), cv::saturate_cast<uint8_t>(c.y()),
                     cv::saturate_cast<uint8_t>(c.x()));
     }
+  }
+  return img;
+}
+
+}  // namespace
+
+void writeShadedPicture(const std::string& path, const InstanceImage& instances,
+                        const Image<Vec3f>& normals_table, const Transform& T_table_camera) {
+  writeOrThrow(path, shadedPicture(instances, normals_table, T_table_camera));
+}
+
+void writeShadedPicture(const std::string& path, const InstanceImage& instances,
+                        const Image<Vec3f>& normals_table, const Transform& T_table_camera,
+                        const PinholeCamera& camera, const std::vector<PictureArrow>& arrows) {
+  cv::Mat img = shadedPicture(instances, normals_table, T_table_camera);
+  const Transform T_camera_table = T_table_camera.inverse();
+  // Drawn worst first, so that the best arrows end up on top.
+  for (auto a = arrows.rbegin(); a != arrows.rend(); ++a) {
+    double u0, v0, u1, v1;
+    if (!camera.project(T_camera_table * a->tail_table, &u0, &v0) ||
+        !camera.project(T_camera_table * a->tip_table, &u1, &v1))
+      continue;
+    const Eigen::Vector3f c = a->colour * 255.0f;
+    const cv::Scalar bgr(c.z(), c.y(), c.x());
+    cv::arrowedLine(img, cv::Point2d(u0, v0), cv::Point2d(u1, v1), cv::Scalar(0, 0, 0), 4,
+                    cv::LINE_AA, 0, 0.25);
+    cv::arrowedLine(img, cv::Point2d(u0, v0), cv::Point2d(u1, v1), bgr, 2, cv::LINE_AA, 0, 0.25);
+    if (!a->label.empty())
+      cv::putText(img, a->label, cv::Point2d(u0 + 4, v0 - 4), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+                  cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
   }
   writeOrThrow(path, img);
 }

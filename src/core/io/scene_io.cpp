@@ -55,7 +55,8 @@ void writeSuperquadricsYaml(const std::string& path, const std::vector<Superquad
   if (!f) throw std::runtime_error("cannot write " + path);
 }
 
-std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path) {
+std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path,
+                                                     std::vector<int>* ids) {
   YAML::Node root;
   try {
     root = YAML::LoadFile(path);
@@ -79,6 +80,18 @@ std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path) {
     s.T_table_object = Transform::Identity();
     s.T_table_object.linear() = quat.normalized().toRotationMatrix();
     s.T_table_object.translation() = Vec3(p[0], p[1], p[2]);
+    if (!s.T_table_object.matrix().allFinite() || !s.scale_m.allFinite() ||
+        !s.exponents.allFinite())
+      throw std::runtime_error(path + ": object " + std::to_string(out.size()) +
+                               " has a value that is not finite");
+    if (ids) {
+      try {
+        ids->push_back(o["id"] ? o["id"].as<int>() : static_cast<int>(out.size()));
+      } catch (const YAML::Exception&) {
+        throw std::runtime_error(path + ": object " + std::to_string(out.size()) +
+                                 " has an id that is not an integer");
+      }
+    }
     out.push_back(s);
   }
   return out;

@@ -1,0 +1,26 @@
+#pragma once
+/// @file grasp_files.h
+/// What a grasp ranking leaves for people and programs: a printed table, a JSON of every
+/// grasp and its outcomes, and a picture of the best grasps drawn on the scene.
+
+#include <string>
+#include <vector>
+
+#include "simstack/grasping/grasp_ranking.h"
+
+namespace simstack {
+
+/// The ranking as a text table of its first `rows` grasps (rank, contact, approach, seal,
+/// displacements in mm, toppled, freed, failed), then the baseline drift.
+std::string graspTable(const GraspRanking& ranking, int rows);
+
+/// JSON: target id, candidate counts, baseline per hypothesis, and every grasp best first with
+/// its per-hypothesis outcomes. Throws std::runtime_error naming the file when it cannot write.
+void writeGraspJson(const std::string& path, const GraspRanking& ranking, int target_id);
+
+/// The scene seen from above and in front (640x480), with the first `top` grasps as arrows
+/// pointing at their contacts, coloured from green (best) to red, numbered.
+void writeGraspPicture(const std::string& path, const std::vector<SuperquadricShape>& scene,
+                       const std::vector<RankedGrasp>& grasps, int top);
+
+}  // namespace simstack

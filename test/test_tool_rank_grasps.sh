@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# End-to-end check of simstack_rank_grasps on a two-box stack written as simstack_reconstruct
+# writes scenes: the table, grasps.json and grasps.png, the best grasp lifting the top box
+# straight up, and clear errors (non-zero exit) for an unknown id and bad files.
+set -eu
+rank=$1
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+cat > "$dir/stack.yaml" <<'YAML'
+frame: table
+objects:
+  - {id: 0, scale: [0.03, 0.03, 0.06], exponents: [20, 20, 20], position: [0, 0, 0.06], orientation: [1, 0, 0, 0]}
+  - {id: 7, scale: [0.06, 0.06, 0.03], exponents: [20, 20, 20], position: [0, 0, 0.1505], orientation: [1, 0, 0, 0]}
+YAML
+"$rank" --scene "$dir/stack.yaml" --target 7 --candidates 16 --output "$dir/out" > "$dir/log.txt"
+cat "$dir/log.txt"
+grep -q "16 grasps ranked" "$dir/log.txt"
+test -s "$dir/out/grasps.png"
+/usr/bin/python3 - "$dir/out/grasps.json" <<'PY'
+import json, sys
+doc = json.load(open(sys.argv[1]))
+assert doc["target_id"] == 7 and len(doc["grasps"]) == 16, doc["target_id"]
+best = doc["grasps"][0]
+assert best["approach"][2] > 0.9, best["approach"]          # straight up
+assert best["failed_share"] == 0 and best["freed_share"] == 1, best
+assert all(g["failed_share"] >= best["failed_share"] for g in doc["grasps"])
+PY
+expect_error() {  # expect_error WORDS ARGS...: non-zero exit and WORDS in the message
+  local words=$1; shift
+  if "$rank" "$@" > /dev/null 2> "$dir/err"; then echo "accepted: $*"; exit 1; fi
+  grep -q -- "$words" "$dir/err" || { echo "expected '$words':"; cat "$dir/err"; exit 1; }
+}
+expect_error "no object with id 3" --scene "$dir/stack.yaml" --target 3
+echo "objects: [1, 2" > "$dir/broken.yaml"
+expect_error "broken.yaml" --scene "$dir/broken.yaml" --target 0
+sed 's/0.03, 0.03, 0.06/.nan, 0.03, 0.06/' "$dir/stack.yaml" > "$dir/nan.yaml"
+expect_error "nan.yaml" --scene "$dir/nan.yaml" --target 7
+sed 's/exponents: \[20, 20, 20\], position: \[0, 0, 0.06\]/exponents: [0.5, 20, 20], position: [0, 0, 0.06]/' \
+  "$dir/stack.yaml" > "$dir/low.yaml"
+expect_error "exponents" --scene "$dir/low.yaml" --target 7
+expect_error "nope.yaml" --scene "$dir/nope.yaml" --target 0
+expect_error "pull-distance" --scene "$dir/stack.yaml" --target 7 --pull-distance 0
+echo "tool_rank_grasps ok"
