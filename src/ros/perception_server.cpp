@@ -58,7 +58,8 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
       tf_listener_(tf_buffer_),
       it_(nh),
       rate_since_(ros::WallTime::now()) {
-  objects_pub_ = pnh_.advertise<ObjectArray>("objects", 1);
+  // Latched: a grasp client or rviz that starts later still gets the last scene.
+  objects_pub_ = pnh_.advertise<ObjectArray>("objects", 1, true);
   instances_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("instances", 1);
   markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("markers", 1);
   occupancy_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("occupancy", 1);

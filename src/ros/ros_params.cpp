@@ -144,10 +144,10 @@ void GraspServerConfig::validate() const {
 
 GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
   static const std::set<std::string> known{
-      "objects_topic",       "threads",         "max_candidates",   "max_candidates_limit",
-      "max_pull_distance_m", "cup_radius_m",    "seal_tolerance_m", "surface_samples",
-      "tool_length_m",       "max_force_n",     "cup_stiffness_hz", "settle_s",
-      "topple_deg",          "match_distance_m"};
+      "objects_topic",       "threads",          "max_candidates",   "max_candidates_limit",
+      "max_pull_distance_m", "cup_radius_m",     "seal_tolerance_m", "surface_samples",
+      "tool_length_m",       "max_force_n",      "cup_stiffness_hz", "settle_s",
+      "topple_deg",          "match_distance_m", "density_kgpm3"};
   XmlRpc::XmlRpcValue all;
   if (ros::param::get(pnh.getNamespace(), all) && all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
     for (auto& kv : all)

@@ -5,6 +5,7 @@
 /// more scene hypotheses (the perception's latent samples): each candidate is simulated in
 /// each hypothesis and ranked by its mean and its worst case over them.
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -51,6 +52,19 @@ struct GraspRanking {
 /// match distance), or -1.
 int matchObject(const SuperquadricShape& reference, const std::vector<SuperquadricShape>& scene,
                 double match_distance_m);
+
+/// The candidate as a robot would execute it on another estimate of its target (a further
+/// hypothesis, or the true object): the same approach line, onto `target`. std::nullopt when
+/// the line misses it.
+std::optional<Vec3> carryCandidate(const SuctionCandidate& candidate,
+                                   const SuperquadricShape& target, double tool_length_m);
+
+/// Executes a grasp chosen on some estimate of scene[target] in `simulator`'s scene (built
+/// from `scene`): carried onto the target along its approach line, then pulled. A miss is a
+/// failed pull (cup_held false).
+PullOutcome executeGrasp(const PullSimulator& simulator,
+                         const std::vector<SuperquadricShape>& scene, int target,
+                         const SuctionCandidate& candidate, double tool_length_m);
 
 /// Ranks grasps on hypotheses[0][target]. The target of each further hypothesis is its object
 /// matching it (hypotheses without one are left out, said in the message); a candidate is

@@ -42,18 +42,6 @@ int threadCount(int requested) {
   return requested == 0 ? cores : std::min(requested, cores);
 }
 
-// The candidate of hypothesis 0 as the robot would execute it in hypothesis h: the same
-// approach line, onto h's target. False when the line misses it.
-bool carryOver(const SuctionCandidate& c, const SuperquadricShape& target, double tool_length_m,
-               Vec3* contact) {
-  const double reach = tool_length_m + 2.0 * target.scale_m.maxCoeff() + 0.1;
-  const Vec3 start = c.contact_table + (tool_length_m + 0.05) * c.approach_table;
-  const auto hit = enterSuperquadric(target, start, -c.approach_table, reach);
-  if (!hit) return false;
-  *contact = *hit;
-  return true;
-}
-
 void summarise(RankedGrasp* g) {
   const double n = static_cast<double>(g->outcomes.size());
   for (const PullOutcome& o : g->outcomes) {
@@ -68,6 +56,26 @@ void summarise(RankedGrasp* g) {
 }
 
 }  // namespace
+
+std::optional<Vec3> carryCandidate(const SuctionCandidate& c, const SuperquadricShape& target,
+                                   double tool_length_m) {
+  const double reach = tool_length_m + 2.0 * target.scale_m.maxCoeff() + 0.1;
+  const Vec3 start = c.contact_table + (tool_length_m + 0.05) * c.approach_table;
+  return enterSuperquadric(target, start, -c.approach_table, reach);
+}
+
+PullOutcome executeGrasp(const PullSimulator& sim, const std::vector<SuperquadricShape>& scene,
+                         int target, const SuctionCandidate& c, double tool_length_m) {
+  const auto contact = carryCandidate(c, scene.at(target), tool_length_m);
+  if (!contact) {
+    PullOutcome miss;
+    miss.cup_held = false;  // nothing to hold where this scene puts the target
+    return miss;
+  }
+  const Mat3 turn =
+      sim.settledPoses()[target].linear() * scene[target].T_table_object.linear().transpose();
+  return sim.pull(target, sim.settledPoint(target, *contact), turn * c.approach_table);
+}
 
 std::string checkScene(const std::vector<SuperquadricShape>& scene) {
   for (size_t i = 0; i < scene.size(); ++i) {
@@ -144,17 +152,14 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
   std::vector<PullOutcome> outcomes(static_cast<size_t>(C) * H);
   parallelFor(C * H, threads, [&](int job) {
     const int c = job / H, k = job % H;
-    const SuperquadricShape& t = hypotheses[out.hypotheses[k]][targets[k]];
-    Vec3 contact = cands[c].contact_table;
-    PullOutcome& o = outcomes[job];
-    if (k > 0 && !carryOver(cands[c], t, config.candidates.tool_length_m, &contact)) {
-      o.cup_held = false;  // nothing to hold where this hypothesis puts the target
-      return;
-    }
-    const Mat3 turn =
-        sims[k]->settledPoses()[targets[k]].linear() * t.T_table_object.linear().transpose();
-    o = sims[k]->pull(targets[k], sims[k]->settledPoint(targets[k], contact),
-                      turn * cands[c].approach_table);
+    const auto& scene = hypotheses[out.hypotheses[k]];
+    outcomes[job] =
+        k == 0
+            ? sims[0]->pull(target, sims[0]->settledPoint(target, cands[c].contact_table),
+                            sims[0]->settledPoses()[target].linear() *
+                                scene[target].T_table_object.linear().transpose() *
+                                cands[c].approach_table)
+            : executeGrasp(*sims[k], scene, targets[k], cands[c], config.candidates.tool_length_m);
   });
   out.pulls = C * H;
   for (int c = 0; c < C; ++c) {

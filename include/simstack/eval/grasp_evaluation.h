@@ -1,0 +1,52 @@
+#pragma once
+/// @file grasp_evaluation.h
+/// What the grasp ranking is worth: on generated piles, grasps are chosen on each method's
+/// estimated scene, then executed in the true pile (Bullet), and the other objects'
+/// displacement is measured. Choosers on the same targets: the ranking on the estimate, a
+/// random sealable candidate of the estimate, the top-most candidate (what a simple picker
+/// does), and the ranking on the true pile itself (the oracle).
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "simstack/dataset/dataset.h"
+#include "simstack/eval/evaluator.h"
+#include "simstack/grasping/grasp_ranking.h"
+
+namespace simstack {
+
+struct GraspEvaluationOptions {
+  int scenes = 0;                 ///< the first N scenes (0 = all)
+  uint64_t seed = 7;              ///< viewpoints, sensor noise and the random chooser
+  int width = 640, height = 480;  ///< rendered view (a scaled Kinect)
+  bool noise = true;              ///< Kinect-like sensor noise
+  GraspRankingConfig ranking;     ///< candidates, cup and pull (shared by every chooser)
+};
+
+/// One pick: a chooser's grasp on a method's scene, executed in the true pile.
+struct PickResult {
+  int scene = 0, target = 0;
+  std::string method;   ///< "truth" for the oracle, else the estimating method's name
+  std::string chooser;  ///< "ranked", "random", "top-most"
+  bool found = true;    ///< the method has an object matching the target
+  bool grasped = true;  ///< a sealable candidate existed on its estimate of the target
+  PullOutcome outcome;  ///< in the true pile (a failed pull when not found or not grasped)
+};
+
+/// Every true object of the first scenes as a target, one random view per scene. Scenes must
+/// be superquadric piles (std::invalid_argument otherwise).
+std::vector<PickResult> evaluateGrasps(const DatasetReader& reader,
+                                       const std::vector<EvaluatedMethod*>& methods,
+                                       const GraspEvaluationOptions& options,
+                                       const std::function<void(int, int)>& progress = {});
+
+/// Per method and chooser: picks, mean and median displacement of the others (mm), the share
+/// of picks that toppled something, freed the target, failed.
+nlohmann::json graspSummary(const std::vector<PickResult>& picks);
+/// That summary as a GitHub markdown table.
+std::string graspSummaryTable(const nlohmann::json& summary);
+
+}  // namespace simstack

@@ -1,0 +1,94 @@
+#!/usr/bin/env python3
+"""Ranks suction grasps on one perceived object through the simstack grasp service and prints
+them best first (README, "Grasps").
+
+    scripts/rank_grasps.py --target 0            # an object id of the latest ~objects
+    scripts/rank_grasps.py --target top          # the object whose centre is highest
+    scripts/rank_grasps.py --target 1 --candidates 32 --hypotheses 3 --json grasps.json
+
+The scene is the latest ObjectArray the grasp server received (launch/grasps.launch); with
+--target top it is read here first to choose the object, and sent with the request.
+"""
+import argparse
+import json
+import sys
+
+import rospy
+from simstack.msg import ObjectArray
+from simstack.srv import RankGrasps, RankGraspsRequest
+
+
+def table(res, rows):
+    lines = ["%4s  %-22s %-18s %5s %8s %8s %7s %6s %6s" % (
+        "rank", "contact (m)", "approach", "seal", "mean mm", "max mm", "toppled", "freed",
+        "failed")]
+    for i, g in enumerate(res.grasps[:rows]):
+        p, a = g.contact.position, g.approach
+        lines.append("%4d  %+6.3f %+6.3f %+6.3f  %+5.2f %+5.2f %+5.2f %5.2f %8.1f %8.1f %7.2f %6.2f %6.2f" % (
+            i + 1, p.x, p.y, p.z, a.x, a.y, a.z, g.seal_score, 1e3 * g.mean_displacement_m,
+            1e3 * g.max_displacement_m, g.toppled, g.freed_share, g.failed_share))
+    if len(res.grasps) > rows:
+        lines.append("  ... %d more" % (len(res.grasps) - rows))
+    for h, d in enumerate(res.baseline_displacement_m):
+        lines.append("baseline (hypothesis %d left alone): objects moved %.1f mm at most" % (h, 1e3 * d))
+    return "\n".join(lines)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--target", required=True, help="object id, or 'top' for the highest")
+    parser.add_argument("--candidates", type=int, default=0, help="grasps to simulate (0: the node's)")
+    parser.add_argument("--pull-distance", type=float, default=0.10, help="metres")
+    parser.add_argument("--pull-speed", type=float, default=0.20, help="metres per second")
+    parser.add_argument("--hypotheses", type=int, default=1, help="scene hypotheses (1: objects alone)")
+    parser.add_argument("--camera", default="camera", help="namespace of the perception and grasp nodes")
+    parser.add_argument("--rows", type=int, default=10, help="grasps printed")
+    parser.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the service")
+    parser.add_argument("--json", help="also write the response to this file")
+    args = parser.parse_args(rospy.myargv()[1:])
+    rospy.init_node("rank_grasps_client", anonymous=True)
+    service = "/%s/grasps/rank_grasps" % args.camera
+    req = RankGraspsRequest(candidates=args.candidates, pull_distance_m=args.pull_distance,
+                            pull_speed_mps=args.pull_speed, hypotheses=args.hypotheses)
+    if args.target == "top":
+        topic = "/%s/perception/objects" % args.camera
+        try:
+            scene = rospy.wait_for_message(topic, ObjectArray, timeout=args.timeout)
+        except rospy.ROSException as e:
+            sys.exit("rank_grasps: no scene on %s: %s" % (topic, e))
+        if not scene.objects:
+            sys.exit("rank_grasps: the latest scene has no objects")
+        req.scene = scene
+        req.target_id = max(scene.objects, key=lambda o: o.superquadric.pose.position.z).id
+    else:
+        try:
+            req.target_id = int(args.target)
+        except ValueError:
+            sys.exit("rank_grasps: --target must be an object id or 'top', not %r" % args.target)
+    try:
+        rospy.wait_for_service(service, timeout=args.timeout)
+        res = rospy.ServiceProxy(service, RankGrasps)(req)
+    except (rospy.ROSException, rospy.ServiceException) as e:
+        sys.exit("rank_grasps: %s: %s" % (service, e))
+    if not res.success:
+        sys.exit("rank_grasps: %s" % res.message)
+    print("object %d: %s (%d pulls in %d hypotheses, %.2f s)" % (
+        req.target_id, res.message, res.pulls, res.hypotheses_used, res.time_s))
+    print(table(res, args.rows))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"target_id": req.target_id, "frame": res.header.frame_id,
+                       "message": res.message,
+                       "baseline_displacement_m": list(res.baseline_displacement_m),
+                       "grasps": [{"contact": [g.contact.position.x, g.contact.position.y, g.contact.position.z],
+                                   "approach": [g.approach.x, g.approach.y, g.approach.z],
+                                   "seal_score": g.seal_score,
+                                   "mean_displacement_m": g.mean_displacement_m,
+                                   "max_displacement_m": g.max_displacement_m,
+                                   "toppled": g.toppled, "freed_share": g.freed_share,
+                                   "failed_share": g.failed_share} for g in res.grasps]}, f, indent=1)
+        print("wrote %s" % args.json)
+
+
+if __name__ == "__main__":
+    main()
