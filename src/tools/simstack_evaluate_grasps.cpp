@@ -39,6 +39,11 @@ int main(int argc, char** argv) {
   app.add_option("--sim-threads", o.ranking.threads, "threads simulating pulls")
       ->capture_default_str()
       ->check(CLI::Range(0, 1024));
+  app.add_option("--hypotheses", o.hypotheses,
+                 "scene hypotheses each candidate is simulated in (the C-VAE's decomposed latent "
+                 "samples; at most the model's samples)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 16));
   app.add_option("--seed", o.seed, "viewpoints, noise and the random chooser")
       ->capture_default_str();
   app.add_flag("--no-noise", no_noise, "clean rendered views instead of Kinect-like noise");
@@ -50,8 +55,19 @@ int main(int argc, char** argv) {
     std::ofstream check(output, std::ios::app);  // a bad --output is found before the work
     if (!check) throw std::runtime_error("cannot write " + output);
     const DatasetReader reader(dataset);
-    const auto methods = evaluatedMethods(perception.configs(), !no_classical,
-                                          reader.info().extent_m, reader.info().resolution);
+    // As the node runs them: hypothesis 0 is the mean scene, H of them decomposed.
+    std::vector<std::unique_ptr<EvaluatedMethod>> methods;
+    for (PerceptionConfig c : perception.configs()) {
+      c.decompose_samples = std::min(std::max(c.decompose_samples, o.hypotheses), c.samples);
+      methods.push_back(std::make_unique<NetworkMethod>(c));
+    }
+    if (!no_classical) {
+      ClassicalConfig cc;
+      cc.threads = perception.config().threads;
+      cc.fit = perception.config().fit;
+      methods.push_back(
+          std::make_unique<ClassicalMethod>(cc, reader.info().extent_m, reader.info().resolution));
+    }
     std::vector<EvaluatedMethod*> run;
     for (const auto& m : methods) run.push_back(m.get());
     const int n = o.scenes > 0 ? std::min(o.scenes, reader.size()) : reader.size();
@@ -79,6 +95,7 @@ int main(int argc, char** argv) {
                         {"candidates", o.ranking.candidates.max_candidates},
                         {"noise", o.noise},
                         {"seed", o.seed},
+                        {"hypotheses", o.hypotheses},
                         {"summary", summary},
                         {"picks", rows}}
              .dump(1)

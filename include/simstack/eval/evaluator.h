@@ -31,6 +31,8 @@ struct MethodEstimate {
   std::vector<TriangleMesh> surfaces;  ///< the predicted full surface of each hypothesis
   std::vector<std::vector<float>> hypotheses_tsdf;  ///< per hypothesis on `grid`; <= 0 occupied
   std::vector<SuperquadricShape> superquadrics;     ///< the objects found, table frame
+  /// The objects of the further hypotheses that were decomposed (robust grasp ranking).
+  std::vector<std::vector<SuperquadricShape>> further_superquadrics;
   Image<int> pixel_instances;  ///< instance per pixel of the view, -1 none (may stay empty)
   bool table_estimated = false;
   double perceive_ms = std::numeric_limits<double>::quiet_NaN();

@@ -24,6 +24,9 @@ struct GraspEvaluationOptions {
   int width = 640, height = 480;  ///< rendered view (a scaled Kinect)
   bool noise = true;              ///< Kinect-like sensor noise
   GraspRankingConfig ranking;     ///< candidates, cup and pull (shared by every chooser)
+  /// Hypotheses the ranking simulates each candidate in: the estimate, then up to H - 1 of a
+  /// method's further decomposed hypotheses (MethodEstimate::further_superquadrics).
+  int hypotheses = 1;
 };
 
 /// One pick: a chooser's grasp on a method's scene, executed in the true pile.

@@ -34,8 +34,11 @@ struct RankedGrasp {
   double mean_toppled = 0.0;          ///< toppled objects, mean over hypotheses
   double failed_share = 0.0;          ///< hypotheses where the seal broke
   double freed_share = 0.0;           ///< hypotheses where the target came free
-  /// What the ranking sorts by after failures and topples: (mean + worst) / 2 of the mean
-  /// displacement, which is the paper's score for one hypothesis.
+  double peak_load = 0.0;             ///< largest PullOutcome::peak_load over hypotheses
+  /// What the ranking sorts by after failures, freeing and topples: (mean + worst) / 2 of the
+  /// mean displacement, which is the paper's score for one hypothesis, compared in whole
+  /// millimetres (finer differences are within the physics' own drift); ties go to the lower
+  /// peak load, the grasp with more margin against a wrong mass or centre.
   double score_m = 0.0;
 };
 

@@ -49,10 +49,13 @@ struct PullOutcome {
   double mean_displacement_m = 0.0;  ///< over the other objects (the paper's score)
   double max_displacement_m = 0.0;
   double max_rotation_rad = 0.0;
-  int toppled = 0;             ///< other objects turned beyond topple_rad
-  bool cup_held = true;        ///< the seal held to the end
-  bool target_freed = false;   ///< held, and touching no other object at the end
-  double peak_force_n = 0.0;   ///< largest force the seal carried
+  int toppled = 0;            ///< other objects turned beyond topple_rad
+  bool cup_held = true;       ///< the seal held to the end
+  bool target_freed = false;  ///< held, and touching no other object at the end
+  double peak_force_n = 0.0;  ///< largest force the seal carried
+  /// Largest share of the seal's limit used while it held: max of force / max_force_n and
+  /// moment / (max_force_n x cup_radius_m). Near 1, a slightly heavier object breaks it.
+  double peak_load = 0.0;
   double target_lift_m = 0.0;  ///< the target's rise (its centre's z) at the end
   /// A failed pull: the seal broke and the target was not freed. Ranked last.
   bool failed() const { return !cup_held; }

@@ -1,7 +1,8 @@
 #pragma once
 /// @file physics_world.h
 /// A Bullet rigid-body world with the table plane z = 0 and convex objects. Used to settle
-/// generated piles and to test the stability of estimated scenes.
+/// generated piles, to test the stability of estimated scenes and to simulate suction pulls
+/// (a cup holding one object).
 /// Not thread-safe; use one world per thread.
 
 #include <functional>

@@ -39,12 +39,15 @@ const SuctionCandidate* choose(const GraspRanking& r, const std::string& chooser
 // The picks of every chooser for one method's estimate of one target.
 void pickOnEstimate(const std::vector<SuperquadricShape>& truth, const PullSimulator& truth_sim,
                     int scene, int target, const std::string& method,
-                    const std::vector<SuperquadricShape>& estimate,
-                    const GraspEvaluationOptions& options, std::mt19937_64& rng,
-                    std::vector<PickResult>* out) {
-  const int k = matchObject(truth[target], estimate, options.ranking.match_distance_m);
+                    const MethodEstimate& estimate, const GraspEvaluationOptions& options,
+                    std::mt19937_64& rng, std::vector<PickResult>* out) {
+  const int k =
+      matchObject(truth[target], estimate.superquadrics, options.ranking.match_distance_m);
+  std::vector<std::vector<SuperquadricShape>> scenes{estimate.superquadrics};
+  for (const auto& further : estimate.further_superquadrics)
+    if (static_cast<int>(scenes.size()) < options.hypotheses) scenes.push_back(further);
   GraspRanking ranking;
-  if (k >= 0) ranking = rankGrasps({estimate}, k, {}, options.ranking);
+  if (k >= 0) ranking = rankGrasps(scenes, k, {}, options.ranking);
   for (const std::string chooser : {"ranked", "random", "top-most"}) {
     PickResult p;
     p.scene = scene, p.target = target, p.method = method, p.chooser = chooser;
@@ -73,10 +76,9 @@ std::vector<PickResult> evaluateScene(const SceneRecord& rec, int index,
       renderer.render(camera, T_table_camera,
                       options.noise ? SensorNoiseConfig::kinect(rng()) : SensorNoiseConfig());
   const DepthView view{r.depth, camera, T_table_camera};
-  std::vector<std::vector<SuperquadricShape>> estimates;
+  std::vector<MethodEstimate> estimates;
   for (EvaluatedMethod* m : methods)
-    estimates.push_back(
-        m->estimate(view, nullptr, rec.scene.surfaceCentroid().head<2>()).superquadrics);
+    estimates.push_back(m->estimate(view, nullptr, rec.scene.surfaceCentroid().head<2>()));
   const PullSimulator truth_sim(truth, options.ranking.pull);
   std::vector<PickResult> out;
   for (int t = 0; t < static_cast<int>(truth.size()); ++t) {
@@ -123,22 +125,25 @@ nlohmann::json graspSummary(const std::vector<PickResult>& picks) {
       keys.emplace_back(p.method, p.chooser);
   nlohmann::json out = nlohmann::json::array();
   for (const auto& [method, chooser] : keys) {
-    std::vector<double> d;
+    std::vector<double> d, d_freed;
     double toppled = 0, freed = 0, failed = 0, found = 0, n = 0;
     for (const PickResult& p : picks) {
       if (p.method != method || p.chooser != chooser) continue;
       ++n;
       d.push_back(1e3 * p.outcome.mean_displacement_m);
+      if (p.outcome.target_freed) d_freed.push_back(d.back());
       toppled += p.outcome.toppled > 0, freed += p.outcome.target_freed;
       failed += p.outcome.failed(), found += p.found;
     }
-    double mean = 0;
+    double mean = 0, mean_freed = 0;
     for (double x : d) mean += x / d.size();
+    for (double x : d_freed) mean_freed += x / d_freed.size();
     out.push_back({{"method", method},
                    {"chooser", chooser},
                    {"picks", n},
                    {"mean_displacement_mm", mean},
                    {"median_displacement_mm", median(d)},
+                   {"freed_mean_displacement_mm", mean_freed},
                    {"toppled_share", toppled / n},
                    {"freed_share", freed / n},
                    {"failed_share", failed / n},
@@ -149,16 +154,18 @@ nlohmann::json graspSummary(const std::vector<PickResult>& picks) {
 
 std::string graspSummaryTable(const nlohmann::json& summary) {
   std::ostringstream out;
-  out << "| scene from | grasp chosen by | picks | others moved, mean (mm) | median (mm) | "
-         "toppled something | target freed | seal broke |\n|---|---|---|---|---|---|---|---|\n";
+  out << "| scene from | grasp chosen by | picks | target freed | seal broke | others moved, mean "
+         "(mm) | median (mm) | mean when freed (mm) | toppled something |\n"
+         "|---|---|---|---|---|---|---|---|---|\n";
   char line[256];
   for (const auto& r : summary) {
     std::snprintf(
-        line, sizeof line, "| %s | %s | %d | %.1f | %.1f | %.0f %% | %.0f %% | %.0f %% |\n",
+        line, sizeof line, "| %s | %s | %d | %.0f %% | %.0f %% | %.1f | %.1f | %.1f | %.0f %% |\n",
         r["method"].get<std::string>().c_str(), r["chooser"].get<std::string>().c_str(),
-        static_cast<int>(r["picks"].get<double>()), r["mean_displacement_mm"].get<double>(),
-        r["median_displacement_mm"].get<double>(), 100 * r["toppled_share"].get<double>(),
-        100 * r["freed_share"].get<double>(), 100 * r["failed_share"].get<double>());
+        static_cast<int>(r["picks"].get<double>()), 100 * r["freed_share"].get<double>(),
+        100 * r["failed_share"].get<double>(), r["mean_displacement_mm"].get<double>(),
+        r["median_displacement_mm"].get<double>(), r["freed_mean_displacement_mm"].get<double>(),
+        100 * r["toppled_share"].get<double>());
     out << line;
   }
   return out.str();

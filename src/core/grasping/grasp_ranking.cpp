@@ -51,6 +51,7 @@ void summarise(RankedGrasp* g) {
     g->mean_toppled += o.toppled / n;
     g->failed_share += (o.failed() ? 1.0 : 0.0) / n;
     g->freed_share += (o.target_freed ? 1.0 : 0.0) / n;
+    g->peak_load = std::max(g->peak_load, o.peak_load);
   }
   g->score_m = 0.5 * (g->mean_displacement_m + g->worst_displacement_m);
 }
@@ -169,12 +170,15 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
     summarise(&g);
     out.grasps.push_back(g);
   }
-  std::stable_sort(out.grasps.begin(), out.grasps.end(),
-                   [](const RankedGrasp& a, const RankedGrasp& b) {
-                     if (a.failed_share != b.failed_share) return a.failed_share < b.failed_share;
-                     if (a.mean_toppled != b.mean_toppled) return a.mean_toppled < b.mean_toppled;
-                     return a.score_m < b.score_m;
-                   });
+  std::stable_sort(
+      out.grasps.begin(), out.grasps.end(), [](const RankedGrasp& a, const RankedGrasp& b) {
+        if (a.failed_share != b.failed_share) return a.failed_share < b.failed_share;
+        if (a.freed_share != b.freed_share) return a.freed_share > b.freed_share;
+        if (a.mean_toppled != b.mean_toppled) return a.mean_toppled < b.mean_toppled;
+        const double da = std::round(a.score_m * 1e3), db = std::round(b.score_m * 1e3);
+        if (da != db) return da < db;
+        return a.peak_load < b.peak_load;
+      });
   return out;
 }
 

@@ -134,6 +134,8 @@ PullOutcome PullSimulator::pull(int target, const Vec3& contact, const Vec3& app
       out.cup_held = false;
     } else {
       out.peak_force_n = std::max(out.peak_force_n, load.force_n.norm());
+      out.peak_load = std::max({out.peak_load, load.force_n.norm() / config_.max_force_n,
+                                load.torque_nm.norm() / max_torque});
     }
   }
   int others = 0;

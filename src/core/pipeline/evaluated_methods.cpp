@@ -33,6 +33,11 @@ MethodEstimate NetworkMethod::estimate(const DepthView& view, const GridSpec*, c
     out.surfaces.push_back(h.surface.empty() ? extractSurface(h.tsdf_m) : h.surface);
   }
   for (const InstanceEstimate& e : est.instances()) out.superquadrics.push_back(e.superquadric);
+  for (size_t h = 1; h < est.hypotheses.size() && est.hypotheses[h].decomposed; ++h) {
+    out.further_superquadrics.emplace_back();
+    for (const InstanceEstimate& e : est.hypotheses[h].instances)
+      out.further_superquadrics.back().push_back(e.superquadric);
+  }
   if (label_pixels_) out.pixel_instances = pixelInstances(view, est);
   out.table_estimated = est.table_estimated;
   out.perceive_ms = est.timings.total_ms;
