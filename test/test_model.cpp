@@ -670,6 +670,15 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   wider.base_channels = 8;
   longer.steps = 6;
   EXPECT_THROW(CvaeTrainer(data, wider, longer, b, "test").run(true), std::runtime_error);
+  // --resume with nothing to resume is an error, not a fresh start.
+  const std::string none = tempPath("simstack_train_none");
+  const RemoveAtExit cleanup_none{{none}};
+  try {
+    CvaeTrainer(data, tiny(), tc, none, "test").run(true);
+    ADD_FAILURE() << "resumed without a checkpoint";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("no checkpoint"), std::string::npos) << e.what();
+  }
 }
 
 TEST(CvaeConfig, RoundTripsThroughYaml) {

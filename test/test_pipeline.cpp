@@ -201,13 +201,34 @@ TEST(ScenePerception, BadInputGetsClearErrors) {
   EXPECT_THROW(
       perception.perceive(DepthView{DepthImage(320, 240, 1.0f), camera, Transform::Identity()}),
       std::invalid_argument);
-  // Nothing valid and no table pose: no table to be found.
+  // No valid depth, with or without a table pose: unusable depth, said as such.
   const DepthImage nan_depth(camera.width, camera.height, std::nanf(""));
-  EXPECT_THROW(perception.perceive(DepthView{nan_depth, camera, std::nullopt}), std::runtime_error);
-  // Nothing valid with a pose: an answer, not a crash.
+  EXPECT_THROW(perception.perceive(DepthView{nan_depth, camera, std::nullopt}),
+               std::invalid_argument);
   const RenderedPile p = renderPile(13);
-  const SceneEstimate est = perception.perceive(DepthView{nan_depth, camera, p.T_table_camera});
-  EXPECT_EQ(est.hypotheses.size(), 3u);
+  try {
+    perception.perceive(DepthView{nan_depth, camera, p.T_table_camera});
+    ADD_FAILURE() << "a view without depth was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("sensor range"), std::string::npos) << e.what();
+  }
+  // Depth beyond the sensor's range (a float image of random bits) is missing, not a crash.
+  DepthImage far = p.view.depth;
+  for (size_t i = 0; i < far.pixels.size(); i += 7) far.pixels[i] = 1e30f;
+  EXPECT_EQ(perception.perceive(DepthView{far, p.camera, p.T_table_camera}).hypotheses.size(), 3u);
+  // Intrinsics that do not fit the image, and poses no camera over a table can have.
+  PinholeCamera normalized = p.camera;
+  normalized.fx = 0.82, normalized.fy = 1.09, normalized.cx = normalized.cy = 0.5;
+  EXPECT_THROW(perception.perceive(DepthView{p.view.depth, normalized, p.T_table_camera}),
+               std::invalid_argument);
+  Transform below = p.T_table_camera;
+  below.translation().z() = -0.5;
+  EXPECT_THROW(perception.perceive(DepthView{p.view.depth, p.camera, below}),
+               std::invalid_argument);
+  Transform sheared = p.T_table_camera;
+  sheared.linear()(0, 1) += 0.3;
+  EXPECT_THROW(perception.perceive(DepthView{p.view.depth, p.camera, sheared}),
+               std::invalid_argument);
   // A second view without a pose.
   const DepthView good{p.view.depth, p.camera, p.T_table_camera};
   EXPECT_THROW(perception.perceive({good, DepthView{p.view.depth, p.camera, std::nullopt}}),

@@ -50,7 +50,15 @@ DepthView readView(const std::string& depth_path, double depth_scale, const std:
   std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
   view.depth = ext == ".pcd" ? readDepthPcd(depth_path) : readDepthImage(depth_path, depth_scale);
   view.camera = parseIntrinsics(intrinsics, view.depth.width, view.depth.height);
-  if (!pose_path.empty()) view.T_table_camera = readViewYaml(pose_path).T_table_camera;
+  if (!pose_path.empty()) {
+    const ViewDescription pose = readViewYaml(pose_path);
+    if (pose.camera.width != view.depth.width || pose.camera.height != view.depth.height)
+      throw std::invalid_argument(pose_path + " describes a " + std::to_string(pose.camera.width) +
+                                  "x" + std::to_string(pose.camera.height) + " view, but " +
+                                  depth_path + " is " + std::to_string(view.depth.width) + "x" +
+                                  std::to_string(view.depth.height));
+    view.T_table_camera = pose.T_table_camera;
+  }
   return view;
 }
 
@@ -70,7 +78,7 @@ int main(int argc, char** argv) {
   app.add_option("--intrinsics", intrinsics, "fx,fy,cx,cy in pixels")->required();
   app.add_option("--depth-scale", depth_scale, "metres per unit of a 16-bit PNG")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(FinitePositive);
   app.add_option("--table-pose", pose_path,
                  "YAML with T_table_camera (a view file of simstack_generate --views); without "
                  "it the table plane is estimated from the depth (RANSAC)")

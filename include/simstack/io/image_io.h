@@ -14,7 +14,12 @@ namespace simstack {
 
 /// 16-bit PNG in millimetres (0 = missing), the format of ROS 16UC1 depth.
 void writeDepthPng(const std::string& path, const DepthImage& depth);
-/// Reads a 16-bit PNG (units of `depth_scale_m`, default mm) or a 32-bit float TIFF in metres.
+/// Largest side of a depth image the readers accept (pixels).
+constexpr int kMaxDepthImageSide = 4096;
+
+/// Reads a one-channel 16-bit PNG (units of `depth_scale_m`, default mm) or 32-bit float TIFF
+/// in metres. Throws std::runtime_error naming the file for anything else (colour images
+/// included) and for a side over kMaxDepthImageSide.
 DepthImage readDepthImage(const std::string& path, double depth_scale_m = 0.001);
 /// 8-bit PNG of an instance mask.
 void writeMaskPng(const std::string& path, const InstanceImage& mask);

@@ -12,6 +12,7 @@
 #include "simstack/geometry/superquadric.h"
 #include "simstack/geometry/triangle_mesh.h"
 #include "simstack/geometry/voxel_grid.h"
+#include "simstack/io/image_io.h"
 
 namespace simstack {
 
@@ -30,6 +31,12 @@ TriangleMesh readMeshPly(const std::string& path);
 /// PCD of x y z label (pcl::PointXYZL), binary.
 void writeLabelledCloudPcd(const std::string& path, const Points3& points,
                            const std::vector<int>& labels);
+
+/// Reads a PCD file's header and checks it before PCL sees the file (PCL crashes on some
+/// malformed files and allocates what any header claims): x y z fields, consistent SIZE /
+/// TYPE / COUNT, WIDTH and HEIGHT at most kMaxDepthImageSide, POINTS = WIDTH x HEIGHT, and
+/// binary data as long as the header promises. Throws std::runtime_error naming the file.
+void checkPcdHeader(const std::string& path);
 
 /// Depth (metres) from an organized PCD: z of each point, NaN where invalid. The size comes
 /// from the cloud, which must be organized.

@@ -14,6 +14,9 @@
 
 namespace simstack {
 
+/// The most latent samples a frame may ask for.
+constexpr int kMaxSamples = 64;
+
 struct PerceptionConfig {
   std::string model_path;           ///< a model written by simstack_train (required)
   std::string model_card_path;      ///< the card samples and hough came from ("" = defaults)
@@ -25,7 +28,9 @@ struct PerceptionConfig {
   int min_instance_points = 30;     ///< instances with a smaller surface are dropped
   bool joint_refinement = true;     ///< eqs. 7-9 after the per-instance fits
   double min_pile_height_m = 0.01;  ///< depth points lower than this are table
-  int threads = 2;
+  double min_depth_m = 0.1;         ///< the sensor's range: depth outside [min, max] is missing
+  double max_depth_m = 10.0;
+  int threads = 2;                ///< capped at the machine's cores
   HoughConfig hough;              ///< the model's (model card)
   SurfaceSegmentConfig segments;  ///< the split along the observed surface's convex patches
   FitConfig fit;

@@ -1,6 +1,7 @@
 #include "simstack/eval/evaluator.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <iomanip>
@@ -241,10 +242,17 @@ std::string resultsTable(const EvaluationResults& r) {
   return o.str();
 }
 
+namespace {
+std::string lowercase(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+  return s;
+}
+}  // namespace
+
 std::vector<RealSceneResult> evaluateRealScenes(const std::string& dir, EvaluatedMethod& method) {
   std::vector<std::filesystem::path> files;
   for (const auto& e : std::filesystem::directory_iterator(dir))
-    if (e.path().extension() == ".pcd") files.push_back(e.path());
+    if (lowercase(e.path().extension().string()) == ".pcd") files.push_back(e.path());
   std::sort(files.begin(), files.end());
   if (files.empty()) throw std::runtime_error("no .pcd files in " + dir);
   std::vector<RealSceneResult> out;

@@ -36,11 +36,15 @@ void writeDepthPng(const std::string& path, const DepthImage& depth) {
 }
 
 DepthImage readDepthImage(const std::string& path, double depth_scale_m) {
-  const cv::Mat m = cv::imread(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE);
+  const cv::Mat m = cv::imread(path, cv::IMREAD_UNCHANGED);
   if (m.empty()) throw std::runtime_error("cannot read a depth image from " + path);
   if (m.channels() != 1)
     throw std::runtime_error(path + ": a depth image has one channel, this one has " +
                              std::to_string(m.channels()));
+  if (m.cols > kMaxDepthImageSide || m.rows > kMaxDepthImageSide)
+    throw std::runtime_error(path + ": " + std::to_string(m.cols) + "x" + std::to_string(m.rows) +
+                             " is larger than a depth image can be here (" +
+                             std::to_string(kMaxDepthImageSide) + " pixels a side)");
   DepthImage depth(m.cols, m.rows, 0.0f);
   if (m.type() == CV_16UC1) {
     for (int v = 0; v < m.rows; ++v)

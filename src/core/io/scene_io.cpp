@@ -8,7 +8,10 @@
 #include <pcl/point_types.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <fstream>
+#include <map>
+#include <sstream>
 #include <stdexcept>
 
 namespace simstack {
@@ -154,10 +157,83 @@ void writeLabelledCloudPcd(const std::string& path, const Points3& points,
     throw std::runtime_error("cannot write " + path);
 }
 
+void checkPcdHeader(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw std::runtime_error("cannot open " + path);
+  f.seekg(0, std::ios::end);
+  const long long file_size = f.tellg();
+  f.seekg(0);
+  const auto bad = [&](const std::string& why) {
+    return std::runtime_error(path + " is not a PCD file PCL can read safely: " + why);
+  };
+  std::map<std::string, std::vector<std::string>> header;
+  std::string line;
+  // The header is text lines up to DATA; a real one is a few hundred bytes.
+  while (f.tellg() < 65536 && std::getline(f, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream words(line);
+    std::string key, word;
+    words >> key;
+    while (words >> word) header[key].push_back(word);
+    if (key == "DATA") break;
+  }
+  if (!header.count("DATA")) throw bad("no DATA line in its first 64 KB");
+  for (const char* key : {"FIELDS", "SIZE", "TYPE", "WIDTH", "HEIGHT"})
+    if (!header.count(key)) throw bad(std::string("no ") + key + " line");
+  const auto& fields = header["FIELDS"];
+  const size_t n = fields.size();
+  std::vector<std::string> counts =
+      header.count("COUNT") ? header["COUNT"] : std::vector<std::string>(n, "1");
+  if (header["SIZE"].size() != n || header["TYPE"].size() != n || counts.size() != n)
+    throw bad("FIELDS, SIZE, TYPE and COUNT differ in length");
+  for (const char* axis : {"x", "y", "z"})
+    if (std::find(fields.begin(), fields.end(), axis) == fields.end())
+      throw bad(std::string("no field ") + axis);
+  const auto number = [&](const std::string& text, long long lo, long long hi, const char* what) {
+    size_t used = 0;
+    long long v = -1;
+    try {
+      v = std::stoll(text, &used);
+    } catch (const std::exception&) {
+    }
+    if (used != text.size() || v < lo || v > hi)
+      throw bad(std::string(what) + " '" + text + "' is not in [" + std::to_string(lo) + ", " +
+                std::to_string(hi) + "]");
+    return v;
+  };
+  long long point_bytes = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const long long size = number(header["SIZE"][i], 1, 8, "SIZE");
+    if (header["TYPE"][i] != "F" && header["TYPE"][i] != "I" && header["TYPE"][i] != "U")
+      throw bad("TYPE '" + header["TYPE"][i] + "' is not F, I or U");
+    point_bytes += size * number(counts[i], 1, 1024, "COUNT");
+  }
+  const long long width = number(header["WIDTH"].at(0), 1, kMaxDepthImageSide, "WIDTH");
+  const long long height = number(header["HEIGHT"].at(0), 1, kMaxDepthImageSide, "HEIGHT");
+  if (header.count("POINTS") &&
+      number(header["POINTS"].at(0), 0, width * height, "POINTS") != width * height)
+    throw bad("POINTS differs from WIDTH x HEIGHT");
+  const std::string data = header["DATA"].empty() ? "" : header["DATA"][0];
+  const long long body = file_size - static_cast<long long>(f.tellg());
+  if (data == "binary") {
+    if (body < width * height * point_bytes)
+      throw bad("its binary data holds " + std::to_string(body) + " bytes, not the " +
+                std::to_string(width * height * point_bytes) + " its header promises");
+  } else if (data == "binary_compressed") {
+    uint32_t sizes[2] = {0, 0};
+    f.read(reinterpret_cast<char*>(sizes), sizeof sizes);
+    if (!f || sizes[0] > body - 8 || sizes[1] != width * height * point_bytes)
+      throw bad("its compressed data sizes do not match the header");
+  } else if (data != "ascii") {
+    throw bad("DATA '" + data + "' is not ascii, binary or binary_compressed");
+  }
+}
+
 namespace {
 
 template <class Point>
 DepthImage organizedDepth(const std::string& path, pcl::PointCloud<Point>* cloud) {
+  checkPcdHeader(path);
   if (pcl::io::loadPCDFile(path, *cloud) != 0)
     throw std::runtime_error("cannot read cloud " + path);
   if (!cloud->isOrganized() || cloud->width < 2 || cloud->height < 2)

@@ -68,19 +68,20 @@ class BatchQueue {
           omp_set_num_threads(1);
           for (int64_t step = start; step < tc.steps; ++step) {
             std::vector<TrainingSample> samples;
-            try {
+            Batch batch;
+            try {  // nothing may leave the thread: an error goes to next() as a message
               for (int i = 0; i < tc.batch_size; ++i) {
                 std::mt19937_64 rng(mix(tc.seed, static_cast<uint64_t>(step) * 1024 + i));
                 std::uniform_int_distribution<int> pick(0, train_scenes - 1);
                 samples.push_back(builder.build(reader.read(pick(rng)), rng));
               }
+              batch = toBatch(samples, resolution);
             } catch (const std::exception& e) {
               std::lock_guard<std::mutex> lock(mutex_);
               error_ = e.what();
               cv_.notify_all();
               return;
             }
-            Batch batch = toBatch(samples, resolution);
             std::unique_lock<std::mutex> lock(mutex_);
             cv_.wait(lock, [&] { return queue_.size() < 3 || stop_; });
             if (stop_) return;
@@ -400,6 +401,9 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   torch::manual_seed(tc.seed);
   const fs::path checkpoint = out / "checkpoint.pt";
   const bool resuming = resume && fs::exists(checkpoint) && fs::exists(out / "state.yaml");
+  if (resume && !resuming)
+    throw std::runtime_error("--resume: no checkpoint to resume in " + out.string() +
+                             " (checkpoint.pt and state.yaml); start without --resume");
   Cvae model = impl_->loadOrCreate(resuming, checkpoint);
   torch::optim::Adam optimizer(model->parameters(), torch::optim::AdamOptions(tc.learning_rate));
   const int64_t start = resuming ? impl_->restore(model, optimizer, out) : 0;

@@ -21,6 +21,8 @@ void perceptionFields(C& c, F&& f) {
   f("min_instance_points", c.min_instance_points);
   f("joint_refinement", c.joint_refinement);
   f("min_pile_height_m", c.min_pile_height_m);
+  f("min_depth_m", c.min_depth_m);
+  f("max_depth_m", c.max_depth_m);
   f("threads", c.threads);
 }
 template <class C, class F>

@@ -5,6 +5,7 @@
 #include <limits>
 #include <random>
 #include <stdexcept>
+#include <thread>
 
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/instances/instance_finder.h"
@@ -21,14 +22,51 @@ double msSince(Clock::time_point t) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
+void checkPose(const Transform& T, size_t index) {
+  const std::string name = "view " + std::to_string(index) + ": the camera pose ";
+  if (!T.matrix().allFinite()) throw std::invalid_argument(name + "is not finite");
+  const Mat3 R = T.linear();
+  if (!(R.transpose() * R).isIdentity(1e-4) || std::abs(R.determinant() - 1.0) > 1e-4)
+    throw std::invalid_argument(name + "is not rigid (its rotation is not orthonormal)");
+  if (!(T.translation().z() > 0.0))
+    throw std::invalid_argument(name + "puts the camera " + std::to_string(T.translation().z()) +
+                                " m above the table; it must be above it");
+  // A low camera may look slightly up at a tall pile; one looking more than 45 degrees up
+  // cannot see the table (a pose given the wrong way round).
+  if (!(R.col(2).z() < std::sqrt(0.5)))
+    throw std::invalid_argument(
+        name + "looks away from the table (its optical axis points " +
+        std::to_string(std::asin(std::min(1.0, R.col(2).z())) * 180 / M_PI) + " degrees up)");
+}
+
 void checkView(const DepthView& v, size_t index) {
   v.camera.validate();
+  if (v.T_table_camera) checkPose(*v.T_table_camera, index);
   if (v.depth.width != v.camera.width || v.depth.height != v.camera.height ||
       v.depth.pixels.size() != static_cast<size_t>(v.depth.width) * v.depth.height)
     throw std::invalid_argument(
         "view " + std::to_string(index) + ": the depth image is " + std::to_string(v.depth.width) +
         "x" + std::to_string(v.depth.height) + " but its camera is " +
         std::to_string(v.camera.width) + "x" + std::to_string(v.camera.height));
+}
+
+/// The views with depth outside the sensor's range marked missing (a float image of random
+/// bits holds depths of 1e30 m); a first view with nothing left is unusable.
+std::vector<DepthView> withinSensorRange(const std::vector<DepthView>& views,
+                                         const PerceptionConfig& c) {
+  std::vector<DepthView> out = views;
+  for (size_t i = 0; i < out.size(); ++i) {
+    size_t valid = 0;
+    for (float& d : out[i].depth.pixels) {
+      if (!(d >= c.min_depth_m && d <= c.max_depth_m)) d = 0.0f;
+      valid += d > 0.0f;
+    }
+    if (i == 0 && valid == 0)
+      throw std::invalid_argument("view 0 has no depth within the sensor range " +
+                                  std::to_string(c.min_depth_m) + " .. " +
+                                  std::to_string(c.max_depth_m) + " m");
+  }
+  return out;
 }
 
 /// Each instance's visible share: its triangles that are the first surface a ray from the
@@ -129,7 +167,18 @@ struct ScenePerception::Impl {
 namespace {
 
 void validate(const PerceptionConfig& config) {
-  if (config.samples < 1) throw std::invalid_argument("samples must be >= 1");
+  if (config.samples < 1 || config.samples > kMaxSamples)
+    throw std::invalid_argument("samples must lie in [1, " + std::to_string(kMaxSamples) +
+                                "], not " + std::to_string(config.samples));
+  if (!(config.min_pile_height_m >= 0.0 && config.min_pile_height_m <= 1.0))
+    throw std::invalid_argument("min_pile_height_m must lie in [0, 1] m, not " +
+                                std::to_string(config.min_pile_height_m));
+  if (!(config.min_depth_m > 0.0 && config.min_depth_m < config.max_depth_m &&
+        config.max_depth_m <= 100.0))
+    throw std::invalid_argument(
+        "the sensor range min_depth_m .. max_depth_m must satisfy 0 < min "
+        "< max <= 100 m, not " +
+        std::to_string(config.min_depth_m) + " .. " + std::to_string(config.max_depth_m));
   if (config.decompose_samples < 0 || config.decompose_samples > config.samples)
     throw std::invalid_argument("decompose_samples must lie in [0, samples]");
   if (config.points_per_instance < 10)
@@ -139,8 +188,15 @@ void validate(const PerceptionConfig& config) {
   config.segments.validate();
 }
 
+/// More threads than cores only make the OpenMP regions and torch slower (1000 threads never
+/// finish a frame).
+int cappedThreads(int threads) {
+  return std::min(threads, static_cast<int>(std::max(1u, std::thread::hardware_concurrency())));
+}
+
 /// No latent space: S hypotheses would be S copies of one.
 PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
+  config.threads = cappedThreads(config.threads);
   if (!model.hasLatentCode()) {
     config.samples = 1;
     config.decompose_samples = std::min(config.decompose_samples, 1);
@@ -152,7 +208,7 @@ PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
 
 ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Impl) {
   validate(config);
-  impl_->model = std::make_unique<CvaeInference>(config.model_path, config.threads);
+  impl_->model = std::make_unique<CvaeInference>(config.model_path, cappedThreads(config.threads));
   impl_->config = forModel(config, impl_->model->config());
 }
 
@@ -160,7 +216,7 @@ void ScenePerception::updateSettings(const PerceptionConfig& config) {
   if (config.model_path != impl_->config.model_path)
     throw std::invalid_argument("updateSettings keeps the model: " + impl_->config.model_path +
                                 ", not " + config.model_path);
-  if (config.threads != impl_->config.threads)
+  if (cappedThreads(config.threads) != impl_->config.threads)
     throw std::invalid_argument("updateSettings keeps the thread count");
   validate(config);
   impl_->config = forModel(config, impl_->model->config());
@@ -170,17 +226,19 @@ ScenePerception::~ScenePerception() = default;
 const PerceptionConfig& ScenePerception::config() const { return impl_->config; }
 const CvaeConfig& ScenePerception::modelConfig() const { return impl_->model->config(); }
 
-SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views) const {
+SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_given) const {
   const PerceptionConfig& c = impl_->config;
   const CvaeConfig& mc = impl_->model->config();
-  if (views.empty()) throw std::invalid_argument("perceive: no depth view given");
-  for (size_t i = 0; i < views.size(); ++i) {
-    checkView(views[i], i);
-    if (i > 0 && !views[i].T_table_camera)
+  if (views_given.empty()) throw std::invalid_argument("perceive: no depth view given");
+  for (size_t i = 0; i < views_given.size(); ++i) {
+    checkView(views_given[i], i);
+    if (i > 0 && !views_given[i].T_table_camera)
       throw std::invalid_argument(
           "perceive: view " + std::to_string(i) +
           " has no pose; only the first view may leave the table to RANSAC");
   }
+  const std::vector<DepthView> in_range = withinSensorRange(views_given, c);
+  const std::vector<DepthView>& views = in_range;
   const auto start = Clock::now();
   SceneEstimate out;
   auto t = Clock::now();

@@ -1,0 +1,112 @@
+#!/usr/bin/env bash
+# Malformed inputs through the tools (issue 24's corpus, generated here: no third-party
+# files). Every case must end with a non-zero exit and one message line naming the problem, or
+# with exit 0 and a sensible result: never a signal, never more than 60 s.
+# Usage: test_fuzz_inputs.sh BIN_DIR
+set -u
+bin=$1
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+fail=0
+reconstruct="$bin/simstack_reconstruct"
+K=525,525,319.5,239.5
+
+# expect NAME WORDS CMD...: non-zero exit (not a signal), WORDS in stderr, within 60 s.
+expect() {
+  local name=$1 words=$2; shift 2
+  timeout 60 "$@" > "$dir/out.txt" 2> "$dir/err.txt"
+  local rc=$?
+  if [ $rc -eq 0 ]; then echo "FAIL $name: accepted"; fail=1; return; fi
+  if [ $rc -eq 124 ]; then echo "FAIL $name: still running after 60 s"; fail=1; return; fi
+  if [ $rc -ge 128 ]; then echo "FAIL $name: killed by signal $((rc - 128))"; fail=1; return; fi
+  if ! grep -q -- "$words" "$dir/err.txt"; then
+    echo "FAIL $name: no '$words' in:"; cat "$dir/err.txt"; fail=1; return; fi
+  echo "ok   $name: $(grep -m1 -- "$words" "$dir/err.txt" | cut -c1-150)"
+}
+# survive NAME CMD...: exit 0 or 1 (a result, or an error), no signal, within 60 s.
+survive() {
+  local name=$1; shift
+  timeout 60 "$@" > "$dir/out.txt" 2> "$dir/err.txt"
+  local rc=$?
+  if [ $rc -le 1 ]; then echo "ok   $name (exit $rc)"; else
+    echo "FAIL $name: exit $rc"; cat "$dir/err.txt"; fail=1; fi
+}
+# succeed NAME CMD...: exit 0 within 60 s.
+succeed() {
+  local name=$1; shift
+  if timeout 60 "$@" > "$dir/out.txt" 2> "$dir/err.txt"; then echo "ok   $name"; else
+    echo "FAIL $name: exit $?"; cat "$dir/err.txt"; fail=1; fi
+}
+
+# A good view to start from.
+"$bin/simstack_generate" --scenes 1 --seed 5 --output "$dir/d.h5" --views 1 --noise > /dev/null
+view="$dir/d_views/scene_000000_view_0"
+good="${view}_depth.png"
+
+# Depth files that are not what their name says.
+echo "just some text" > "$dir/text.pcd"
+cp "$good" "$dir/png.pcd"
+head -c 5000 /dev/urandom > "$dir/random.pcd"
+printf '# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 640\nHEIGHT 480\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 307200\nDATA binary\n' > "$dir/short.pcd"
+head -c 20000 /dev/urandom >> "$dir/short.pcd"
+printf '# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 999999999\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 999999999\nDATA binary\n' > "$dir/huge.pcd"
+cp "$dir/text.pcd" "$dir/TEXT.PCD"
+for f in text.pcd png.pcd random.pcd short.pcd huge.pcd TEXT.PCD; do
+  expect "depth $f" "$f" "$reconstruct" --depth "$dir/$f" --intrinsics $K --output "$dir/o"
+done
+# A float TIFF of random bits (depths of 1e30 m, NaN, negative): outside the sensor's range.
+head -c $((64 * 48 * 4)) /dev/urandom > "$dir/raw.bin"
+convert -size 64x48 -depth 32 -define quantum:format=floating-point -endian LSB gray:"$dir/raw.bin" \
+  "$dir/random.tiff" 2> /dev/null
+if [ -s "$dir/random.tiff" ]; then
+  survive "random float TIFF" "$reconstruct" --depth "$dir/random.tiff" \
+    --intrinsics 52.5,52.5,31.5,23.5 --output "$dir/o"
+fi
+convert -size 64x48 xc:red -depth 16 PNG48:"$dir/rgb16.png" 2> /dev/null
+expect "16-bit RGB PNG" "one channel" "$reconstruct" --depth "$dir/rgb16.png" --intrinsics 52.5,52.5,31.5,23.5 --output "$dir/o"
+convert -size 5000x10 xc:black -depth 16 "$dir/wide.png" 2> /dev/null
+expect "5000-pixel-wide PNG" "4096" "$reconstruct" --depth "$dir/wide.png" --intrinsics $K --output "$dir/o"
+
+# Intrinsics that do not fit the image.
+expect "tiny focal length" "field of view" "$reconstruct" --depth "$good" --intrinsics 1e-9,1e-9,319.5,239.5 --output "$dir/o"
+expect "normalized intrinsics" "field of view" "$reconstruct" --depth "$good" --intrinsics 0.82,1.09,0.5,0.5 --output "$dir/o"
+expect "principal point outside" "cx = 1999.5" "$reconstruct" --depth "$good" --intrinsics 525,525,1999.5,239.5 --output "$dir/o"
+expect "depth scale nan" "depth-scale" "$reconstruct" --depth "$good" --intrinsics $K --depth-scale nan --output "$dir/o"
+
+# Poses that cannot be a camera over a table.
+sed 's/^\(T_table_camera:.*\)$/\1/' "$view.yaml" > /dev/null
+/usr/bin/python3 - "$view.yaml" "$dir" <<'PY'
+import re, sys
+text = open(sys.argv[1]).read()
+open(sys.argv[2] + "/nan_pose.yaml", "w").write(re.sub(r"(translation: \[)[^,\]]+", r"\1.nan", text, count=1))
+# The camera mirrored below the table: z of the translation negated.
+m = re.search(r"translation: \[([^\]]+)\]", text)
+x, y, z = [float(v) for v in m.group(1).split(",")]
+open(sys.argv[2] + "/below.yaml", "w").write(text.replace(m.group(0), "translation: [%g, %g, %g]" % (x, y, -z)))
+PY
+expect "NaN pose" "finite\|nan" "$reconstruct" --depth "$good" --intrinsics $K --table-pose "$dir/nan_pose.yaml" --output "$dir/o"
+expect "camera below the table" "above" "$reconstruct" --depth "$good" --intrinsics $K --table-pose "$dir/below.yaml" --output "$dir/o"
+
+# Configs out of range.
+sed 's/min_pile_height_m: 0.01/min_pile_height_m: -1/' "$(dirname "$0")/../config/perception.yaml" > "$dir/neg.yaml"
+sed -i "s|model: models/|model: $(cd "$(dirname "$0")/.." && pwd)/models/|" "$dir/neg.yaml"
+expect "min_pile_height_m -1" "min_pile_height_m" "$reconstruct" --config "$dir/neg.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
+succeed "threads 1000 (capped at the cores)" "$reconstruct" --depth "$good" --intrinsics $K --threads 1000 --output "$dir/o1000"
+
+# Training: nothing to resume; a dataset cut short.
+train_config="$dir/train.yaml"  # the default config, validated on the one generated pile
+sed 's/validation_scenes: 32/validation_scenes: 1/' "$(dirname "$0")/../config/train_r32.yaml" > "$train_config"
+"$bin/simstack_generate" --scenes 2 --seed 6 --output "$dir/two.h5" > /dev/null
+expect "train --resume without a checkpoint" "no checkpoint" "$bin/simstack_train" --dataset "$dir/two.h5" \
+  --config "$train_config" --output "$dir/run" --resume
+head -c 3000 "$dir/d.h5" > "$dir/cut.h5"
+expect "train on a truncated dataset" "cut.h5" "$bin/simstack_train" --dataset "$dir/cut.h5" \
+  --config "$train_config" --output "$dir/run2"
+
+cp "$dir/two.h5" "$dir/scrambled.h5"
+dd if=/dev/urandom of="$dir/scrambled.h5" bs=1 seek=20000 count=20000 conv=notrunc 2> /dev/null
+expect "train on a scrambled dataset" "scrambled.h5" "$bin/simstack_train" --dataset "$dir/scrambled.h5" \
+  --config "$train_config" --output "$dir/run3"
+
+[ $fail -eq 0 ] && echo "fuzz corpus: every case handled"
+exit $fail
