@@ -1,9 +1,12 @@
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
 
 #include "simstack/dataset/dataset.h"
+#include "simstack/io/staged_output.h"
 #include "simstack/scene/pile_generator.h"
 
 using namespace simstack;
@@ -71,4 +74,45 @@ TEST(Dataset, ClearErrorsNameTheFile) {
   { std::ofstream(path) << "not a dataset"; }
   EXPECT_THROW(DatasetReader{path}, std::runtime_error);
   std::filesystem::remove(path);
+}
+
+TEST(StagedOutput, ACommittedFileReplacesTheTargetAndAnAbandonedOneLeavesNoTrace) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("simstack_staged_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  const std::string target = (dir / "sub" / "data.h5").string();
+  {
+    StagedFile staged(target);  // makes the directory, probes the place
+    std::ofstream(staged.path()) << "partial";
+  }
+  EXPECT_FALSE(fs::exists(target));
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir / "sub"), fs::directory_iterator()), 0);
+  {
+    StagedFile staged(target);
+    std::ofstream(staged.path()) << "complete";
+    staged.commit();
+  }
+  std::string text;
+  std::ifstream(target) >> text;
+  EXPECT_EQ(text, "complete");
+  // A directory: commit replaces the earlier one whole.
+  const std::string out = (dir / "out").string();
+  fs::create_directories(out);
+  std::ofstream(out + "/stale.ply") << "old";
+  {
+    StagedDirectory staged(out);
+    std::ofstream(staged.path() + "/new.yaml") << "new";
+    staged.commit();
+  }
+  EXPECT_TRUE(fs::exists(out + "/new.yaml"));
+  EXPECT_FALSE(fs::exists(out + "/stale.ply"));
+  {
+    StagedDirectory staged(out);  // abandoned: the committed one stays
+    std::ofstream(staged.path() + "/other.yaml") << "x";
+  }
+  EXPECT_TRUE(fs::exists(out + "/new.yaml"));
+  EXPECT_FALSE(fs::exists(out + "/other.yaml"));
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()), 2);  // sub, out
+  EXPECT_THROW(StagedDirectory((dir / "sub" / "data.h5" / "x").string()), std::runtime_error);
+  fs::remove_all(dir);
 }

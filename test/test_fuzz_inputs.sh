@@ -93,6 +93,23 @@ sed -i "s|model: models/|model: $(cd "$(dirname "$0")/.." && pwd)/models/|" "$di
 expect "min_pile_height_m -1" "min_pile_height_m" "$reconstruct" --config "$dir/neg.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
 succeed "threads 1000 (capped at the cores)" "$reconstruct" --depth "$good" --intrinsics $K --threads 1000 --output "$dir/o1000"
 
+# Results are atomic: nothing on the table is a result with no objects; a second run replaces
+# the first's directory whole; a failed run leaves the earlier result as it was; an output
+# that cannot be made fails before the work.
+convert -size 640x480 xc:'#03E803E803E8' -depth 16 -colorspace gray "$dir/plane.png" 2> /dev/null
+succeed "nothing on the table" "$reconstruct" --depth "$dir/plane.png" --intrinsics $K --output "$dir/empty"
+grep -q "^0 objects" "$dir/out.txt" || { echo "FAIL nothing on the table: no '0 objects' line"; fail=1; }
+touch "$dir/empty/instance_7.ply"
+succeed "rerun into the same directory" "$reconstruct" --depth "$dir/plane.png" --intrinsics $K --output "$dir/empty"
+[ ! -e "$dir/empty/instance_7.ply" ] || { echo "FAIL rerun: a stale file stayed"; fail=1; }
+cp "$dir/empty/superquadrics.yaml" "$dir/before.yaml"
+expect "failed run into an earlier result" "field of view" "$reconstruct" --depth "$dir/plane.png" \
+  --intrinsics 0.82,1.09,0.5,0.5 --output "$dir/empty"
+cmp -s "$dir/before.yaml" "$dir/empty/superquadrics.yaml" || { echo "FAIL: the earlier result changed"; fail=1; }
+[ -z "$(ls -d "$dir"/empty.partial-* 2> /dev/null)" ] || { echo "FAIL: a partial directory stayed"; fail=1; }
+echo "a file" > "$dir/afile"
+expect "output under a file" "afile" "$reconstruct" --depth "$dir/plane.png" --intrinsics $K --output "$dir/afile/sub"
+
 # Training: nothing to resume; a dataset cut short.
 train_config="$dir/train.yaml"  # the default config, validated on the one generated pile
 sed 's/validation_scenes: 32/validation_scenes: 1/' "$(dirname "$0")/../config/train_r32.yaml" > "$train_config"

@@ -5,9 +5,11 @@
 #include <chrono>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 
 #include "simstack/grasping/grasp_files.h"
 #include "simstack/io/scene_io.h"
+#include "simstack/io/staged_output.h"
 
 using namespace simstack;
 namespace fs = std::filesystem;
@@ -60,11 +62,8 @@ int main(int argc, char** argv) {
     }
     if (const std::string why = checkScene(scene); !why.empty())
       throw std::invalid_argument(scene_path + ": " + why);
-    if (!output.empty()) {  // before the work: a bad --output is found at once
-      std::error_code ec;
-      fs::create_directories(output, ec);
-      if (ec) throw std::runtime_error("cannot create " + output + ": " + ec.message());
-    }
+    std::optional<StagedDirectory> staged;  // before the work: a bad --output fails at once
+    if (!output.empty()) staged.emplace(output);
     const auto start = std::chrono::steady_clock::now();
     const GraspRanking ranking =
         rankGrasps({scene}, static_cast<int>(found - ids.begin()), {}, config);
@@ -77,10 +76,12 @@ int main(int argc, char** argv) {
     if (!ranking.message.empty()) std::cout << ranking.message << "\n";
     std::cout << graspTable(ranking, rows);
     if (!output.empty()) {
+      writeGraspJson((fs::path(staged->path()) / "grasps.json").string(), ranking, target_id);
+      writeGraspPicture((fs::path(staged->path()) / "grasps.png").string(), scene, ranking.grasps,
+                        5);
+      staged->commit();
       const std::string json = (fs::path(output) / "grasps.json").string();
       const std::string png = (fs::path(output) / "grasps.png").string();
-      writeGraspJson(json, ranking, target_id);
-      writeGraspPicture(png, scene, ranking.grasps, 5);
       std::cout << "wrote " << json << " and " << png << " (the best 5 grasps)\n";
     }
   } catch (const std::exception& e) {

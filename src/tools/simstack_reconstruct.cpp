@@ -10,6 +10,7 @@
 #include "perception_options.h"
 #include "simstack/io/image_io.h"
 #include "simstack/io/scene_io.h"
+#include "simstack/io/staged_output.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/pipeline/reconstruction_files.h"
 
@@ -91,13 +92,12 @@ int main(int argc, char** argv) {
   try {
     const DepthView view = readView(depth_path, depth_scale, intrinsics, pose_path);
     const PerceptionConfig config = perception.config();
+    StagedDirectory staged(output);  // a bad --output fails here, before the work
     const ScenePerception pipeline(config);
     const SceneEstimate est = pipeline.perceive(view);
-    std::error_code ec;
-    fs::create_directories(output, ec);
-    if (ec) throw std::runtime_error("cannot create " + output + ": " + ec.message());
     const std::vector<std::string> files =
-        writeReconstruction(output, view, est, config.min_pile_height_m);
+        writeReconstruction(staged.path(), view, est, config.min_pile_height_m);
+    staged.commit();  // replaces an earlier run's directory whole
 
     const StageTimings& t = est.timings;
     std::cout << "table " << (est.table_estimated ? "estimated by RANSAC" : "from " + pose_path)

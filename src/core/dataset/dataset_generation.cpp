@@ -17,6 +17,7 @@
 
 #include "simstack/dataset/dataset.h"
 #include "simstack/io/image_io.h"
+#include "simstack/io/staged_output.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/mesh_catalogue.h"
 #include "simstack/scene/pile_generator.h"
@@ -155,14 +156,10 @@ GenerationSummary generateDataset(const GenerationOptions& o,
                                   const std::function<void(int, int)>& progress) {
   DatasetInfo info = datasetInfo(o);
   const std::unique_ptr<PileGenerator> generator = makeGenerator(o, &info);
-  if (fs::path(o.output).has_parent_path()) {
-    std::error_code ec;
-    fs::create_directories(fs::path(o.output).parent_path(), ec);
-    if (ec)
-      throw std::runtime_error("cannot create the directory of --output " + o.output + ": " +
-                               ec.message());
-  }
-  DatasetWriter writer(o.output, info);
+  // Written beside the target and renamed onto it when complete: a failed run leaves no
+  // partial dataset that training would later read.
+  StagedFile staged(o.output);
+  auto writer = std::make_unique<DatasetWriter>(staged.path(), info);
   GenerationSummary summary;
   summary.truncation_m = info.truncation_m;
   if (o.views > 0) {
@@ -178,7 +175,7 @@ GenerationSummary generateDataset(const GenerationOptions& o,
     summary.threads = workers.threads();
     for (int i = 0; i < o.scenes; ++i) {
       const SceneResult r = workers.take(i);
-      writer.write(i, r.pile.scene, r.gt);
+      writer->write(i, r.pile.scene, r.gt);
       summary.attempts += r.pile.attempts;
       summary.objects += static_cast<long>(r.pile.scene.objects.size());
       const auto& st = r.pile.object_steps;
@@ -187,6 +184,8 @@ GenerationSummary generateDataset(const GenerationOptions& o,
       if (progress) progress(i + 1, o.scenes);
     }
   }
+  writer.reset();  // closes the file
+  staged.commit();
   summary.undone_share = all_steps > 0 ? undone_steps / all_steps : 0.0;
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return summary;

@@ -101,6 +101,13 @@ std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path,
 }
 
 void writeMeshPly(const std::string& path, const TriangleMesh& mesh) {
+  if (mesh.vertices.empty()) {  // PCL refuses to write an empty mesh; an empty PLY is valid
+    std::ofstream f(path);
+    f << "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
+         "property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n";
+    if (!f) throw std::runtime_error("cannot write " + path);
+    return;
+  }
   pcl::PointCloud<pcl::PointXYZ> cloud;
   for (const Vec3& v : mesh.vertices) cloud.push_back(pcl::PointXYZ(v.x(), v.y(), v.z()));
   pcl::PolygonMesh pm;

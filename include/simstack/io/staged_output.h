@@ -1,0 +1,44 @@
+#pragma once
+/// @file staged_output.h
+/// Results written in full or not at all. A staged output is created beside its target at once
+/// (so an unusable target fails before any work is done), filled, and put in place of the
+/// target by commit(); destroyed without commit() it is removed, and the target keeps what it
+/// had. Throws std::runtime_error naming the path on failure.
+
+#include <string>
+
+namespace simstack {
+
+/// A directory: commit() replaces the target directory whole, so that no file of an earlier
+/// run stays beside the new ones.
+class StagedDirectory {
+ public:
+  explicit StagedDirectory(const std::string& target);
+  ~StagedDirectory();
+  StagedDirectory(const StagedDirectory&) = delete;
+  StagedDirectory& operator=(const StagedDirectory&) = delete;
+  /// Where to write.
+  const std::string& path() const { return staged_; }
+  void commit();
+
+ private:
+  std::string target_, staged_;
+  bool committed_ = false;
+};
+
+/// One file: commit() renames it onto the target.
+class StagedFile {
+ public:
+  explicit StagedFile(const std::string& target);
+  ~StagedFile();
+  StagedFile(const StagedFile&) = delete;
+  StagedFile& operator=(const StagedFile&) = delete;
+  const std::string& path() const { return staged_; }
+  void commit();
+
+ private:
+  std::string target_, staged_;
+  bool committed_ = false;
+};
+
+}  // namespace simstack
