@@ -9,8 +9,10 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <fstream>
 #include <map>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -178,9 +180,15 @@ void checkPcdHeader(const std::string& path) {
   // The header is text lines up to DATA; a real one is a few hundred bytes.
   while (f.tellg() < 65536 && std::getline(f, line)) {
     if (line.empty() || line[0] == '#') continue;
+    for (const unsigned char c : line)  // PCL's header parser crashes on some stray bytes
+      if (c != '\r' && c != '\t' && (c < 32 || c > 126))
+        throw bad("a byte that is not text in its header");
     std::istringstream words(line);
     std::string key, word;
     words >> key;
+    static const std::set<std::string> known{"VERSION", "FIELDS", "SIZE",      "TYPE",   "COUNT",
+                                             "WIDTH",   "HEIGHT", "VIEWPOINT", "POINTS", "DATA"};
+    if (!known.count(key)) throw bad("'" + key.substr(0, 20) + "' is not a header field");
     while (words >> word) header[key].push_back(word);
     if (key == "DATA") break;
   }
@@ -208,12 +216,16 @@ void checkPcdHeader(const std::string& path) {
                 std::to_string(hi) + "]");
     return v;
   };
-  long long point_bytes = 0;
+  long long point_bytes = 0, values_per_point = 0;
   for (size_t i = 0; i < n; ++i) {
     const long long size = number(header["SIZE"][i], 1, 8, "SIZE");
-    if (header["TYPE"][i] != "F" && header["TYPE"][i] != "I" && header["TYPE"][i] != "U")
-      throw bad("TYPE '" + header["TYPE"][i] + "' is not F, I or U");
+    const std::string& type = header["TYPE"][i];
+    const bool ok = type == "F" ? (size == 4 || size == 8)
+                                : (type == "I" || type == "U") &&
+                                      (size == 1 || size == 2 || size == 4 || size == 8);
+    if (!ok) throw bad("TYPE " + type + " of SIZE " + std::to_string(size) + " is not a PCD field");
     point_bytes += size * number(counts[i], 1, 1024, "COUNT");
+    values_per_point += number(counts[i], 1, 1024, "COUNT");
   }
   const long long width = number(header["WIDTH"].at(0), 1, kMaxDepthImageSide, "WIDTH");
   const long long height = number(header["HEIGHT"].at(0), 1, kMaxDepthImageSide, "HEIGHT");
@@ -231,7 +243,29 @@ void checkPcdHeader(const std::string& path) {
     f.read(reinterpret_cast<char*>(sizes), sizeof sizes);
     if (!f || sizes[0] > body - 8 || sizes[1] != width * height * point_bytes)
       throw bad("its compressed data sizes do not match the header");
-  } else if (data != "ascii") {
+  } else if (data == "ascii") {
+    // PCL's text parser crashes on short or ragged lines: every point must be a line of
+    // exactly the header's number of values.
+    long long points = 0;
+    while (std::getline(f, line)) {
+      std::istringstream values(line);
+      std::string value;
+      long long count = 0;
+      while (values >> value) {
+        char* end = nullptr;
+        std::strtod(value.c_str(), &end);
+        if (*end != '\0') throw bad("'" + value.substr(0, 20) + "' in its data is not a number");
+        ++count;
+      }
+      if (count == 0) continue;
+      if (count != values_per_point || ++points > width * height)
+        throw bad("its text data does not hold " + std::to_string(width * height) + " points of " +
+                  std::to_string(values_per_point) + " values");
+    }
+    if (points != width * height)
+      throw bad("its text data holds " + std::to_string(points) + " points, not " +
+                std::to_string(width * height));
+  } else {
     throw bad("DATA '" + data + "' is not ascii, binary or binary_compressed");
   }
 }

@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer target for the depth readers with clang (Debian's clang and
+# libclang-rt-dev carry libFuzzer) against the build's simstack_core, seeds it with a valid PCD,
+# PNG and TIFF, and runs it. Crashing inputs are kept in the corpus directory's crash-* files.
+# Usage: test/fuzz/run_fuzz.sh [SECONDS=180] [BUILD_DIR=build]
+set -eu
+seconds=${1:-180}
+build=${2:-build}
+root=$(cd "$(dirname "$0")/../.." && pwd)
+work=$root/$build/fuzz
+mkdir -p "$work/corpus"
+lib=$root/$build/devel/lib
+command -v clang++ > /dev/null || { echo "needs clang: sudo apt-get install clang libclang-rt-14-dev"; exit 2; }
+clang++ -std=c++17 -O1 -g -fsanitize=fuzzer -I"$root/include" -I/usr/include/eigen3 \
+  "$root/test/fuzz/fuzz_depth_readers.cpp" -L"$lib" -lsimstack_core -Wl,-rpath,"$lib" \
+  -o "$work/fuzz_depth_readers"
+# Seeds: one valid file of each format, the first byte choosing the reader.
+seed=$(mktemp -d)
+trap 'rm -rf "$seed"' EXIT
+"$lib/simstack/simstack_generate" --scenes 1 --seed 1 --resolution 16 --output "$seed/d.h5" \
+  --views 1 > /dev/null
+convert "$seed/d_views/scene_000000_view_0_depth.png" -resize 64x48 "$seed/small.png"
+{ printf '\001'; cat "$seed/small.png"; } > "$work/corpus/seed_png"
+{ printf '\000'; printf '# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 2\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 4\nDATA ascii\n0 0 1\n1 0 1\n0 1 1\n1 1 1\n'; } > "$work/corpus/seed_pcd"
+convert -size 8x6 xc:gray -depth 32 -define quantum:format=floating-point "$seed/f.tiff" 2> /dev/null || true  # writes the file, complains about a tag
+{ printf '\002'; cat "$seed/f.tiff"; } > "$work/corpus/seed_tiff"
+cd "$work"
+./fuzz_depth_readers -max_total_time="$seconds" -rss_limit_mb=2048 -timeout=10 \
+  -max_len=65536 corpus
