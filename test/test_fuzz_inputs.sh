@@ -67,6 +67,28 @@ expect "16-bit RGB PNG" "one channel" "$reconstruct" --depth "$dir/rgb16.png" --
 convert -size 5000x10 xc:black -depth 16 "$dir/wide.png" 2> /dev/null
 expect "5000-pixel-wide PNG" "4096" "$reconstruct" --depth "$dir/wide.png" --intrinsics $K --output "$dir/o"
 
+# A PNG whose header claims 100000 x 100000 pixels: refused before it is decoded.
+/usr/bin/python3 - "$good" "$dir/claims_huge.png" <<'PY'
+import struct, sys
+data = bytearray(open(sys.argv[1], "rb").read())
+data[16:24] = struct.pack(">II", 100000, 100000)
+open(sys.argv[2], "wb").write(data)
+PY
+expect "PNG header claiming 100000x100000" "100000x100000" "$reconstruct" --depth "$dir/claims_huge.png" --intrinsics $K --output "$dir/o"
+
+# Peak memory (maximum resident set, kB) of a run, whatever it ends with.
+peak_kb() {
+  /usr/bin/python3 -c 'import resource, subprocess, sys
+subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=60)
+print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)' "$@"
+}
+good_kb=$(peak_kb "$reconstruct" --depth "$good" --intrinsics $K --output "$dir/mem_good")
+for f in huge.pcd short.pcd claims_huge.png wide.png; do
+  kb=$(peak_kb "$reconstruct" --depth "$dir/$f" --intrinsics $K --output "$dir/mem")
+  if [ "$kb" -gt $((2 * good_kb)) ]; then echo "FAIL memory $f: $kb kB, a good view takes $good_kb kB"; fail=1
+  else echo "ok   memory $f: $kb kB (a good 640x480 view: $good_kb kB)"; fi
+done
+
 # Intrinsics that do not fit the image.
 expect "tiny focal length" "field of view" "$reconstruct" --depth "$good" --intrinsics 1e-9,1e-9,319.5,239.5 --output "$dir/o"
 expect "normalized intrinsics" "field of view" "$reconstruct" --depth "$good" --intrinsics 0.82,1.09,0.5,0.5 --output "$dir/o"

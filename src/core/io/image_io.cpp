@@ -2,11 +2,13 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
+#include <utility>
 
 namespace simstack {
 namespace {
@@ -35,7 +37,51 @@ void writeDepthPng(const std::string& path, const DepthImage& depth) {
   writeOrThrow(path, m);
 }
 
+namespace {
+
+// The size a PNG or TIFF file declares, read from its header before anything is decoded (a
+// 10000 x 10000 image would otherwise take 200 MB before it is refused); {0, 0} when the file
+// is neither or its header cannot be read (the decoder then decides).
+std::pair<uint32_t, uint32_t> declaredSize(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  unsigned char h[24] = {};
+  if (!f.read(reinterpret_cast<char*>(h), sizeof h)) return {0, 0};
+  const auto be32 = [](const unsigned char* p) {
+    return uint32_t(p[0]) << 24 | uint32_t(p[1]) << 16 | uint32_t(p[2]) << 8 | uint32_t(p[3]);
+  };
+  if (h[0] == 0x89 && h[1] == 'P' && h[2] == 'N' && h[3] == 'G')
+    return {be32(h + 16), be32(h + 20)};
+  const bool little = h[0] == 'I' && h[1] == 'I', big = h[0] == 'M' && h[1] == 'M';
+  if (!little && !big) return {0, 0};
+  const auto read = [&](uint32_t offset, int bytes) -> uint32_t {
+    unsigned char b[4] = {};
+    f.clear();
+    f.seekg(offset);
+    if (!f.read(reinterpret_cast<char*>(b), bytes)) return 0;
+    uint32_t v = 0;
+    for (int i = 0; i < bytes; ++i) v |= uint32_t(b[little ? i : bytes - 1 - i]) << (8 * i);
+    return v;
+  };
+  const uint32_t ifd = read(4, 4), entries = read(ifd, 2);
+  uint32_t width = 0, height = 0;
+  for (uint32_t e = 0; e < std::min<uint32_t>(entries, 512); ++e) {
+    const uint32_t at = ifd + 2 + 12 * e, tag = read(at, 2), type = read(at + 2, 2);
+    const uint32_t value = type == 3 ? read(at + 8, 2) : read(at + 8, 4);  // SHORT or LONG
+    if (tag == 256) width = value;
+    if (tag == 257) height = value;
+  }
+  return {width, height};
+}
+
+}  // namespace
+
 DepthImage readDepthImage(const std::string& path, double depth_scale_m) {
+  const auto [width, height] = declaredSize(path);
+  if (width > static_cast<uint32_t>(kMaxDepthImageSide) ||
+      height > static_cast<uint32_t>(kMaxDepthImageSide))
+    throw std::runtime_error(path + ": " + std::to_string(width) + "x" + std::to_string(height) +
+                             " is larger than a depth image can be here (" +
+                             std::to_string(kMaxDepthImageSide) + " pixels a side)");
   const cv::Mat m = cv::imread(path, cv::IMREAD_UNCHANGED);
   if (m.empty()) throw std::runtime_error("cannot read a depth image from " + path);
   if (m.channels() != 1)
