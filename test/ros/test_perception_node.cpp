@@ -205,6 +205,22 @@ TEST_F(PerceptionNodeTest, BadInputIsSkippedAndTheNodeKeepsPublishing) {
            }},
           {"zero focal length",
            [](sensor_msgs::Image*, sensor_msgs::CameraInfo* c) { c->K[0] = c->P[0] = 0; }},
+          {"normalized intrinsics",
+           [](sensor_msgs::Image*, sensor_msgs::CameraInfo* c) {
+             c->K[0] = c->P[0] = 0.82, c->K[4] = c->P[5] = 1.09;
+             c->K[2] = c->P[2] = 0.5, c->K[5] = c->P[6] = 0.5;
+           }},
+          {"principal point outside the image",
+           [](sensor_msgs::Image*, sensor_msgs::CameraInfo* c) { c->K[2] = c->P[2] = 1999.5; }},
+          {"depth beyond the sensor's range (32FC1)",
+           [](sensor_msgs::Image* i, sensor_msgs::CameraInfo*) {
+             i->encoding = "32FC1";
+             i->step = 4 * i->width;
+             i->data.assign(size_t(i->step) * i->height, 0);
+             const float far = 1e30f;
+             for (size_t k = 0; k < size_t(i->width) * i->height; ++k)
+               std::memcpy(i->data.data() + 4 * k, &far, 4);
+           }},
           {"no tf for the frame",
            [](sensor_msgs::Image* i, sensor_msgs::CameraInfo* c) {
              i->header.frame_id = c->header.frame_id = "nowhere";

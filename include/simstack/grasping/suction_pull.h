@@ -30,11 +30,12 @@ struct PullConfig {
   double presettle_s = 1.0;
   PhysicsConfig physics = pullPhysics();
 
-  /// The generator's physics (friction 1, rolling friction 0.01) with sleeping, split impulse
-  /// and cached friction directions on: objects at rest stay put (true piles left alone move
-  /// under 2 mm over a pull; docs/experiments.md), and overlaps are resolved without being
-  /// shot apart. Density 200 kg/m^3, that of packaged household goods (a cereal box is about
-  /// 100, a full can 1000): what the cup must lift, unlike the stability test, depends on it.
+  /// The generator's physics (friction 1, rolling friction 0.01) with sleeping and cached
+  /// friction directions on (and Bullet's split impulse, as everywhere): objects at rest stay put
+  /// (true piles left alone move under 2 mm over a pull; docs/experiments.md), and overlaps are
+  /// resolved without being shot apart. Density 200 kg/m^3, that of packaged household goods (a
+  /// cereal box is about 100, a full can 1000): what the cup must lift, unlike the stability test,
+  /// depends on it.
   static PhysicsConfig pullPhysics();
   /// Throws std::invalid_argument naming the first bad value.
   void validate() const;

@@ -19,10 +19,11 @@ class InstanceFinder {
   InstanceFinder(const HoughConfig& hough, const SurfaceSegmentConfig& segments);
 
   /// The view's convex patches when the regrouping is enabled, std::nullopt otherwise.
-  /// Points lower than `min_height_m` above the table are left out.
+  /// Points lower than `min_height_m` above the table, or outside `grid` when given, are left
+  /// out.
   std::optional<SurfaceSegments> segmentView(const DepthImage& depth, const PinholeCamera& camera,
-                                             const Transform& T_table_camera,
-                                             double min_height_m) const;
+                                             const Transform& T_table_camera, double min_height_m,
+                                             const GridSpec* grid = nullptr) const;
 
   /// Hough instances of `tsdf_m` / `votes` (one grid), regrouped along `segments` when given
   /// and the regrouping is enabled.

@@ -20,6 +20,7 @@
 
 #include "simstack/geometry/image.h"
 #include "simstack/geometry/pinhole_camera.h"
+#include "simstack/geometry/voxel_grid.h"
 #include "simstack/instances/hough_voting.h"
 
 namespace simstack {
@@ -55,10 +56,12 @@ struct SurfaceSegments {
 };
 
 /// Patches of one depth view (std::invalid_argument when the image and camera disagree).
-/// Points lower than `min_height_m` above the table are left out.
+/// Points lower than `min_height_m` above the table are left out, and with `grid` those
+/// outside its box (no instance lies there, and PCL's octree asserts on far coordinates).
 SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCamera& camera,
                                       const Transform& T_table_camera, double min_height_m,
-                                      const SurfaceSegmentConfig& config);
+                                      const SurfaceSegmentConfig& config,
+                                      const GridSpec* grid = nullptr);
 
 /// Linear index of the labelled voxel (label >= 0) nearest to a table-frame point among the
 /// point's voxel and the 26 around it, -1 if none: an observed point lies up to a voxel off the

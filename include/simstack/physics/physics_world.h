@@ -30,9 +30,9 @@ struct PhysicsConfig {
   int rest_steps = 20;  ///< consecutive steps at rest that end settle()
   bool allow_sleeping = true;
   int solver_iterations = 10;  ///< Bullet's default; more reduce creep on slopes
-  /// Bullet's split impulse: overlapping objects (estimated scenes have them) are pushed apart
-  /// by a position correction that adds no velocity, instead of being shot apart.
-  bool split_impulse = false;
+  /// Bullet's split impulse (its default): overlapping objects (estimated scenes have them)
+  /// are pushed apart by a position correction that adds no velocity, not shot apart.
+  bool split_impulse = true;
   /// Bullet's two friction directions per contact, kept from step to step: objects resting
   /// on slopes hold instead of creeping a few mm/s down them.
   bool friction_direction_caching = false;

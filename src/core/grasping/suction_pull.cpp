@@ -51,7 +51,6 @@ PhysicsConfig PullConfig::pullPhysics() {
   p.rolling_friction = 0.01;
   p.spinning_friction = 0.01;
   p.allow_sleeping = true;
-  p.split_impulse = true;
   p.friction_direction_caching = true;
   p.density_kgpm3 = 200.0;
   return p;

@@ -10,9 +10,10 @@ InstanceFinder::InstanceFinder(const HoughConfig& hough, const SurfaceSegmentCon
 std::optional<SurfaceSegments> InstanceFinder::segmentView(const DepthImage& depth,
                                                            const PinholeCamera& camera,
                                                            const Transform& T_table_camera,
-                                                           double min_height_m) const {
+                                                           double min_height_m,
+                                                           const GridSpec* grid) const {
   if (!segments_.enabled) return std::nullopt;
-  return segmentVisibleSurface(depth, camera, T_table_camera, min_height_m, segments_);
+  return segmentVisibleSurface(depth, camera, T_table_camera, min_height_m, segments_, grid);
 }
 
 InstanceSegmentation InstanceFinder::find(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,

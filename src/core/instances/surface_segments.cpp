@@ -33,9 +33,16 @@ void SurfaceSegmentConfig::validate() const {
   if (hull_samples < 1) fail("hull_samples must be >= 1");
 }
 
+namespace {
+bool insideBox(const GridSpec& grid, const Vec3& p) {
+  const Vec3 q = (p - grid.origin_table) / grid.extent_m();
+  return (q.array() >= 0.0).all() && (q.array() <= 1.0).all();
+}
+}  // namespace
+
 SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCamera& camera,
                                       const Transform& T_table_camera, double min_height_m,
-                                      const SurfaceSegmentConfig& config) {
+                                      const SurfaceSegmentConfig& config, const GridSpec* grid) {
   config.validate();
   if (depth.width != camera.width || depth.height != camera.height)
     throw std::invalid_argument("segmentVisibleSurface: the depth image is " +
@@ -54,6 +61,7 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
       const Vec3 q = camera.backproject(u, v, d);
       const Vec3 p = T_table_camera * q;
       if (!(p.z() >= min_height_m)) continue;
+      if (grid && !insideBox(*grid, p)) continue;
       out.points_table.push_back(p);
       out.pixel.push_back(v * depth.width + u);
       // Camera frame: the supervoxels turn their normals towards the origin, which must be

@@ -283,9 +283,9 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
   std::optional<SurfaceSegments> segments;
   if (c.segments.enabled && c.decompose_samples > 0) {
     t = Clock::now();
-    segments =
-        InstanceFinder(c.hough, c.segments)
-            .segmentView(views[0].depth, views[0].camera, out.T_table_camera, c.min_pile_height_m);
+    segments = InstanceFinder(c.hough, c.segments)
+                   .segmentView(views[0].depth, views[0].camera, out.T_table_camera,
+                                c.min_pile_height_m, &out.grid);
     out.timings.instances_ms += msSince(t);
   }
   for (int k = 0; k < c.decompose_samples; ++k) {
