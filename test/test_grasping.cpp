@@ -38,7 +38,7 @@ std::vector<SuperquadricShape> bridgedTarget() {
 PullOutcome pullAt(const std::vector<SuperquadricShape>& scene, int target, const Vec3& contact,
                    const Vec3& approach) {
   PullSimulator sim(scene, PullConfig());
-  return sim.pull(target, sim.settledPoint(target, contact), approach);
+  return sim.pullPerceived(target, contact, approach);
 }
 
 TEST(SuctionCandidates, RimOfAFlatFaceSealsAndASphereCapDeviatesByItsSagitta) {

@@ -80,11 +80,13 @@ class PullSimulator {
   /// The scene after settling (start of every run).
   const std::vector<Transform>& settledPoses() const { return settled_; }
   const SceneDrift& drift() const { return drift_; }
-  /// A contact point of the perceived scene moved with its object into the settled scene.
-  Vec3 settledPoint(int object, const Vec3& p_table) const;
 
   /// Pulls `target` at `contact_table` (of the settled scene) along `approach_table`.
   PullOutcome pull(int target, const Vec3& contact_table, const Vec3& approach_table) const;
+  /// The same for a contact and approach given on the scene as perceived: both move with the
+  /// target into the settled scene first.
+  PullOutcome pullPerceived(int target, const Vec3& contact_table,
+                            const Vec3& approach_table) const;
 
  private:
   std::unique_ptr<PhysicsWorld> world(const std::vector<Transform>& poses) const;

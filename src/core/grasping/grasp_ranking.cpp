@@ -73,9 +73,7 @@ PullOutcome executeGrasp(const PullSimulator& sim, const std::vector<Superquadri
     miss.cup_held = false;  // nothing to hold where this scene puts the target
     return miss;
   }
-  const Mat3 turn =
-      sim.settledPoses()[target].linear() * scene[target].T_table_object.linear().transpose();
-  return sim.pull(target, sim.settledPoint(target, *contact), turn * c.approach_table);
+  return sim.pullPerceived(target, *contact, c.approach_table);
 }
 
 std::string checkScene(const std::vector<SuperquadricShape>& scene) {
@@ -156,10 +154,7 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
     const auto& scene = hypotheses[out.hypotheses[k]];
     outcomes[job] =
         k == 0
-            ? sims[0]->pull(target, sims[0]->settledPoint(target, cands[c].contact_table),
-                            sims[0]->settledPoses()[target].linear() *
-                                scene[target].T_table_object.linear().transpose() *
-                                cands[c].approach_table)
+            ? sims[0]->pullPerceived(target, cands[c].contact_table, cands[c].approach_table)
             : executeGrasp(*sims[k], scene, targets[k], cands[c], config.candidates.tool_length_m);
   });
   out.pulls = C * H;

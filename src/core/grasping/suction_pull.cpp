@@ -103,8 +103,10 @@ std::unique_ptr<PhysicsWorld> PullSimulator::world(const std::vector<Transform>&
   return w;
 }
 
-Vec3 PullSimulator::settledPoint(int object, const Vec3& p_table) const {
-  return settled_.at(object) * (scene_.at(object).T_table_object.inverse() * p_table);
+PullOutcome PullSimulator::pullPerceived(int target, const Vec3& contact,
+                                         const Vec3& approach) const {
+  const Transform moved = settled_.at(target) * scene_.at(target).T_table_object.inverse();
+  return pull(target, moved * contact, moved.linear() * approach);
 }
 
 PullOutcome PullSimulator::pull(int target, const Vec3& contact, const Vec3& approach) const {
