@@ -115,6 +115,37 @@ sed -i "s|model: models/|model: $(cd "$(dirname "$0")/.." && pwd)/models/|" "$di
 expect "min_pile_height_m -1" "min_pile_height_m" "$reconstruct" --config "$dir/neg.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
 succeed "threads 1000 (capped at the cores)" "$reconstruct" --depth "$good" --intrinsics $K --threads 1000 --output "$dir/o1000"
 
+# Models and their cards: cut short, random bytes, a card that is not YAML; the pipeline's
+# sample count and threads out of range in a config.
+pkg=$(cd "$(dirname "$0")/.." && pwd)
+with_model() {  # with_model NAME: a config whose model is $dir/NAME.pt
+  sed "s|model: models/simstack_r32.pt|model: $dir/$1.pt|" "$pkg/config/perception.yaml" > "$dir/$1_config.yaml"
+}
+head -c 100000 "$pkg/models/simstack_r32.pt" > "$dir/cut_model.pt"
+head -c 3000 /dev/urandom > "$dir/random_model.pt"
+cp "$pkg/models/simstack_r32.pt" "$dir/bad_card.pt"
+echo "perception: [" > "$dir/bad_card.yaml"
+for m in cut_model random_model bad_card; do
+  with_model $m
+  expect "model $m" "$m" "$reconstruct" --config "$dir/${m}_config.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
+done
+sed "s|^perception:|perception:\n  samples: 100000|; s|model: models/|model: $pkg/models/|" \
+  "$pkg/config/perception.yaml" > "$dir/samples.yaml"
+expect "samples: 100000" "samples must lie in" "$reconstruct" --config "$dir/samples.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
+sed "s|threads: 2 |threads: 1000|; s|model: models/|model: $pkg/models/|" "$pkg/config/perception.yaml" > "$dir/threads.yaml"
+succeed "threads: 1000 in a config (capped)" "$reconstruct" --config "$dir/threads.yaml" --depth "$good" --intrinsics $K --output "$dir/othreads"
+
+# The evaluation's real scenes: a directory with a text file and a PNG named .pcd / .PCD.
+mkdir "$dir/real"
+cp "$dir/text.pcd" "$dir/real/a.pcd"
+cp "$good" "$dir/real/b.PCD"
+expect "evaluate --real on files that are not PCDs" "is not a PCD file" "$bin/simstack_evaluate" --real "$dir/real" --output "$dir/eval.json"
+[ ! -e "$dir/eval.json" ] || { echo "FAIL evaluate --real: wrote eval.json"; fail=1; }
+
+# A generator run that cannot make its piles (a 0.2 m grid) leaves no file behind.
+expect "generate with no pile possible" "no pile accepted" "$bin/simstack_generate" --scenes 2 --seed 1 --extent 0.2 --output "$dir/g.h5"
+[ -z "$(ls "$dir"/g.h5* 2> /dev/null)" ] || { echo "FAIL generate: a partial file stayed"; fail=1; }
+
 # Results are atomic: nothing on the table is a result with no objects; a second run replaces
 # the first's directory whole; a failed run leaves the earlier result as it was; an output
 # that cannot be made fails before the work.

@@ -7,6 +7,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include <H5Cpp.h>
+
 #include "simstack/dataset/dataset.h"
 #include "simstack/model/cvae.h"
 #include "simstack/model/cvae_inference.h"
@@ -556,6 +558,19 @@ std::string tinyDataset(int scenes) {
   return path;
 }
 
+// Training on tinyDataset(3): batches of 2, one validation scene, small views, one thread.
+TrainConfig tinyTraining(int steps) {
+  TrainConfig tc;
+  tc.batch_size = 2;
+  tc.steps = steps;
+  tc.threads = 1;
+  tc.validate_every = 2;
+  tc.validation_scenes = 1;
+  tc.image_width = 80;
+  tc.image_height = 60;
+  return tc;
+}
+
 std::vector<std::string> lines(const std::string& path) {
   std::ifstream f(path);
   std::vector<std::string> out;
@@ -577,15 +592,8 @@ torch::Tensor probe(const std::string& model_path) {
 
 TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   const std::string data = tinyDataset(3);
-  TrainConfig tc;
-  tc.batch_size = 2;
-  tc.steps = 4;
-  tc.threads = 1;
+  TrainConfig tc = tinyTraining(4);
   tc.checkpoint_every = 2;
-  tc.validate_every = 2;
-  tc.validation_scenes = 1;
-  tc.image_width = 80;
-  tc.image_height = 60;
   const std::string a = tempPath("simstack_train_a"), b = tempPath("simstack_train_b"),
                     c = tempPath("simstack_train_c");
   const RemoveAtExit cleanup{{a, b, c, data}};
@@ -679,6 +687,39 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("no checkpoint"), std::string::npos) << e.what();
   }
+}
+
+// A dataset that goes bad between two runs: the resumed run stops on its first training batch
+// with the file's name in the message, and the checkpoint it started from stays whole.
+TEST(CvaeTrainer, AFailedReadKeepsTheLastCheckpoint) {
+  const std::string data = tinyDataset(3), out = tempPath("simstack_train_fail");
+  const RemoveAtExit cleanup{{out, data}};
+  fs::remove_all(out);
+  TrainConfig tc = tinyTraining(2);
+  tc.checkpoint_every = 1;
+  CvaeTrainer(data, tiny(), tc, out, "test").run(false);
+  const torch::Tensor before = probe(out + "/checkpoint.pt");
+  {  // the two training scenes claim 999 objects; the validation scene stays good
+    H5::H5File file(data, H5F_ACC_RDWR);
+    H5::DataSet count = file.openDataSet("num_objects");
+    std::vector<int32_t> n(3);
+    count.read(n.data(), H5::PredType::NATIVE_INT32);
+    n[0] = n[1] = 999;
+    count.write(n.data(), H5::PredType::NATIVE_INT32);
+  }
+  tc.steps = 4;
+  try {
+    CvaeTrainer(data, tiny(), tc, out, "test").run(true);
+    ADD_FAILURE() << "training on scenes with 999 objects did not stop";
+  } catch (const std::runtime_error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(data), std::string::npos) << what;
+    EXPECT_NE(what.find("invalid object count 999"), std::string::npos) << what;
+  }
+  EXPECT_EQ(lines(out + "/state.yaml").at(0), "step: 2");
+  EXPECT_TRUE(torch::equal(probe(out + "/checkpoint.pt"), before));
+  for (const auto& entry : fs::directory_iterator(out))
+    EXPECT_NE(entry.path().extension(), ".tmp") << entry.path();
 }
 
 TEST(CvaeConfig, RoundTripsThroughYaml) {

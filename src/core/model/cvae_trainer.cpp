@@ -411,11 +411,22 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   const TrainingSampleBuilder builder(mc, scaledKinect(tc.image_width, tc.image_height),
                                       tc.sensor_noise);
   TrainingLog log(out / "train_log.csv", resume && start > 0);
+  // Each file is written beside its place and renamed into it, state.yaml last: a run stopped
+  // by an error or a kill leaves the previous checkpoint whole, never half of a new one.
   auto save_checkpoint = [&](int64_t step) {
-    saveCvae(checkpoint.string(), model);
-    torch::save(optimizer, (out / "optimizer.pt").string());
-    std::ofstream((out / "state.yaml").string()) << "step: " << step << "\n";
+    const fs::path model_tmp = out / "checkpoint.pt.tmp", optim_tmp = out / "optimizer.pt.tmp",
+                   state_tmp = out / "state.yaml.tmp";
+    saveCvae(model_tmp.string(), model);
+    torch::save(optimizer, optim_tmp.string());
+    {
+      std::ofstream state(state_tmp.string());
+      state << "step: " << step << "\n";
+      if (!state.flush()) throw std::runtime_error("cannot write " + state_tmp.string());
+    }
     log.flush();
+    fs::rename(model_tmp, checkpoint);
+    fs::rename(optim_tmp, out / "optimizer.pt");
+    fs::rename(state_tmp, out / "state.yaml");
   };
 
   TrainingReport report;
