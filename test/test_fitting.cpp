@@ -90,6 +90,90 @@ TEST(SuperquadricFit, RecoversKnownShapesFromNoisySamples) {
   }
 }
 
+// The side of `sq` a camera looking along `view` sees: noisy samples whose normal faces it.
+Points3 seenSide(const SuperquadricShape& sq, const Vec3& view, int count, double sigma,
+                 uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> noise(0.0, sigma);
+  Points3 pts;
+  for (const SurfacePoint& s : sq.sampleSurfaceObject(2 * count, rng)) {
+    if ((sq.T_table_object.linear() * s.normal).dot(view) >= 0.0) continue;
+    pts.push_back(sq.T_table_object * s.position + Vec3(noise(rng), noise(rng), noise(rng)));
+  }
+  return pts;
+}
+
+// Median distance of each shape's surface samples from the other's surface (the larger).
+double medianSurfaceError(const SuperquadricShape& a, const SuperquadricShape& b) {
+  auto one_way = [](const SuperquadricShape& from, const SuperquadricShape& to) {
+    std::mt19937_64 rng(5);
+    std::vector<double> d;
+    for (const SurfacePoint& s : from.sampleSurfaceObject(2000, rng))
+      d.push_back(std::abs(surfaceDistance(to, from.T_table_object * s.position)));
+    std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
+    return d[d.size() / 2];
+  };
+  return std::max(one_way(a, b), one_way(b, a));
+}
+
+TEST(SuperquadricFit, RecoversABoxAndACylinderFromOneSideAndABadStart) {
+  // A box and a cylinder (|x|^2 + |y|^2 across, a flat top and bottom), each seen from one
+  // side with 1 mm noise; the fit starts from an ellipsoid of the wrong size, turned by 40 and
+  // 25 degrees and 2 cm off.
+  const std::vector<SuperquadricShape> truth = {
+      makeShape(Vec3(0.06, 0.04, 0.03), Vec3(20, 20, 20), Vec3(0.1, 0.0, 0.03), Vec3(1, 2, 3), 0.6),
+      makeShape(Vec3(0.035, 0.035, 0.08), Vec3(2, 2, 20), Vec3(0.0, 0.1, 0.08), Vec3(1, 0, 0),
+                1.2)};
+  const Vec3 view = Vec3(-0.4, 0.3, -0.8).normalized();
+  for (size_t i = 0; i < truth.size(); ++i) {
+    const Points3 pts = seenSide(truth[i], view, 2000, 0.001, 40 + i);
+    SuperquadricShape bad = truth[i];
+    bad.scale_m = Vec3(truth[i].scale_m.z(), truth[i].scale_m.x(), truth[i].scale_m.y()) * 0.7;
+    bad.exponents = Vec3::Constant(2.0);
+    bad.T_table_object.linear() = truth[i].T_table_object.linear() *
+                                  Eigen::AngleAxisd(0.7, Vec3::UnitZ()).toRotationMatrix() *
+                                  Eigen::AngleAxisd(0.44, Vec3::UnitX()).toRotationMatrix();
+    bad.T_table_object.translation() += Vec3(0.02, -0.01, 0.01);
+    ASSERT_GT(medianSurfaceError(bad, truth[i]), 0.01) << "the start is not bad, shape " << i;
+    const SuperquadricShape fit = fitSuperquadric(pts, FitConfig(), bad);
+    EXPECT_LT(medianSurfaceError(fit, truth[i]), 0.001)
+        << "shape " << i << ": scale " << fit.scale_m.transpose() << " exponents "
+        << fit.exponents.transpose();
+  }
+}
+
+TEST(SuperquadricFit, AxisPermutedParametersAreOneShape) {
+  const SuperquadricShape sq =
+      makeShape(Vec3(0.03, 0.07, 0.05), Vec3(2.5, 9, 4), Vec3(0.1, 0, 0.06), Vec3(1, 1, 0), 0.8);
+  // The same solid with its axes renumbered (y, z, x) and the x axis flipped: a rotation by
+  // 180 degrees about the object's z, a symmetry.
+  SuperquadricShape permuted = sq;
+  const Mat3 R = sq.T_table_object.linear();
+  permuted.scale_m = Vec3(sq.scale_m.y(), sq.scale_m.z(), sq.scale_m.x());
+  permuted.exponents = Vec3(sq.exponents.y(), sq.exponents.z(), sq.exponents.x());
+  permuted.T_table_object.linear() << -R.col(1), -R.col(2), R.col(0);
+  ASSERT_NEAR(permuted.T_table_object.linear().determinant(), 1.0, 1e-12);
+  EXPECT_TRUE(sameSuperquadric(sq, permuted, 1e-6));
+  const SuperquadricShape a = canonicalSuperquadric(sq), b = canonicalSuperquadric(permuted);
+  EXPECT_LT((a.scale_m - b.scale_m).norm(), 1e-12);
+  EXPECT_LT((a.exponents - b.exponents).norm(), 1e-12);
+  EXPECT_LT((a.T_table_object.linear() - b.T_table_object.linear()).norm(), 1e-9);
+  EXPECT_TRUE(sameSuperquadric(sq, a, 1e-6));
+  EXPECT_GE(a.scale_m.x(), a.scale_m.y());
+  EXPECT_GE(a.scale_m.y(), a.scale_m.z());
+  // Another solid is not the same: 2 mm longer along one axis.
+  SuperquadricShape longer = sq;
+  longer.scale_m.y() += 0.002;
+  EXPECT_FALSE(sameSuperquadric(sq, longer, 0.001));
+  // Fits started from the two numberings end in one canonical shape.
+  const Points3 pts = noisySurface(sq, 1000, 0.001, 9);
+  const SuperquadricShape fa = fitSuperquadric(pts, FitConfig(), sq),
+                          fb = fitSuperquadric(pts, FitConfig(), permuted);
+  EXPECT_TRUE(sameSuperquadric(fa, fb, 1e-4));
+  EXPECT_LT((fa.scale_m - fb.scale_m).norm(), 1e-4);
+  EXPECT_GE(fa.scale_m.x(), fa.scale_m.y());
+}
+
 TEST(SuperquadricFit, RejectsTooFewPoints) {
   EXPECT_THROW(fitSuperquadric(Points3{Vec3::Zero(), Vec3::Ones()}), std::invalid_argument);
   Points3 bad(10, Vec3::Zero());

@@ -29,14 +29,21 @@ struct FitConfig {
   double lambda_dist = 100.0;  ///< eq. 7 weights (the paper's values)
   double lambda_coll = 10.0;
   double lambda_floor = 1.0;
-  int max_points = 100;     ///< points per instance used by the solver (evenly subsampled)
+  /// Points per instance in the per-instance fit's final solve: an even cover of the surface
+  /// (one point per cell of a grid sized for this many cells).
+  int max_points = 600;
+  /// Points of the coarser cover on which the starts and the switched alternatives are tried.
+  int coarse_points = 60;
+  /// Points per instance in the joint refinement (a cover like max_points').
+  int joint_points = 100;
   int shape_samples = 200;  ///< surface samples per shape for the collision and floor terms
                             ///< (L_floor is a sum, so it grows with this)
   /// A collision or floor sample joins a joint round only when it is within this distance of
   /// penetrating at the round's start (the terms are hinges: farther samples add zeros).
   double contact_margin_m = 0.01;
   int joint_rounds = 3;           ///< joint solves, samples redrawn and re-selected between them
-  int max_iterations = 20;        ///< Ceres iterations of each per-instance fit (stage one)
+  int start_iterations = 10;      ///< Ceres iterations from each start or alternative (stage one)
+  int max_iterations = 100;       ///< at most, for a solve to convergence (stage one)
   int joint_max_iterations = 10;  ///< Ceres iterations of each joint round
   int threads = 1;
 
@@ -54,9 +61,19 @@ double meanDistortion(const SuperquadricShape& sq, const Points3& points_table);
 /// exponents `initial_exponent`. Requires at least 4 points (std::invalid_argument).
 SuperquadricShape initialGuess(const Points3& points_table, double initial_exponent = 3.0);
 
-/// Stage one: fits one superquadric to the points of one instance (eqs. 5-6).
+/// Stage one: fits one superquadric to the points of one instance (eqs. 5-6). Eq. 5 has many
+/// local minima on partial and noisy views (and its global one is a point: the sqrt(a1 a2 a3)
+/// weight shrinks faster than the distances grow), so the fit is a small search on
+/// `coarse_points` of the points: short solves from the points' bounding box (with exponents
+/// `initial_exponent`, 1.3 and 8), from two boxes reaching deeper behind the points, and from
+/// `start` when given; the best that is not collapsed (a quarter of the points' extent at least)
+/// solved to convergence; then its "switched" alternatives (each pair of axes turned by 45
+/// degrees with the conjugate exponent, the passage between a box and a diamond cross-section
+/// that a local solve cannot make), kept when better; last, a solve on `max_points`. The result
+/// is in canonical form (canonicalSuperquadric).
 SuperquadricShape fitSuperquadric(const Points3& points_table,
-                                  const FitConfig& config = FitConfig());
+                                  const FitConfig& config = FitConfig(),
+                                  const std::optional<SuperquadricShape>& start = std::nullopt);
 
 /// Stage two: all shapes together with collision and floor penalties (eqs. 7-9).
 /// `points_table[i]` belongs to `shapes[i]`.

@@ -47,4 +47,16 @@ struct SuperquadricShape {
   std::vector<SurfacePoint> sampleSurfaceObject(int count, std::mt19937_64& rng) const;
 };
 
+/// The same solid written with its axes ordered by size, largest first: the semi-axes,
+/// exponents and rotation columns are permuted together (and one column negated when needed to
+/// keep the rotation proper), and the columns turned so that each one's largest component is
+/// positive. Two parameter sets of one solid that differ by an axis permutation or a symmetry
+/// flip have the same canonical form (up to axes of equal size).
+SuperquadricShape canonicalSuperquadric(const SuperquadricShape& sq);
+
+/// Whether two parameter sets describe the same solid within `tolerance_m`: every point of a
+/// fine surface sample of each lies within `tolerance_m` (along the ray from the centre) of the
+/// other's surface. Independent of how the axes are numbered.
+bool sameSuperquadric(const SuperquadricShape& a, const SuperquadricShape& b, double tolerance_m);
+
 }  // namespace simstack

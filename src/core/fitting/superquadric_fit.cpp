@@ -7,8 +7,10 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <tuple>
+#include <unordered_map>
 
 namespace simstack {
 namespace {
@@ -42,36 +44,47 @@ void toShape(const T* u, const Bounds& b, T* x) {
   for (int i = 6; i < kParams; ++i) x[i] = u[i];
 }
 
-/// Signed distance from the shape's surface along the ray centre -> p (see the header).
+inline double valueOf(double v) { return v; }
+template <typename S, int N>
+double valueOf(const ceres::Jet<S, N>& v) {
+  return v.a;
+}
+
+/// log sum_i exp(log_w_i + mu e_i), and its slope in mu (the terms' mean exponent).
 template <typename T>
-T rayDistance(const T* x, const T* p) {
-  const T d[3] = {p[0] - x[6], p[1] - x[7], p[2] - x[8]};
-  const T inverse[3] = {-x[9], -x[10], -x[11]};
-  T q[3];
-  ceres::AngleAxisRotatePoint(inverse, d, q);
+T logSumExp(const T* log_w, const T* e, const T& mu, T* slope) {
+  T terms[3];
+  T top = log_w[0] + mu * e[0];
+  for (int i = 0; i < 3; ++i) {
+    terms[i] = log_w[i] + mu * e[i];
+    if (terms[i] > top) top = terms[i];
+  }
+  T sum(0.0), weighted(0.0);
+  for (int i = 0; i < 3; ++i) {
+    const T w = exp(terms[i] - top);
+    sum += w;
+    weighted += e[i] * w;
+  }
+  if (slope) *slope = weighted / sum;
+  return top + log(sum);
+}
+
+/// Signed distance from the shape's surface along the ray centre -> q, for q in the shape's
+/// own frame (see the header).
+template <typename T>
+T localRayDistance(const T* x, const T* q) {
   // Everything in logs: exponents up to 100 over- and underflow doubles otherwise.
   T lw[3];  // log |q_i / a_i|^e_i
   for (int i = 0; i < 3; ++i)
     lw[i] = T(0.5) * x[3 + i] * log(q[i] * q[i] / (x[i] * x[i]) + T(1e-18));
-  auto logSumExp = [&](const T& mu, T* weighted_exponent) {
-    T terms[3];
-    T top = lw[0] + mu * x[3];
-    for (int i = 0; i < 3; ++i) {
-      terms[i] = lw[i] + mu * x[3 + i];
-      if (terms[i] > top) top = terms[i];
-    }
-    T s(0.0), se(0.0);
-    for (int i = 0; i < 3; ++i) {
-      const T e = exp(terms[i] - top);
-      s += e;
-      se += x[3 + i] * e;
-    }
-    if (weighted_exponent) *weighted_exponent = se / s;
-    return top + log(s);
-  };
+  double lw_v[3], e_v[3];
+  for (int i = 0; i < 3; ++i) {
+    lw_v[i] = valueOf(lw[i]);
+    e_v[i] = valueOf(x[3 + i]);
+  }
   const T norm = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + T(1e-18));
-  const T log_f = logSumExp(T(0.0), nullptr);
-  if (norm < T(1e-7) || log_f < T(-27.6)) {
+  const double log_f = logSumExp(lw_v, e_v, 0.0, static_cast<double*>(nullptr));
+  if (norm < T(1e-7) || log_f < -27.6) {
     // At the centre the ray has no direction: any point there is deep inside; report the
     // smallest semi-axis, a lower bound of its depth.
     T smallest = x[0];
@@ -80,14 +93,30 @@ T rayDistance(const T* x, const T* p) {
     return -smallest;
   }
   // Solve log sum_i |q_i/a_i|^e_i exp(mu e_i) = 0 for mu = log(lambda): Newton on the convex
-  // log-sum-exp, started from the equal-exponent solution.
-  T mu = -log_f / ((x[3] + x[4] + x[5]) / T(3.0));
+  // log-sum-exp, started from the equal-exponent solution, on plain numbers; then one more step
+  // in T. At the root that step's derivatives are the implicit function's (d mu = -dh / h'),
+  // so the derivatives are exact while the solver's dual numbers go through one evaluation
+  // instead of seven.
+  double mu_v = -log_f / ((e_v[0] + e_v[1] + e_v[2]) / 3.0);
   for (int it = 0; it < 6; ++it) {
-    T slope;
-    const T value = logSumExp(mu, &slope);
-    mu -= value / slope;
+    double slope;
+    const double value = logSumExp(lw_v, e_v, mu_v, &slope);
+    mu_v -= value / slope;
   }
+  T slope;
+  const T value = logSumExp(lw, &x[3], T(mu_v), &slope);
+  const T mu = T(mu_v) - value / slope;
   return norm * (T(1.0) - exp(mu));
+}
+
+/// The same for p in the table frame.
+template <typename T>
+T rayDistance(const T* x, const T* p) {
+  const T d[3] = {p[0] - x[6], p[1] - x[7], p[2] - x[8]};
+  const T inverse[3] = {-x[9], -x[10], -x[11]};
+  T q[3];
+  ceres::AngleAxisRotatePoint(inverse, d, q);
+  return localRayDistance(x, q);
 }
 
 /// A point on the surface of every superquadric, whatever its sizes and exponents: the signed
@@ -112,21 +141,32 @@ void placeSample(const T* x, const SurfaceSample& w, T* p) {
   for (int i = 0; i < 3; ++i) p[i] += x[6 + i];
 }
 
-struct DistortionResidual {
-  Vec3 point;
+/// Eq. 5's residuals of all points of one shape in one block: the bounds' transform and the
+/// rotation are computed once per evaluation instead of once per point.
+struct DistortionResiduals {
+  Points3 points;
   double weight;  // sqrt(lambda / N)
   Bounds lo;
   template <typename T>
   bool operator()(const T* u, T* r) const {
     T x[kParams];
     toShape(u, lo, x);
-    const T p[3] = {T(point.x()), T(point.y()), T(point.z())};
-    r[0] = T(weight) * pow(x[0] * x[1] * x[2], 0.25) * rayDistance(x, p);
+    T R[9];  // column-major: table from object
+    ceres::AngleAxisToRotationMatrix(&x[9], R);
+    const T w = T(weight) * pow(x[0] * x[1] * x[2], 0.25);
+    for (size_t k = 0; k < points.size(); ++k) {
+      const T d[3] = {points[k].x() - x[6], points[k].y() - x[7], points[k].z() - x[8]};
+      T q[3];
+      for (int i = 0; i < 3; ++i)
+        q[i] = R[3 * i] * d[0] + R[3 * i + 1] * d[1] + R[3 * i + 2] * d[2];
+      r[k] = w * localRayDistance(x, q);
+    }
     return true;
   }
-  static ceres::CostFunction* Create(const Vec3& point, double weight, const Bounds& lo) {
-    return new ceres::AutoDiffCostFunction<DistortionResidual, 1, kParams>(
-        new DistortionResidual{point, weight, lo});
+  static ceres::CostFunction* Create(Points3 points, double weight, const Bounds& lo) {
+    const int n = static_cast<int>(points.size());
+    return new ceres::AutoDiffCostFunction<DistortionResiduals, ceres::DYNAMIC, kParams>(
+        new DistortionResiduals{std::move(points), weight, lo}, n);
   }
 };
 
@@ -228,15 +268,57 @@ Params fromSolver(const Params& u, const FitConfig& c) {
   return x;
 }
 
+// Eq. 5 over all `points`, weighted by lambda / N.
 void addDistortion(ceres::Problem* problem, double* x, const Points3& points, double lambda,
-                   int max_points, const Bounds& lo) {
-  const size_t n = points.size();
-  const size_t stride = std::max<size_t>(1, (n + max_points - 1) / std::max(1, max_points));
-  const size_t used = (n + stride - 1) / stride;
-  const double weight = std::sqrt(lambda / used);
-  for (size_t k = 0; k < n; k += stride) {
-    problem->AddResidualBlock(DistortionResidual::Create(points[k], weight, lo), nullptr, x);
+                   const Bounds& lo) {
+  const double weight = std::sqrt(lambda / points.size());
+  problem->AddResidualBlock(DistortionResiduals::Create(points, weight, lo), nullptr, x);
+}
+
+// One point per cell of a cubic grid whose cell is chosen so that about `target` cells are
+// occupied (the point nearest the cell's centroid): an even cover of the surface, in which
+// dense patches do not outvote sparse ones. Centroids themselves would sit inside curved
+// surfaces and round off edges.
+Points3 surfaceCover(const Points3& points, int target) {
+  if (static_cast<int>(points.size()) <= target) return points;
+  Vec3 lo = points[0], hi = points[0];
+  for (const Vec3& p : points) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
   }
+  const Vec3 e = (hi - lo).cwiseMax(1e-6);
+  // A surface spanning the box has about the box's surface area, so cells of side h hold it in
+  // about area / h^2 cells; up to two corrections from the count found bring it near the target.
+  double cell = std::sqrt(2.0 * (e.x() * e.y() + e.y() * e.z() + e.z() * e.x()) / target);
+  std::vector<uint64_t> keys(points.size());
+  std::unordered_map<uint64_t, std::pair<Vec3, int>> cells;
+  for (int attempt = 0; attempt < 3; ++attempt) {
+    cells.clear();
+    for (size_t k = 0; k < points.size(); ++k) {
+      const Eigen::Array3d c = ((points[k] - lo) / cell).array().floor();
+      keys[k] = (static_cast<uint64_t>(c.x()) << 42) | (static_cast<uint64_t>(c.y()) << 21) |
+                static_cast<uint64_t>(c.z());
+      auto& [sum, count] = cells.try_emplace(keys[k], Vec3::Zero(), 0).first->second;
+      sum += points[k];
+      ++count;
+    }
+    const double ratio = static_cast<double>(cells.size()) / target;
+    if (ratio > 0.8 && ratio < 1.25) break;
+    cell *= std::sqrt(ratio);
+  }
+  std::unordered_map<uint64_t, std::pair<size_t, double>> nearest;
+  for (size_t k = 0; k < points.size(); ++k) {
+    const auto& [sum, count] = cells.at(keys[k]);
+    const double d = (points[k] - sum / count).squaredNorm();
+    auto [it, fresh] = nearest.try_emplace(keys[k], k, d);
+    if (!fresh && d < it->second.second) it->second = {k, d};
+  }
+  std::vector<size_t> chosen;
+  for (const auto& [key, pick] : nearest) chosen.push_back(pick.first);
+  std::sort(chosen.begin(), chosen.end());  // input order: reproducible whatever the hashing
+  Points3 out;
+  for (size_t k : chosen) out.push_back(points[k]);
+  return out;
 }
 
 ceres::Solver::Options solverOptions(const FitConfig& c, int max_iterations) {
@@ -262,10 +344,13 @@ std::vector<SurfaceSample> unitSamples(const Vec3& exponents, int count, uint64_
   unit.exponents = exponents;
   std::mt19937_64 rng(seed);
   std::vector<SurfaceSample> out;
-  for (const SurfacePoint& s : unit.sampleSurfaceObject(count, rng)) {
+  // Area-weighted on a coarse mesh (12 cells a face), then onto the exact surface: near enough
+  // to uniform for contact samples, and a tenth of the finer mesh's cost (this runs for every
+  // shape in every joint round).
+  for (const SurfacePoint& s : unit.meshObject(12).sampleSurface(count, rng)) {
+    const Vec3 p = unit.surfacePointAlong(s.position);
     SurfaceSample w;
-    for (int i = 0; i < 3; ++i)
-      w[i] = std::copysign(std::pow(std::abs(s.position[i]), exponents[i]), s.position[i]);
+    for (int i = 0; i < 3; ++i) w[i] = std::copysign(std::pow(std::abs(p[i]), exponents[i]), p[i]);
     const double sum = w.cwiseAbs().sum();
     if (sum > 0.0) out.push_back(w / sum);
   }
@@ -293,10 +378,13 @@ void FitConfig::validate() const {
           "initial_exponent must lie in [min_exponent, max_exponent]");
   require(lambda_dist >= 0.0 && lambda_coll >= 0.0 && lambda_floor >= 0.0,
           "lambda_dist, lambda_coll and lambda_floor must be >= 0");
-  require(max_points >= 4 && shape_samples >= 1, "need max_points >= 4 and shape_samples >= 1");
+  require(max_points >= 4 && coarse_points >= 4 && joint_points >= 4 && shape_samples >= 1,
+          "need max_points, coarse_points and joint_points >= 4, and shape_samples >= 1");
   require(contact_margin_m >= 0.0, "contact_margin_m must be >= 0");
-  require(joint_rounds >= 1 && max_iterations >= 1 && joint_max_iterations >= 1 && threads >= 1,
-          "joint_rounds, max_iterations, joint_max_iterations and threads must be >= 1");
+  require(joint_rounds >= 1 && start_iterations >= 1 && max_iterations >= 1 &&
+              joint_max_iterations >= 1 && threads >= 1,
+          "joint_rounds, start_iterations, max_iterations, joint_max_iterations and threads "
+          "must be >= 1");
 }
 
 double surfaceDistance(const SuperquadricShape& sq, const Vec3& p_table) {
@@ -339,15 +427,116 @@ SuperquadricShape initialGuess(const Points3& points, double initial_exponent) {
   return sq;
 }
 
-SuperquadricShape fitSuperquadric(const Points3& points, const FitConfig& c) {
+namespace {
+
+// The bounding box of the points and, for a view of one side, two deeper boxes.
+std::vector<SuperquadricShape> startingShapes(const SuperquadricShape& box) {
+  std::vector<SuperquadricShape> starts{box};
+  // Pointed (octahedron-like) and flat-faced versions of the box: the exponents move slowly
+  // between them through the solver's bounded parametrisation.
+  for (const double e : {1.3, 8.0}) {
+    SuperquadricShape other = box;
+    other.exponents = Vec3::Constant(e);
+    if (e != box.exponents.x()) starts.push_back(other);
+  }
+  // A view of one side covers about half of the object, and the points' thinnest principal
+  // axis is then near the line of sight: the whole object may reach as far again behind the
+  // points, on either side of them (the side the camera was on is not known here).
+  int thin = 0;
+  box.scale_m.minCoeff(&thin);
+  for (const double side : {-1.0, 1.0}) {
+    SuperquadricShape deeper = box;
+    deeper.scale_m[thin] *= 2.0;
+    deeper.T_table_object.translation() +=
+        side * box.scale_m[thin] * box.T_table_object.linear().col(thin);
+    starts.push_back(deeper);
+  }
+  return starts;
+}
+
+// The alternatives of a fitted shape that a local solve cannot reach from it. About each axis
+// k, the cross-section |x|^p + |y|^p <= 1 turned by 45 degrees is close to the one of the
+// conjugate exponent p / (p - 1), scaled by 2^(1/2 - 1/p): exactly so for the diamond (p = 1)
+// and the square (p = infinity), and the circle (p = 2) maps to itself. The solver passes
+// between the two only through worse fits: a box seen across an edge is fitted as a diamond
+// prism, an octahedron as a box with rounded edges.
+std::vector<SuperquadricShape> switchedShapes(const SuperquadricShape& sq) {
+  std::vector<SuperquadricShape> out;
+  for (int k = 0; k < 3; ++k) {
+    const int i = (k + 1) % 3, j = (k + 2) % 3;
+    const double p = std::sqrt(sq.exponents[i] * sq.exponents[j]);
+    if (p > 1.6 && p < 2.5) continue;  // round: turning it changes little
+    const double q = p > 20.0 ? 1.05 : std::max(1.05, p / (p - 1.0));
+    const double scale = 0.5 * (sq.scale_m[i] + sq.scale_m[j]) * std::pow(2.0, 0.5 - 1.0 / p);
+    SuperquadricShape turned = sq;
+    turned.T_table_object.linear() =
+        sq.T_table_object.linear() *
+        Eigen::AngleAxisd(0.25 * 3.14159265358979323846, Vec3::Unit(k)).toRotationMatrix();
+    turned.scale_m[i] = turned.scale_m[j] = scale;
+    turned.exponents[i] = turned.exponents[j] = std::min(q, 50.0);
+    out.push_back(turned);
+  }
+  return out;
+}
+
+struct Solution {
+  Params u;  // solver variables
+  double cost = std::numeric_limits<double>::infinity();
+};
+
+Solution solveFrom(const Params& start, const Points3& points, const FitConfig& c, int iterations) {
+  Solution s{start};
+  ceres::Problem problem;
+  addDistortion(&problem, s.u.data(), points, 1.0, solverBounds(c));
+  ceres::Solver::Summary summary;
+  ceres::Solve(solverOptions(c, iterations), &problem, &summary);
+  s.cost = summary.final_cost;
+  return s;
+}
+
+}  // namespace
+
+SuperquadricShape fitSuperquadric(const Points3& points, const FitConfig& c,
+                                  const std::optional<SuperquadricShape>& start) {
   c.validate();
   checkPoints(points);
-  Params u = toSolver(toParams(initialGuess(points, c.initial_exponent)), c);
-  ceres::Problem problem;
-  addDistortion(&problem, u.data(), points, 1.0, c.max_points, solverBounds(c));
-  ceres::Solver::Summary summary;
-  ceres::Solve(solverOptions(c, c.max_iterations), &problem, &summary);
-  return fromParams(fromSolver(u, c));
+  const Points3 coarse = surfaceCover(points, c.coarse_points);
+  // Each start gets a short solve on the coarse cover; the best is solved to convergence.
+  const SuperquadricShape box = initialGuess(coarse, c.initial_exponent);
+  std::vector<SuperquadricShape> starts = startingShapes(box);
+  if (start) starts.push_back(*start);
+  // A solve that shrinks the shape far below its points' extent is in the degenerate basin
+  // (see the header): it never wins, whatever its cost.
+  const double least_reach = 0.25 * box.scale_m.maxCoeff();
+  const auto admissible = [&](const Solution& s) {
+    return fromParams(fromSolver(s.u, c)).scale_m.maxCoeff() >= least_reach;
+  };
+  Solution best;
+  for (const SuperquadricShape& s0 : starts) {
+    Solution s = solveFrom(toSolver(toParams(s0), c), coarse, c, c.start_iterations);
+    if (admissible(s) && s.cost < best.cost) best = s;
+  }
+  if (!std::isfinite(best.cost)) best.u = toSolver(toParams(box), c);
+  best = solveFrom(best.u, coarse, c, c.max_iterations);
+  // Then the switched alternatives of the result, each solved in turn; a better one replaces
+  // it (and is switched again, a few times at most).
+  for (int round = 0; round < 3; ++round) {
+    bool improved = false;
+    for (const SuperquadricShape& alt : switchedShapes(fromParams(fromSolver(best.u, c)))) {
+      Solution s = solveFrom(toSolver(toParams(alt), c), coarse, c, c.start_iterations);
+      if (!admissible(s) || s.cost >= best.cost) continue;
+      s = solveFrom(s.u, coarse, c, c.max_iterations);
+      if (admissible(s) && s.cost < best.cost) {
+        best = s;
+        improved = true;
+      }
+    }
+    if (!improved) break;
+  }
+  // Last, the chosen basin on the finer cover.
+  const Points3 fine = surfaceCover(points, c.max_points);
+  if (fine.size() > coarse.size()) best = solveFrom(best.u, fine, c, c.max_iterations);
+  return canonicalSuperquadric(fromParams(fromSolver(best.u, c)));
 }
 
 std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points,
@@ -359,7 +548,9 @@ std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points,
   const size_t n = shapes.size();
   const Bounds lo = solverBounds(c);
   std::vector<Params> u(n), x(n);
+  std::vector<Points3> cover(n);
   for (size_t i = 0; i < n; ++i) {
+    cover[i] = surfaceCover(points[i], c.joint_points);
     u[i] = toSolver(toParams(shapes[i]), c);
     x[i] = fromSolver(u[i], c);
   }
@@ -376,8 +567,7 @@ std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points,
     std::vector<SuperquadricShape> current(n);
     for (size_t i = 0; i < n; ++i) {
       problem.AddParameterBlock(u[i].data(), kParams);
-      if (!points[i].empty())
-        addDistortion(&problem, u[i].data(), points[i], c.lambda_dist, c.max_points, lo);
+      if (!cover[i].empty()) addDistortion(&problem, u[i].data(), cover[i], c.lambda_dist, lo);
       samples[i] = unitSamples(Vec3(x[i][3], x[i][4], x[i][5]), c.shape_samples, 977 * round + i);
       current[i] = fromParams(x[i]);
     }

@@ -1,5 +1,7 @@
 #include "simstack/geometry/superquadric.h"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -132,6 +134,50 @@ std::vector<SurfacePoint> SuperquadricShape::sampleSurfaceObject(int count,
     s.normal = normalObject(s.position);
   }
   return samples;
+}
+
+SuperquadricShape canonicalSuperquadric(const SuperquadricShape& sq) {
+  std::array<int, 3> order{0, 1, 2};
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return sq.scale_m[a] > sq.scale_m[b]; });
+  SuperquadricShape out = sq;
+  const Mat3 R = sq.T_table_object.linear();
+  Mat3 C;
+  for (int k = 0; k < 3; ++k) {
+    out.scale_m[k] = sq.scale_m[order[k]];
+    out.exponents[k] = sq.exponents[order[k]];
+    C.col(k) = R.col(order[k]);
+  }
+  // The solid is symmetric under each axis' reflection: a column's sign is free, so each is
+  // chosen by its largest component, and the last one keeps the rotation proper (a reflection
+  // of the third axis is a symmetry too).
+  for (int k = 0; k < 2; ++k) {
+    Eigen::Index top = 0;
+    C.col(k).cwiseAbs().maxCoeff(&top);
+    if (C(top, k) < 0) C.col(k) = -C.col(k);
+  }
+  C.col(2) = C.col(0).cross(C.col(1));
+  out.T_table_object.linear() = C;
+  return out;
+}
+
+namespace {
+// Largest distance, along the ray from b's centre, of a's surface samples from b's surface.
+double largestRayGap(const SuperquadricShape& a, const SuperquadricShape& b) {
+  std::mt19937_64 rng(17);
+  const Transform b_from_table = b.T_table_object.inverse();
+  double worst = 0.0;
+  for (const SurfacePoint& s : a.sampleSurfaceObject(2000, rng)) {
+    const Vec3 p = b_from_table * (a.T_table_object * s.position);
+    if (p.norm() < 1e-9) return std::numeric_limits<double>::infinity();
+    worst = std::max(worst, std::abs(p.norm() - b.surfacePointAlong(p).norm()));
+  }
+  return worst;
+}
+}  // namespace
+
+bool sameSuperquadric(const SuperquadricShape& a, const SuperquadricShape& b, double tolerance_m) {
+  return largestRayGap(a, b) <= tolerance_m && largestRayGap(b, a) <= tolerance_m;
 }
 
 }  // namespace simstack

@@ -63,9 +63,12 @@ void fitFields(C& c, F&& f) {
   f("lambda_coll", c.lambda_coll);
   f("lambda_floor", c.lambda_floor);
   f("max_points", c.max_points);
+  f("coarse_points", c.coarse_points);
+  f("joint_points", c.joint_points);
   f("shape_samples", c.shape_samples);
   f("contact_margin_m", c.contact_margin_m);
   f("joint_rounds", c.joint_rounds);
+  f("start_iterations", c.start_iterations);
   f("max_iterations", c.max_iterations);
   f("joint_max_iterations", c.joint_max_iterations);
 }
