@@ -34,7 +34,7 @@ struct FitConfig {
   int max_points = 600;
   /// Points of the coarser cover on which the starts and the switched alternatives are tried.
   int coarse_points = 60;
-  /// Points per instance in the joint refinement (a cover like max_points').
+  /// Points per instance in the joint refinement (every n-th of them).
   int joint_points = 100;
   int shape_samples = 200;  ///< surface samples per shape for the collision and floor terms
                             ///< (L_floor is a sum, so it grows with this)
