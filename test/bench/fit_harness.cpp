@@ -17,6 +17,7 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <sstream>
 
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/fitting/superquadric_fit.h"

@@ -430,7 +430,8 @@ SuperquadricShape initialGuess(const Points3& points, double initial_exponent) {
 
 namespace {
 
-// The bounding box of the points and, for a view of one side, two deeper boxes.
+// The bounding box of the points, pointed and flat-faced versions of it, and, for a view of
+// one side, two deeper boxes.
 std::vector<SuperquadricShape> startingShapes(const SuperquadricShape& box) {
   std::vector<SuperquadricShape> starts{box};
   // Pointed (octahedron-like) and flat-faced versions of the box: the exponents move slowly
