@@ -34,9 +34,16 @@ void emit(std::ostream& out, XmlRpc::XmlRpcValue& v, int indent) {
     case XmlRpc::XmlRpcValue::TypeInt:
       out << " " << static_cast<int>(v);
       break;
-    case XmlRpc::XmlRpcValue::TypeDouble:
-      out << " " << std::setprecision(17) << static_cast<double>(v);
+    case XmlRpc::XmlRpcValue::TypeDouble: {
+      const double d = static_cast<double>(v);  // YAML spells the infinities .inf and -.inf
+      if (std::isinf(d))
+        out << (d > 0 ? " .inf" : " -.inf");
+      else if (std::isnan(d))
+        out << " .nan";
+      else
+        out << " " << std::setprecision(17) << d;
       break;
+    }
     case XmlRpc::XmlRpcValue::TypeString: {
       std::string s = static_cast<std::string>(v), quoted = "\"";
       for (char c : s)
@@ -69,16 +76,18 @@ PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
   if (ros::param::get(pnh.getNamespace(), all) && all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
     for (auto& kv : all)
       if (kv.second.getType() == XmlRpc::XmlRpcValue::TypeStruct &&
-          !std::set<std::string>{"perception", "hough", "segments", "fitting", "table", "node"}
+          !std::set<std::string>{"perception", "hough", "segments", "fitting", "table", "workspace",
+                                 "node"}
                .count(kv.first))
         throw std::runtime_error("unknown parameter section " + pnh.resolveName(kv.first) +
-                                 " (perception, hough, segments, fitting, table or node)");
+                                 " (perception, hough, segments, fitting, table, workspace or "
+                                 "node)");
   // Nothing loaded (a node started by hand): the package's own config, as the tools do.
   if (!pnh.hasParam("perception") && !pnh.hasParam("segments") && !pnh.hasParam("fitting") &&
-      !pnh.hasParam("table") && !pnh.hasParam("hough"))
+      !pnh.hasParam("table") && !pnh.hasParam("hough") && !pnh.hasParam("workspace"))
     return loadPerceptionYaml(package_dir + "/config/perception.yaml", package_dir);
   std::ostringstream yaml;
-  for (const char* section : {"perception", "hough", "segments", "fitting", "table"}) {
+  for (const char* section : {"perception", "hough", "segments", "fitting", "table", "workspace"}) {
     XmlRpc::XmlRpcValue v;
     if (!pnh.getParam(section, v)) continue;
     if (v.getType() != XmlRpc::XmlRpcValue::TypeStruct)

@@ -14,6 +14,9 @@ struct DepthView {
   DepthImage depth;  ///< metres; NaN / 0 = missing
   PinholeCamera camera;
   std::optional<Transform> T_table_camera;  ///< unknown: the table is estimated from the depth
+  /// Optional, the depth's size: pixels where it is 0 are ignored (not the workspace); empty:
+  /// every pixel counts.
+  Image<uint8_t> mask = {};
 };
 
 }  // namespace simstack

@@ -11,6 +11,7 @@
 #include "simstack/instances/hough_voting.h"
 #include "simstack/instances/surface_segments.h"
 #include "simstack/pipeline/table_plane.h"
+#include "simstack/pipeline/workspace.h"
 
 namespace simstack {
 
@@ -35,9 +36,11 @@ struct PerceptionConfig {
   SurfaceSegmentConfig segments;  ///< the split along the observed surface's convex patches
   FitConfig fit;
   TablePlaneConfig table;
+  WorkspaceConfig workspace;  ///< where to look, and the tiles covering it
 };
 
-/// Reads a perception config: sections `perception:`, `segments:`, `fitting:` and `table:`
+/// Reads a perception config: sections `perception:`, `segments:`, `fitting:`, `table:` and
+/// `workspace:`
 /// (absent fields keep their defaults; unknown fields are errors, so that a typo is not silently
 /// ignored); a `node:` section holds the ROS node's own parameters and is not read here.
 /// `model_path`, when given, replaces the file's `perception.model`. A relative model path is taken
@@ -61,7 +64,7 @@ std::string modelCardPath(const std::string& model_path);
 std::string applyModelCard(PerceptionConfig* config);
 /// A model card's `perception:` section (YAML text) for these settings.
 std::string modelCardPerceptionYaml(int samples, const HoughConfig& hough);
-/// The YAML text of a config (all five sections).
+/// The YAML text of a config (all six sections).
 std::string perceptionYaml(const PerceptionConfig& config);
 
 }  // namespace simstack

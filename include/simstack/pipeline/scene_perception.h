@@ -52,8 +52,10 @@ struct StageTimings {
 struct SceneEstimate {
   Transform T_table_camera = Transform::Identity();  ///< of the first view
   bool table_estimated = false;  ///< true when the table came from RANSAC, not the caller
-  GridSpec grid;
-  Grid3<float> partial_tsdf_m, partial_weight;  ///< the network's input
+  GridSpec grid;  ///< the scene grid: one tile, or a cube holding all tiles (workspace.h)
+  int tiles = 1;  ///< network passes this frame took
+  bool tiles_cropped = false;  ///< the pile needed more than workspace.max_tiles tiles
+  Grid3<float> partial_tsdf_m, partial_weight;  ///< the network's input, over the scene grid
   Grid3<float> occupancy_probability;           ///< share of hypotheses with tsdf <= 0, per voxel
   std::vector<SceneHypothesis> hypotheses;      ///< S of them; the decomposed ones first
   StageTimings timings;

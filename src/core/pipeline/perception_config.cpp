@@ -2,6 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <array>
 #include <filesystem>
 #include <set>
 #include <stdexcept>
@@ -79,6 +80,25 @@ void tableFields(C& c, F&& f) {
   f("pixel_stride", c.pixel_stride);
   f("max_depth_m", c.max_depth_m);
   f("min_inlier_share", c.min_inlier_share);
+  f("max_planes", c.max_planes);
+  f("max_behind_share", c.max_behind_share);
+}
+template <class C, class F>
+void workspaceFields(C& c, F&& f) {
+  f("min_m", c.min_m);
+  f("max_m", c.max_m);
+  f("max_tiles", c.max_tiles);
+  f("tile_overlap_m", c.tile_overlap_m);
+}
+
+template <class T>
+void emit(YAML::Emitter& e, const T& value) {
+  e << value;
+}
+void emit(YAML::Emitter& e, const std::array<double, 3>& value) {
+  e << YAML::Flow << YAML::BeginSeq;
+  for (double v : value) e << v;
+  e << YAML::EndSeq;
 }
 
 template <class C, class Fields>
@@ -107,7 +127,8 @@ template <class C, class Fields>
 void writeSection(YAML::Emitter& e, const char* name, C& c, Fields fields) {
   e << YAML::Key << name << YAML::Value << YAML::BeginMap;
   fields(c, [&](const char* key, const auto& value) {
-    e << YAML::Key << key << YAML::Value << value;
+    e << YAML::Key << key << YAML::Value;
+    emit(e, value);
   });
   e << YAML::EndMap;
 }
@@ -136,7 +157,7 @@ PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& p
   for (const auto& kv : root) {
     const std::string section = kv.first.as<std::string>();
     if (section != "perception" && section != "hough" && section != "segments" &&
-        section != "fitting" && section != "table" && section != "node")
+        section != "fitting" && section != "table" && section != "workspace" && section != "node")
       throw std::runtime_error(path + ": unknown section '" + section + "'");
   }
   readSection(
@@ -147,6 +168,8 @@ PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& p
       root, "fitting", &c.fit, [](auto& x, auto&& f) { fitFields(x, f); }, path);
   readSection(
       root, "table", &c.table, [](auto& x, auto&& f) { tableFields(x, f); }, path);
+  readSection(
+      root, "workspace", &c.workspace, [](auto& x, auto&& f) { workspaceFields(x, f); }, path);
   if (!model_path.empty()) c.model_path = model_path;
   if (!c.model_path.empty() && !base_dir.empty() &&
       std::filesystem::path(c.model_path).is_relative())
@@ -221,6 +244,7 @@ std::string perceptionYaml(const PerceptionConfig& config) {
   writeSection(e, "segments", c.segments, [](auto& x, auto&& f) { segmentFields(x, f); });
   writeSection(e, "fitting", c.fit, [](auto& x, auto&& f) { fitFields(x, f); });
   writeSection(e, "table", c.table, [](auto& x, auto&& f) { tableFields(x, f); });
+  writeSection(e, "workspace", c.workspace, [](auto& x, auto&& f) { workspaceFields(x, f); });
   e << YAML::EndMap;
   return e.c_str();
 }

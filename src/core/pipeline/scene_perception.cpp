@@ -6,6 +6,8 @@
 #include <random>
 #include <stdexcept>
 #include <thread>
+#include <tuple>
+#include <utility>
 
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/instances/instance_finder.h"
@@ -48,23 +50,30 @@ void checkView(const DepthView& v, size_t index) {
         "view " + std::to_string(index) + ": the depth image is " + std::to_string(v.depth.width) +
         "x" + std::to_string(v.depth.height) + " but its camera is " +
         std::to_string(v.camera.width) + "x" + std::to_string(v.camera.height));
+  if (!v.mask.empty() && (v.mask.width != v.depth.width || v.mask.height != v.depth.height ||
+                          v.mask.pixels.size() != v.depth.pixels.size()))
+    throw std::invalid_argument("view " + std::to_string(index) + ": the mask is " +
+                                std::to_string(v.mask.width) + "x" + std::to_string(v.mask.height) +
+                                " but the depth image is " + std::to_string(v.depth.width) + "x" +
+                                std::to_string(v.depth.height));
 }
 
-/// The views with depth outside the sensor's range marked missing (a float image of random
-/// bits holds depths of 1e30 m); a first view with nothing left is unusable.
+/// The views with depth outside the sensor's range or the view's mask marked missing (a float
+/// image of random bits holds depths of 1e30 m); a first view with nothing left is unusable.
 std::vector<DepthView> withinSensorRange(const std::vector<DepthView>& views,
                                          const PerceptionConfig& c) {
   std::vector<DepthView> out = views;
   for (size_t i = 0; i < out.size(); ++i) {
+    applyMask(&out[i]);
     size_t valid = 0;
     for (float& d : out[i].depth.pixels) {
       if (!(d >= c.min_depth_m && d <= c.max_depth_m)) d = 0.0f;
       valid += d > 0.0f;
     }
     if (i == 0 && valid == 0)
-      throw std::invalid_argument("view 0 has no depth within the sensor range " +
-                                  std::to_string(c.min_depth_m) + " .. " +
-                                  std::to_string(c.max_depth_m) + " m");
+      throw std::invalid_argument(
+          "view 0 has no depth within the sensor range " + std::to_string(c.min_depth_m) + " .. " +
+          std::to_string(c.max_depth_m) + " m" + (out[i].mask.empty() ? "" : " and its mask"));
   }
   return out;
 }
@@ -104,6 +113,12 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   const InstanceSegmentation seg =
       InstanceFinder(hough, config.segments).find(h->tsdf_m, h->votes, segments);
   h->labels = seg.labels;
+  // An instance whose centre lies outside the workspace is not reported (its voxels are free).
+  std::vector<bool> outside(seg.size(), false);
+  for (int k = 0; k < seg.size(); ++k)
+    outside[k] = !config.workspace.contains(seg.centres_table[k]);
+  for (int& label : h->labels.data)
+    if (label >= 0 && outside[label]) label = -1;
   if (timings) timings->instances_ms += msSince(t);
 
   t = Clock::now();
@@ -112,7 +127,7 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
       splitByLabel(h->surface, triangleLabels(h->surface, h->labels), seg.size());
   std::vector<Points3> points(parts.size());
   for (size_t k = 0; k < parts.size(); ++k) {
-    if (parts[k].empty()) continue;
+    if (parts[k].empty() || outside[k]) continue;
     std::mt19937_64 rng(config.seed * 7919 + k);
     for (const SurfacePoint& s : parts[k].sampleSurface(config.points_per_instance, rng))
       points[k].push_back(s.position);
@@ -185,6 +200,7 @@ void validate(const PerceptionConfig& config) {
     throw std::invalid_argument("points_per_instance must be >= 10");
   if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
   config.fit.validate();
+  config.workspace.validate();
   config.segments.validate();
 }
 
@@ -196,6 +212,11 @@ int cappedThreads(int threads) {
 
 /// No latent space: S hypotheses would be S copies of one.
 PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
+  if (!(config.workspace.tile_overlap_m < 0.5 * model.extent_m))
+    throw std::invalid_argument("workspace: tile_overlap_m (" +
+                                std::to_string(config.workspace.tile_overlap_m) +
+                                " m) must be less than half the model's grid side (" +
+                                std::to_string(0.5 * model.extent_m) + " m)");
   config.threads = cappedThreads(config.threads);
   if (!model.hasLatentCode()) {
     config.samples = 1;
@@ -226,6 +247,60 @@ ScenePerception::~ScenePerception() = default;
 const PerceptionConfig& ScenePerception::config() const { return impl_->config; }
 const CvaeConfig& ScenePerception::modelConfig() const { return impl_->model->config(); }
 
+namespace {
+
+/// The table frame of the first view: its pose, or a RANSAC plane.
+Transform firstViewPose(const DepthView& view, const PerceptionConfig& c, bool* estimated) {
+  *estimated = !view.T_table_camera;
+  if (view.T_table_camera) return *view.T_table_camera;
+  return estimateTablePlane(view.depth, view.camera, c.table, c.workspace).T_table_camera;
+}
+
+/// The views' partial TSDF and weight over `grid`.
+std::pair<Grid3<float>, Grid3<float>> partialTsdf(const GridSpec& grid,
+                                                  const std::vector<DepthView>& views,
+                                                  const Transform& T_table_first,
+                                                  double truncation_m) {
+  ProjectiveTsdfConfig tc;
+  tc.truncation_m = truncation_m;
+  ProjectiveTsdf partial(grid, tc);
+  for (size_t i = 0; i < views.size(); ++i)
+    partial.integrate(views[i].depth, views[i].camera,
+                      i == 0 ? T_table_first : *views[i].T_table_camera);
+  return {partial.tsdf(), partial.weight()};
+}
+
+/// The network's S hypotheses over the scene grid: each tile predicted from its own partial
+/// TSDF, then the tiles blended (workspace.h). One tile is the scene grid itself.
+std::vector<CvaePrediction> predictTiles(const CvaeInference& model, const TilePlan& plan,
+                                         const SceneEstimate& est,
+                                         const std::vector<DepthView>& views,
+                                         const PerceptionConfig& c) {
+  if (plan.tiles.size() == 1 && plan.tiles.front() == plan.scene)
+    return model.predict(est.partial_tsdf_m, est.partial_weight, c.samples, c.seed,
+                         c.zero_code_first);
+  const double truncation = model.config().truncation_m();
+  std::vector<std::vector<CvaePrediction>> tiles;
+  for (const GridSpec& tile : plan.tiles) {
+    const auto [tsdf, weight] = partialTsdf(tile, views, est.T_table_camera, truncation);
+    tiles.push_back(model.predict(tsdf, weight, c.samples, c.seed, c.zero_code_first));
+  }
+  std::vector<CvaePrediction> out(tiles.front().size());
+  for (size_t k = 0; k < out.size(); ++k) {
+    std::vector<Grid3<float>> tsdf;
+    std::vector<Grid3<Vec3f>> votes;
+    for (auto& tile : tiles) {
+      tsdf.push_back(std::move(tile[k].tsdf_m));
+      votes.push_back(std::move(tile[k].votes));
+    }
+    out[k].tsdf_m = blendTiles(plan.scene, tsdf, static_cast<float>(truncation));
+    out[k].votes = blendTiles(plan.scene, votes, Vec3f(Vec3f::Zero()));
+  }
+  return out;
+}
+
+}  // namespace
+
 SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_given) const {
   const PerceptionConfig& c = impl_->config;
   const CvaeConfig& mc = impl_->model->config();
@@ -237,37 +312,34 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
           "perceive: view " + std::to_string(i) +
           " has no pose; only the first view may leave the table to RANSAC");
   }
-  const std::vector<DepthView> in_range = withinSensorRange(views_given, c);
-  const std::vector<DepthView>& views = in_range;
+  std::vector<DepthView> views = withinSensorRange(views_given, c);
   const auto start = Clock::now();
   SceneEstimate out;
   auto t = Clock::now();
-  if (views[0].T_table_camera) {
-    out.T_table_camera = *views[0].T_table_camera;
-  } else {
-    out.T_table_camera =
-        estimateTablePlane(views[0].depth, views[0].camera, c.table).T_table_camera;
-    out.table_estimated = true;
-  }
+  out.T_table_camera = firstViewPose(views[0], c, &out.table_estimated);
+  for (size_t i = 0; i < views.size(); ++i)
+    cropToWorkspace(&views[i], i == 0 ? out.T_table_camera : *views[i].T_table_camera, c.workspace);
   out.timings.table_ms = msSince(t);
 
   t = Clock::now();
   const Vec2 centre = observedPileCentre(views[0].depth, views[0].camera, out.T_table_camera,
                                          mc.extent_m, c.min_pile_height_m);
-  out.grid = GridSpec::sceneGrid(centre, mc.extent_m, mc.resolution);
-  ProjectiveTsdfConfig tc;
-  tc.truncation_m = mc.truncation_m();
-  ProjectiveTsdf partial(out.grid, tc);
-  for (size_t i = 0; i < views.size(); ++i)
-    partial.integrate(views[i].depth, views[i].camera,
-                      i == 0 ? out.T_table_camera : *views[i].T_table_camera);
-  out.partial_tsdf_m = partial.tsdf();
-  out.partial_weight = partial.weight();
+  const auto placement = [&](const Vec2& near) {
+    return visiblePileCentre(views[0].depth, views[0].camera, out.T_table_camera, near,
+                             0.5 * mc.extent_m, c.min_pile_height_m);
+  };
+  const TilePlan plan = planTiles(
+      pilePoints(views[0], out.T_table_camera, c.workspace, c.min_pile_height_m, mc.extent_m),
+      centre, placement, mc.extent_m, mc.resolution, c.workspace);
+  out.grid = plan.scene;
+  out.tiles = static_cast<int>(plan.tiles.size());
+  out.tiles_cropped = plan.cropped;
+  std::tie(out.partial_tsdf_m, out.partial_weight) =
+      partialTsdf(out.grid, views, out.T_table_camera, mc.truncation_m());
   out.timings.tsdf_ms = msSince(t);
 
   t = Clock::now();
-  std::vector<CvaePrediction> predictions = impl_->model->predict(
-      out.partial_tsdf_m, out.partial_weight, c.samples, c.seed, c.zero_code_first);
+  std::vector<CvaePrediction> predictions = predictTiles(*impl_->model, plan, out, views, c);
   out.timings.network_ms = msSince(t);
 
   out.occupancy_probability = Grid3<float>(out.grid, 0.0f);

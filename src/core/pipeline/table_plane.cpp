@@ -6,20 +6,122 @@
 #include <pcl/sample_consensus/model_types.h>
 #include <pcl/segmentation/sac_segmentation.h>
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace simstack {
 
+namespace {
+
+using Cloud = pcl::PointCloud<pcl::PointXYZ>;
+
+/// The table frame of a plane n.p + d = 0 (camera frame, n towards the camera).
+Transform tableFromPlane(Vec3 n, double d) {
+  Vec3 x = Vec3::UnitX() - Vec3::UnitX().dot(n) * n;
+  if (x.norm() < 1e-6) x = Vec3::UnitY() - Vec3::UnitY().dot(n) * n;
+  x.normalize();
+  Transform T_camera_table = Transform::Identity();
+  T_camera_table.linear().col(0) = x;
+  T_camera_table.linear().col(1) = n.cross(x);
+  T_camera_table.linear().col(2) = n;
+  T_camera_table.translation() = -d * n;
+  return T_camera_table.inverse();
+}
+
+struct Plane {
+  Eigen::Vector4d coefficients = Eigen::Vector4d::Zero();  // normalised, camera on + side
+  pcl::PointIndices inliers;
+  int points = 0;  // of the cloud it was found in
+};
+
+/// The largest plane through `cloud` (PCL RANSAC), oriented towards the camera; no inliers when
+/// none.
+Plane largestPlane(const Cloud::Ptr& cloud, const TablePlaneConfig& config) {
+  Plane out;
+  out.points = static_cast<int>(cloud->size());
+  if (cloud->size() < 3) return out;
+  pcl::SACSegmentation<pcl::PointXYZ> seg;
+  seg.setOptimizeCoefficients(true);
+  seg.setModelType(pcl::SACMODEL_PLANE);
+  seg.setMethodType(pcl::SAC_RANSAC);
+  seg.setDistanceThreshold(config.inlier_distance_m);
+  seg.setMaxIterations(config.max_iterations);
+  seg.setInputCloud(cloud);
+  pcl::ModelCoefficients coefficients;
+  seg.segment(out.inliers, coefficients);
+  if (coefficients.values.size() != 4) {
+    out.inliers.indices.clear();
+    return out;
+  }
+  for (int i = 0; i < 4; ++i) out.coefficients[i] = coefficients.values[i];
+  out.coefficients /= out.coefficients.head<3>().norm();
+  if (out.coefficients[3] < 0) out.coefficients = -out.coefficients;
+  return out;
+}
+
+/// Share of the points inside the workspace's x/y footprint (in the frame the plane defines)
+/// that lie more than `margin` behind the plane (away from the camera), where the camera
+/// cannot see when the plane is the table.
+double behindShare(const Cloud& cloud, const Eigen::Vector4d& plane,
+                   const WorkspaceConfig& workspace, double margin) {
+  const Transform T = tableFromPlane(plane.head<3>(), plane[3]);
+  size_t within = 0, behind = 0;
+  for (const pcl::PointXYZ& q : cloud) {
+    const Vec3 p = T * Vec3(q.x, q.y, q.z);
+    if (!(p.x() >= workspace.min_m[0] && p.x() <= workspace.max_m[0] &&
+          p.y() >= workspace.min_m[1] && p.y() <= workspace.max_m[1]))
+      continue;
+    ++within;
+    behind += p.z() < -margin;
+  }
+  return within == 0 ? 1.0 : static_cast<double>(behind) / within;
+}
+
+/// The largest plane; with a bounded workspace, the largest of the `max_planes` largest with
+/// almost nothing seen behind it inside the workspace's footprint (the top of a robot's base
+/// at the workspace's edge has the table behind it), re-estimated from the points inside the
+/// workspace.
+Plane tablePlane(const Cloud::Ptr& cloud, const TablePlaneConfig& config,
+                 const WorkspaceConfig& workspace) {
+  Plane first = largestPlane(cloud, config);
+  if (!workspace.bounded()) return first;
+  Cloud::Ptr rest(new Cloud(*cloud));
+  for (int k = 0; k < std::max(1, config.max_planes); ++k) {
+    const Plane plane = k == 0 ? first : largestPlane(rest, config);
+    if (plane.inliers.indices.size() < config.min_inlier_share * cloud->size()) break;
+    if (behindShare(*cloud, plane.coefficients, workspace, 2.0 * config.inlier_distance_m) <=
+        config.max_behind_share) {
+      const Transform T = tableFromPlane(plane.coefficients.head<3>(), plane.coefficients[3]);
+      Cloud::Ptr inside(new Cloud);
+      for (const pcl::PointXYZ& p : *cloud)
+        if (workspace.contains(T * Vec3(p.x, p.y, p.z))) inside->push_back(p);
+      const Plane again = largestPlane(inside, config);
+      return again.inliers.indices.size() >= 50 ? again : plane;
+    }
+    Cloud::Ptr next(new Cloud);
+    std::vector<bool> on(rest->size(), false);
+    for (int i : plane.inliers.indices) on[i] = true;
+    for (size_t i = 0; i < rest->size(); ++i)
+      if (!on[i]) next->push_back((*rest)[i]);
+    rest = next;
+  }
+  return first;
+}
+
+}  // namespace
+
 TablePlane estimateTablePlane(const DepthImage& depth, const PinholeCamera& camera,
-                              const TablePlaneConfig& config) {
+                              const TablePlaneConfig& config, const WorkspaceConfig& workspace) {
   camera.validate();
   if (depth.width != camera.width || depth.height != camera.height ||
       depth.pixels.size() != static_cast<size_t>(depth.width) * depth.height)
     throw std::invalid_argument("table plane: the depth image is " + std::to_string(depth.width) +
                                 "x" + std::to_string(depth.height) + " but the camera is " +
                                 std::to_string(camera.width) + "x" + std::to_string(camera.height));
-  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+  Cloud::Ptr cloud(new Cloud);
   const int stride = std::max(1, config.pixel_stride);
   for (int v = 0; v < depth.height; v += stride)
     for (int u = 0; u < depth.width; u += stride) {
@@ -31,42 +133,16 @@ TablePlane estimateTablePlane(const DepthImage& depth, const PinholeCamera& came
   if (cloud->size() < 50)
     throw std::runtime_error("table plane: only " + std::to_string(cloud->size()) +
                              " valid depth points; cannot estimate the table");
-  pcl::SACSegmentation<pcl::PointXYZ> seg;
-  seg.setOptimizeCoefficients(true);
-  seg.setModelType(pcl::SACMODEL_PLANE);
-  seg.setMethodType(pcl::SAC_RANSAC);
-  seg.setDistanceThreshold(config.inlier_distance_m);
-  seg.setMaxIterations(config.max_iterations);
-  seg.setInputCloud(cloud);
-  pcl::PointIndices inliers;
-  pcl::ModelCoefficients coefficients;
-  seg.segment(inliers, coefficients);
+  const Plane plane = tablePlane(cloud, config, workspace);
   TablePlane out;
-  out.points = static_cast<int>(cloud->size());
-  out.inliers = static_cast<int>(inliers.indices.size());
-  if (coefficients.values.size() != 4 || out.inliers < config.min_inlier_share * out.points)
+  out.points = plane.points;
+  out.inliers = static_cast<int>(plane.inliers.indices.size());
+  if (out.inliers == 0 || out.inliers < config.min_inlier_share * out.points)
     throw std::runtime_error("table plane: no dominant plane in the depth image (" +
                              std::to_string(out.inliers) + " of " + std::to_string(out.points) +
                              " points on the best plane)");
-  Vec3 n(coefficients.values[0], coefficients.values[1], coefficients.values[2]);
-  double d = coefficients.values[3];
-  const double norm = n.norm();
-  n /= norm;
-  d /= norm;
-  if (d < 0) {  // the camera (origin) must be on the positive side
-    n = -n;
-    d = -d;
-  }
-  out.plane_camera << n, d;
-  Vec3 x = Vec3::UnitX() - Vec3::UnitX().dot(n) * n;
-  if (x.norm() < 1e-6) x = Vec3::UnitY() - Vec3::UnitY().dot(n) * n;
-  x.normalize();
-  Transform T_camera_table = Transform::Identity();
-  T_camera_table.linear().col(0) = x;
-  T_camera_table.linear().col(1) = n.cross(x);
-  T_camera_table.linear().col(2) = n;
-  T_camera_table.translation() = -d * n;
-  out.T_table_camera = T_camera_table.inverse();
+  out.plane_camera = plane.coefficients;
+  out.T_table_camera = tableFromPlane(plane.coefficients.head<3>(), plane.coefficients[3]);
   return out;
 }
 

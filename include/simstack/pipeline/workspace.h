@@ -1,0 +1,104 @@
+#pragma once
+/// @file workspace.h
+/// Where the pipeline looks and how it covers what it finds there.
+///
+/// The workspace is a box in the table frame (as pcl_ros' CropBox or octomap_server's
+/// pointcloud_[min|max]_[x|y|z]): depth points outside it take no part in the pile, the grid's
+/// placement, the table plane or the instances. Unbounded by default.
+///
+/// Tiles: the network sees a cube of fixed side (R voxels). When the occupied part of the
+/// workspace is wider than one such cube, it is covered by overlapping cubes on one voxel
+/// lattice, each predicted on its own; their TSDFs and votes are blended into one scene grid
+/// (a cube as wide as all tiles together, z from the table up), in which the instances are then
+/// found once. One tile, placed as before tiles existed, is the common case.
+
+#include <algorithm>
+#include <array>
+#include <functional>
+#include <limits>
+#include <optional>
+#include <vector>
+
+#include "simstack/geometry/depth_view.h"
+#include "simstack/geometry/voxel_grid.h"
+#include "simstack/types.h"
+
+namespace simstack {
+
+struct WorkspaceConfig {
+  static constexpr double kUnbounded = std::numeric_limits<double>::infinity();
+  std::array<double, 3> min_m{-kUnbounded, -kUnbounded, -kUnbounded};  ///< table frame
+  std::array<double, 3> max_m{kUnbounded, kUnbounded, kUnbounded};
+  int max_tiles = 9;             ///< at most this many network passes a frame
+  double tile_overlap_m = 0.16;  ///< neighbouring tiles share this much (an object this wide
+                                 ///< near a border is whole in one of them)
+
+  bool bounded() const;
+  bool contains(const Vec3& p_table) const;
+  /// Throws std::invalid_argument naming the field (min above max, NaN, tiles < 1, overlap
+  /// outside [0, side / 2) is checked by planTiles).
+  void validate() const;
+};
+
+/// Table-frame points of the pile as the grid placement sees them: every `stride`-th pixel's
+/// point between `min_height_m` and `max_height_m` above the table and inside the workspace.
+std::vector<Vec3> pilePoints(const DepthView& view, const Transform& T_table_camera,
+                             const WorkspaceConfig& workspace, double min_height_m,
+                             double max_height_m, int stride = 2);
+
+/// Depth where the view's mask is 0 marked missing (nothing when the view has no mask).
+void applyMask(DepthView* view);
+
+/// Depth whose point lies outside the workspace box marked missing (nothing when unbounded).
+void cropToWorkspace(DepthView* view, const Transform& T_table_camera,
+                     const WorkspaceConfig& workspace);
+
+struct TilePlan {
+  GridSpec scene;               ///< holds every tile; the single tile itself when one
+  std::vector<GridSpec> tiles;  ///< each the network's grid (R voxels, side extent_m)
+  bool cropped = false;         ///< the pile needed more than max_tiles: its largest groups (or
+                                ///< the middle of the largest) are covered
+};
+
+/// Covers the pile's points (table frame) with tiles of `resolution` voxels of side `extent_m`.
+/// The pile fits one tile when its x/y spread (0.5 and 99.5 percentiles, two voxels' margin on
+/// each side) is at most the side: that tile is centred on `single_centre` (observedPileCentre,
+/// the placement of training), moved just enough to hold the spread. `placement` maps the
+/// median of a group of points to where training would centre a grid on that group.
+/// Otherwise each separate group of points (gaps of two voxels) gets one tile placed as in
+/// training when it fits, else the fewest tiles overlapping by at least `tile_overlap_m`; the
+/// largest groups first, at most `max_tiles` in all; all tiles on the first one's voxel lattice.
+TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_centre,
+                   const std::function<Vec2(const Vec2&)>& placement, double extent_m,
+                   int resolution, const WorkspaceConfig& workspace);
+
+/// Blends tile predictions into the scene grid: each voxel the weighted mean of the tiles whose
+/// box holds its centre (trilinear in each tile), weighted by the centre's distance (in voxels)
+/// from the tile's nearest side face, so that a tile's border, where its view of the scene is
+/// cut, counts least. Voxels no tile holds get `outside` (free space for a TSDF). A tile on the
+/// scene's voxel lattice is copied exactly.
+template <typename T>
+Grid3<T> blendTiles(const GridSpec& scene, const std::vector<Grid3<T>>& tiles, const T& outside) {
+  if (tiles.size() == 1 && tiles.front().spec == scene) return tiles.front();
+  Grid3<T> out(scene, outside);
+  for (int i = 0; i < scene.voxelCount(); ++i) {
+    const Vec3i v = scene.unravel(i);
+    const Vec3 p = scene.voxelCentre(v.x(), v.y(), v.z());
+    T sum = outside * 0.0f;
+    double weight = 0.0;
+    for (const Grid3<T>& tile : tiles) {
+      const Vec3 c = tile.spec.continuousIndex(p);
+      const double r = tile.spec.resolution;
+      if ((c.array() < -0.5).any() || (c.array() > r - 0.5).any()) continue;
+      const double w =
+          std::min(std::min(c.x() + 0.5, r - 0.5 - c.x()), std::min(c.y() + 0.5, r - 0.5 - c.y())) +
+          1e-3;
+      sum = sum + tile.sampleTrilinear(p) * static_cast<float>(w);
+      weight += w;
+    }
+    if (weight > 0.0) out.data[i] = sum * static_cast<float>(1.0 / weight);
+  }
+  return out;
+}
+
+}  // namespace simstack

@@ -1,0 +1,324 @@
+// Workcell scenes: the workspace box and mask, the table plane among other planes, and tiles
+// for piles wider than one grid (issue 26).
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <random>
+
+#include "simstack/eval/occupancy.h"
+#include "simstack/pipeline/scene_perception.h"
+#include "simstack/render/depth_renderer.h"
+#include "simstack/scene/pile_generator.h"
+#include "simstack/tsdf/ground_truth.h"
+
+namespace simstack {
+namespace {
+
+const std::string kModel = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
+
+/// Training's placement for the synthetic clusters below: their centre is their median.
+const std::function<Vec2(const Vec2&)> kCentroid = [](const Vec2& median) { return median; };
+
+std::vector<Vec3> cluster(const Vec2& centre, double half_width) {
+  std::vector<Vec3> out;
+  for (int i = -10; i <= 10; ++i)
+    for (int j = -10; j <= 10; ++j)
+      out.emplace_back(centre.x() + half_width * i / 10.0, centre.y() + half_width * j / 10.0,
+                       0.05);
+  return out;
+}
+
+TEST(PlanTiles, ACompactPileTakesOneTileWhereTrainingPlacesIt) {
+  const Vec2 centre(0.1, -0.2);
+  const TilePlan plan =
+      planTiles(cluster(centre, 0.15), centre, kCentroid, 0.64, 32, WorkspaceConfig());
+  ASSERT_EQ(plan.tiles.size(), 1u);
+  EXPECT_EQ(plan.scene, GridSpec::sceneGrid(centre, 0.64, 32));
+  EXPECT_EQ(plan.tiles.front(), plan.scene);
+  EXPECT_FALSE(plan.cropped);
+  // A placement that would cut the pile is moved just enough to hold it.
+  const TilePlan moved = planTiles(cluster(centre, 0.2), centre + Vec2(0.2, 0.0), kCentroid, 0.64,
+                                   32, WorkspaceConfig());
+  ASSERT_EQ(moved.tiles.size(), 1u);
+  EXPECT_LE(moved.scene.origin_table.x(), centre.x() - 0.2 - 0.04 + 1e-9);
+}
+
+/// True when every point lies in some tile, 1.5 voxels from its x/y sides, and every tile in
+/// the scene grid.
+bool covered(const TilePlan& plan, const std::vector<Vec3>& points) {
+  for (const Vec3& p : points) {
+    bool held = false;
+    for (const GridSpec& t : plan.tiles) {
+      const Vec3 c = t.continuousIndex(p) + Vec3::Constant(0.5);
+      held |= c.x() >= 1.5 && c.x() <= t.resolution - 1.5 && c.y() >= 1.5 &&
+              c.y() <= t.resolution - 1.5;
+    }
+    if (!held) return false;
+  }
+  for (const GridSpec& t : plan.tiles)
+    for (const Vec3& corner :
+         std::array<Vec3, 2>{t.origin_table, Vec3(t.origin_table + Vec3::Constant(t.extent_m()))}) {
+      const Vec3 c = plan.scene.continuousIndex(corner) + Vec3::Constant(0.5);
+      if ((c.array() < -1e-6).any() || (c.array() > plan.scene.resolution + 1e-6).any())
+        return false;
+    }
+  return true;
+}
+
+TEST(PlanTiles, SeparatePilesTakeOneTileEachCentredOnThem) {
+  std::vector<Vec3> points = cluster(Vec2(-0.45, 0.0), 0.15);
+  for (const Vec3& p : cluster(Vec2(0.45, 0.1), 0.15)) points.push_back(p);
+  const TilePlan plan = planTiles(points, Vec2::Zero(), kCentroid, 0.64, 32, WorkspaceConfig());
+  ASSERT_EQ(plan.tiles.size(), 2u);
+  EXPECT_FALSE(plan.cropped);
+  EXPECT_NEAR(plan.scene.voxel_size_m, 0.02, 1e-12);
+  EXPECT_TRUE(covered(plan, points));
+  std::vector<Vec2> centres;
+  for (const GridSpec& t : plan.tiles) {
+    EXPECT_EQ(t.resolution, 32);
+    EXPECT_NEAR(t.extent_m(), 0.64, 1e-9);
+    centres.push_back((t.origin_table + Vec3::Constant(0.32)).head<2>());
+  }
+  std::sort(centres.begin(), centres.end(), [](auto& a, auto& b) { return a.x() < b.x(); });
+  // Each where training would place it (here: on the group's median).
+  EXPECT_LT((centres[0] - Vec2(-0.45, 0.0)).norm(), 1e-9);
+  EXPECT_LT((centres[1] - Vec2(0.45, 0.1)).norm(), 1e-9);
+}
+
+TEST(PlanTiles, AWidePileIsCoveredByOverlappingTiles) {
+  std::vector<Vec3> points;
+  for (int i = 0; i <= 100; ++i)
+    for (int j = 0; j <= 30; ++j) points.emplace_back(-0.5 + 0.01 * i, 0.2 + 0.01 * j, 0.05);
+  WorkspaceConfig ws;
+  const TilePlan plan = planTiles(points, Vec2::Zero(), kCentroid, 0.64, 32, ws);
+  ASSERT_GE(plan.tiles.size(), 2u);
+  EXPECT_TRUE(covered(plan, points));
+  std::vector<double> xs;
+  for (const GridSpec& t : plan.tiles) xs.push_back(t.origin_table.x());
+  std::sort(xs.begin(), xs.end());
+  for (size_t k = 1; k < xs.size(); ++k)
+    EXPECT_GE(0.64 - (xs[k] - xs[k - 1]), ws.tile_overlap_m - 1e-9);
+  // Capped at max_tiles: the middle is covered and the plan says so.
+  ws.max_tiles = 1;
+  const TilePlan capped = planTiles(points, Vec2::Zero(), kCentroid, 0.64, 32, ws);
+  EXPECT_EQ(capped.tiles.size(), 1u);
+  EXPECT_TRUE(capped.cropped);
+}
+
+TEST(PlanTiles, BlendingKeepsAgreeingTilesAndFillsTheRest) {
+  std::vector<Vec3> points = cluster(Vec2(-0.45, 0.0), 0.15);
+  for (const Vec3& p : cluster(Vec2(0.45, 0.0), 0.15)) points.push_back(p);
+  const auto shifted = [](const Vec2& median) -> Vec2 { return median + Vec2(0.007, -0.003); };
+  const TilePlan plan = planTiles(points, Vec2::Zero(), shifted, 0.64, 32, WorkspaceConfig());
+  ASSERT_EQ(plan.tiles.size(), 2u);
+  // A tile on the scene's lattice is copied exactly; a constant field stays constant.
+  std::vector<Grid3<float>> tiles;
+  for (const GridSpec& t : plan.tiles) {
+    tiles.emplace_back(t, 0.0f);
+    for (int i = 0; i < t.voxelCount(); ++i) tiles.back().data[i] = -0.5f + 1e-4f * (i % 7);
+  }
+  const Grid3<float> blended = blendTiles(plan.scene, tiles, 1.0f);
+  int inside = 0, outside = 0;
+  for (int i = 0; i < plan.scene.voxelCount(); ++i) {
+    const Vec3i v = plan.scene.unravel(i);
+    const Vec3 p = plan.scene.voxelCentre(v.x(), v.y(), v.z());
+    if (plan.tiles[0].containsPoint(p)) {
+      const Vec3i j = plan.tiles[0].voxelIndex(p);
+      ASSERT_NEAR(blended.data[i], tiles[0].at(j.x(), j.y(), j.z()), 1e-5);
+      ++inside;
+    } else if (!plan.tiles[1].containsPoint(p)) {
+      ASSERT_EQ(blended.data[i], 1.0f);
+      ++outside;
+    } else {
+      ASSERT_NEAR(blended.data[i], -0.5f, 1e-3);
+    }
+  }
+  EXPECT_GT(inside, 0);
+  EXPECT_GT(outside, 0);  // between the piles and above the tiles
+}
+
+TEST(Workspace, ConfigReadsBoundsAndRejectsAnEmptyBox) {
+  const std::string path = std::filesystem::temp_directory_path() / "simstack_workspace.yaml";
+  std::ofstream(path) << "workspace:\n  min_m: [-0.3, -0.25, -.inf]\n  max_m: [0.3, 0.25, 0.4]\n"
+                         "  max_tiles: 4\n";
+  const PerceptionConfig c = loadPerceptionYaml(path);
+  EXPECT_TRUE(c.workspace.bounded());
+  EXPECT_EQ(c.workspace.max_tiles, 4);
+  EXPECT_TRUE(c.workspace.contains(Vec3(0.0, 0.0, -5.0)));
+  EXPECT_FALSE(c.workspace.contains(Vec3(0.31, 0.0, 0.1)));
+  EXPECT_FALSE(c.workspace.contains(Vec3(0.0, 0.0, 0.5)));
+  // Written and read again, the same box (infinite bounds included).
+  std::ofstream(path) << perceptionYaml(c);
+  EXPECT_EQ(perceptionYaml(loadPerceptionYaml(path)), perceptionYaml(c));
+  EXPECT_FALSE(PerceptionConfig().workspace.bounded());
+  WorkspaceConfig empty;
+  empty.min_m[0] = 0.2;
+  empty.max_m[0] = 0.1;
+  try {
+    empty.validate();
+    ADD_FAILURE() << "an empty box must be an error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("min_m.x"), std::string::npos) << e.what();
+  }
+  std::filesystem::remove(path);
+}
+
+/// A generated pile moved by `shift` in x/y.
+std::vector<SceneObject> pileAt(uint64_t seed, const Vec2& shift) {
+  std::vector<SceneObject> out = PileGenerator(PileConfig()).generate(seed).scene.objects;
+  for (SceneObject& o : out) {
+    const Vec3 c = o.T_table_object.translation();
+    o.T_table_object.translation() = Vec3(c.x() + shift.x(), c.y() + shift.y(), c.z());
+  }
+  return out;
+}
+
+SceneObject box(const Vec3& centre, const Vec3& half_size) {
+  SuperquadricShape sq;
+  sq.scale_m = half_size;
+  sq.exponents = Vec3::Constant(20.0);
+  sq.T_table_object.translation() = centre;
+  SceneObject o;
+  o.shape = ObjectShape::fromSuperquadric(sq);
+  o.T_table_object = sq.T_table_object;
+  return o;
+}
+
+PinholeCamera wideCamera() {
+  PinholeCamera c;
+  c.width = 1280;
+  c.height = 720;
+  c.fx = c.fy = 640.0;
+  c.cx = 639.5;
+  c.cy = 359.5;
+  return c;
+}
+
+DepthView render(const Scene& scene, const PinholeCamera& camera, const Transform& pose) {
+  RenderConfig rc;
+  rc.table_half_size_m = 1.5;
+  return DepthView{DepthRenderer(scene, rc).render(camera, pose).depth, camera, pose};
+}
+
+/// Occupancy IoU of hypothesis 0 against the truth at random points around `truth`'s objects
+/// (their bounding box grown by 5 cm, from the table up): free of the grids' voxel lattices,
+/// so that estimates on different grids compare. Points outside the estimate's grid are free.
+double pileIou(const SceneEstimate& est, const Scene& truth) {
+  Vec3 lo = Vec3::Constant(1e9), hi = Vec3::Constant(-1e9);
+  for (const SceneObject& o : truth.objects) {
+    const SuperquadricShape sq = o.superquadricTable();
+    lo = lo.cwiseMin(sq.centroid() - Vec3::Constant(sq.scale_m.maxCoeff() + 0.05));
+    hi = hi.cwiseMax(sq.centroid() + Vec3::Constant(sq.scale_m.maxCoeff() + 0.05));
+  }
+  lo.z() = 0.0;
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  long inter = 0, uni = 0;
+  for (int k = 0; k < 200000; ++k) {
+    const Vec3 p = lo + (hi - lo).cwiseProduct(Vec3(u(rng), u(rng), u(rng)));
+    bool y = false;
+    for (const SceneObject& o : truth.objects) y = y || o.contains(p);
+    const bool q = est.grid.containsPoint(p) && est.hypotheses[0].tsdf_m.sampleTrilinear(p) <= 0;
+    inter += y && q;
+    uni += y || q;
+  }
+  return uni > 0 ? static_cast<double>(inter) / uni : 0.0;
+}
+
+TEST(Tiles, TwoPilesFarApartAreReconstructedAsWellAsAlone) {
+  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  PerceptionConfig config;
+  config.model_path = kModel;
+  const ScenePerception perception(config);
+  const PinholeCamera camera = wideCamera();
+  const Transform pose = lookAt(Vec3(0.0, -0.55, 0.95), Vec3(0.0, 0.0, 0.0));
+  double joint_sum = 0.0, alone_sum = 0.0;
+  for (uint64_t seed = 21; seed < 31; ++seed) {
+    Scene left, right, both;
+    left.objects = pileAt(seed, Vec2(-0.45, 0.0));
+    right.objects = pileAt(seed + 100, Vec2(0.45, 0.0));
+    both.objects = left.objects;
+    both.objects.insert(both.objects.end(), right.objects.begin(), right.objects.end());
+    const SceneEstimate est = perception.perceive(render(both, camera, pose));
+    EXPECT_GE(est.tiles, 2) << "seed " << seed;
+    EXPECT_GE(est.grid.extent_m(), 1.0);
+    for (const Scene* pile : {&left, &right}) {
+      const SceneEstimate alone = perception.perceive(render(*pile, camera, pose));
+      EXPECT_EQ(alone.tiles, 1);
+      joint_sum += pileIou(est, *pile);
+      alone_sum += pileIou(alone, *pile);
+    }
+  }
+  // The joint reconstruction is no worse than the piles seen alone (mean IoU of 20 piles; the
+  // one tile of a pile in a joint scene is up to half a voxel from where it is alone).
+  std::cout << "mean IoU of 20 piles: joint " << joint_sum / 20 << ", alone " << alone_sum / 20
+            << "\n";
+  EXPECT_GE(joint_sum, alone_sum);
+}
+
+/// The frame estimateTablePlane gives for the true table: origin below the camera, x along
+/// the camera's x axis on the plane.
+Transform ransacConvention(const Transform& T_table_camera) {
+  const Vec3 n = T_table_camera.linear().transpose() * Vec3::UnitZ();  // camera frame
+  const double d = T_table_camera.translation().z();
+  Vec3 x = Vec3::UnitX() - Vec3::UnitX().dot(n) * n;
+  x.normalize();
+  Transform T_camera_table = Transform::Identity();
+  T_camera_table.linear() << x, n.cross(x), n;
+  T_camera_table.translation() = -d * n;
+  return T_camera_table.inverse();
+}
+
+TEST(Workspace, ARobotBaseAndAWallOutsideItAreNeitherTableNorObjects) {
+  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  Scene scene;
+  scene.objects = pileAt(31, Vec2::Zero());
+  const size_t pile = scene.objects.size();
+  // A robot's base close to the camera, at the workspace's edge, and a wall behind the table.
+  scene.objects.push_back(box(Vec3(0.55, -0.15, 0.2), Vec3(0.2, 0.2, 0.2)));
+  scene.objects.push_back(box(Vec3(0.0, 0.75, 0.3), Vec3(0.9, 0.02, 0.3)));
+  const PinholeCamera camera = wideCamera();
+  const Transform pose = lookAt(Vec3(0.1, -0.7, 0.9), Vec3(0.0, 0.1, 0.0));
+  const DepthView view = render(scene, camera, pose);
+  PerceptionConfig config;
+  config.model_path = kModel;
+  config.workspace.min_m = {-0.3, -0.3, -0.05};
+  config.workspace.max_m = {0.3, 0.3, 0.5};
+  {
+    const ScenePerception perception(config);
+    const SceneEstimate est = perception.perceive(view);
+    EXPECT_EQ(est.tiles, 1);
+    EXPECT_GE(est.instances().size(), pile - 1);
+    EXPECT_LE(est.instances().size(), pile + 1);
+    for (const InstanceEstimate& e : est.instances())
+      EXPECT_TRUE(config.workspace.contains(e.vote_centre)) << e.vote_centre.transpose();
+    // Without the workspace, the base and the wall widen the scene beyond one tile.
+    PerceptionConfig open = config;
+    open.workspace = WorkspaceConfig();
+    const SceneEstimate all = ScenePerception(open).perceive(view);
+    EXPECT_GT(all.tiles, 1);
+  }
+  // No pose: the table plane from the points in the workspace (given in the frame RANSAC
+  // defines, where the truth puts the pile's box), right although the base's top is nearer.
+  const Transform T_ransac_table = ransacConvention(pose) * pose.inverse();
+  WorkspaceConfig ws;
+  const Vec3 lo = T_ransac_table * Vec3(-0.3, -0.3, 0.0), hi = T_ransac_table * Vec3(0.3, 0.3, 0.0);
+  for (int a = 0; a < 2; ++a) {
+    ws.min_m[a] = std::min(lo[a], hi[a]);
+    ws.max_m[a] = std::max(lo[a], hi[a]);
+  }
+  ws.min_m[2] = -0.05;
+  ws.max_m[2] = 0.5;
+  const TablePlane plane = estimateTablePlane(view.depth, camera, TablePlaneConfig(), ws);
+  const Vec3 z_true = pose.linear().transpose() * Vec3::UnitZ();
+  const Vec3 z_est = plane.T_table_camera.linear().transpose() * Vec3::UnitZ();
+  EXPECT_GT(z_true.dot(z_est), std::cos(M_PI / 180.0));
+  EXPECT_NEAR(plane.T_table_camera.translation().z(), pose.translation().z(), 0.005);
+}
+
+}  // namespace
+}  // namespace simstack
