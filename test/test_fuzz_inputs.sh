@@ -142,7 +142,7 @@ expect "evaluate --real on files that are not PCDs" "is not a PCD file" "$bin/si
 [ ! -e "$dir/eval.json" ] || { echo "FAIL evaluate --real: wrote eval.json"; fail=1; }
 
 # A generator run that cannot make its piles (a 0.2 m grid) leaves no file behind.
-expect "generate with no pile possible" "no pile accepted" "$bin/simstack_generate" --scenes 2 --seed 1 --extent 0.2 --output "$dir/g.h5"
+expect "generate with no pile possible" "no pile accepted" "$bin/simstack_generate" --scenes 2 --seed 1 --extent 0.2 --sizes 0.05:0.15 --output "$dir/g.h5"
 [ -z "$(ls "$dir"/g.h5* 2> /dev/null)" ] || { echo "FAIL generate: a partial file stayed"; fail=1; }
 
 # Results are atomic: nothing on the table is a result with no objects; a second run replaces

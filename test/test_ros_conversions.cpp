@@ -55,6 +55,25 @@ TEST(Conversions, BadImagesAreRejectedWithAReason) {
   EXPECT_THROW(depthFromImage(empty), std::invalid_argument);
 }
 
+TEST(Conversions, MasksAreMono8) {
+  auto m = image(sensor_msgs::image_encodings::MONO8, 3, 2, 1);
+  m.step = 4;  // padded rows
+  m.data.assign(8, 0);
+  m.data[4 + 2] = 255;  // pixel (2, 1)
+  const Image<uint8_t> mask = maskFromImage(m);
+  EXPECT_EQ(mask.width, 3);
+  EXPECT_EQ(mask.at(2, 1), 255);
+  EXPECT_EQ(mask.at(0, 0), 0);
+  try {
+    maskFromImage(image(sensor_msgs::image_encodings::TYPE_16UC1, 3, 2, 2));
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("16UC1"), std::string::npos);
+  }
+  m.data.resize(5);
+  EXPECT_THROW(maskFromImage(m), std::invalid_argument);
+}
+
 TEST(Conversions, CameraInfo) {
   sensor_msgs::CameraInfo info;
   info.width = 640;

@@ -1,6 +1,7 @@
 #pragma once
 // Small analytic scenes shared by the unit tests.
 
+#include "simstack/geometry/pinhole_camera.h"
 #include "simstack/scene/scene.h"
 
 namespace simstack {
@@ -34,6 +35,17 @@ inline Scene fourObjectPile() {
                 object({0.07, 0.07, 0.115}, {2, 2, 10}, {0.215, 0.03, 0.115}, 0.0),
                 object({0.10, 0.07, 0.06}, {2, 2, 2}, {-0.03, 0.0, 0.20}, 0.5),
                 object({0.07, 0.07, 0.07}, {4, 4, 4}, {-0.04, -0.203, 0.07}, 0.3)}};
+}
+
+/// A 1280x720 camera with a 90-degree horizontal field of view, as on an overhead pick station.
+inline PinholeCamera wideCamera() {
+  PinholeCamera c;
+  c.width = 1280;
+  c.height = 720;
+  c.fx = c.fy = 640.0;
+  c.cx = 639.5;
+  c.cy = 359.5;
+  return c;
 }
 
 }  // namespace test

@@ -32,4 +32,12 @@ if "$tool" --scenes 1 --seed 1 --output "$dir/x.h5" --ycb /nonexistent 2> "$dir/
 grep -q "/nonexistent" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
 if "$tool" --scenes 1 --seed 1 --output /proc/forbidden/x.h5 2> "$dir/err.txt"; then echo "wrote to /proc"; exit 1; fi
 grep -q "/proc/forbidden/x.h5" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
+if "$tool" --scenes 1 --seed 1 --output "$dir/x.h5" --sizes 0.3:0.1 2> "$dir/err.txt"; then echo "accepted --sizes 0.3:0.1"; exit 1; fi
+grep -q "object sizes" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
+if "$tool" --scenes 1 --seed 1 --output "$dir/x.h5" --sizes 0.1 2> "$dir/err.txt"; then echo "accepted --sizes 0.1"; exit 1; fi
+grep -q "'0.1'" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
+# Piles of more objects than training saw fit with smaller objects; a scene whose seed makes no
+# pile is drawn again and counted.
+"$tool" --scenes 3 --seed 4 --objects 6:7 --sizes 0.05:0.12 --output "$dir/big.h5" > "$dir/big.txt"
+grep -q "wrote 3 scenes" "$dir/big.txt" || { cat "$dir/big.txt"; exit 1; }
 echo "simstack_generate ok"

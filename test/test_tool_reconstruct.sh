@@ -14,11 +14,40 @@ for f in superquadrics.yaml surface.ply instances.pcd grids.h5 depth.png instanc
          superquadrics_input_view.png superquadrics_second_view.png; do
   test -s "$dir/out/$f" || { echo "missing $f"; cat "$dir/log.txt"; exit 1; }
 done
-grep -q "objects; timings" "$dir/log.txt"
+grep -q "objects in 1 tile; timings" "$dir/log.txt"
 # Without a pose the table comes from RANSAC.
 "$reconstruct" --depth "${view}_depth.png" --intrinsics 525,525,319.5,239.5 --output "$dir/out2" \
   > "$dir/log2.txt"
 grep -q "estimated by RANSAC" "$dir/log2.txt"
+# A mask: 8-bit PNG, 0 = ignore. Everything masked leaves no depth; a mask of another size is
+# refused, naming both files.
+png() {  # png FILE WIDTH HEIGHT VALUE: a grey 8-bit PNG of one value
+  /usr/bin/python3 - "$@" <<'PY'
+import struct, sys, zlib
+path, w, h, value = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+def chunk(kind, data):
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+rows = b"".join(b"\0" + bytes([value]) * w for _ in range(h))
+with open(path, "wb") as f:
+    f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(rows)) + chunk(b"IEND", b""))
+PY
+}
+png "$dir/all.png" 640 480 255
+"$reconstruct" --depth "${view}_depth.png" --intrinsics 525,525,319.5,239.5 \
+  --table-pose "$view.yaml" --mask "$dir/all.png" --output "$dir/out3" > "$dir/log3.txt"
+cmp -s <(grep -o "[0-9]* objects in" "$dir/log.txt") <(grep -o "[0-9]* objects in" "$dir/log3.txt") ||
+  { echo "a mask of ones changed the result"; exit 1; }
+png "$dir/none.png" 640 480 0
+if "$reconstruct" --depth "${view}_depth.png" --intrinsics 525,525,319.5,239.5 \
+  --table-pose "$view.yaml" --mask "$dir/none.png" --output "$dir/x" 2> "$dir/e4"; then
+  echo "accepted a mask that hides everything"; exit 1; fi
+grep -q "mask" "$dir/e4" || { cat "$dir/e4"; exit 1; }
+png "$dir/small.png" 320 240 255
+if "$reconstruct" --depth "${view}_depth.png" --intrinsics 525,525,319.5,239.5 \
+  --mask "$dir/small.png" --output "$dir/x" 2> "$dir/e5"; then
+  echo "accepted a mask of another size"; exit 1; fi
+grep -q "small.png is 320x240" "$dir/e5" || { cat "$dir/e5"; exit 1; }
 if /usr/bin/python3 -c "import h5py" 2>/dev/null; then
   /usr/bin/python3 - "$dir/out/grids.h5" <<'PY'
 import sys, h5py

@@ -14,6 +14,7 @@
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/pile_generator.h"
 #include "simstack/tsdf/ground_truth.h"
+#include "test_scenes.h"
 
 namespace simstack {
 namespace {
@@ -36,30 +37,33 @@ TEST(PlanTiles, ACompactPileTakesOneTileWhereTrainingPlacesIt) {
   const Vec2 centre(0.1, -0.2);
   const TilePlan plan =
       planTiles(cluster(centre, 0.15), centre, kCentroid, 0.64, 32, WorkspaceConfig());
-  ASSERT_EQ(plan.tiles.size(), 1u);
+  ASSERT_EQ(plan.tileCount(), 1);
   EXPECT_EQ(plan.scene, GridSpec::sceneGrid(centre, 0.64, 32));
-  EXPECT_EQ(plan.tiles.front(), plan.scene);
+  EXPECT_EQ(plan.groups.front().tiles.front(), plan.scene);
+  EXPECT_EQ(plan.groups.front().grid, plan.scene);
   EXPECT_FALSE(plan.cropped);
   // A placement that would cut the pile is moved just enough to hold it.
   const TilePlan moved = planTiles(cluster(centre, 0.2), centre + Vec2(0.2, 0.0), kCentroid, 0.64,
                                    32, WorkspaceConfig());
-  ASSERT_EQ(moved.tiles.size(), 1u);
+  ASSERT_EQ(moved.tileCount(), 1);
   EXPECT_LE(moved.scene.origin_table.x(), centre.x() - 0.2 - 0.04 + 1e-9);
 }
 
 /// True when every point lies in some tile, 1.5 voxels from its x/y sides, and every tile in
 /// the scene grid.
 bool covered(const TilePlan& plan, const std::vector<Vec3>& points) {
+  std::vector<GridSpec> tiles;
+  for (const TileGroup& g : plan.groups) tiles.insert(tiles.end(), g.tiles.begin(), g.tiles.end());
   for (const Vec3& p : points) {
     bool held = false;
-    for (const GridSpec& t : plan.tiles) {
+    for (const GridSpec& t : tiles) {
       const Vec3 c = t.continuousIndex(p) + Vec3::Constant(0.5);
       held |= c.x() >= 1.5 && c.x() <= t.resolution - 1.5 && c.y() >= 1.5 &&
               c.y() <= t.resolution - 1.5;
     }
     if (!held) return false;
   }
-  for (const GridSpec& t : plan.tiles)
+  for (const GridSpec& t : tiles)
     for (const Vec3& corner :
          std::array<Vec3, 2>{t.origin_table, Vec3(t.origin_table + Vec3::Constant(t.extent_m()))}) {
       const Vec3 c = plan.scene.continuousIndex(corner) + Vec3::Constant(0.5);
@@ -73,12 +77,15 @@ TEST(PlanTiles, SeparatePilesTakeOneTileEachCentredOnThem) {
   std::vector<Vec3> points = cluster(Vec2(-0.45, 0.0), 0.15);
   for (const Vec3& p : cluster(Vec2(0.45, 0.1), 0.15)) points.push_back(p);
   const TilePlan plan = planTiles(points, Vec2::Zero(), kCentroid, 0.64, 32, WorkspaceConfig());
-  ASSERT_EQ(plan.tiles.size(), 2u);
+  ASSERT_EQ(plan.groups.size(), 2u);
+  ASSERT_EQ(plan.tileCount(), 2);
   EXPECT_FALSE(plan.cropped);
   EXPECT_NEAR(plan.scene.voxel_size_m, 0.02, 1e-12);
   EXPECT_TRUE(covered(plan, points));
   std::vector<Vec2> centres;
-  for (const GridSpec& t : plan.tiles) {
+  for (const TileGroup& g : plan.groups) {
+    const GridSpec& t = g.tiles.front();
+    EXPECT_EQ(g.grid, t);
     EXPECT_EQ(t.resolution, 32);
     EXPECT_NEAR(t.extent_m(), 0.64, 1e-9);
     centres.push_back((t.origin_table + Vec3::Constant(0.32)).head<2>());
@@ -95,17 +102,18 @@ TEST(PlanTiles, AWidePileIsCoveredByOverlappingTiles) {
     for (int j = 0; j <= 30; ++j) points.emplace_back(-0.5 + 0.01 * i, 0.2 + 0.01 * j, 0.05);
   WorkspaceConfig ws;
   const TilePlan plan = planTiles(points, Vec2::Zero(), kCentroid, 0.64, 32, ws);
-  ASSERT_GE(plan.tiles.size(), 2u);
+  ASSERT_EQ(plan.groups.size(), 1u);
+  ASSERT_GE(plan.tileCount(), 2);
   EXPECT_TRUE(covered(plan, points));
   std::vector<double> xs;
-  for (const GridSpec& t : plan.tiles) xs.push_back(t.origin_table.x());
+  for (const GridSpec& t : plan.groups.front().tiles) xs.push_back(t.origin_table.x());
   std::sort(xs.begin(), xs.end());
   for (size_t k = 1; k < xs.size(); ++k)
     EXPECT_GE(0.64 - (xs[k] - xs[k - 1]), ws.tile_overlap_m - 1e-9);
   // Capped at max_tiles: the middle is covered and the plan says so.
   ws.max_tiles = 1;
   const TilePlan capped = planTiles(points, Vec2::Zero(), kCentroid, 0.64, 32, ws);
-  EXPECT_EQ(capped.tiles.size(), 1u);
+  EXPECT_EQ(capped.tileCount(), 1);
   EXPECT_TRUE(capped.cropped);
 }
 
@@ -114,10 +122,11 @@ TEST(PlanTiles, BlendingKeepsAgreeingTilesAndFillsTheRest) {
   for (const Vec3& p : cluster(Vec2(0.45, 0.0), 0.15)) points.push_back(p);
   const auto shifted = [](const Vec2& median) -> Vec2 { return median + Vec2(0.007, -0.003); };
   const TilePlan plan = planTiles(points, Vec2::Zero(), shifted, 0.64, 32, WorkspaceConfig());
-  ASSERT_EQ(plan.tiles.size(), 2u);
+  ASSERT_EQ(plan.groups.size(), 2u);
   // A tile on the scene's lattice is copied exactly; a constant field stays constant.
+  std::vector<GridSpec> specs = {plan.groups[0].grid, plan.groups[1].grid};
   std::vector<Grid3<float>> tiles;
-  for (const GridSpec& t : plan.tiles) {
+  for (const GridSpec& t : specs) {
     tiles.emplace_back(t, 0.0f);
     for (int i = 0; i < t.voxelCount(); ++i) tiles.back().data[i] = -0.5f + 1e-4f * (i % 7);
   }
@@ -126,11 +135,11 @@ TEST(PlanTiles, BlendingKeepsAgreeingTilesAndFillsTheRest) {
   for (int i = 0; i < plan.scene.voxelCount(); ++i) {
     const Vec3i v = plan.scene.unravel(i);
     const Vec3 p = plan.scene.voxelCentre(v.x(), v.y(), v.z());
-    if (plan.tiles[0].containsPoint(p)) {
-      const Vec3i j = plan.tiles[0].voxelIndex(p);
+    if (specs[0].containsPoint(p)) {
+      const Vec3i j = specs[0].voxelIndex(p);
       ASSERT_NEAR(blended.data[i], tiles[0].at(j.x(), j.y(), j.z()), 1e-5);
       ++inside;
-    } else if (!plan.tiles[1].containsPoint(p)) {
+    } else if (!specs[1].containsPoint(p)) {
       ASSERT_EQ(blended.data[i], 1.0f);
       ++outside;
     } else {
@@ -188,16 +197,6 @@ SceneObject box(const Vec3& centre, const Vec3& half_size) {
   return o;
 }
 
-PinholeCamera wideCamera() {
-  PinholeCamera c;
-  c.width = 1280;
-  c.height = 720;
-  c.fx = c.fy = 640.0;
-  c.cx = 639.5;
-  c.cy = 359.5;
-  return c;
-}
-
 DepthView render(const Scene& scene, const PinholeCamera& camera, const Transform& pose) {
   RenderConfig rc;
   rc.table_half_size_m = 1.5;
@@ -229,14 +228,15 @@ double pileIou(const SceneEstimate& est, const Scene& truth) {
   return uni > 0 ? static_cast<double>(inter) / uni : 0.0;
 }
 
-TEST(Tiles, TwoPilesFarApartAreReconstructedAsWellAsAlone) {
+TEST(Tiles, TwoPilesFarApartAreEachPerceivedAsAlone) {
   if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
   PerceptionConfig config;
   config.model_path = kModel;
   const ScenePerception perception(config);
-  const PinholeCamera camera = wideCamera();
+  const PinholeCamera camera = test::wideCamera();
   const Transform pose = lookAt(Vec3(0.0, -0.55, 0.95), Vec3(0.0, 0.0, 0.0));
-  double joint_sum = 0.0, alone_sum = 0.0;
+  double resampled_joint = 0.0, resampled_alone = 0.0;
+  int on_lattice_piles = 0, resampled_piles = 0;
   for (uint64_t seed = 21; seed < 31; ++seed) {
     Scene left, right, both;
     left.objects = pileAt(seed, Vec2(-0.45, 0.0));
@@ -246,18 +246,44 @@ TEST(Tiles, TwoPilesFarApartAreReconstructedAsWellAsAlone) {
     const SceneEstimate est = perception.perceive(render(both, camera, pose));
     EXPECT_GE(est.tiles, 2) << "seed " << seed;
     EXPECT_GE(est.grid.extent_m(), 1.0);
+    // Every object found once: each pile's instances are those it has when seen alone (same
+    // camera, one tile), none lost or doubled at a tile's border. Compared by their Hough
+    // centres, within a voxel: the network's output varies in its last bits with where its
+    // buffers lie in memory (oneDNN), which can move a centre by a fraction of a voxel.
+    std::vector<int> taken(est.instances().size(), 0);
     for (const Scene* pile : {&left, &right}) {
       const SceneEstimate alone = perception.perceive(render(*pile, camera, pose));
       EXPECT_EQ(alone.tiles, 1);
-      joint_sum += pileIou(est, *pile);
-      alone_sum += pileIou(alone, *pile);
+      for (const InstanceEstimate& a : alone.instances()) {
+        int best = -1;
+        double best_d = 1e9;
+        for (size_t k = 0; k < est.instances().size(); ++k) {
+          const double d = (est.instances()[k].vote_centre - a.vote_centre).norm();
+          if (d < best_d) best_d = d, best = static_cast<int>(k);
+        }
+        EXPECT_LT(best_d, est.grid.voxel_size_m) << "seed " << seed;
+        if (best >= 0) ++taken[best];
+      }
+      // The scene grid's TSDF: the pile's own where its group sets the scene's voxel lattice,
+      // else resampled onto it (trilinear).
+      const Vec3 shift = (alone.grid.origin_table - est.grid.origin_table) / est.grid.voxel_size_m;
+      const bool on_lattice = (shift - shift.array().round().matrix()).norm() < 1e-6;
+      const double j = pileIou(est, *pile), a = pileIou(alone, *pile);
+      if (on_lattice) {
+        EXPECT_GE(j, a - 1e-3) << "seed " << seed;  // the same last-bit variation
+        ++on_lattice_piles;
+      } else {
+        resampled_joint += j;
+        resampled_alone += a;
+        ++resampled_piles;
+      }
     }
+    for (int t : taken) EXPECT_EQ(t, 1) << "seed " << seed;
   }
-  // The joint reconstruction is no worse than the piles seen alone (mean IoU of 20 piles; the
-  // one tile of a pile in a joint scene is up to half a voxel from where it is alone).
-  std::cout << "mean IoU of 20 piles: joint " << joint_sum / 20 << ", alone " << alone_sum / 20
-            << "\n";
-  EXPECT_GE(joint_sum, alone_sum);
+  EXPECT_GE(on_lattice_piles, 10);
+  std::cout << "piles resampled onto the scene grid: " << resampled_piles << ", mean IoU there "
+            << resampled_joint / std::max(1, resampled_piles) << " against "
+            << resampled_alone / std::max(1, resampled_piles) << " alone\n";
 }
 
 /// The frame estimateTablePlane gives for the true table: origin below the camera, x along
@@ -281,7 +307,7 @@ TEST(Workspace, ARobotBaseAndAWallOutsideItAreNeitherTableNorObjects) {
   // A robot's base close to the camera, at the workspace's edge, and a wall behind the table.
   scene.objects.push_back(box(Vec3(0.55, -0.15, 0.2), Vec3(0.2, 0.2, 0.2)));
   scene.objects.push_back(box(Vec3(0.0, 0.75, 0.3), Vec3(0.9, 0.02, 0.3)));
-  const PinholeCamera camera = wideCamera();
+  const PinholeCamera camera = test::wideCamera();
   const Transform pose = lookAt(Vec3(0.1, -0.7, 0.9), Vec3(0.0, 0.1, 0.0));
   const DepthView view = render(scene, camera, pose);
   PerceptionConfig config;
@@ -318,6 +344,49 @@ TEST(Workspace, ARobotBaseAndAWallOutsideItAreNeitherTableNorObjects) {
   const Vec3 z_est = plane.T_table_camera.linear().transpose() * Vec3::UnitZ();
   EXPECT_GT(z_true.dot(z_est), std::cos(M_PI / 180.0));
   EXPECT_NEAR(plane.T_table_camera.translation().z(), pose.translation().z(), 0.005);
+}
+
+}  // namespace
+}  // namespace simstack
+
+namespace simstack {
+namespace {
+
+/// `g` inside a larger grid on the same lattice, `offset` voxels in, `fill` elsewhere.
+template <typename T>
+Grid3<T> embedded(const Grid3<T>& g, int n, const Vec3i& offset, const T& fill) {
+  GridSpec s = g.spec;
+  s.resolution = n;
+  s.origin_table -= s.voxel_size_m * offset.cast<double>();
+  Grid3<T> out(s, fill);
+  const int r = g.spec.resolution;
+  for (int z = 0; z < r; ++z)
+    for (int y = 0; y < r; ++y)
+      for (int x = 0; x < r; ++x)
+        out.at(x + offset.x(), y + offset.y(), z + offset.z()) = g.at(x, y, z);
+  return out;
+}
+
+TEST(Tiles, DecompositionDoesNotDependOnTheGridAroundThePile) {
+  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  PerceptionConfig config;
+  config.model_path = kModel;
+  config.segments.enabled = false;
+  const ScenePerception perception(config);
+  const PinholeCamera camera = test::wideCamera();
+  const Transform pose = lookAt(Vec3(0.0, -0.55, 0.95), Vec3(0.0, 0.0, 0.0));
+  for (uint64_t seed = 121; seed < 131; ++seed) {
+    Scene pile;
+    pile.objects = pileAt(seed, Vec2::Zero());
+    const SceneEstimate est = perception.perceive(render(pile, camera, pose));
+    SceneHypothesis big;
+    big.tsdf_m = embedded(est.hypotheses[0].tsdf_m, 70, Vec3i(20, 7, 0), 0.06f);
+    big.votes = embedded(est.hypotheses[0].votes, 70, Vec3i(20, 7, 0), Vec3f(Vec3f::Zero()));
+    decompose(&big, config);
+    std::cout << "seed " << seed << ": alone " << est.instances().size() << ", embedded "
+              << big.instances.size() << "\n";
+    EXPECT_EQ(big.instances.size(), est.instances().size()) << "seed " << seed;
+  }
 }
 
 }  // namespace

@@ -24,6 +24,9 @@ struct SceneEstimate;
 /// Depth in metres from a 16UC1 (mm) or 32FC1 (m) image; 0 and NaN stay missing (0).
 /// Rejects other encodings, big-endian data and a step or data size that does not fit.
 DepthImage depthFromImage(const sensor_msgs::Image& msg);
+/// A workspace mask (mono8 or 8UC1): 0 = ignore the pixel. Throws std::invalid_argument for
+/// another encoding, an empty image or one whose data is shorter than its step says.
+Image<uint8_t> maskFromImage(const sensor_msgs::Image& msg);
 
 /// Pinhole intrinsics from a CameraInfo (the rectified P matrix, K when P is zero).
 /// Rejects zero focal lengths and empty sizes.

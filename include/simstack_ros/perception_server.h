@@ -72,6 +72,7 @@ class PerceptionServer {
   tf2_ros::TransformBroadcaster tf_broadcaster_;
   image_transport::ImageTransport it_;
   image_transport::CameraSubscriber depth_sub_;
+  ros::Subscriber mask_sub_;  ///< ~mask: the workspace mask, applied to every frame
   ros::Publisher objects_pub_, instances_pub_, markers_pub_, occupancy_pub_;
   image_transport::Publisher labels_pub_;
   ros::ServiceServer reset_srv_, save_srv_;
@@ -95,6 +96,7 @@ class PerceptionServer {
   StageTimings last_timings_;
   std::shared_ptr<const SceneEstimate> last_scene_;
   std::vector<DepthView> views_;  ///< accumulated views (accumulate_views)
+  Image<uint8_t> mask_;           ///< the last ~mask received (empty: none)
   bool reset_requested_ = false;
   std::optional<LiveSettingsConfig> pending_settings_;
   std::thread worker_;  ///< last: starts after everything it uses

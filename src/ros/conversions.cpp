@@ -13,6 +13,24 @@
 
 namespace simstack {
 
+Image<uint8_t> maskFromImage(const sensor_msgs::Image& msg) {
+  namespace enc = sensor_msgs::image_encodings;
+  if (msg.encoding != enc::MONO8 && msg.encoding != enc::TYPE_8UC1)
+    throw std::invalid_argument("mask encoding '" + msg.encoding +
+                                "' is not supported (use mono8 or 8UC1, 0 = ignore)");
+  if (msg.width == 0 || msg.height == 0) throw std::invalid_argument("mask image is empty");
+  if (msg.step < msg.width || msg.data.size() < static_cast<size_t>(msg.step) * msg.height)
+    throw std::invalid_argument("mask image holds " + std::to_string(msg.data.size()) +
+                                " bytes with step " + std::to_string(msg.step) + ", expected " +
+                                std::to_string(static_cast<size_t>(msg.width) * msg.height) +
+                                " at least");
+  Image<uint8_t> mask(static_cast<int>(msg.width), static_cast<int>(msg.height), 0);
+  for (uint32_t v = 0; v < msg.height; ++v)
+    std::memcpy(&mask.at(0, static_cast<int>(v)),
+                msg.data.data() + static_cast<size_t>(v) * msg.step, msg.width);
+  return mask;
+}
+
 DepthImage depthFromImage(const sensor_msgs::Image& msg) {
   namespace enc = sensor_msgs::image_encodings;
   const bool mm = msg.encoding == enc::TYPE_16UC1 || msg.encoding == enc::MONO16;

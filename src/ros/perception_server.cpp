@@ -86,6 +86,20 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
     throw std::runtime_error("node/image_transport '" + node_.image_transport +
                              "' cannot be loaded: " + e.what());
   }
+  // A latched publisher's mask arrives once; a bad one is reported and the previous one kept.
+  mask_sub_ =
+      pnh_.subscribe<sensor_msgs::Image>("mask", 1, [this](const sensor_msgs::ImageConstPtr& msg) {
+        try {
+          Image<uint8_t> mask = maskFromImage(*msg);
+          ROS_INFO("simstack perception: workspace mask %dx%d received on %s", mask.width,
+                   mask.height, mask_sub_.getTopic().c_str());
+          std::lock_guard<std::mutex> lock(mutex_);
+          mask_ = std::move(mask);
+        } catch (const std::invalid_argument& e) {
+          ROS_ERROR("simstack perception: mask on %s refused, the previous one stays: %s",
+                    mask_sub_.getTopic().c_str(), e.what());
+        }
+      });
   worker_ = std::thread(&PerceptionServer::work, this);  // last: onFrame only fills the mailbox
   ROS_INFO("simstack perception: model %s (%d samples), table %s '%s', listening on %s",
            perception_->config().model_path.c_str(), perception_->config().samples,
@@ -96,6 +110,7 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
 PerceptionServer::~PerceptionServer() {
   // Nothing may call back into this object once its state starts going away.
   depth_sub_.shutdown();
+  mask_sub_.shutdown();
   diagnostics_timer_.stop();
   reset_srv_.shutdown();
   save_srv_.shutdown();
@@ -235,6 +250,7 @@ void PerceptionServer::process(const Frame& frame) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (reset_requested_) views_.clear();
     reset_requested_ = false;
+    view.mask = mask_;  // a mask of another size makes perceive() refuse the frame
     if (node_.accumulate_views && view.T_table_camera) {
       views_.push_back(view);
       if (static_cast<int>(views_.size()) > node_.max_views) views_.erase(views_.begin());
@@ -353,6 +369,10 @@ void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   status.add("mesh ms", last_timings_.mesh_ms);
   status.add("fitting ms", last_timings_.fitting_ms);
   status.add("total ms", last_timings_.total_ms);
+  status.add("tiles (network passes) of the last frame", last_scene_ ? last_scene_->tiles : 0);
+  status.add("workspace mask",
+             mask_.empty() ? std::string("none")
+                           : std::to_string(mask_.width) + "x" + std::to_string(mask_.height));
 }
 
 }  // namespace simstack

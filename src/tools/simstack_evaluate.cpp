@@ -58,6 +58,9 @@ int main(int argc, char** argv) {
   app.add_option("--ycb", mesh_dir, "mesh directory for YCB datasets")
       ->check(CLI::ExistingDirectory);
   app.add_flag("--noise", o.noise, "Kinect-like sensor noise in the rendered views");
+  app.add_flag("--overhead", o.overhead,
+               "views from above, as on a pick station (elevation 60-89 degrees, 0.6-1.0 m "
+               "away) instead of the paper's ranges");
   app.add_flag("--no-classical", no_classical, "skip the classical baseline");
   app.add_flag("--no-stability", no_stability, "skip the physics stability test");
   app.add_option("--chamfer-points", o.chamfer_points, "surface samples per Chamfer set")

@@ -12,6 +12,19 @@ using namespace simstack;
 
 namespace {
 
+std::pair<double, double> parseSizes(const std::string& s) {
+  const auto colon = s.find(':');
+  try {
+    if (colon == std::string::npos) throw std::invalid_argument(s);
+    size_t a = 0, b = 0;
+    const double lo = std::stod(s.substr(0, colon), &a), hi = std::stod(s.substr(colon + 1), &b);
+    if (a != colon || b != s.size() - colon - 1) throw std::invalid_argument(s);
+    return {lo, hi};
+  } catch (const std::exception&) {
+    throw CLI::ValidationError("--sizes", "expected MIN:MAX in metres, got '" + s + "'");
+  }
+}
+
 std::pair<int, int> parseRange(const std::string& s) {
   const auto colon = s.find(':');
   try {
@@ -29,7 +42,7 @@ std::pair<int, int> parseRange(const std::string& s) {
 
 int main(int argc, char** argv) {
   GenerationOptions o;
-  std::string objects = "3:4";
+  std::string objects = "3:4", sizes = "0.05:0.3";
   CLI::App app{
       "Generate random piles settled under Bullet physics and write the HDF5 dataset "
       "of ground-truth TSDF, centre votes and labels (DESIGN.md section 4)."};
@@ -40,6 +53,15 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--output", o.output, "output HDF5 file")->required();
   app.add_option("--objects", objects, "objects per pile, MIN:MAX")->capture_default_str();
+  app.add_option("--sizes", sizes,
+                 "superquadrics' full extent along each axis, MIN:MAX metres (drawn uniformly); "
+                 "smaller objects make piles of more objects fit the grid")
+      ->capture_default_str();
+  app.add_option("--redraws", o.redraws,
+                 "times a scene whose pile cannot be made is drawn again from another seed "
+                 "before the run fails")
+      ->check(CLI::Range(0, 100))
+      ->capture_default_str();
   app.add_option("--ycb", o.ycb_dir,
                  "directory of YCB meshes (<dir>/<object>/nontextured.stl): mesh piles instead of "
                  "superquadrics");
@@ -68,6 +90,7 @@ int main(int argc, char** argv) {
 
   try {
     std::tie(o.min_objects, o.max_objects) = parseRange(objects);
+    std::tie(o.min_size_m, o.max_size_m) = parseSizes(sizes);
     ProgressBar bar("generating", o.scenes);
     const GenerationSummary s = generateDataset(o, [&](int done, int) { bar.update(done); });
     bar.finish();
@@ -79,6 +102,9 @@ int main(int argc, char** argv) {
               << 100.0 * o.scenes / s.attempts << " % accepted), " << o.scenes / s.seconds
               << " scenes/s on " << s.threads << " threads; " << 100.0 * s.undone_share
               << " % of the physics went to drops and piles that were undone\n";
+    if (s.skipped > 0)
+      std::cout << "  " << s.skipped
+                << " scenes drawn again: no pile could be made from their seed\n";
     if (o.views > 0) std::cout << "  " << o.views << " views per scene in " << s.views_dir << "/\n";
     return 0;
   } catch (const std::exception& e) {

@@ -45,7 +45,7 @@ PinholeCamera parseIntrinsics(const std::string& text, int width, int height) {
 }
 
 DepthView readView(const std::string& depth_path, double depth_scale, const std::string& intrinsics,
-                   const std::string& pose_path) {
+                   const std::string& pose_path, const std::string& mask_path) {
   DepthView view;
   std::string ext = fs::path(depth_path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
@@ -60,13 +60,21 @@ DepthView readView(const std::string& depth_path, double depth_scale, const std:
                                   std::to_string(view.depth.height));
     view.T_table_camera = pose.T_table_camera;
   }
+  if (!mask_path.empty()) {
+    view.mask = readMaskPng(mask_path);
+    if (view.mask.width != view.depth.width || view.mask.height != view.depth.height)
+      throw std::invalid_argument(mask_path + " is " + std::to_string(view.mask.width) + "x" +
+                                  std::to_string(view.mask.height) + ", but " + depth_path +
+                                  " is " + std::to_string(view.depth.width) + "x" +
+                                  std::to_string(view.depth.height));
+  }
   return view;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string depth_path, intrinsics, pose_path, output;
+  std::string depth_path, intrinsics, pose_path, mask_path, output;
   double depth_scale = 0.001;
   CLI::App app{
       "Reconstruct a pile from one depth image: superquadrics (YAML), instance meshes (PLY), a "
@@ -84,13 +92,17 @@ int main(int argc, char** argv) {
                  "YAML with T_table_camera (a view file of simstack_generate --views); without "
                  "it the table plane is estimated from the depth (RANSAC)")
       ->check(CLI::ExistingFile);
+  app.add_option("--mask", mask_path,
+                 "8-bit PNG of the depth's size: pixels where it is 0 are ignored (not the "
+                 "workspace), also for the table plane")
+      ->check(CLI::ExistingFile);
   app.add_option("--output", output, "output directory (created)")->required();
   const PerceptionOptions perception(app);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
 
   try {
-    const DepthView view = readView(depth_path, depth_scale, intrinsics, pose_path);
+    const DepthView view = readView(depth_path, depth_scale, intrinsics, pose_path, mask_path);
     const PerceptionConfig config = perception.config();
     StagedDirectory staged(output);  // a bad --output fails here, before the work
     const ScenePerception pipeline(config);
@@ -102,10 +114,13 @@ int main(int argc, char** argv) {
     const StageTimings& t = est.timings;
     std::cout << "table " << (est.table_estimated ? "estimated by RANSAC" : "from " + pose_path)
               << "\n"
-              << est.instances().size() << " objects; timings (ms): table " << t.table_ms
-              << ", tsdf " << t.tsdf_ms << ", network " << t.network_ms << ", instances "
-              << t.instances_ms << ", mesh " << t.mesh_ms << ", fitting " << t.fitting_ms
-              << ", total " << t.total_ms << "\nwrote " << output << "/{";
+              << est.instances().size() << " objects in " << est.tiles
+              << (est.tiles == 1 ? " tile" : " tiles")
+              << (est.tiles_cropped ? " (workspace.max_tiles reached: the pile is cut)" : "")
+              << "; timings (ms): table " << t.table_ms << ", tsdf " << t.tsdf_ms << ", network "
+              << t.network_ms << ", instances " << t.instances_ms << ", mesh " << t.mesh_ms
+              << ", fitting " << t.fitting_ms << ", total " << t.total_ms << "\nwrote " << output
+              << "/{";
     for (size_t i = 0; i < files.size(); ++i) std::cout << (i ? ", " : "") << files[i];
     std::cout << "}\n";
     return 0;

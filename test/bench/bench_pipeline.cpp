@@ -1,6 +1,6 @@
 // Scene decomposition: Hough voting at R = 32 and 64, the joint fit of a 4-object scene, and a
 // whole ScenePerception::perceive() at R = 32 with 3 samples (the shipped model), with and
-// without the regrouping along the observed surface.
+// without the regrouping along the observed surface, and with one and with four tiles.
 #include <benchmark/benchmark.h>
 
 #include <filesystem>
@@ -121,6 +121,50 @@ BENCHMARK(BM_Perceive)
     ->ArgNames({"samples", "segments"})
     ->Args({3, 1})
     ->Args({3, 0})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+// A 1280x720 frame seen from 1 m above the table, holding one 4-object pile (one tile) or four
+// copies of it 0.8 m apart (four tiles): the cost of a scene wider than one grid.
+static void BM_PerceiveTiles(benchmark::State& state) {
+  const std::string model = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
+  if (!std::filesystem::exists(model)) {
+    state.SkipWithError("shipped model missing");
+    return;
+  }
+  const Scene pile = test::fourObjectPile();
+  const Vec3 c = pile.surfaceCentroid();
+  Scene scene;
+  const int piles = static_cast<int>(state.range(0));
+  for (int k = 0; k < piles; ++k)
+    for (SceneObject o : pile.objects) {
+      const Vec2 shift = piles == 1 ? Vec2::Zero() : Vec2(k % 2 ? 0.4 : -0.4, k / 2 ? 0.4 : -0.4);
+      o.T_table_object.translation() += Vec3(shift.x() - c.x(), shift.y() - c.y(), 0.0);
+      scene.objects.push_back(o);
+    }
+  const PinholeCamera camera = test::wideCamera();
+  const Transform T = lookAt(Vec3(0.0, -0.3, 1.0), Vec3(0.0, 0.0, 0.0));
+  RenderConfig rc;
+  rc.table_half_size_m = 1.5;
+  const RenderResult r = DepthRenderer(scene, rc).render(camera, T, SensorNoiseConfig::kinect(1));
+  PerceptionConfig pc;
+  pc.model_path = model;
+  pc.threads = 2;
+  const ScenePerception perception(pc);
+  int tiles = 0;
+  size_t objects = 0;
+  for (auto _ : state) {
+    const SceneEstimate e = perception.perceive(DepthView{r.depth, camera, T});
+    tiles = e.tiles;
+    objects = e.instances().size();
+  }
+  state.counters["tiles"] = tiles;
+  state.counters["objects"] = static_cast<double>(objects);
+}
+BENCHMARK(BM_PerceiveTiles)
+    ->ArgNames({"piles"})
+    ->Arg(1)
+    ->Arg(4)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

@@ -3,7 +3,8 @@
 /// Making a dataset (simstack_generate): random piles settled under physics, their ground-truth
 /// grids written to HDF5 in scene order, and optionally rendered views beside it (a 16-bit depth
 /// PNG in mm, the instance mask, a YAML with intrinsics and pose, and pictures). Scene i uses a
-/// hash of (seed, i), so the dataset does not depend on the number of threads.
+/// hash of (seed, i), so the dataset does not depend on the number of threads; a scene whose
+/// seed gives no pile is drawn again from seeds derived from it (GenerationOptions::redraws).
 
 #include <cstdint>
 #include <functional>
@@ -25,12 +26,18 @@ struct GenerationOptions {
   double extent_m = 0.64;
   double truncation_vox = 3.0;
   double max_tilt_deg = 180.0;
+  /// Superquadrics' full extent along each axis, drawn uniformly (YCB meshes keep their size).
+  double min_size_m = 0.05, max_size_m = 0.30;
+  /// A scene whose pile cannot be made (no pile accepted in the generator's attempts) is drawn
+  /// again from another seed, at most this many times, before the run fails.
+  int redraws = 3;
   int threads = 2;
 };
 
 struct GenerationSummary {
   long objects = 0;
   long attempts = 0;        ///< piles drawn for the accepted ones
+  int skipped = 0;          ///< scenes drawn again because no pile could be made from their seed
   double undone_share = 0;  ///< share of the physics spent on drops and piles undone
   double seconds = 0;
   int threads = 0;

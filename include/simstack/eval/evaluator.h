@@ -67,6 +67,7 @@ struct EvaluationOptions {
   bool noise = false;             ///< Kinect-like sensor noise
   bool stability = true;          ///< the physics stability test
   int chamfer_points = 1000;      ///< surface samples per Chamfer set
+  bool overhead = false;          ///< views from above (ViewpointRange::overhead())
 };
 
 using Row = std::map<std::string, double>;

@@ -7,10 +7,13 @@
 /// placement, the table plane or the instances. Unbounded by default.
 ///
 /// Tiles: the network sees a cube of fixed side (R voxels). When the occupied part of the
-/// workspace is wider than one such cube, it is covered by overlapping cubes on one voxel
-/// lattice, each predicted on its own; their TSDFs and votes are blended into one scene grid
-/// (a cube as wide as all tiles together, z from the table up), in which the instances are then
-/// found once. One tile, placed as before tiles existed, is the common case.
+/// workspace is wider than one such cube, its points are split into separate groups, and each
+/// group is perceived as a scene of its own: on one tile placed as training would place it, or,
+/// when wider than a tile, on overlapping tiles whose predictions are blended into the group's
+/// grid, where its instances are found once (objects cut by a tile border whole). The groups'
+/// TSDFs and votes are then blended into one scene grid (a cube holding every group, z from the
+/// table up) for the outputs; a group off the scene's voxel lattice is resampled there. One
+/// tile, placed as before tiles existed, is the common case.
 
 #include <algorithm>
 #include <array>
@@ -53,11 +56,22 @@ void applyMask(DepthView* view);
 void cropToWorkspace(DepthView* view, const Transform& T_table_camera,
                      const WorkspaceConfig& workspace);
 
-struct TilePlan {
-  GridSpec scene;               ///< holds every tile; the single tile itself when one
+/// A separate group of the pile's points and the tiles covering it.
+struct TileGroup {
+  GridSpec grid;                ///< holds the group's tiles, on their lattice; the tile when one
   std::vector<GridSpec> tiles;  ///< each the network's grid (R voxels, side extent_m)
-  bool cropped = false;         ///< the pile needed more than max_tiles: its largest groups (or
-                                ///< the middle of the largest) are covered
+  Vec2 lo = Vec2::Zero(), hi = Vec2::Zero();  ///< the group's points' x/y box (table frame)
+};
+
+struct TilePlan {
+  GridSpec scene;                 ///< holds every group, on the first group's lattice
+  std::vector<TileGroup> groups;  ///< the largest first; one group of one tile, the scene
+                                  ///< itself, is the common case
+  bool cropped = false;  ///< the pile needed more than max_tiles: its largest groups (or the
+                         ///< middle of the largest) are covered
+  int tileCount() const;
+  /// The group whose box is nearest the point (x/y).
+  int groupOf(const Vec3& p_table) const;
 };
 
 /// Covers the pile's points (table frame) with tiles of `resolution` voxels of side `extent_m`.
@@ -65,9 +79,10 @@ struct TilePlan {
 /// each side) is at most the side: that tile is centred on `single_centre` (observedPileCentre,
 /// the placement of training), moved just enough to hold the spread. `placement` maps the
 /// median of a group of points to where training would centre a grid on that group.
-/// Otherwise each separate group of points (gaps of two voxels) gets one tile placed as in
-/// training when it fits, else the fewest tiles overlapping by at least `tile_overlap_m`; the
-/// largest groups first, at most `max_tiles` in all; all tiles on the first one's voxel lattice.
+/// Otherwise the points are split into groups (gaps of two voxels; groups whose joint spread fits
+/// one tile kept together), each perceived as a scene of its own: one tile placed as in
+/// training when it fits, else the fewest tiles overlapping by at least `tile_overlap_m` (on the
+/// first one's voxel lattice); the largest groups first, at most `max_tiles` tiles in all.
 TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_centre,
                    const std::function<Vec2(const Vec2&)>& placement, double extent_m,
                    int resolution, const WorkspaceConfig& workspace);

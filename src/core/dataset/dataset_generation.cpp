@@ -75,6 +75,13 @@ std::unique_ptr<PileGenerator> makeGenerator(const GenerationOptions& o, Dataset
   config.max_objects = o.max_objects;
   config.grid_extent_m = o.extent_m;
   config.max_tilt_deg = o.max_tilt_deg;
+  if (!(o.min_size_m > 0.0 && o.min_size_m <= o.max_size_m && o.max_size_m < o.extent_m))
+    throw std::invalid_argument("object sizes must satisfy 0 < min (" +
+                                std::to_string(o.min_size_m) + " m) <= max (" +
+                                std::to_string(o.max_size_m) + " m) < the grid's side (" +
+                                std::to_string(o.extent_m) + " m)");
+  config.min_size_m = o.min_size_m;
+  config.max_size_m = o.max_size_m;
   if (o.ycb_dir.empty()) return std::make_unique<PileGenerator>(config);
   if (!fs::is_directory(o.ycb_dir))
     throw std::runtime_error("--ycb: not a directory: " + o.ycb_dir);
@@ -107,9 +114,18 @@ class SceneWorkers {
         omp_set_num_threads(threads > 1 ? 1 : 2);  // parallelism across scenes, not inside
         for (int i = next_++; i < scenes_; i = next_++) {
           try {
-            const uint64_t seed = sceneSeed(o.seed, i);
+            uint64_t seed = sceneSeed(o.seed, i);
             SceneResult r;
-            r.pile = generator.generate(seed);
+            for (int redraw = 0;; ++redraw) {
+              try {
+                r.pile = generator.generate(seed);
+                break;
+              } catch (const std::runtime_error&) {
+                if (redraw >= o.redraws) throw;
+                ++skipped_;
+                seed = sceneSeed(seed ^ 0x5EEDu, i);  // another pile for scene i
+              }
+            }
             const Vec3 centre = r.pile.scene.surfaceCentroid();
             const GridSpec grid = GridSpec::sceneGrid(centre.head<2>(), o.extent_m, o.resolution);
             r.gt = computeGroundTruth(r.pile.scene, grid, info.truncation_m);
@@ -130,6 +146,7 @@ class SceneWorkers {
     for (auto& t : pool_) t.join();
   }
   int threads() const { return static_cast<int>(pool_.size()); }
+  int skipped() const { return skipped_; }
   /// Scene i once made; throws std::runtime_error with the first failure.
   SceneResult take(int i) {
     std::unique_lock<std::mutex> lock(mutex_);
@@ -143,6 +160,7 @@ class SceneWorkers {
  private:
   const int scenes_;
   std::atomic<int> next_{0};
+  std::atomic<int> skipped_{0};
   std::mutex mutex_;
   std::condition_variable ready_;
   std::map<int, SceneResult> done_;
@@ -183,6 +201,7 @@ GenerationSummary generateDataset(const GenerationOptions& o,
       all_steps += st.placed + st.undone_drops + st.rest_checks + st.rejected_piles;
       if (progress) progress(i + 1, o.scenes);
     }
+    summary.skipped = workers.skipped();
   }
   writer.reset();  // closes the file
   staged.commit();

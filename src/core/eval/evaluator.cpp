@@ -101,7 +101,9 @@ void evaluateView(const SceneRecord& rec, int k, int v, const SceneTruth& scene,
                   const EvaluationOptions& options, std::vector<MethodResults>* results) {
   std::mt19937_64 rng(scene_seed + 7919ull * static_cast<uint64_t>(v + 1));
   ViewTruth vt;
-  vt.T_table_camera = sampleViewpoint(rec.scene.surfaceCentroid(), ViewpointRange(), rng);
+  vt.T_table_camera =
+      sampleViewpoint(rec.scene.surfaceCentroid(),
+                      options.overhead ? ViewpointRange::overhead() : ViewpointRange(), rng);
   const uint64_t view_seed = rng();
   const RenderResult r =
       renderer.render(camera, vt.T_table_camera,
@@ -206,6 +208,7 @@ json resultsJson(const EvaluationResults& r, bool with_views) {
   out["seed"] = o.seed;
   out["image"] = std::to_string(o.width) + "x" + std::to_string(o.height);
   out["noise"] = o.noise;
+  out["overhead"] = o.overhead;
   out["chamfer_points"] = o.chamfer_points;
   if (!r.truth_stable.empty())
     out["ground_truth"] = {{"stable", mean(r.truth_stable)},

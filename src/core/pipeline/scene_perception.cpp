@@ -270,22 +270,24 @@ std::pair<Grid3<float>, Grid3<float>> partialTsdf(const GridSpec& grid,
   return {partial.tsdf(), partial.weight()};
 }
 
-/// The network's S hypotheses over the scene grid: each tile predicted from its own partial
-/// TSDF, then the tiles blended (workspace.h). One tile is the scene grid itself.
-std::vector<CvaePrediction> predictTiles(const CvaeInference& model, const TilePlan& plan,
-                                         const SceneEstimate& est,
-                                         const std::vector<DepthView>& views,
-                                         const PerceptionConfig& c) {
-  if (plan.tiles.size() == 1 && plan.tiles.front() == plan.scene)
-    return model.predict(est.partial_tsdf_m, est.partial_weight, c.samples, c.seed,
-                         c.zero_code_first);
+/// The network's S hypotheses over one group's grid: each tile predicted from its own partial
+/// TSDF, then the tiles blended (workspace.h).
+std::vector<SceneHypothesis> predictGroup(
+    const CvaeInference& model, const TileGroup& group, const std::vector<DepthView>& views,
+    const Transform& T_table_first, const std::pair<Grid3<float>, Grid3<float>>& scene_partial,
+    const PerceptionConfig& c) {
   const double truncation = model.config().truncation_m();
   std::vector<std::vector<CvaePrediction>> tiles;
-  for (const GridSpec& tile : plan.tiles) {
-    const auto [tsdf, weight] = partialTsdf(tile, views, est.T_table_camera, truncation);
+  for (const GridSpec& tile : group.tiles) {
+    if (tile == scene_partial.first.spec) {  // the common case: computed already
+      tiles.push_back(model.predict(scene_partial.first, scene_partial.second, c.samples, c.seed,
+                                    c.zero_code_first));
+      continue;
+    }
+    const auto [tsdf, weight] = partialTsdf(tile, views, T_table_first, truncation);
     tiles.push_back(model.predict(tsdf, weight, c.samples, c.seed, c.zero_code_first));
   }
-  std::vector<CvaePrediction> out(tiles.front().size());
+  std::vector<SceneHypothesis> out(tiles.front().size());
   for (size_t k = 0; k < out.size(); ++k) {
     std::vector<Grid3<float>> tsdf;
     std::vector<Grid3<Vec3f>> votes;
@@ -293,10 +295,81 @@ std::vector<CvaePrediction> predictTiles(const CvaeInference& model, const TileP
       tsdf.push_back(std::move(tile[k].tsdf_m));
       votes.push_back(std::move(tile[k].votes));
     }
-    out[k].tsdf_m = blendTiles(plan.scene, tsdf, static_cast<float>(truncation));
-    out[k].votes = blendTiles(plan.scene, votes, Vec3f(Vec3f::Zero()));
+    out[k].tsdf_m = blendTiles(group.grid, tsdf, static_cast<float>(truncation));
+    out[k].votes = blendTiles(group.grid, votes, Vec3f(Vec3f::Zero()));
+    out[k].labels = Grid3<int>(group.grid, -1);
   }
   return out;
+}
+
+/// One group of tiles seen as a scene of its own: predicted, and the first hypotheses
+/// decomposed on the group's grid.
+std::vector<SceneHypothesis> perceiveGroup(
+    const CvaeInference& model, const TileGroup& group, const std::vector<DepthView>& views,
+    const Transform& T_table_first, const std::pair<Grid3<float>, Grid3<float>>& scene_partial,
+    const PerceptionConfig& c, StageTimings* timings) {
+  auto t = Clock::now();
+  std::vector<SceneHypothesis> hypotheses =
+      predictGroup(model, group, views, T_table_first, scene_partial, c);
+  timings->network_ms += msSince(t);
+  std::optional<SurfaceSegments> segments;
+  if (c.segments.enabled && c.decompose_samples > 0) {
+    t = Clock::now();
+    segments = InstanceFinder(c.hough, c.segments)
+                   .segmentView(views[0].depth, views[0].camera, T_table_first, c.min_pile_height_m,
+                                &group.grid);
+    timings->instances_ms += msSince(t);
+  }
+  for (int k = 0; k < c.decompose_samples; ++k)
+    decompose(&hypotheses[k], c, timings, segments ? &*segments : nullptr);
+  return hypotheses;
+}
+
+/// The groups' hypotheses joined on the scene grid: TSDFs and votes blended (groups that are
+/// not on the scene's lattice resampled), each voxel's label from the group holding it
+/// farthest from its sides, and each group's instances that are nearer its own points than
+/// any other group's (a tile also sees the edge of a neighbouring group).
+SceneHypothesis joinGroups(const TilePlan& plan, std::vector<SceneHypothesis>& parts,
+                           float truncation) {
+  SceneHypothesis h;
+  std::vector<Grid3<float>> tsdf;
+  std::vector<Grid3<Vec3f>> votes;
+  for (const SceneHypothesis& p : parts) {
+    tsdf.push_back(p.tsdf_m);
+    votes.push_back(p.votes);
+  }
+  h.tsdf_m = blendTiles(plan.scene, tsdf, truncation);
+  h.votes = blendTiles(plan.scene, votes, Vec3f(Vec3f::Zero()));
+  h.labels = Grid3<int>(plan.scene, -1);
+  std::vector<int> first_label(parts.size(), 0);
+  for (size_t g = 0; g + 1 < parts.size(); ++g) {
+    int most = -1;
+    for (int l : parts[g].labels.data) most = std::max(most, l);
+    first_label[g + 1] = first_label[g] + most + 1;
+  }
+  for (int i = 0; i < plan.scene.voxelCount(); ++i) {
+    const Vec3i v = plan.scene.unravel(i);
+    const Vec3 p = plan.scene.voxelCentre(v.x(), v.y(), v.z());
+    double best = -1.0;
+    for (size_t g = 0; g < parts.size(); ++g) {
+      const GridSpec& s = parts[g].labels.spec;
+      const Vec3 c = s.continuousIndex(p);
+      const double side = std::min(std::min(c.x() + 0.5, s.resolution - 0.5 - c.x()),
+                                   std::min(c.y() + 0.5, s.resolution - 0.5 - c.y()));
+      if (!s.containsPoint(p) || side <= best) continue;
+      best = side;
+      const Vec3i j = s.voxelIndex(p);
+      const int l = parts[g].labels.at(j.x(), j.y(), j.z());
+      h.labels.data[i] = l >= 0 ? l + first_label[g] : -1;
+    }
+  }
+  for (size_t g = 0; g < parts.size(); ++g) {
+    h.decomposed = h.decomposed || parts[g].decomposed;
+    h.surface.append(parts[g].surface);
+    for (InstanceEstimate& e : parts[g].instances)
+      if (plan.groupOf(e.vote_centre) == static_cast<int>(g)) h.instances.push_back(std::move(e));
+  }
+  return h;
 }
 
 }  // namespace
@@ -332,40 +405,37 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
       pilePoints(views[0], out.T_table_camera, c.workspace, c.min_pile_height_m, mc.extent_m),
       centre, placement, mc.extent_m, mc.resolution, c.workspace);
   out.grid = plan.scene;
-  out.tiles = static_cast<int>(plan.tiles.size());
+  out.tiles = plan.tileCount();
   out.tiles_cropped = plan.cropped;
-  std::tie(out.partial_tsdf_m, out.partial_weight) =
+  std::pair<Grid3<float>, Grid3<float>> partial =
       partialTsdf(out.grid, views, out.T_table_camera, mc.truncation_m());
   out.timings.tsdf_ms = msSince(t);
 
-  t = Clock::now();
-  std::vector<CvaePrediction> predictions = predictTiles(*impl_->model, plan, out, views, c);
-  out.timings.network_ms = msSince(t);
-
+  // Each group as a scene of its own; one group is the scene.
+  std::vector<std::vector<SceneHypothesis>> groups;
+  for (const TileGroup& g : plan.groups)
+    groups.push_back(
+        perceiveGroup(*impl_->model, g, views, out.T_table_camera, partial, c, &out.timings));
+  out.partial_tsdf_m = std::move(partial.first);
+  out.partial_weight = std::move(partial.second);
+  if (groups.size() == 1 && plan.groups.front().grid == plan.scene) {
+    out.hypotheses = std::move(groups.front());
+  } else {
+    for (size_t k = 0; k < groups.front().size(); ++k) {
+      std::vector<SceneHypothesis> parts;
+      for (auto& g : groups) parts.push_back(std::move(g[k]));
+      out.hypotheses.push_back(joinGroups(plan, parts, static_cast<float>(mc.truncation_m())));
+    }
+  }
   out.occupancy_probability = Grid3<float>(out.grid, 0.0f);
-  for (CvaePrediction& p : predictions) {
-    for (size_t i = 0; i < p.tsdf_m.data.size(); ++i)
-      if (p.tsdf_m.data[i] <= 0.0f) out.occupancy_probability.data[i] += 1.0f / predictions.size();
-    SceneHypothesis h;
-    h.tsdf_m = std::move(p.tsdf_m);
-    h.votes = std::move(p.votes);
-    h.labels = Grid3<int>(out.grid, -1);
-    out.hypotheses.push_back(std::move(h));
-  }
-  std::optional<SurfaceSegments> segments;
-  if (c.segments.enabled && c.decompose_samples > 0) {
-    t = Clock::now();
-    segments = InstanceFinder(c.hough, c.segments)
-                   .segmentView(views[0].depth, views[0].camera, out.T_table_camera,
-                                c.min_pile_height_m, &out.grid);
-    out.timings.instances_ms += msSince(t);
-  }
-  for (int k = 0; k < c.decompose_samples; ++k) {
-    decompose(&out.hypotheses[k], c, &out.timings, segments ? &*segments : nullptr);
-    t = Clock::now();
+  for (const SceneHypothesis& h : out.hypotheses)
+    for (size_t i = 0; i < h.tsdf_m.data.size(); ++i)
+      if (h.tsdf_m.data[i] <= 0.0f)
+        out.occupancy_probability.data[i] += 1.0f / out.hypotheses.size();
+  t = Clock::now();
+  for (int k = 0; k < c.decompose_samples; ++k)
     setVisibleFractions(&out.hypotheses[k], views[0].camera, out.T_table_camera);
-    out.timings.mesh_ms += msSince(t);
-  }
+  out.timings.mesh_ms += msSince(t);
   out.timings.total_ms = msSince(start);
   return out;
 }

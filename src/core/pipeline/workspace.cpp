@@ -78,13 +78,25 @@ double quantile(std::vector<double>* values, double q) {
 
 /// A group of pile points separated from the others by at least two voxels of nothing.
 struct Cluster {
-  Vec2 lo, hi, median;
-  size_t points = 0;
+  std::array<std::vector<double>, 2> xy;  // its points' coordinates
+  Vec2 lo, hi, median;                    // 0.5 / 99.5 percentiles and median (finish())
+
+  void finish() {  // as observedPileCentre and a single tile take them
+    for (int a = 0; a < 2; ++a) {
+      std::vector<double> x = xy[a];
+      std::nth_element(x.begin(), x.begin() + x.size() / 2, x.end());
+      median[a] = x[x.size() / 2];
+      lo[a] = quantile(&x, 0.005);
+      hi[a] = quantile(&x, 0.995);
+    }
+  }
+  size_t size() const { return xy[0].size(); }
 };
 
 /// Connected groups of the points' x/y cells (side `cell`, 8-neighbourhood), with fewer than
-/// `min_points` points dropped (flying pixels), largest first.
-std::vector<Cluster> clusters(const std::vector<Vec3>& points, double cell, size_t min_points) {
+/// `min_points` points dropped.
+std::vector<Cluster> connectedGroups(const std::vector<Vec3>& points, double cell,
+                                     size_t min_points) {
   std::unordered_map<int64_t, std::vector<size_t>> cells;
   const auto key = [](int64_t i, int64_t j) { return (i << 32) ^ (j & 0xffffffff); };
   for (size_t k = 0; k < points.size(); ++k)
@@ -95,21 +107,12 @@ std::vector<Cluster> clusters(const std::vector<Vec3>& points, double cell, size
     if (seen[start]) continue;
     seen[start] = true;
     Cluster c;
-    c.lo = Vec2::Constant(1e300);
-    c.hi = Vec2::Constant(-1e300);
-    std::array<std::vector<double>, 2> coordinates;
     std::vector<int64_t> stack{start};
     while (!stack.empty()) {
       const int64_t k = stack.back();
       stack.pop_back();
-      for (size_t i : cells.at(k)) {
-        const Vec2 p = points[i].head<2>();
-        c.lo = c.lo.cwiseMin(p);
-        c.hi = c.hi.cwiseMax(p);
-        coordinates[0].push_back(p.x());
-        coordinates[1].push_back(p.y());
-        ++c.points;
-      }
+      for (size_t i : cells.at(k))
+        for (int a = 0; a < 2; ++a) c.xy[a].push_back(points[i][a]);
       const Vec3& any = points[cells.at(k).front()];
       const int64_t ci = std::floor(any.x() / cell), cj = std::floor(any.y() / cell);
       for (int64_t di = -1; di <= 1; ++di)
@@ -121,16 +124,37 @@ std::vector<Cluster> clusters(const std::vector<Vec3>& points, double cell, size
           }
         }
     }
-    if (c.points < min_points) continue;
-    for (int a = 0; a < 2; ++a) {  // as observedPileCentre takes it
-      std::vector<double>& x = coordinates[a];
-      std::nth_element(x.begin(), x.begin() + x.size() / 2, x.end());
-      c.median[a] = x[x.size() / 2];
-    }
-    out.push_back(c);
+    if (c.size() >= min_points) out.push_back(std::move(c));
   }
-  std::sort(out.begin(), out.end(),
-            [](const Cluster& a, const Cluster& b) { return a.points > b.points; });
+  return out;
+}
+
+/// The connected groups, largest first, each joined with the smaller ones that fit one tile
+/// (`side`, with `margin` on each side) together with it: a pile that one tile holds stays
+/// one group, whatever gaps it has. Groups of fewer than 10 points left (flying pixels far from
+/// everything) are dropped.
+std::vector<Cluster> clusters(const std::vector<Vec3>& points, double cell, double side,
+                              double margin) {
+  std::vector<Cluster> parts = connectedGroups(points, cell, 1);
+  for (Cluster& c : parts) c.finish();
+  std::sort(parts.begin(), parts.end(),
+            [](const Cluster& a, const Cluster& b) { return a.size() > b.size(); });
+  std::vector<Cluster> out;
+  std::vector<bool> used(parts.size(), false);
+  for (size_t i = 0; i < parts.size(); ++i) {
+    if (used[i]) continue;
+    Cluster group = parts[i];
+    for (size_t j = i + 1; j < parts.size(); ++j) {
+      if (used[j]) continue;
+      const Vec2 lo = group.lo.cwiseMin(parts[j].lo), hi = group.hi.cwiseMax(parts[j].hi);
+      if ((hi - lo).maxCoeff() + 2.0 * margin > side) continue;
+      for (int a = 0; a < 2; ++a)
+        group.xy[a].insert(group.xy[a].end(), parts[j].xy[a].begin(), parts[j].xy[a].end());
+      group.finish();
+      used[j] = true;
+    }
+    if (group.size() >= 10) out.push_back(std::move(group));  // not a few flying pixels
+  }
   return out;
 }
 
@@ -155,6 +179,30 @@ std::vector<Vec2> clusterTiles(const Cluster& c, const Vec2& placement, double v
   for (double y : origins[1])
     for (double x : origins[0]) out.emplace_back(x, y);
   return out;
+}
+
+/// The group of tiles at these origins, all on the first one's voxel lattice (moved by up to
+/// half a voxel), and the cube holding them on that lattice.
+TileGroup tileGroup(std::vector<Vec2> origins, double voxel, int resolution) {
+  TileGroup g;
+  const Vec2 anchor = origins.front();
+  Vec2 first = anchor, last = anchor;
+  for (Vec2& o : origins) {
+    o = anchor + ((o - anchor) / voxel).array().round().matrix() * voxel;
+    first = first.cwiseMin(o);
+    last = last.cwiseMax(o);
+  }
+  for (const Vec2& o : origins) {
+    GridSpec t;
+    t.origin_table = Vec3(o.x(), o.y(), 0.0);
+    t.voxel_size_m = voxel;
+    t.resolution = resolution;
+    g.tiles.push_back(t);
+  }
+  g.grid = g.tiles.front();
+  g.grid.origin_table.head<2>() = first;
+  g.grid.resolution = resolution + static_cast<int>(std::lround((last - first).maxCoeff() / voxel));
+  return g;
 }
 
 }  // namespace
@@ -187,50 +235,67 @@ TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_cent
     for (int a = 0; a < 2; ++a)
       centre[a] = std::clamp(centre[a], hi[a] - 0.5 * extent_m, lo[a] + 0.5 * extent_m);
     plan.scene = GridSpec::sceneGrid(centre, extent_m, resolution);
-    plan.tiles.push_back(plan.scene);
+    TileGroup g;
+    g.grid = plan.scene;
+    g.tiles.push_back(plan.scene);
+    g.lo = lo;
+    g.hi = hi;
+    plan.groups.push_back(g);
     return plan;
   }
   // Each separate group of the pile gets its own tiles, the largest groups first.
-  std::vector<Vec2> origins;
-  for (const Cluster& c : clusters(pile_points, margin, 10)) {
-    const std::vector<Vec2> more = clusterTiles(c, placement(c.median), voxel, resolution, overlap);
-    if (origins.size() + more.size() > static_cast<size_t>(workspace.max_tiles)) {
+  size_t tiles = 0;
+  for (const Cluster& c : clusters(pile_points, margin, extent_m, margin)) {
+    std::vector<Vec2> origins = clusterTiles(c, placement(c.median), voxel, resolution, overlap);
+    if (tiles + origins.size() > static_cast<size_t>(workspace.max_tiles)) {
       plan.cropped = true;
-      if (!origins.empty()) break;
+      if (tiles > 0) break;
       // Even the largest group needs more: its tiles nearest its middle.
-      std::vector<Vec2> sorted = more;
       const Vec2 middle = 0.5 * (c.lo + c.hi);
-      std::sort(sorted.begin(), sorted.end(), [&](const Vec2& a, const Vec2& b) {
+      std::sort(origins.begin(), origins.end(), [&](const Vec2& a, const Vec2& b) {
         return (a - middle).norm() < (b - middle).norm();
       });
-      sorted.resize(workspace.max_tiles);
-      origins = sorted;
-      break;
+      origins.resize(workspace.max_tiles);
     }
-    origins.insert(origins.end(), more.begin(), more.end());
+    tiles += origins.size();
+    plan.groups.push_back(tileGroup(origins, voxel, resolution));
+    plan.groups.back().lo = c.lo;
+    plan.groups.back().hi = c.hi;
   }
-  // Every tile on the voxel lattice of the largest group's (first) tile, which is then placed
-  // exactly as alone (resampling the others onto it cost more than moving them by up to half
-  // a voxel); the scene cube from the tiles' lowest corner, as wide as their union.
-  const Vec2 anchor = origins.front();
-  for (Vec2& o : origins) o = anchor + ((o - anchor) / voxel).array().round().matrix() * voxel;
+  // The scene cube: on the largest group's lattice, holding every group.
+  const Vec2 anchor = plan.groups.front().grid.origin_table.head<2>();
   Vec2 first = anchor, last = anchor;
-  for (const Vec2& o : origins) {
-    first = first.cwiseMin(o);
-    last = last.cwiseMax(o);
+  for (const TileGroup& g : plan.groups) {
+    const Vec2 o = g.grid.origin_table.head<2>();
+    first = first.cwiseMin(anchor + ((o - anchor) / voxel).array().floor().matrix() * voxel);
+    last = last.cwiseMax(o + Vec2::Constant(g.grid.extent_m()));
   }
-  const int n = static_cast<int>(std::lround((last - first).maxCoeff() / voxel)) + resolution;
+  const int n = static_cast<int>(std::ceil((last - first).maxCoeff() / voxel - 1e-6));
   plan.scene.origin_table = Vec3(first.x(), first.y(), 0.0);
   plan.scene.voxel_size_m = voxel;
-  plan.scene.resolution = n;
-  for (const Vec2& o : origins) {
-    GridSpec t;
-    t.origin_table = Vec3(o.x(), o.y(), 0.0);
-    t.voxel_size_m = voxel;
-    t.resolution = resolution;
-    plan.tiles.push_back(t);
-  }
+  plan.scene.resolution = std::max(n, resolution);
   return plan;
+}
+
+}  // namespace simstack
+
+namespace simstack {
+
+int TilePlan::tileCount() const {
+  int n = 0;
+  for (const TileGroup& g : groups) n += static_cast<int>(g.tiles.size());
+  return n;
+}
+
+int TilePlan::groupOf(const Vec3& p_table) const {
+  int best = 0;
+  double best_d = std::numeric_limits<double>::infinity();
+  for (size_t k = 0; k < groups.size(); ++k) {
+    const Vec2 q = p_table.head<2>();
+    const double d = (q - q.cwiseMax(groups[k].lo).cwiseMin(groups[k].hi)).norm();
+    if (d < best_d) best_d = d, best = static_cast<int>(k);
+  }
+  return best;
 }
 
 }  // namespace simstack
