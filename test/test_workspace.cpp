@@ -197,9 +197,10 @@ SceneObject box(const Vec3& centre, const Vec3& half_size) {
   return o;
 }
 
-DepthView render(const Scene& scene, const PinholeCamera& camera, const Transform& pose) {
+DepthView render(const Scene& scene, const PinholeCamera& camera, const Transform& pose,
+                 double table_half_size_m = 1.5) {
   RenderConfig rc;
-  rc.table_half_size_m = 1.5;
+  rc.table_half_size_m = table_half_size_m;
   return DepthView{DepthRenderer(scene, rc).render(camera, pose).depth, camera, pose};
 }
 
@@ -304,12 +305,13 @@ TEST(Workspace, ARobotBaseAndAWallOutsideItAreNeitherTableNorObjects) {
   Scene scene;
   scene.objects = pileAt(31, Vec2::Zero());
   const size_t pile = scene.objects.size();
-  // A robot's base close to the camera, at the workspace's edge, and a wall behind the table.
-  scene.objects.push_back(box(Vec3(0.55, -0.15, 0.2), Vec3(0.2, 0.2, 0.2)));
+  // A robot's base close to the camera, beside the workspace, whose top holds more pixels than
+  // the (small) table, and a wall behind the table.
+  scene.objects.push_back(box(Vec3(0.75, 0.0, 0.15), Vec3(0.4, 0.6, 0.15)));
   scene.objects.push_back(box(Vec3(0.0, 0.75, 0.3), Vec3(0.9, 0.02, 0.3)));
   const PinholeCamera camera = test::wideCamera();
-  const Transform pose = lookAt(Vec3(0.1, -0.7, 0.9), Vec3(0.0, 0.1, 0.0));
-  const DepthView view = render(scene, camera, pose);
+  const Transform pose = lookAt(Vec3(0.3, -0.6, 1.0), Vec3(0.3, 0.0, 0.0));
+  const DepthView view = render(scene, camera, pose, 0.6);
   PerceptionConfig config;
   config.model_path = kModel;
   config.workspace.min_m = {-0.3, -0.3, -0.05};
@@ -344,6 +346,9 @@ TEST(Workspace, ARobotBaseAndAWallOutsideItAreNeitherTableNorObjects) {
   const Vec3 z_est = plane.T_table_camera.linear().transpose() * Vec3::UnitZ();
   EXPECT_GT(z_true.dot(z_est), std::cos(M_PI / 180.0));
   EXPECT_NEAR(plane.T_table_camera.translation().z(), pose.translation().z(), 0.005);
+  // The largest plane alone is the base's top, 0.3 m above the table.
+  const TablePlane largest = estimateTablePlane(view.depth, camera);
+  EXPECT_GT(std::abs(largest.T_table_camera.translation().z() - pose.translation().z()), 0.2);
 }
 
 }  // namespace

@@ -112,6 +112,9 @@ struct TrainConfig {
   int image_width = 320;       ///< rendered training views (intrinsics scale with it)
   int image_height = 240;
   bool sensor_noise = true;  ///< Kinect-like noise in training views
+  /// Share of training views from above (ViewpointRange::overhead(), as on pick stations); the
+  /// rest in the paper's ranges.
+  double overhead_share = 0.0;
   /// Warm start: a model file whose parameters of the same name and shape start this run (the
   /// others keep their random initialisation); empty: all random. Not read when resuming.
   std::string init_from;

@@ -24,8 +24,10 @@ struct TrainingSample {
 
 class TrainingSampleBuilder {
  public:
-  TrainingSampleBuilder(const CvaeConfig& config, const PinholeCamera& camera, bool sensor_noise);
-  /// A random viewpoint in the paper's ranges.
+  /// `overhead_share` of the random viewpoints come from above (ViewpointRange::overhead()).
+  TrainingSampleBuilder(const CvaeConfig& config, const PinholeCamera& camera, bool sensor_noise,
+                        double overhead_share = 0.0);
+  /// A random viewpoint in the paper's ranges (or from above, see the constructor).
   TrainingSample build(const SceneRecord& record, std::mt19937_64& rng) const;
   /// A given viewpoint.
   TrainingSample build(const SceneRecord& record, const Transform& T_table_camera,
@@ -36,6 +38,7 @@ class TrainingSampleBuilder {
   CvaeConfig config_;
   PinholeCamera camera_;
   bool noise_;
+  double overhead_share_;
 };
 
 }  // namespace simstack

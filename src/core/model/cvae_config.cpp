@@ -67,6 +67,7 @@ void trainFields(C& c, F&& f) {
   f("image_width", c.image_width);
   f("image_height", c.image_height);
   f("sensor_noise", c.sensor_noise);
+  f("overhead_share", c.overhead_share);
   f("init_from", c.init_from);
 }
 
@@ -150,6 +151,7 @@ void TrainConfig::validate() const {
           "checkpoint_every and validate_every must be >= 1");
   require(validation_scenes >= 1, "validation_scenes must be >= 1");
   require(image_width >= 16 && image_height >= 16, "image size must be at least 16x16");
+  require(overhead_share >= 0.0 && overhead_share <= 1.0, "overhead_share must lie in [0, 1]");
 }
 
 std::string TrainConfig::toYaml() const {

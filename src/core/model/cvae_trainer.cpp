@@ -409,7 +409,7 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   const int64_t start = resuming ? impl_->restore(model, optimizer, out) : 0;
 
   const TrainingSampleBuilder builder(mc, scaledKinect(tc.image_width, tc.image_height),
-                                      tc.sensor_noise);
+                                      tc.sensor_noise, tc.overhead_share);
   TrainingLog log(out / "train_log.csv", resume && start > 0);
   // Each file is written beside its place and renamed into it, state.yaml last: a run stopped
   // by an error or a kill leaves the previous checkpoint whole, never half of a new one.

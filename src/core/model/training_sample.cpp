@@ -11,14 +11,19 @@
 namespace simstack {
 
 TrainingSampleBuilder::TrainingSampleBuilder(const CvaeConfig& config, const PinholeCamera& camera,
-                                             bool sensor_noise)
-    : config_(config), camera_(camera), noise_(sensor_noise) {
+                                             bool sensor_noise, double overhead_share)
+    : config_(config), camera_(camera), noise_(sensor_noise), overhead_share_(overhead_share) {
   config_.validate();
   camera_.validate();
 }
 
 TrainingSample TrainingSampleBuilder::build(const SceneRecord& record, std::mt19937_64& rng) const {
-  const Transform T = sampleViewpoint(record.scene.surfaceCentroid(), ViewpointRange(), rng);
+  // With no overhead share the random stream is the one it always was.
+  const bool overhead = overhead_share_ > 0.0 &&
+                        std::uniform_real_distribution<double>(0.0, 1.0)(rng) < overhead_share_;
+  const Transform T =
+      sampleViewpoint(record.scene.surfaceCentroid(),
+                      overhead ? ViewpointRange::overhead() : ViewpointRange(), rng);
   return build(record, T, rng());
 }
 
