@@ -357,6 +357,31 @@ TEST(Workspace, ARobotBaseAndAWallOutsideItAreNeitherTableNorObjects) {
 namespace simstack {
 namespace {
 
+TEST(Tiles, ARowWiderThanATileIsFoundWholeAcrossTileBorders) {
+  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  PerceptionConfig config;
+  config.model_path = kModel;
+  const ScenePerception perception(config);
+  // Seven boxes in a row 1.1 m long, 2 cm apart: one group, covered by overlapping tiles.
+  Scene row;
+  for (int k = -3; k <= 3; ++k)
+    row.objects.push_back(box(Vec3(0.16 * k, 0.0, 0.05), Vec3(0.07, 0.07, 0.05)));
+  const Transform pose = lookAt(Vec3(0.0, -0.7, 1.0), Vec3(0.0, 0.0, 0.0));
+  const SceneEstimate est = perception.perceive(render(row, test::wideCamera(), pose));
+  EXPECT_GE(est.tiles, 2);
+  EXPECT_EQ(est.instances().size(), row.objects.size());
+  for (const SceneObject& o : row.objects) {
+    double best = 1e9;
+    for (const InstanceEstimate& e : est.instances())
+      best = std::min(best, (e.vote_centre - o.T_table_object.translation()).norm());
+    EXPECT_LT(best, 0.04) << o.T_table_object.translation().transpose();
+  }
+  const double iou = pileIou(est, row);
+  EXPECT_GT(iou, 0.6);
+  std::cout << "row of " << row.objects.size() << " boxes: " << est.tiles << " tiles, "
+            << est.instances().size() << " instances, IoU " << iou << "\n";
+}
+
 /// `g` inside a larger grid on the same lattice, `offset` voxels in, `fill` elsewhere.
 template <typename T>
 Grid3<T> embedded(const Grid3<T>& g, int n, const Vec3i& offset, const T& fill) {

@@ -87,17 +87,18 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
                              "' cannot be loaded: " + e.what());
   }
   // A latched publisher's mask arrives once; a bad one is reported and the previous one kept.
-  mask_sub_ =
-      pnh_.subscribe<sensor_msgs::Image>("mask", 1, [this](const sensor_msgs::ImageConstPtr& msg) {
+  const std::string mask_topic = pnh_.resolveName("mask");
+  mask_sub_ = pnh_.subscribe<sensor_msgs::Image>(
+      "mask", 1, [this, mask_topic](const sensor_msgs::ImageConstPtr& msg) {
         try {
           Image<uint8_t> mask = maskFromImage(*msg);
           ROS_INFO("simstack perception: workspace mask %dx%d received on %s", mask.width,
-                   mask.height, mask_sub_.getTopic().c_str());
+                   mask.height, mask_topic.c_str());
           std::lock_guard<std::mutex> lock(mutex_);
           mask_ = std::move(mask);
         } catch (const std::invalid_argument& e) {
           ROS_ERROR("simstack perception: mask on %s refused, the previous one stays: %s",
-                    mask_sub_.getTopic().c_str(), e.what());
+                    mask_topic.c_str(), e.what());
         }
       });
   worker_ = std::thread(&PerceptionServer::work, this);  // last: onFrame only fills the mailbox

@@ -67,8 +67,8 @@ struct TilePlan {
   GridSpec scene;                 ///< holds every group, on the first group's lattice
   std::vector<TileGroup> groups;  ///< the largest first; one group of one tile, the scene
                                   ///< itself, is the common case
-  bool cropped = false;  ///< the pile needed more than max_tiles: its largest groups (or the
-                         ///< middle of the largest) are covered
+  bool cropped = false;           ///< the pile needed more than max_tiles (or a wider square): its
+                                  ///< largest groups (or the middle of the largest) are covered
   int tileCount() const;
   /// The group whose box is nearest the point (x/y).
   int groupOf(const Vec3& p_table) const;
@@ -82,7 +82,9 @@ struct TilePlan {
 /// Otherwise the points are split into groups (gaps of two voxels; groups whose joint spread fits
 /// one tile kept together), each perceived as a scene of its own: one tile placed as in
 /// training when it fits, else the fewest tiles overlapping by at least `tile_overlap_m` (on the
-/// first one's voxel lattice); the largest groups first, at most `max_tiles` tiles in all.
+/// first one's voxel lattice); the largest groups first, at most `max_tiles` tiles in all and
+/// within a square of ceil(sqrt(max_tiles)) tiles' side (`cropped` says when groups were left
+/// out). Flying pixels alone (groups of fewer than 10 points) take the single tile.
 TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_centre,
                    const std::function<Vec2(const Vec2&)>& placement, double extent_m,
                    int resolution, const WorkspaceConfig& workspace);

@@ -212,11 +212,13 @@ int cappedThreads(int threads) {
 
 /// No latent space: S hypotheses would be S copies of one.
 PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
-  if (!(config.workspace.tile_overlap_m < 0.5 * model.extent_m))
+  // The overlap in whole voxels, as planTiles takes it.
+  const double voxel = model.extent_m / model.resolution;
+  if (std::ceil(config.workspace.tile_overlap_m / voxel - 1e-9) >= model.resolution / 2)
     throw std::invalid_argument("workspace: tile_overlap_m (" +
                                 std::to_string(config.workspace.tile_overlap_m) +
                                 " m) must be less than half the model's grid side (" +
-                                std::to_string(0.5 * model.extent_m) + " m)");
+                                std::to_string(0.5 * model.extent_m) + " m, in whole voxels)");
   config.threads = cappedThreads(config.threads);
   if (!model.hasLatentCode()) {
     config.samples = 1;
@@ -325,21 +327,31 @@ std::vector<SceneHypothesis> perceiveGroup(
   return hypotheses;
 }
 
-/// The groups' hypotheses joined on the scene grid: TSDFs and votes blended (groups that are
-/// not on the scene's lattice resampled), each voxel's label from the group holding it
-/// farthest from its sides, and each group's instances that are nearer its own points than
-/// any other group's (a tile also sees the edge of a neighbouring group).
+/// Weight of a table-frame point in a group: its distance (voxels) from the nearest side face
+/// of the group's tile that holds it farthest in, 0 outside every tile of the group (a group's
+/// grid is a cube; its tiles need not fill it).
+double groupWeight(const TileGroup& group, const Vec3& p) {
+  double best = 0.0;
+  for (const GridSpec& t : group.tiles) {
+    const Vec3 c = t.continuousIndex(p);
+    const double r = t.resolution;
+    if ((c.array() < -0.5).any() || (c.array() > r - 0.5).any()) continue;
+    best = std::max(best, 1e-3 + std::min(std::min(c.x() + 0.5, r - 0.5 - c.x()),
+                                          std::min(c.y() + 0.5, r - 0.5 - c.y())));
+  }
+  return best;
+}
+
+/// The groups' hypotheses joined on the scene grid: each voxel's TSDF and vote the weighted
+/// mean of the groups' (trilinear; weights by groupWeight), its label the group's holding it
+/// farthest in, and each group's instances that lie nearer its own points than any other
+/// group's (a tile also sees the edge of a neighbouring group). The surface is made again
+/// from the joined TSDF.
 SceneHypothesis joinGroups(const TilePlan& plan, std::vector<SceneHypothesis>& parts,
                            float truncation) {
   SceneHypothesis h;
-  std::vector<Grid3<float>> tsdf;
-  std::vector<Grid3<Vec3f>> votes;
-  for (const SceneHypothesis& p : parts) {
-    tsdf.push_back(p.tsdf_m);
-    votes.push_back(p.votes);
-  }
-  h.tsdf_m = blendTiles(plan.scene, tsdf, truncation);
-  h.votes = blendTiles(plan.scene, votes, Vec3f(Vec3f::Zero()));
+  h.tsdf_m = Grid3<float>(plan.scene, truncation);
+  h.votes = Grid3<Vec3f>(plan.scene, Vec3f::Zero());
   h.labels = Grid3<int>(plan.scene, -1);
   std::vector<int> first_label(parts.size(), 0);
   for (size_t g = 0; g + 1 < parts.size(); ++g) {
@@ -350,25 +362,33 @@ SceneHypothesis joinGroups(const TilePlan& plan, std::vector<SceneHypothesis>& p
   for (int i = 0; i < plan.scene.voxelCount(); ++i) {
     const Vec3i v = plan.scene.unravel(i);
     const Vec3 p = plan.scene.voxelCentre(v.x(), v.y(), v.z());
-    double best = -1.0;
+    double sum_w = 0.0, best = 0.0;
+    float tsdf = 0.0f;
+    Vec3f vote = Vec3f::Zero();
     for (size_t g = 0; g < parts.size(); ++g) {
-      const GridSpec& s = parts[g].labels.spec;
-      const Vec3 c = s.continuousIndex(p);
-      const double side = std::min(std::min(c.x() + 0.5, s.resolution - 0.5 - c.x()),
-                                   std::min(c.y() + 0.5, s.resolution - 0.5 - c.y()));
-      if (!s.containsPoint(p) || side <= best) continue;
-      best = side;
-      const Vec3i j = s.voxelIndex(p);
+      const double w = groupWeight(plan.groups[g], p);
+      if (w <= 0.0) continue;
+      tsdf += static_cast<float>(w) * parts[g].tsdf_m.sampleTrilinear(p);
+      vote += static_cast<float>(w) * parts[g].votes.sampleTrilinear(p);
+      sum_w += w;
+      if (w <= best) continue;
+      best = w;
+      const Vec3i j = parts[g].labels.spec.voxelIndex(p);
+      if (!parts[g].labels.spec.inside(j.x(), j.y(), j.z())) continue;
       const int l = parts[g].labels.at(j.x(), j.y(), j.z());
       h.labels.data[i] = l >= 0 ? l + first_label[g] : -1;
+    }
+    if (sum_w > 0.0) {
+      h.tsdf_m.data[i] = tsdf / static_cast<float>(sum_w);
+      h.votes.data[i] = vote / static_cast<float>(sum_w);
     }
   }
   for (size_t g = 0; g < parts.size(); ++g) {
     h.decomposed = h.decomposed || parts[g].decomposed;
-    h.surface.append(parts[g].surface);
     for (InstanceEstimate& e : parts[g].instances)
       if (plan.groupOf(e.vote_centre) == static_cast<int>(g)) h.instances.push_back(std::move(e));
   }
+  if (h.decomposed) h.surface = extractSurface(h.tsdf_m);
   return h;
 }
 

@@ -98,8 +98,13 @@ Plane tablePlane(const Cloud::Ptr& cloud, const TablePlaneConfig& config,
       Cloud::Ptr inside(new Cloud);
       for (const pcl::PointXYZ& p : *cloud)
         if (workspace.contains(T * Vec3(p.x, p.y, p.z))) inside->push_back(p);
+      // Kept only when it is the same table, refined (a box top inside could be larger).
       const Plane again = largestPlane(inside, config);
-      return again.inliers.indices.size() >= 50 ? again : plane;
+      const bool same =
+          again.inliers.indices.size() >= 50 &&
+          again.coefficients.head<3>().dot(plane.coefficients.head<3>()) > std::cos(0.05) &&
+          std::abs(again.coefficients[3] - plane.coefficients[3]) < config.inlier_distance_m;
+      return same ? again : plane;
     }
     Cloud::Ptr next(new Cloud);
     std::vector<bool> on(rest->size(), false);

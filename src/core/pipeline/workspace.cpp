@@ -98,7 +98,9 @@ struct Cluster {
 std::vector<Cluster> connectedGroups(const std::vector<Vec3>& points, double cell,
                                      size_t min_points) {
   std::unordered_map<int64_t, std::vector<size_t>> cells;
-  const auto key = [](int64_t i, int64_t j) { return (i << 32) ^ (j & 0xffffffff); };
+  const auto key = [](int64_t i, int64_t j) {
+    return static_cast<int64_t>((static_cast<uint64_t>(i) << 32) ^ static_cast<uint32_t>(j));
+  };
   for (size_t k = 0; k < points.size(); ++k)
     cells[key(std::floor(points[k].x() / cell), std::floor(points[k].y() / cell))].push_back(k);
   std::unordered_map<int64_t, bool> seen;
@@ -169,7 +171,7 @@ std::vector<Vec2> clusterTiles(const Cluster& c, const Vec2& placement, double v
     const double lo = c.lo[a] - margin, hi = c.hi[a] + margin;
     const int span = static_cast<int>(std::ceil((hi - lo) / voxel - 1e-9));
     if (span <= r) {
-      origins[a].push_back(std::clamp(placement[a] - 0.5 * side, hi - side, lo));
+      origins[a].push_back(std::min(std::max(placement[a] - 0.5 * side, hi - side), lo));
       continue;
     }
     const int count = 1 + (span - overlap - 1) / (r - overlap);
@@ -229,11 +231,11 @@ TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_cent
       hi[a] = quantile(&c, 0.995) + margin;
     }
   }
-  if ((hi - lo).maxCoeff() <= extent_m) {
+  const auto single = [&]() {
     // One tile: the training placement, moved just enough to hold the pile's spread.
     Vec2 centre = single_centre;
     for (int a = 0; a < 2; ++a)
-      centre[a] = std::clamp(centre[a], hi[a] - 0.5 * extent_m, lo[a] + 0.5 * extent_m);
+      centre[a] = std::min(std::max(centre[a], hi[a] - 0.5 * extent_m), lo[a] + 0.5 * extent_m);
     plan.scene = GridSpec::sceneGrid(centre, extent_m, resolution);
     TileGroup g;
     g.grid = plan.scene;
@@ -242,11 +244,26 @@ TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_cent
     g.hi = hi;
     plan.groups.push_back(g);
     return plan;
-  }
-  // Each separate group of the pile gets its own tiles, the largest groups first.
+  };
+  if ((hi - lo).maxCoeff() <= extent_m) return single();
+  const std::vector<Cluster> groups = clusters(pile_points, margin, extent_m, margin);
+  if (groups.empty()) return single();  // a few flying pixels far apart
+  // Each separate group of the pile gets its own tiles, the largest groups first, as long as
+  // the scene stays within a square of max_side (the tiles' count allows no wider).
+  const double max_side = std::ceil(std::sqrt(workspace.max_tiles)) * extent_m;
+  Vec2 scene_lo = Vec2::Constant(1e300), scene_hi = Vec2::Constant(-1e300);
   size_t tiles = 0;
-  for (const Cluster& c : clusters(pile_points, margin, extent_m, margin)) {
+  for (const Cluster& c : groups) {
     std::vector<Vec2> origins = clusterTiles(c, placement(c.median), voxel, resolution, overlap);
+    Vec2 lo_c = scene_lo, hi_c = scene_hi;
+    for (const Vec2& o : origins) {
+      lo_c = lo_c.cwiseMin(o);
+      hi_c = hi_c.cwiseMax(o + Vec2::Constant(extent_m));
+    }
+    if (tiles > 0 && (hi_c - lo_c).maxCoeff() > max_side + 1e-9) {
+      plan.cropped = true;
+      continue;
+    }
     if (tiles + origins.size() > static_cast<size_t>(workspace.max_tiles)) {
       plan.cropped = true;
       if (tiles > 0) break;
@@ -258,6 +275,10 @@ TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_cent
       origins.resize(workspace.max_tiles);
     }
     tiles += origins.size();
+    for (const Vec2& o : origins) {
+      scene_lo = scene_lo.cwiseMin(o);
+      scene_hi = scene_hi.cwiseMax(o + Vec2::Constant(extent_m));
+    }
     plan.groups.push_back(tileGroup(origins, voxel, resolution));
     plan.groups.back().lo = c.lo;
     plan.groups.back().hi = c.hi;
