@@ -49,6 +49,10 @@ std::vector<Vec3> pilePoints(const DepthView& view, const Transform& T_table_cam
                              const WorkspaceConfig& workspace, double min_height_m,
                              double max_height_m, int stride = 2);
 
+/// The x/y median of the points (each coordinate's element at size / 2, as observedPileCentre
+/// takes it). Requires at least one point.
+Vec2 medianXY(std::vector<Vec3> points);
+
 /// Depth where the view's mask is 0 marked missing (nothing when the view has no mask).
 void applyMask(DepthView* view);
 
@@ -89,33 +93,44 @@ TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_cent
                    const std::function<Vec2(const Vec2&)>& placement, double extent_m,
                    int resolution, const WorkspaceConfig& workspace);
 
-/// Blends tile predictions into the scene grid: each voxel the weighted mean of the tiles whose
-/// box holds its centre (trilinear in each tile), weighted by the centre's distance (in voxels)
-/// from the tile's nearest side face, so that a tile's border, where its view of the scene is
-/// cut, counts least. Voxels no tile holds get `outside` (free space for a TSDF). A tile on the
-/// scene's voxel lattice is copied exactly.
-template <typename T>
-Grid3<T> blendTiles(const GridSpec& scene, const std::vector<Grid3<T>>& tiles, const T& outside) {
-  if (tiles.size() == 1 && tiles.front().spec == scene) return tiles.front();
+/// How much a tile counts at a table-frame point: the point's distance (in voxels) from the
+/// tile's nearest side face, where its view of the scene is cut (plus 1e-3, so that a point on
+/// the face still counts); 0 outside the tile.
+double tileWeight(const GridSpec& tile, const Vec3& p_table);
+/// A group's weight at a point: its tile holding the point farthest in (0 outside every tile of
+/// the group; a group's grid is a cube its tiles need not fill).
+double groupWeight(const TileGroup& group, const Vec3& p_table);
+
+/// The grids blended onto `scene`: each voxel the mean of the grids (trilinear) weighted by
+/// `weight(k, p)` for grid k at the voxel's centre p; voxels no grid weighs get `outside`.
+/// A grid on the scene's voxel lattice is copied exactly.
+template <typename T, typename Weight>
+Grid3<T> blendGrids(const GridSpec& scene, const std::vector<Grid3<T>>& grids, Weight&& weight,
+                    const T& outside) {
   Grid3<T> out(scene, outside);
   for (int i = 0; i < scene.voxelCount(); ++i) {
     const Vec3i v = scene.unravel(i);
     const Vec3 p = scene.voxelCentre(v.x(), v.y(), v.z());
     T sum = outside * 0.0f;
-    double weight = 0.0;
-    for (const Grid3<T>& tile : tiles) {
-      const Vec3 c = tile.spec.continuousIndex(p);
-      const double r = tile.spec.resolution;
-      if ((c.array() < -0.5).any() || (c.array() > r - 0.5).any()) continue;
-      const double w =
-          std::min(std::min(c.x() + 0.5, r - 0.5 - c.x()), std::min(c.y() + 0.5, r - 0.5 - c.y())) +
-          1e-3;
-      sum = sum + tile.sampleTrilinear(p) * static_cast<float>(w);
-      weight += w;
+    double total = 0.0;
+    for (size_t k = 0; k < grids.size(); ++k) {
+      const double w = weight(k, p);
+      if (w <= 0.0) continue;
+      sum = sum + grids[k].sampleTrilinear(p) * static_cast<float>(w);
+      total += w;
     }
-    if (weight > 0.0) out.data[i] = sum * static_cast<float>(1.0 / weight);
+    if (total > 0.0) out.data[i] = sum * static_cast<float>(1.0 / total);
   }
   return out;
+}
+
+/// Tile predictions blended onto `scene`, each weighted by tileWeight; one tile that is the
+/// scene is returned as it is.
+template <typename T>
+Grid3<T> blendTiles(const GridSpec& scene, const std::vector<Grid3<T>>& tiles, const T& outside) {
+  if (tiles.size() == 1 && tiles.front().spec == scene) return tiles.front();
+  return blendGrids(
+      scene, tiles, [&](size_t k, const Vec3& p) { return tileWeight(tiles[k].spec, p); }, outside);
 }
 
 }  // namespace simstack

@@ -327,21 +327,6 @@ std::vector<SceneHypothesis> perceiveGroup(
   return hypotheses;
 }
 
-/// Weight of a table-frame point in a group: its distance (voxels) from the nearest side face
-/// of the group's tile that holds it farthest in, 0 outside every tile of the group (a group's
-/// grid is a cube; its tiles need not fill it).
-double groupWeight(const TileGroup& group, const Vec3& p) {
-  double best = 0.0;
-  for (const GridSpec& t : group.tiles) {
-    const Vec3 c = t.continuousIndex(p);
-    const double r = t.resolution;
-    if ((c.array() < -0.5).any() || (c.array() > r - 0.5).any()) continue;
-    best = std::max(best, 1e-3 + std::min(std::min(c.x() + 0.5, r - 0.5 - c.x()),
-                                          std::min(c.y() + 0.5, r - 0.5 - c.y())));
-  }
-  return best;
-}
-
 /// The groups' hypotheses joined on the scene grid: each voxel's TSDF and vote the weighted
 /// mean of the groups' (trilinear; weights by groupWeight), its label the group's holding it
 /// farthest in, and each group's instances that lie nearer its own points than any other
@@ -350,8 +335,6 @@ double groupWeight(const TileGroup& group, const Vec3& p) {
 SceneHypothesis joinGroups(const TilePlan& plan, std::vector<SceneHypothesis>& parts,
                            float truncation) {
   SceneHypothesis h;
-  h.tsdf_m = Grid3<float>(plan.scene, truncation);
-  h.votes = Grid3<Vec3f>(plan.scene, Vec3f::Zero());
   h.labels = Grid3<int>(plan.scene, -1);
   std::vector<int> first_label(parts.size(), 0);
   for (size_t g = 0; g + 1 < parts.size(); ++g) {
@@ -359,28 +342,27 @@ SceneHypothesis joinGroups(const TilePlan& plan, std::vector<SceneHypothesis>& p
     for (int l : parts[g].labels.data) most = std::max(most, l);
     first_label[g + 1] = first_label[g] + most + 1;
   }
+  const auto weight = [&](size_t g, const Vec3& p) { return groupWeight(plan.groups[g], p); };
+  std::vector<Grid3<float>> tsdf;
+  std::vector<Grid3<Vec3f>> votes;
+  for (const SceneHypothesis& part : parts) {
+    tsdf.push_back(part.tsdf_m);
+    votes.push_back(part.votes);
+  }
+  h.tsdf_m = blendGrids(plan.scene, tsdf, weight, truncation);
+  h.votes = blendGrids(plan.scene, votes, weight, Vec3f(Vec3f::Zero()));
   for (int i = 0; i < plan.scene.voxelCount(); ++i) {
     const Vec3i v = plan.scene.unravel(i);
     const Vec3 p = plan.scene.voxelCentre(v.x(), v.y(), v.z());
-    double sum_w = 0.0, best = 0.0;
-    float tsdf = 0.0f;
-    Vec3f vote = Vec3f::Zero();
+    double best = 0.0;
     for (size_t g = 0; g < parts.size(); ++g) {
-      const double w = groupWeight(plan.groups[g], p);
-      if (w <= 0.0) continue;
-      tsdf += static_cast<float>(w) * parts[g].tsdf_m.sampleTrilinear(p);
-      vote += static_cast<float>(w) * parts[g].votes.sampleTrilinear(p);
-      sum_w += w;
+      const double w = weight(g, p);
       if (w <= best) continue;
       best = w;
       const Vec3i j = parts[g].labels.spec.voxelIndex(p);
       if (!parts[g].labels.spec.inside(j.x(), j.y(), j.z())) continue;
       const int l = parts[g].labels.at(j.x(), j.y(), j.z());
       h.labels.data[i] = l >= 0 ? l + first_label[g] : -1;
-    }
-    if (sum_w > 0.0) {
-      h.tsdf_m.data[i] = tsdf / static_cast<float>(sum_w);
-      h.votes.data[i] = vote / static_cast<float>(sum_w);
     }
   }
   for (size_t g = 0; g < parts.size(); ++g) {
@@ -415,15 +397,16 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
   out.timings.table_ms = msSince(t);
 
   t = Clock::now();
-  const Vec2 centre = observedPileCentre(views[0].depth, views[0].camera, out.T_table_camera,
-                                         mc.extent_m, c.min_pile_height_m);
+  // Training's placement (observedPileCentre's rule) from one pass over the pile's points.
   const auto placement = [&](const Vec2& near) {
     return visiblePileCentre(views[0].depth, views[0].camera, out.T_table_camera, near,
                              0.5 * mc.extent_m, c.min_pile_height_m);
   };
-  const TilePlan plan = planTiles(
-      pilePoints(views[0], out.T_table_camera, c.workspace, c.min_pile_height_m, mc.extent_m),
-      centre, placement, mc.extent_m, mc.resolution, c.workspace);
+  const std::vector<Vec3> pile =
+      pilePoints(views[0], out.T_table_camera, c.workspace, c.min_pile_height_m, mc.extent_m);
+  const Vec2 centre =
+      placement(pile.empty() ? Vec2(out.T_table_camera.translation().head<2>()) : medianXY(pile));
+  const TilePlan plan = planTiles(pile, centre, placement, mc.extent_m, mc.resolution, c.workspace);
   out.grid = plan.scene;
   out.tiles = plan.tileCount();
   out.tiles_cropped = plan.cropped;

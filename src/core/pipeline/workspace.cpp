@@ -298,9 +298,29 @@ TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_cent
   return plan;
 }
 
-}  // namespace simstack
+double tileWeight(const GridSpec& tile, const Vec3& p) {
+  const Vec3 c = tile.continuousIndex(p);
+  const double r = tile.resolution;
+  if ((c.array() < -0.5).any() || (c.array() > r - 0.5).any()) return 0.0;
+  return 1e-3 +
+         std::min(std::min(c.x() + 0.5, r - 0.5 - c.x()), std::min(c.y() + 0.5, r - 0.5 - c.y()));
+}
 
-namespace simstack {
+double groupWeight(const TileGroup& group, const Vec3& p) {
+  double best = 0.0;
+  for (const GridSpec& t : group.tiles) best = std::max(best, tileWeight(t, p));
+  return best;
+}
+
+Vec2 medianXY(std::vector<Vec3> points) {
+  Vec2 out;
+  for (int a = 0; a < 2; ++a) {
+    std::nth_element(points.begin(), points.begin() + points.size() / 2, points.end(),
+                     [a](const Vec3& l, const Vec3& r) { return l[a] < r[a]; });
+    out[a] = points[points.size() / 2][a];
+  }
+  return out;
+}
 
 int TilePlan::tileCount() const {
   int n = 0;
