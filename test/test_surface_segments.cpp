@@ -2,6 +2,7 @@
 // on rendered scenes whose objects (and which pixel shows which) are known.
 #include <gtest/gtest.h>
 
+#include <functional>
 #include <map>
 
 #include "simstack/eval/segmentation.h"
@@ -231,6 +232,73 @@ TEST(RegroupAlongSurfaceSegments, JoinsABoxCutInTwoAndKeepsAnUnseenInstance) {
   EXPECT_GT(segmentationAgreement(truth, out.labels.data).agreement, 0.95);
 }
 
+// `seg` with the voxels of instance `from` that `inside` accepts moved to a new instance.
+InstanceSegmentation cutOff(InstanceSegmentation seg, int from,
+                            const std::function<bool(const Vec3&)>& inside) {
+  const int piece = seg.size();
+  for (int i = 0; i < kGrid.voxelCount(); ++i) {
+    const Vec3i c = kGrid.unravel(i);
+    if (seg.labels.data[i] == from && inside(kGrid.voxelCentre(c.x(), c.y(), c.z())))
+      seg.labels.data[i] = piece;
+  }
+  seg.centres_table.assign(piece + 1, Vec3::Zero());
+  seg.voxel_counts.assign(piece + 1, 0);
+  for (int l : seg.labels.data)
+    if (l >= 0) ++seg.voxel_counts[l];
+  return seg;
+}
+
+// The segment points that fall on instance `k`'s voxels.
+int visiblePoints(const SurfaceSegments& segments, const InstanceSegmentation& seg, int k) {
+  int n = 0;
+  for (const Vec3& p : segments.points_table) {
+    const int voxel = nearestLabelledVoxel(seg.labels, p);
+    n += voxel >= 0 && seg.labels.data[voxel] == k;
+  }
+  return n;
+}
+
+TEST(RegroupAlongSurfaceSegments, JoinsAnUnseenPieceToTheObjectItTouches) {
+  const View v = stack();
+  const GroundTruthGrids gt = truthOf(v);
+  // The lower box's bottom back corner, which the camera (at +x, -y, above) cannot see, cut off
+  // as the votes of a large object do.
+  const InstanceSegmentation seg =
+      cutOff(instancesFrom(gt.labels, {-1, 0, 1}), 0,
+             [](const Vec3& p) { return p.x() < -0.02 && p.y() > 0.0 && p.z() < 0.04; });
+  ASSERT_EQ(seg.size(), 3);
+  ASSERT_GE(seg.voxel_counts[2], 15);
+  ASSERT_EQ(visiblePoints(v.segments, seg, 2), 0);
+  const InstanceSegmentation out =
+      regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, seg);
+  ASSERT_EQ(out.size(), 2);
+  EXPECT_GT(segmentationAgreement(truthLabels(gt.labels), out.labels.data).agreement, 0.95);
+  // Without the rule the piece stays an object of its own.
+  SurfaceSegmentConfig off;
+  off.max_unseen_points = 0;
+  EXPECT_EQ(regroupAlongSurfaceSegments(v.segments, off, 5, seg).size(), 3);
+}
+
+TEST(RegroupAlongSurfaceSegments, JoinsASliverSeenOnAnotherInstancesPatch) {
+  const View v = stack();
+  const GroundTruthGrids gt = truthOf(v);
+  // The lower box's front corner column: seen, but by fewer points than a patch must hold of
+  // an instance (raised here, as the view is close), all on the box's own patch.
+  const InstanceSegmentation seg =
+      cutOff(instancesFrom(gt.labels, {-1, 0, 1}), 0,
+             [](const Vec3& p) { return p.x() > 0.05 && p.y() < -0.03; });
+  ASSERT_EQ(seg.size(), 3);
+  SurfaceSegmentConfig config;
+  config.min_segment_points = 1000;
+  const int seen = visiblePoints(v.segments, seg, 2);
+  ASSERT_GE(seen, config.max_unseen_points);
+  ASSERT_LT(seen, config.min_segment_points);
+  ASSERT_GE(visiblePoints(v.segments, seg, 0), config.min_segment_points);
+  const InstanceSegmentation out = regroupAlongSurfaceSegments(v.segments, config, 5, seg);
+  ASSERT_EQ(out.size(), 2);
+  EXPECT_GT(segmentationAgreement(truthLabels(gt.labels), out.labels.data).agreement, 0.95);
+}
+
 TEST(SurfaceSegments, TheSameViewGivesTheSamePatches) {
   const View v = occlusion();
   for (int i = 0; i < 5; ++i) {
@@ -258,6 +326,12 @@ TEST(SurfaceSegments, EmptyViewsAndBadSettings) {
   }
   bad = SurfaceSegmentConfig();
   bad.max_free_share = 1.0;
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+  bad = SurfaceSegmentConfig();
+  bad.fragment_share = 0.0;
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+  bad = SurfaceSegmentConfig();
+  bad.max_unseen_points = -1;
   EXPECT_THROW(bad.validate(), std::invalid_argument);
   DepthImage wrong(10, 10, 0.5f);
   EXPECT_THROW(segmentVisibleSurface(wrong, PinholeCamera(), Transform::Identity(), 0.01,

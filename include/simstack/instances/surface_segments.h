@@ -35,6 +35,14 @@ struct SurfaceSegmentConfig {
   /// A patch is part of an instance when it holds at least this share of the instance's
   /// visible points.
   double min_instance_share = 0.1;
+  /// A patch is also part of an instance, however few of its points that holds, when the patch
+  /// is part of another instance and holds at least this share of the instance's visible
+  /// points: a sliver the votes cut off a larger object (1: only when all of them do).
+  double fragment_share = 0.5;
+  /// An instance with fewer visible points than this (the camera did not see it) is part of the
+  /// instance it touches over the most voxel faces: the votes cut it off the hidden side of
+  /// an object (0 = off; an instance touching none stays).
+  int max_unseen_points = 10;
   /// Hull points more than this in front of the observed depth are in space seen free.
   double free_space_margin_m = 0.02;
   /// Two groups of patches join when at most this share of their hull's samples is seen free.
@@ -75,8 +83,11 @@ double seenFreeShare(const SurfaceSegments& s, const std::vector<int>& a, const 
                      const SurfaceSegmentConfig& config, uint64_t seed);
 
 /// The Hough instances regrouped along the patches (see the file comment).
+/// - First, an instance the camera did not see (fewer than `max_unseen_points` visible points)
+///   joins the instance it touches most.
 /// - A patch is part of an instance when it holds at least `min_instance_share` of the
-///   instance's visible points (and `min_segment_points`).
+///   instance's visible points (and `min_segment_points`), or, when it is part of another
+///   instance, `fragment_share` of them.
 /// - Patches start as groups; two groups that are part of a common instance join when at most
 ///   `max_free_share` of their hull is seen free, the least free pair first.
 /// - Each voxel of an instance goes to the group whose visible voxels it reaches first through

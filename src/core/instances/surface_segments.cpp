@@ -10,6 +10,7 @@
 #include <deque>
 #include <limits>
 #include <map>
+#include <numeric>
 #include <random>
 #include <set>
 #include <stdexcept>
@@ -31,6 +32,8 @@ void SurfaceSegmentConfig::validate() const {
   if (!(free_space_margin_m >= 0.0)) fail("free_space_margin_m must be >= 0");
   if (!(max_free_share >= 0.0 && max_free_share < 1.0)) fail("max_free_share must lie in [0, 1)");
   if (hull_samples < 1) fail("hull_samples must be >= 1");
+  if (!(fragment_share > 0.0 && fragment_share <= 1.0)) fail("fragment_share must lie in (0, 1]");
+  if (max_unseen_points < 0) fail("max_unseen_points must be >= 0");
 }
 
 namespace {
@@ -219,6 +222,12 @@ std::vector<PatchGroup> initialGroups(const SurfaceSegments& segments, const Vis
       if (points.size() >= static_cast<size_t>(config.min_segment_points) &&
           points.size() >= config.min_instance_share * parts.visible[k])
         part_of[p].insert(k);
+  // Slivers: most of an instance's few visible points on a patch of another instance.
+  const std::vector<std::set<int>> regular = part_of;
+  for (int k = 0; k < instances; ++k)
+    for (const auto& [p, points] : parts.seen[k])
+      if (!regular[p].empty() && points.size() >= config.fragment_share * parts.visible[k])
+        part_of[p].insert(k);
   std::vector<PatchGroup> groups;
   for (int p = 0; p < segments.patches; ++p) {
     if (part_of[p].empty()) continue;
@@ -232,6 +241,48 @@ std::vector<PatchGroup> initialGroups(const SurfaceSegments& segments, const Vis
     groups.push_back(std::move(grp));
   }
   return groups;
+}
+
+/// `labels` with every instance the camera did not see (fewer than `max_unseen` visible points)
+/// joined to the instance it shares the most voxel faces with (chains of unseen instances end
+/// in one label); true when any was joined.
+bool joinUnseen(const std::vector<int>& visible, int max_unseen, Grid3<int>* labels) {
+  const int instances = static_cast<int>(visible.size());
+  std::vector<std::map<int, int>> faces(instances);
+  const GridSpec& g = labels->spec;
+  for (int v = 0; v < g.voxelCount(); ++v) {
+    const int a = labels->data[v];
+    if (a < 0) continue;
+    const Vec3i c = g.unravel(v);
+    for (int axis = 0; axis < 3; ++axis) {
+      Vec3i n = c;
+      ++n[axis];
+      if (!g.inside(n.x(), n.y(), n.z())) continue;
+      const int b = labels->data[g.linear(n.x(), n.y(), n.z())];
+      if (b < 0 || b == a) continue;
+      ++faces[a][b];
+      ++faces[b][a];
+    }
+  }
+  std::vector<int> root(instances);
+  std::iota(root.begin(), root.end(), 0);
+  auto find = [&](int k) {
+    while (root[k] != k) k = root[k] = root[root[k]];
+    return k;
+  };
+  bool joined = false;
+  for (int k = 0; k < instances; ++k) {
+    if (visible[k] >= max_unseen || faces[k].empty()) continue;
+    const auto most =
+        std::max_element(faces[k].begin(), faces[k].end(),
+                         [](const auto& a, const auto& b) { return a.second < b.second; });
+    root[find(k)] = find(most->first);
+    joined = true;
+  }
+  if (!joined) return false;
+  for (int& l : labels->data)
+    if (l >= 0) l = find(l);
+  return true;
 }
 
 /// Two groups that share an instance and do not meet at a concave edge join when the hull of
@@ -357,13 +408,16 @@ InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments
   config.validate();
   InstanceSegmentation out = hough;
   const int instances = hough.size();
-  if (segments.patches < 1 || instances < 1) return out;
-  const VisibleParts parts = visibleParts(segments, hough.labels, instances);
+  if (instances < 1) return out;
+  Grid3<int> labels = hough.labels;
+  VisibleParts parts = visibleParts(segments, labels, instances);
+  const bool joined = joinUnseen(parts.visible, config.max_unseen_points, &labels);
+  if (joined) parts = visibleParts(segments, labels, instances);
   std::vector<PatchGroup> groups = initialGroups(segments, parts, config);
-  if (groups.empty()) return out;
+  if (groups.empty() && !joined) return out;
   joinGroups(segments, config, &groups);
-  const std::vector<int> owner = growGroups(hough.labels, groups, parts.voxel_of);
-  relabel(hough.labels, owner, static_cast<int>(groups.size()), instances, min_part_voxels, &out);
+  const std::vector<int> owner = growGroups(labels, groups, parts.voxel_of);
+  relabel(labels, owner, static_cast<int>(groups.size()), instances, min_part_voxels, &out);
   return out;
 }
 

@@ -49,6 +49,8 @@ void segmentFields(C& c, F&& f) {
   f("concavity_tolerance_deg", c.concavity_tolerance_deg);
   f("min_segment_points", c.min_segment_points);
   f("min_instance_share", c.min_instance_share);
+  f("fragment_share", c.fragment_share);
+  f("max_unseen_points", c.max_unseen_points);
   f("free_space_margin_m", c.free_space_margin_m);
   f("max_free_share", c.max_free_share);
   f("hull_samples", c.hull_samples);
