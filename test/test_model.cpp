@@ -590,6 +590,35 @@ torch::Tensor probe(const std::string& model_path) {
 }
 }  // namespace
 
+TEST(CvaeTrainer, ValidatesAModelFileAsARunDoes) {
+  const std::string data = tinyDataset(3);
+  const std::string a = tempPath("simstack_train_validate");
+  const RemoveAtExit cleanup{{a, data}};
+  fs::remove_all(a);
+  const TrainConfig tc = tinyTraining(2);
+  CvaeTrainer(data, tiny(), tc, a, "test").run(false);
+  TrainConfig v = tc;
+  v.validation_scenes = 2;
+  v.validation_views = 3;
+  // (Two steps of training predict little occupied space: BCE tells the views apart.)
+  const TrainingReport r = CvaeTrainer::validateModel(data, a + "/model.pt", v);
+  EXPECT_GE(r.validation_iou, 0.0);
+  EXPECT_LE(r.validation_iou, 1.0);
+  EXPECT_GE(r.validation_iou_se, 0.0);
+  EXPECT_GT(r.validation_bce, 0.0);
+  EXPECT_EQ(CvaeTrainer::validateModel(data, a + "/model.pt", v).validation_bce, r.validation_bce);
+  // One scene: no spread over scenes; its three views are not its first view alone.
+  v.validation_scenes = 1;
+  const TrainingReport three = CvaeTrainer::validateModel(data, a + "/model.pt", v);
+  EXPECT_EQ(three.validation_iou_se, 0.0);
+  v.validation_views = 1;
+  EXPECT_NE(CvaeTrainer::validateModel(data, a + "/model.pt", v).validation_bce,
+            three.validation_bce);
+  EXPECT_THROW(CvaeTrainer::validateModel(data, a + "/missing.pt", v), std::runtime_error);
+  v.validation_views = 0;
+  EXPECT_THROW(CvaeTrainer::validateModel(data, a + "/model.pt", v), std::invalid_argument);
+}
+
 TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   const std::string data = tinyDataset(3);
   TrainConfig tc = tinyTraining(4);

@@ -18,7 +18,7 @@ int main(int argc, char** argv) {
   int threads = 0;
   std::string architecture;
   int64_t steps = 0;
-  std::string init_from;
+  std::string init_from, validate_only;
   CLI::App app{
       "Train the depth-conditioned VAE of SIMstack (or its FC ablation) on a generated dataset. "
       "Views and "
@@ -31,8 +31,8 @@ int main(int argc, char** argv) {
       ->required()
       ->check(CLI::ExistingFile);
   app.add_option("--output", output,
-                 "output directory (model.pt, model.yaml, checkpoints, train_log.csv)")
-      ->required();
+                 "output directory (model.pt, model.yaml, checkpoints, train_log.csv); required "
+                 "unless --validate-only");
   app.add_flag("--resume", resume, "continue from OUTPUT/checkpoint.pt");
   app.add_option("--threads", threads, "torch threads (overrides training.threads)")
       ->check(CLI::Range(1, 256));
@@ -45,7 +45,15 @@ int main(int argc, char** argv) {
                  "warm start from this model file: its tensors of the same name and shape "
                  "(overrides training.init_from; not read with --resume from a checkpoint)")
       ->check(CLI::ExistingFile);
+  app.add_option("--validate-only", validate_only,
+                 "score this model file on the dataset's validation scenes as a run's validation "
+                 "does (training.validation_scenes x validation_views) and exit; no training")
+      ->check(CLI::ExistingFile);
   CLI11_PARSE(app, argc, argv);
+  if (output.empty() && validate_only.empty()) {
+    std::cerr << "simstack_train: error: --output is required (unless --validate-only)\n";
+    return 2;
+  }
 
   keepFreedMemoryForReuse();
   try {
@@ -56,6 +64,19 @@ int main(int argc, char** argv) {
     if (!architecture.empty()) model.architecture = architecture;
     if (steps > 0) training.steps = steps;
     if (!init_from.empty()) training.init_from = init_from;
+    if (!validate_only.empty()) {
+      const TrainingReport r = CvaeTrainer::validateModel(dataset, validate_only, training);
+      std::cout << "validation of " << validate_only << " on the last "
+                << training.validation_scenes << " scenes of " << dataset << " x "
+                << training.validation_views << " views: IoU " << r.validation_iou << " +- "
+                << r.validation_iou_se << " (standard error over scenes), BCE " << r.validation_bce
+                << ", hypotheses disagree on " << 100.0 * r.validation_disagreement
+                << " % of their voxels";
+      if (std::isfinite(r.validation_posterior_iou))
+        std::cout << ", IoU from the posterior code " << r.validation_posterior_iou;
+      std::cout << "\n";
+      return 0;
+    }
     std::string command;
     for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
     CvaeTrainer trainer(dataset, model, training, output, command);
@@ -75,8 +96,9 @@ int main(int argc, char** argv) {
               << r.samples_per_second << " samples/s)\n  final losses: total " << r.total
               << ", tsdf " << r.tsdf << ", partial " << r.partial << ", votes " << r.votes
               << ", mmd " << r.mmd << ", occupancy " << r.occupancy << "\n  validation: IoU "
-              << r.validation_iou << ", BCE " << r.validation_bce << ", hypotheses disagree on "
-              << 100.0 * r.validation_disagreement << " % of their voxels";
+              << r.validation_iou << " +- " << r.validation_iou_se << ", BCE " << r.validation_bce
+              << ", hypotheses disagree on " << 100.0 * r.validation_disagreement
+              << " % of their voxels";
     if (std::isfinite(r.validation_posterior_iou))
       std::cout << ", IoU from the posterior code " << r.validation_posterior_iou;
     if (std::isfinite(r.posterior_mu_rms)) {

@@ -20,6 +20,8 @@ struct TrainingReport {
   /// Mean of the last 50 steps; occupancy is reported also when its weight is 0.
   double total = 0, tsdf = 0, partial = 0, votes = 0, mmd = 0, occupancy = 0;
   double validation_iou = 0, validation_bce = 0;
+  /// Standard error of validation_iou: the spread of the scenes' mean IoU over sqrt(scenes).
+  double validation_iou_se = 0;
   /// Over all validation scenes, the share of the voxels occupied in some of a scene's three
   /// hypotheses that are not occupied in all three: near 0 means the samples are copies of one
   /// scene.
@@ -63,6 +65,13 @@ class CvaeTrainer {
   /// <output>/model.pt and its card <output>/model.yaml. `progress`, when given, is called
   /// after every step from the calling thread.
   TrainingReport run(bool resume, const TrainingProgressCallback& progress = {});
+
+  /// The validation of a run (the last `training.validation_scenes` scenes of the dataset, each
+  /// from `training.validation_views` viewpoints) for a trained model file, without training:
+  /// the validation_* fields of the report. Throws std::runtime_error naming the file that is
+  /// unusable or does not match the other.
+  static TrainingReport validateModel(const std::string& dataset_path,
+                                      const std::string& model_path, const TrainConfig& training);
 
  private:
   struct Impl;

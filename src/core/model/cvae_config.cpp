@@ -64,6 +64,7 @@ void trainFields(C& c, F&& f) {
   f("checkpoint_every", c.checkpoint_every);
   f("validate_every", c.validate_every);
   f("validation_scenes", c.validation_scenes);
+  f("validation_views", c.validation_views);
   f("image_width", c.image_width);
   f("image_height", c.image_height);
   f("sensor_noise", c.sensor_noise);
@@ -150,6 +151,7 @@ void TrainConfig::validate() const {
   require(checkpoint_every >= 1 && validate_every >= 1,
           "checkpoint_every and validate_every must be >= 1");
   require(validation_scenes >= 1, "validation_scenes must be >= 1");
+  require(validation_views >= 1, "validation_views must be >= 1");
   require(image_width >= 16 && image_height >= 16, "image size must be at least 16x16");
   require(overhead_share >= 0.0 && overhead_share <= 1.0, "overhead_share must lie in [0, 1]");
 }

@@ -127,7 +127,7 @@ class TrainingLog {
     if (log_.tellp() == 0)  // a new log (also when a finished model is trained further)
       log_ << "step,total,tsdf,partial,votes,mmd,occupancy,samples_per_s,validation_iou,"
               "validation_bce,validation_disagreement,posterior_mu_rms,posterior_sigma,"
-              "validation_posterior_iou\n";
+              "validation_posterior_iou,validation_iou_se\n";
   }
   void write(int64_t step, const std::array<double, 6>& losses, const TrainingReport& report,
              bool validated, bool posterior_measured) {
@@ -144,6 +144,7 @@ class TrainingLog {
       }
       log_ << ",";
       if (std::isfinite(report.validation_posterior_iou)) log_ << report.validation_posterior_iou;
+      log_ << "," << report.validation_iou_se;
     }
     log_ << "\n";
   }
@@ -261,6 +262,32 @@ CvaeTrainer::CvaeTrainer(const std::string& dataset_path, const CvaeConfig& mode
 
 CvaeTrainer::~CvaeTrainer() = default;
 
+TrainingReport CvaeTrainer::validateModel(const std::string& dataset_path,
+                                          const std::string& model_path,
+                                          const TrainConfig& training) {
+  training.validate();
+  Cvae model = loadCvae(model_path);
+  Impl impl;
+  impl.model_config = model->config();
+  impl.config = training;
+  impl.reader = std::make_unique<DatasetReader>(dataset_path);
+  const DatasetInfo& info = impl.reader->info();
+  const CvaeConfig& mc = impl.model_config;
+  if (info.resolution != mc.resolution || std::abs(info.extent_m - mc.extent_m) > 1e-9 ||
+      std::abs(info.truncation_m - mc.truncation_m()) > 1e-9)
+    throw std::runtime_error("dataset " + dataset_path + " (" + std::to_string(info.resolution) +
+                             "^3 over " + std::to_string(info.extent_m) +
+                             " m) does not match model " + model_path);
+  impl.train_scenes = std::max(0, info.num_scenes - training.validation_scenes);
+  torch::set_num_threads(training.threads);
+  torch::manual_seed(training.seed);
+  const TrainingSampleBuilder builder(mc, scaledKinect(training.image_width, training.image_height),
+                                      training.sensor_noise, training.overhead_share);
+  TrainingReport report;
+  impl.validate(model, builder, &report);
+  return report;
+}
+
 Cvae CvaeTrainer::Impl::loadOrCreate(bool resuming, const fs::path& checkpoint) const {
   const CvaeConfig& mc = model_config;
   Cvae model = resuming ? loadCvae(checkpoint.string(), &mc) : Cvae(mc);
@@ -299,8 +326,9 @@ int64_t CvaeTrainer::Impl::restore(Cvae& model, torch::optim::Adam& optimizer,
   return start;
 }
 
-// Validation set: one fixed view per held-out scene, three codes each. Besides IoU and BCE it
-// measures whether the latent space is used: how often the three hypotheses disagree.
+// Validation set: `validation_views` fixed views per held-out scene, three codes each. Besides
+// IoU and BCE it measures whether the latent space is used: how often the three hypotheses
+// disagree.
 void CvaeTrainer::Impl::validate(Cvae& model, const TrainingSampleBuilder& builder,
                                  TrainingReport* report) const {
   const CvaeConfig& mc = model_config;
@@ -309,32 +337,46 @@ void CvaeTrainer::Impl::validate(Cvae& model, const TrainingSampleBuilder& build
   torch::NoGradGuard no_grad;
   const int n = reader->size();
   double iou = 0, bce = 0, posterior_iou = 0;
+  std::vector<double> scene_iou;
   int64_t disagree = 0, predicted = 0;
   int count = 0;
   for (int k = train_scenes; k < n; ++k) {
+    // One stream per scene, its views drawn in turn: the first view is the one a single-view
+    // validation drew.
     std::mt19937_64 rng(mix(config.seed ^ 0xA11DA7Eull, static_cast<uint64_t>(k)));
-    const TrainingSample s = builder.build(reader->read(k), rng);
-    const Batch b = toBatch({s}, r);
-    const int samples = 3;
-    const torch::Tensor z = torch::randn({samples, mc.latent_size});
-    const CvaeOutput o = model->generate(b.partial.expand({samples, 2, r, r, r}).contiguous(), z);
-    std::vector<std::vector<float>> preds;
-    for (int j = 0; j < samples; ++j) preds.push_back(values(o.tsdf[j]));
-    const OccupancyScores sc = scoreOccupancy(s.tsdf, preds);
-    iou += sc.iou;
-    bce += sc.bce;
-    if (mc.hasLatentCode()) {
-      // The code the encoder gives when it sees the ground truth (posterior mean): better than
-      // prior codes only when the code carries what the view does not show.
-      const torch::Tensor mu = model->forward(b.partial, b.tsdf, b.votes).mu;
-      posterior_iou += scoreOccupancy(s.tsdf, {values(model->generate(b.partial, mu).tsdf[0])}).iou;
+    const SceneRecord record = reader->read(k);
+    double scene_sum = 0;
+    for (int v = 0; v < config.validation_views; ++v) {
+      const TrainingSample s = builder.build(record, rng);
+      const Batch b = toBatch({s}, r);
+      const int samples = 3;
+      const torch::Tensor z = torch::randn({samples, mc.latent_size});
+      const CvaeOutput o = model->generate(b.partial.expand({samples, 2, r, r, r}).contiguous(), z);
+      std::vector<std::vector<float>> preds;
+      for (int j = 0; j < samples; ++j) preds.push_back(values(o.tsdf[j]));
+      const OccupancyScores sc = scoreOccupancy(s.tsdf, preds);
+      iou += sc.iou;
+      scene_sum += sc.iou;
+      bce += sc.bce;
+      if (mc.hasLatentCode()) {
+        // The code the encoder gives when it sees the ground truth (posterior mean): better
+        // than prior codes only when the code carries what the view does not show.
+        const torch::Tensor mu = model->forward(b.partial, b.tsdf, b.votes).mu;
+        posterior_iou +=
+            scoreOccupancy(s.tsdf, {values(model->generate(b.partial, mu).tsdf[0])}).iou;
+      }
+      const torch::Tensor votes = (o.tsdf <= 0).sum(0);  // per voxel: hypotheses occupied
+      predicted += (votes > 0).sum().item<int64_t>();
+      disagree += ((votes > 0) & (votes < samples)).sum().item<int64_t>();
+      ++count;
     }
-    const torch::Tensor votes = (o.tsdf <= 0).sum(0);  // per voxel: hypotheses occupied
-    predicted += (votes > 0).sum().item<int64_t>();
-    disagree += ((votes > 0) & (votes < samples)).sum().item<int64_t>();
-    ++count;
+    scene_iou.push_back(scene_sum / config.validation_views);
   }
   report->validation_iou = iou / count;
+  double spread = 0;
+  for (double x : scene_iou) spread += (x - report->validation_iou) * (x - report->validation_iou);
+  const double m = static_cast<double>(scene_iou.size());
+  report->validation_iou_se = m > 1 ? std::sqrt(spread / (m - 1) / m) : 0.0;
   report->validation_bce = bce / count;
   report->validation_posterior_iou =
       mc.hasLatentCode() ? posterior_iou / count : std::numeric_limits<double>::quiet_NaN();
@@ -353,6 +395,7 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
   meta << YAML::Key << "dataset_seed" << YAML::Value << reader->info().seed;
   meta << YAML::Key << "dataset_scenes" << YAML::Value << reader->size();
   meta << YAML::Key << "validation_scenes" << YAML::Value << config.validation_scenes;
+  meta << YAML::Key << "validation_views" << YAML::Value << config.validation_views;
   meta << YAML::Key << "steps" << YAML::Value << report.steps;
   meta << YAML::Key << "final_losses" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
        << "total" << YAML::Value << report.total << YAML::Key << "tsdf" << YAML::Value
@@ -360,9 +403,9 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
        << "votes" << YAML::Value << report.votes << YAML::Key << "mmd" << YAML::Value << report.mmd
        << YAML::Key << "occupancy" << YAML::Value << report.occupancy << YAML::EndMap;
   meta << YAML::Key << "validation" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
-       << "iou" << YAML::Value << report.validation_iou << YAML::Key << "bce" << YAML::Value
-       << report.validation_bce << YAML::Key << "disagreement" << YAML::Value
-       << report.validation_disagreement;
+       << "iou" << YAML::Value << report.validation_iou << YAML::Key << "iou_se" << YAML::Value
+       << report.validation_iou_se << YAML::Key << "bce" << YAML::Value << report.validation_bce
+       << YAML::Key << "disagreement" << YAML::Value << report.validation_disagreement;
   if (std::isfinite(report.validation_posterior_iou))
     meta << YAML::Key << "posterior_code_iou" << YAML::Value << report.validation_posterior_iou;
   meta << YAML::EndMap;
