@@ -113,6 +113,7 @@ struct TrainConfig {
   /// about 0.08, so 32 views leave the mean uncertain by 0.014 (docs/experiments.md).
   int validation_scenes = 128;
   int validation_views = 2;
+  int validation_samples = 8;  ///< latent codes per validation view (hypotheses S)
   int image_width = 320;  ///< rendered training views (intrinsics scale with it)
   int image_height = 240;
   bool sensor_noise = true;  ///< Kinect-like noise in training views

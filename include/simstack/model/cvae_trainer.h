@@ -19,13 +19,21 @@ struct TrainingReport {
   int64_t steps = 0;
   /// Mean of the last 50 steps; occupancy is reported also when its weight is 0.
   double total = 0, tsdf = 0, partial = 0, votes = 0, mmd = 0, occupancy = 0;
+  /// IoU and BCE of the expected occupancy of `validation_samples` prior codes (the mean of the
+  /// hypotheses, as the evaluation scores them).
   double validation_iou = 0, validation_bce = 0;
   /// Standard error of validation_iou: the spread of the scenes' mean IoU over sqrt(scenes).
   double validation_iou_se = 0;
-  /// Over all validation scenes, the share of the voxels occupied in some of a scene's three
-  /// hypotheses that are not occupied in all three: near 0 means the samples are copies of one
-  /// scene.
+  /// Mean IoU of one hypothesis, and of the hypothesis nearest the truth (best of S: an
+  /// oracle that shows whether the right completion is among the hypotheses).
+  double validation_single_iou = 0, validation_best_iou = 0;
+  /// Over all validation views, the share of the voxels occupied in some hypothesis that are
+  /// not occupied in all: near 0 means the samples are copies of one scene. Also among the
+  /// voxels the view observed (partial TSDF weight > 0) and those it did not, and the share of
+  /// all disagreeing voxels that lie in the unobserved ones (hidden parts are where they belong).
   double validation_disagreement = 0;
+  double validation_disagreement_seen = 0, validation_disagreement_unseen = 0;
+  double validation_unseen_share = 0;
   /// Validation IoU of one hypothesis decoded from the encoder's posterior mean, the encoder
   /// seeing the ground truth: above validation_iou only if the code carries the hidden parts
   /// (it is what training optimises; prior codes are what inference has). NaN for FC.

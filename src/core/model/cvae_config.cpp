@@ -65,6 +65,7 @@ void trainFields(C& c, F&& f) {
   f("validate_every", c.validate_every);
   f("validation_scenes", c.validation_scenes);
   f("validation_views", c.validation_views);
+  f("validation_samples", c.validation_samples);
   f("image_width", c.image_width);
   f("image_height", c.image_height);
   f("sensor_noise", c.sensor_noise);
@@ -152,6 +153,7 @@ void TrainConfig::validate() const {
           "checkpoint_every and validate_every must be >= 1");
   require(validation_scenes >= 1, "validation_scenes must be >= 1");
   require(validation_views >= 1, "validation_views must be >= 1");
+  require(validation_samples >= 2, "validation_samples must be >= 2");
   require(image_width >= 16 && image_height >= 16, "image size must be at least 16x16");
   require(overhead_share >= 0.0 && overhead_share <= 1.0, "overhead_share must lie in [0, 1]");
 }

@@ -127,7 +127,9 @@ class TrainingLog {
     if (log_.tellp() == 0)  // a new log (also when a finished model is trained further)
       log_ << "step,total,tsdf,partial,votes,mmd,occupancy,samples_per_s,validation_iou,"
               "validation_bce,validation_disagreement,posterior_mu_rms,posterior_sigma,"
-              "validation_posterior_iou,validation_iou_se\n";
+              "validation_posterior_iou,validation_iou_se,validation_single_iou,"
+              "validation_best_iou,validation_disagreement_seen,validation_disagreement_unseen,"
+              "validation_unseen_share\n";
   }
   void write(int64_t step, const std::array<double, 6>& losses, const TrainingReport& report,
              bool validated, bool posterior_measured) {
@@ -144,7 +146,9 @@ class TrainingLog {
       }
       log_ << ",";
       if (std::isfinite(report.validation_posterior_iou)) log_ << report.validation_posterior_iou;
-      log_ << "," << report.validation_iou_se;
+      log_ << "," << report.validation_iou_se << "," << report.validation_single_iou << ","
+           << report.validation_best_iou << "," << report.validation_disagreement_seen << ","
+           << report.validation_disagreement_unseen << "," << report.validation_unseen_share;
     }
     log_ << "\n";
   }
@@ -326,61 +330,94 @@ int64_t CvaeTrainer::Impl::restore(Cvae& model, torch::optim::Adam& optimizer,
   return start;
 }
 
-// Validation set: `validation_views` fixed views per held-out scene, three codes each. Besides
-// IoU and BCE it measures whether the latent space is used: how often the three hypotheses
-// disagree.
+namespace {
+
+/// Sums of the validation measures over views.
+struct ValidationSums {
+  double iou = 0, bce = 0, single = 0, best = 0, posterior = 0;
+  int64_t disagree[2] = {0, 0}, occupied[2] = {0, 0};  // [seen, unseen]
+  int views = 0;
+};
+
+/// One validation view: S prior codes (and the posterior mean for a C-VAE) scored against the
+/// truth; returns the expected-occupancy IoU.
+double scoreValidationView(Cvae& model, const CvaeConfig& mc, const TrainingSample& s,
+                           int samples, ValidationSums* sums) {
+  const int r = mc.resolution;
+  const Batch b = toBatch({s}, r);
+  const torch::Tensor z = torch::randn({samples, mc.latent_size});
+  const CvaeOutput o = model->generate(b.partial.expand({samples, 2, r, r, r}).contiguous(), z);
+  std::vector<std::vector<float>> preds;
+  for (int j = 0; j < samples; ++j) preds.push_back(values(o.tsdf[j]));
+  const OccupancyScores sc = scoreOccupancy(s.tsdf, preds);
+  sums->iou += sc.iou;
+  sums->bce += sc.bce;
+  double best = 0;
+  for (const std::vector<float>& p : preds) {
+    const double one = scoreOccupancy(s.tsdf, {p}).iou;
+    sums->single += one / samples;
+    best = std::max(best, one);
+  }
+  sums->best += best;
+  if (mc.hasLatentCode()) {
+    // The code the encoder gives when it sees the ground truth (posterior mean): better than
+    // prior codes only when the code carries what the view does not show.
+    const torch::Tensor mu = model->forward(b.partial, b.tsdf, b.votes).mu;
+    sums->posterior += scoreOccupancy(s.tsdf, {values(model->generate(b.partial, mu).tsdf[0])}).iou;
+  }
+  const torch::Tensor votes = (o.tsdf <= 0).sum(0).flatten();  // per voxel: hypotheses occupied
+  const torch::Tensor seen = (b.partial[0][1] > 0.5).flatten();
+  const torch::Tensor any = votes > 0, split = any & (votes < samples);
+  for (int u = 0; u < 2; ++u) {
+    const torch::Tensor region = u == 0 ? seen : ~seen;
+    sums->occupied[u] += (any & region).sum().item<int64_t>();
+    sums->disagree[u] += (split & region).sum().item<int64_t>();
+  }
+  ++sums->views;
+  return sc.iou;
+}
+
+}  // namespace
+
+// Validation set: `validation_views` fixed views per held-out scene, `validation_samples` codes
+// each. Besides IoU and BCE it measures whether the latent space is used (scoreValidationView).
 void CvaeTrainer::Impl::validate(Cvae& model, const TrainingSampleBuilder& builder,
                                  TrainingReport* report) const {
-  const CvaeConfig& mc = model_config;
-  const int r = mc.resolution;
   model->eval();
   torch::NoGradGuard no_grad;
   const int n = reader->size();
-  double iou = 0, bce = 0, posterior_iou = 0;
+  ValidationSums sums;
   std::vector<double> scene_iou;
-  int64_t disagree = 0, predicted = 0;
-  int count = 0;
   for (int k = train_scenes; k < n; ++k) {
     // One stream per scene, its views drawn in turn: the first view is the one a single-view
     // validation drew.
     std::mt19937_64 rng(mix(config.seed ^ 0xA11DA7Eull, static_cast<uint64_t>(k)));
     const SceneRecord record = reader->read(k);
     double scene_sum = 0;
-    for (int v = 0; v < config.validation_views; ++v) {
-      const TrainingSample s = builder.build(record, rng);
-      const Batch b = toBatch({s}, r);
-      const int samples = 3;
-      const torch::Tensor z = torch::randn({samples, mc.latent_size});
-      const CvaeOutput o = model->generate(b.partial.expand({samples, 2, r, r, r}).contiguous(), z);
-      std::vector<std::vector<float>> preds;
-      for (int j = 0; j < samples; ++j) preds.push_back(values(o.tsdf[j]));
-      const OccupancyScores sc = scoreOccupancy(s.tsdf, preds);
-      iou += sc.iou;
-      scene_sum += sc.iou;
-      bce += sc.bce;
-      if (mc.hasLatentCode()) {
-        // The code the encoder gives when it sees the ground truth (posterior mean): better
-        // than prior codes only when the code carries what the view does not show.
-        const torch::Tensor mu = model->forward(b.partial, b.tsdf, b.votes).mu;
-        posterior_iou +=
-            scoreOccupancy(s.tsdf, {values(model->generate(b.partial, mu).tsdf[0])}).iou;
-      }
-      const torch::Tensor votes = (o.tsdf <= 0).sum(0);  // per voxel: hypotheses occupied
-      predicted += (votes > 0).sum().item<int64_t>();
-      disagree += ((votes > 0) & (votes < samples)).sum().item<int64_t>();
-      ++count;
-    }
+    for (int v = 0; v < config.validation_views; ++v)
+      scene_sum += scoreValidationView(model, model_config, builder.build(record, rng),
+                                       config.validation_samples, &sums);
     scene_iou.push_back(scene_sum / config.validation_views);
   }
-  report->validation_iou = iou / count;
+  const double views = sums.views;
+  report->validation_iou = sums.iou / views;
   double spread = 0;
   for (double x : scene_iou) spread += (x - report->validation_iou) * (x - report->validation_iou);
   const double m = static_cast<double>(scene_iou.size());
   report->validation_iou_se = m > 1 ? std::sqrt(spread / (m - 1) / m) : 0.0;
-  report->validation_bce = bce / count;
-  report->validation_posterior_iou =
-      mc.hasLatentCode() ? posterior_iou / count : std::numeric_limits<double>::quiet_NaN();
-  report->validation_disagreement = predicted > 0 ? static_cast<double>(disagree) / predicted : 0;
+  report->validation_bce = sums.bce / views;
+  report->validation_single_iou = sums.single / views;
+  report->validation_best_iou = sums.best / views;
+  report->validation_posterior_iou = model_config.hasLatentCode()
+                                         ? sums.posterior / views
+                                         : std::numeric_limits<double>::quiet_NaN();
+  auto share = [](int64_t a, int64_t b) { return b > 0 ? static_cast<double>(a) / b : 0.0; };
+  report->validation_disagreement = share(sums.disagree[0] + sums.disagree[1],
+                                          sums.occupied[0] + sums.occupied[1]);
+  report->validation_disagreement_seen = share(sums.disagree[0], sums.occupied[0]);
+  report->validation_disagreement_unseen = share(sums.disagree[1], sums.occupied[1]);
+  report->validation_unseen_share =
+      share(sums.disagree[1], sums.disagree[0] + sums.disagree[1]);
   model->train();
 }
 
@@ -396,6 +433,7 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
   meta << YAML::Key << "dataset_scenes" << YAML::Value << reader->size();
   meta << YAML::Key << "validation_scenes" << YAML::Value << config.validation_scenes;
   meta << YAML::Key << "validation_views" << YAML::Value << config.validation_views;
+  meta << YAML::Key << "validation_samples" << YAML::Value << config.validation_samples;
   meta << YAML::Key << "steps" << YAML::Value << report.steps;
   meta << YAML::Key << "final_losses" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
        << "total" << YAML::Value << report.total << YAML::Key << "tsdf" << YAML::Value
@@ -408,6 +446,12 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
        << YAML::Key << "disagreement" << YAML::Value << report.validation_disagreement;
   if (std::isfinite(report.validation_posterior_iou))
     meta << YAML::Key << "posterior_code_iou" << YAML::Value << report.validation_posterior_iou;
+  meta << YAML::Key << "single_code_iou" << YAML::Value << report.validation_single_iou
+       << YAML::Key << "best_code_iou" << YAML::Value << report.validation_best_iou << YAML::Key
+       << "disagreement_seen" << YAML::Value << report.validation_disagreement_seen << YAML::Key
+       << "disagreement_unseen" << YAML::Value << report.validation_disagreement_unseen
+       << YAML::Key << "unseen_share_of_disagreement" << YAML::Value
+       << report.validation_unseen_share;
   meta << YAML::EndMap;
   if (posterior_measured) {  // C-VAE steps trained in this run
     meta << YAML::Key << "posterior" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
