@@ -12,6 +12,48 @@
 
 using namespace simstack;
 
+namespace {
+
+/// What --validate-only prints: the validation's measures of one model file.
+void printValidation(const std::string& model, const std::string& dataset,
+                     const TrainConfig& training, const TrainingReport& r) {
+  std::printf(
+      "validation of %s: the last %d scenes of %s x %d views, %d codes each\n"
+      "  IoU of the codes' mean occupancy %.4f +- %.4f (standard error over scenes), "
+      "BCE %.4f\n  IoU of one code %.4f, of the best of %d (oracle) %.4f",
+      model.c_str(), training.validation_scenes, dataset.c_str(), training.validation_views,
+      training.validation_samples, r.validation_iou, r.validation_iou_se, r.validation_bce,
+      r.validation_single_iou, training.validation_samples, r.validation_best_iou);
+  if (std::isfinite(r.validation_posterior_iou))
+    std::printf(", of the posterior mean (encoder seeing the truth) %.4f",
+                r.validation_posterior_iou);
+  std::printf(
+      "\n  hypotheses disagree on %.2f %% of their occupied voxels: %.2f %% where the view "
+      "observed, %.2f %% where it did not; %.1f %% of the disagreement is unobserved\n",
+      100.0 * r.validation_disagreement, 100.0 * r.validation_disagreement_seen,
+      100.0 * r.validation_disagreement_unseen, 100.0 * r.validation_unseen_share);
+}
+
+/// What a finished run prints: its losses and validation.
+void printTrained(const std::string& architecture, const std::string& output,
+                  const TrainingReport& r) {
+  std::cout << "trained " << architecture << " for " << r.steps << " steps ("
+            << r.samples_per_second << " samples/s)\n  final losses: total " << r.total << ", tsdf "
+            << r.tsdf << ", partial " << r.partial << ", votes " << r.votes << ", mmd " << r.mmd
+            << ", occupancy " << r.occupancy << "\n  validation: IoU " << r.validation_iou << " +- "
+            << r.validation_iou_se << ", BCE " << r.validation_bce << ", hypotheses disagree on "
+            << 100.0 * r.validation_disagreement << " % of their voxels";
+  if (std::isfinite(r.validation_posterior_iou))
+    std::cout << ", IoU from the posterior code " << r.validation_posterior_iou;
+  if (std::isfinite(r.posterior_mu_rms)) {
+    std::cout << "\n  posterior on the last training batches: mu RMS " << r.posterior_mu_rms
+              << ", mean sigma " << r.posterior_sigma;
+  }
+  std::cout << "\n  model: " << output << "/model.pt (provenance in model.yaml)\n";
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   std::string dataset, config_path, output;
   bool resume = false;
@@ -78,23 +120,8 @@ int main(int argc, char** argv) {
     if (validation_views > 0) training.validation_views = validation_views;
     if (validation_samples > 0) training.validation_samples = validation_samples;
     if (!validate_only.empty()) {
-      const TrainingReport r = CvaeTrainer::validateModel(dataset, validate_only, training);
-      std::printf(
-          "validation of %s: the last %d scenes of %s x %d views, %d codes each\n"
-          "  IoU of the codes' mean occupancy %.4f +- %.4f (standard error over scenes), "
-          "BCE %.4f\n  IoU of one code %.4f, of the best of %d (oracle) %.4f",
-          validate_only.c_str(), training.validation_scenes, dataset.c_str(),
-          training.validation_views, training.validation_samples, r.validation_iou,
-          r.validation_iou_se, r.validation_bce, r.validation_single_iou,
-          training.validation_samples, r.validation_best_iou);
-      if (std::isfinite(r.validation_posterior_iou))
-        std::printf(", of the posterior mean (encoder seeing the truth) %.4f",
-                    r.validation_posterior_iou);
-      std::printf(
-          "\n  hypotheses disagree on %.2f %% of their occupied voxels: %.2f %% where the view "
-          "observed, %.2f %% where it did not; %.1f %% of the disagreement is unobserved\n",
-          100.0 * r.validation_disagreement, 100.0 * r.validation_disagreement_seen,
-          100.0 * r.validation_disagreement_unseen, 100.0 * r.validation_unseen_share);
+      printValidation(validate_only, dataset, training,
+                      CvaeTrainer::validateModel(dataset, validate_only, training));
       return 0;
     }
     std::string command;
@@ -112,20 +139,7 @@ int main(int argc, char** argv) {
       bar->update(p.step, suffix);
     });
     if (bar) bar->finish();
-    std::cout << "trained " << model.architecture << " for " << r.steps << " steps ("
-              << r.samples_per_second << " samples/s)\n  final losses: total " << r.total
-              << ", tsdf " << r.tsdf << ", partial " << r.partial << ", votes " << r.votes
-              << ", mmd " << r.mmd << ", occupancy " << r.occupancy << "\n  validation: IoU "
-              << r.validation_iou << " +- " << r.validation_iou_se << ", BCE " << r.validation_bce
-              << ", hypotheses disagree on " << 100.0 * r.validation_disagreement
-              << " % of their voxels";
-    if (std::isfinite(r.validation_posterior_iou))
-      std::cout << ", IoU from the posterior code " << r.validation_posterior_iou;
-    if (std::isfinite(r.posterior_mu_rms)) {
-      std::cout << "\n  posterior on the last training batches: mu RMS " << r.posterior_mu_rms
-                << ", mean sigma " << r.posterior_sigma;
-    }
-    std::cout << "\n  model: " << output << "/model.pt (provenance in model.yaml)\n";
+    printTrained(model.architecture, output, r);
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_train: error: " << e.what() << "\n";

@@ -110,6 +110,8 @@ struct CvaeOutput {
   torch::Tensor votes;          ///< [B, 3, R, R, R]
   torch::Tensor partial_recon;  ///< [B, 1, R, R, R], the conditioning autoencoder's output
   torch::Tensor mu, logvar, z;  ///< [B, latent] (undefined for the FC baseline)
+  /// The conditional prior's N(prior_mu, exp(prior_logvar)) (training pass, learned prior only).
+  torch::Tensor prior_mu, prior_logvar;
 };
 
 class CvaeImpl : public torch::nn::Module {
@@ -120,7 +122,11 @@ class CvaeImpl : public torch::nn::Module {
                      const torch::Tensor& votes);
   /// Generation: decodes codes z [B, latent] conditioned on `partial` [B or 1, 2, R, R, R]; a
   /// single condition is encoded once and shared by all codes. The FC baseline ignores z.
+  /// With a learned prior the rows of z are standard normal draws e, decoded as the codes
+  /// mu(c) + sigma(c) e of the view's prior.
   CvaeOutput generate(const torch::Tensor& partial, const torch::Tensor& z);
+  /// Decodes exactly the codes z (no prior applied): a posterior code, or an optimised one.
+  CvaeOutput decodeCodes(const torch::Tensor& partial, const torch::Tensor& z);
   const CvaeConfig& config() const { return config_; }
   /// Replaces the stored config by one that describes the same network (only the loss
   /// settings may differ); throws std::invalid_argument otherwise.
@@ -133,6 +139,10 @@ class CvaeImpl : public torch::nn::Module {
   /// projected per-channel offsets, before each joint block.
   CvaeOutput decode(const torch::Tensor& bottleneck, const std::vector<torch::Tensor>& cond,
                     const torch::Tensor& z = {});
+  /// The codes z [B, latent] decoded with the encoded condition `cond` (one or B conditions).
+  CvaeOutput decodeWith(const std::vector<torch::Tensor>& cond, const torch::Tensor& z);
+  /// The learned prior's mean and log-variance for the encoded condition.
+  std::pair<torch::Tensor, torch::Tensor> priorOf(const std::vector<torch::Tensor>& cond);
 
   CvaeConfig config_;
   std::vector<int> widths_;  // per stage: R, R/2, R/4, R/8, R/16
@@ -147,6 +157,7 @@ class CvaeImpl : public torch::nn::Module {
   ConvBlock enc_tsdf1{nullptr}, enc_tsdf2{nullptr}, enc_votes1{nullptr}, enc_votes2{nullptr};
   std::vector<ResSEBlock> enc_joint_;
   torch::nn::Linear enc_mu{nullptr}, enc_logvar{nullptr};
+  torch::nn::Linear prior_mu{nullptr}, prior_logvar{nullptr};  // prior "learned"
   // Decoder.
   torch::nn::Linear dec_fc1{nullptr}, dec_fc2{nullptr};
   std::vector<ResSEBlock> dec_joint_;
@@ -180,7 +191,9 @@ struct CvaeLosses {
   torch::Tensor total, tsdf, partial, votes, mmd, occupancy;
 };
 /// The weighted sum of the paper's section 3.1.3 (MMD is 0 for the FC baseline), plus the
-/// occupancy term when its weight is not 0 (its value is reported either way).
+/// occupancy term when its weight is not 0 (its value is reported either way). With a learned
+/// prior the `mmd` slot holds KL(posterior || prior) (weight kl_weight, above its free bits)
+/// instead.
 CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
                          const torch::Tensor& tsdf, const torch::Tensor& votes,
                          const CvaeConfig& config);

@@ -80,6 +80,18 @@ struct CvaeConfig {
   /// RMS 0.1-0.7: such a z is mostly noise, the decoder learned to ignore it, and then nothing
   /// made sigma shrink (README). Inference draws codes from the prior either way.
   std::string posterior = "gaussian";
+  /// The distribution codes are drawn from: "standard" (N(0, I), the paper; the MMD term pulls
+  /// the encoder's codes towards it) or "learned" (the standard C-VAE's conditional prior
+  /// p(z | view) = N(mu(c), sigma(c)^2) from the condition's deepest map, trained by
+  /// KL(posterior || prior) weighted by `kl_weight` in place of the MMD). A network setting.
+  /// Inference still draws standard normal e; a learned prior decodes mu(c) + sigma(c) e, so
+  /// the zero code is the prior's mean for this view.
+  std::string prior = "standard";
+  double kl_weight = 1.0;
+  /// Free bits: the KL term counts each code dimension's batch-mean KL only above
+  /// kl_free_nats / latent_size, so that the code may carry that many nats at no cost (a KL
+  /// that is cheap to squeeze out of the code otherwise leaves it empty). 0 = off.
+  double kl_free_nats = 0.0;
 
   /// Throws std::invalid_argument naming the bad field.
   void validate() const;
@@ -114,7 +126,7 @@ struct TrainConfig {
   int validation_scenes = 128;
   int validation_views = 2;
   int validation_samples = 8;  ///< latent codes per validation view (hypotheses S)
-  int image_width = 320;  ///< rendered training views (intrinsics scale with it)
+  int image_width = 320;       ///< rendered training views (intrinsics scale with it)
   int image_height = 240;
   bool sensor_noise = true;  ///< Kinect-like noise in training views
   /// Share of training views from above (ViewpointRange::overhead(), as on pick stations); the

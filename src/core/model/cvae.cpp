@@ -5,6 +5,8 @@
 #include <filesystem>
 #include <map>
 #include <stdexcept>
+#include <tuple>
+#include <utility>
 
 namespace simstack {
 namespace {
@@ -253,6 +255,17 @@ CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
     }
     enc_mu = register_module("enc_mu", torch::nn::Linear(flat, config.latent_size));
     enc_logvar = register_module("enc_logvar", torch::nn::Linear(flat, config.latent_size));
+    if (config.prior == "learned") {
+      // From the condition's deepest map; zero at first, so the prior starts as N(0, I) and a
+      // warm-started network begins as it was.
+      prior_mu = register_module("prior_mu", torch::nn::Linear(flat, config.latent_size));
+      prior_logvar = register_module("prior_logvar", torch::nn::Linear(flat, config.latent_size));
+      torch::NoGradGuard no_grad;
+      for (auto* l : {&prior_mu, &prior_logvar}) {
+        (*l)->weight.zero_();
+        (*l)->bias.zero_();
+      }
+    }
   }
 }
 
@@ -363,21 +376,25 @@ CvaeOutput CvaeImpl::forward(const torch::Tensor& partial, const torch::Tensor& 
   const torch::Tensor z = config_.posterior == "deterministic"
                               ? mu
                               : mu + torch::randn_like(mu) * torch::exp(0.5 * logvar);
-  CvaeOutput out = generate(partial, z);
+  CvaeOutput out = decodeWith(cond, z);
   out.partial_recon = partial_recon;
   out.mu = mu;
   out.logvar = logvar;
-  out.z = z;
+  if (prior_mu) std::tie(out.prior_mu, out.prior_logvar) = priorOf(cond);
   return out;
 }
 
-CvaeOutput CvaeImpl::generate(const torch::Tensor& partial, const torch::Tensor& z) {
-  std::vector<torch::Tensor> cond = encodeCondition(partial);
+std::pair<torch::Tensor, torch::Tensor> CvaeImpl::priorOf(const std::vector<torch::Tensor>& cond) {
+  const torch::Tensor deepest = cond[4].flatten(1);
+  return {prior_mu(deepest), prior_logvar(deepest).clamp(-10.0, 10.0)};
+}
+
+CvaeOutput CvaeImpl::decodeWith(const std::vector<torch::Tensor>& cond, const torch::Tensor& z) {
   if (!config_.hasLatentCode()) return decode(cond[4], cond);
   const auto b = z.size(0);
   // One condition for all codes is encoded once; the decoder's blocks share its features.
-  if (partial.size(0) != 1 && partial.size(0) != b) {
-    throw std::invalid_argument("generate: " + std::to_string(partial.size(0)) +
+  if (cond[0].size(0) != 1 && cond[0].size(0) != b) {
+    throw std::invalid_argument("generate: " + std::to_string(cond[0].size(0)) +
                                 " conditions for " + std::to_string(b) + " codes");
   }
   const torch::Tensor bottleneck =
@@ -385,6 +402,17 @@ CvaeOutput CvaeImpl::generate(const torch::Tensor& partial, const torch::Tensor&
   CvaeOutput out = decode(bottleneck, cond, z);
   out.z = z;
   return out;
+}
+
+CvaeOutput CvaeImpl::decodeCodes(const torch::Tensor& partial, const torch::Tensor& z) {
+  return decodeWith(encodeCondition(partial), z);
+}
+
+CvaeOutput CvaeImpl::generate(const torch::Tensor& partial, const torch::Tensor& z) {
+  const std::vector<torch::Tensor> cond = encodeCondition(partial);
+  if (!prior_mu || !config_.hasLatentCode()) return decodeWith(cond, z);
+  const auto [mean, logvar] = priorOf(cond);
+  return decodeWith(cond, mean + torch::exp(0.5 * logvar) * z);
 }
 
 torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Tensor& target,
@@ -437,16 +465,33 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
   l.tsdf = inverseTsdfWeightedLoss(out.tsdf, tsdf, c.tsdf_epsilon);
   l.partial = inverseTsdfWeightedLoss(out.partial_recon, partial.narrow(1, 0, 1), c.tsdf_epsilon);
   l.votes = voteLoss(out.votes, votes, c.vote_loss == "occupied");
-  l.mmd = out.z.defined()
-              ? mmdLoss(out.z, torch::randn({c.mmd_prior_samples, out.z.size(1)}, out.z.options()),
-                        c.mmd_kernel_widths)
-              : torch::zeros({}, tsdf.options());
+  torch::Tensor latent;  // the weighted latent term of the total
+  if (out.prior_mu.defined()) {
+    // KL(N(mu, e^logvar) || N(prior_mu, e^prior_logvar)) per code dimension, batch mean;
+    // with free bits each dimension counts only above its share of kl_free_nats.
+    const torch::Tensor d = out.mu - out.prior_mu;
+    const torch::Tensor per_dim =
+        (0.5 * (out.prior_logvar - out.logvar +
+                (torch::exp(out.logvar) + d * d) * torch::exp(-out.prior_logvar) - 1.0))
+            .mean(0);
+    l.mmd = per_dim.sum();  // reported as it is
+    latent =
+        c.kl_weight *
+        (c.kl_free_nats > 0.0 ? per_dim.clamp_min(c.kl_free_nats / per_dim.size(0)).sum() : l.mmd);
+  } else {
+    l.mmd =
+        out.z.defined()
+            ? mmdLoss(out.z, torch::randn({c.mmd_prior_samples, out.z.size(1)}, out.z.options()),
+                      c.mmd_kernel_widths)
+            : torch::zeros({}, tsdf.options());
+    latent = c.delta * l.mmd;
+  }
   {
     // Reported also at weight 0, then without a graph: it is not trained.
     torch::AutoGradMode grad(torch::GradMode::is_enabled() && c.occupancy_weight > 0.0);
     l.occupancy = occupancyLoss(out.tsdf, tsdf, c.occupancy_sharpness);
   }
-  l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + c.delta * l.mmd +
+  l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + latent +
             c.occupancy_weight * l.occupancy;
   return l;
 }

@@ -51,6 +51,9 @@ void cvaeFields(C& c, F&& f) {
   f("vote_loss", c.vote_loss);
   f("condition_dropout", c.condition_dropout);
   f("posterior", c.posterior);
+  f("prior", c.prior);
+  f("kl_weight", c.kl_weight);
+  f("kl_free_nats", c.kl_free_nats);
 }
 
 template <class C, class F>
@@ -105,6 +108,12 @@ void CvaeConfig::validate() const {
           "condition_dropout must lie in [0, 1)");
   require(posterior == "gaussian" || posterior == "deterministic",
           "posterior must be 'gaussian' or 'deterministic', got '" + posterior + "'");
+  require(prior == "standard" || prior == "learned",
+          "prior must be 'standard' or 'learned', got '" + prior + "'");
+  require(prior == "standard" || posterior == "gaussian",
+          "a learned prior needs posterior 'gaussian' (the KL compares two Gaussians)");
+  require(kl_weight >= 0.0, "kl_weight must be >= 0");
+  require(kl_free_nats >= 0.0, "kl_free_nats must be >= 0");
   require(vote_loss == "occupied" || vote_loss == "all",
           "vote_loss must be 'occupied' or 'all', got '" + vote_loss + "'");
 }
@@ -122,6 +131,8 @@ void CvaeConfig::copyLossSettings(const CvaeConfig& o) {
   vote_loss = o.vote_loss;
   condition_dropout = o.condition_dropout;
   posterior = o.posterior;
+  kl_weight = o.kl_weight;
+  kl_free_nats = o.kl_free_nats;
 }
 
 std::string CvaeConfig::toYaml() const {

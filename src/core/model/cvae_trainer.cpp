@@ -341,8 +341,8 @@ struct ValidationSums {
 
 /// One validation view: S prior codes (and the posterior mean for a C-VAE) scored against the
 /// truth; returns the expected-occupancy IoU.
-double scoreValidationView(Cvae& model, const CvaeConfig& mc, const TrainingSample& s,
-                           int samples, ValidationSums* sums) {
+double scoreValidationView(Cvae& model, const CvaeConfig& mc, const TrainingSample& s, int samples,
+                           ValidationSums* sums) {
   const int r = mc.resolution;
   const Batch b = toBatch({s}, r);
   const torch::Tensor z = torch::randn({samples, mc.latent_size});
@@ -363,7 +363,8 @@ double scoreValidationView(Cvae& model, const CvaeConfig& mc, const TrainingSamp
     // The code the encoder gives when it sees the ground truth (posterior mean): better than
     // prior codes only when the code carries what the view does not show.
     const torch::Tensor mu = model->forward(b.partial, b.tsdf, b.votes).mu;
-    sums->posterior += scoreOccupancy(s.tsdf, {values(model->generate(b.partial, mu).tsdf[0])}).iou;
+    sums->posterior +=
+        scoreOccupancy(s.tsdf, {values(model->decodeCodes(b.partial, mu).tsdf[0])}).iou;
   }
   const torch::Tensor votes = (o.tsdf <= 0).sum(0).flatten();  // per voxel: hypotheses occupied
   const torch::Tensor seen = (b.partial[0][1] > 0.5).flatten();
@@ -412,12 +413,11 @@ void CvaeTrainer::Impl::validate(Cvae& model, const TrainingSampleBuilder& build
                                          ? sums.posterior / views
                                          : std::numeric_limits<double>::quiet_NaN();
   auto share = [](int64_t a, int64_t b) { return b > 0 ? static_cast<double>(a) / b : 0.0; };
-  report->validation_disagreement = share(sums.disagree[0] + sums.disagree[1],
-                                          sums.occupied[0] + sums.occupied[1]);
+  report->validation_disagreement =
+      share(sums.disagree[0] + sums.disagree[1], sums.occupied[0] + sums.occupied[1]);
   report->validation_disagreement_seen = share(sums.disagree[0], sums.occupied[0]);
   report->validation_disagreement_unseen = share(sums.disagree[1], sums.occupied[1]);
-  report->validation_unseen_share =
-      share(sums.disagree[1], sums.disagree[0] + sums.disagree[1]);
+  report->validation_unseen_share = share(sums.disagree[1], sums.disagree[0] + sums.disagree[1]);
   model->train();
 }
 
@@ -446,12 +446,11 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
        << YAML::Key << "disagreement" << YAML::Value << report.validation_disagreement;
   if (std::isfinite(report.validation_posterior_iou))
     meta << YAML::Key << "posterior_code_iou" << YAML::Value << report.validation_posterior_iou;
-  meta << YAML::Key << "single_code_iou" << YAML::Value << report.validation_single_iou
-       << YAML::Key << "best_code_iou" << YAML::Value << report.validation_best_iou << YAML::Key
+  meta << YAML::Key << "single_code_iou" << YAML::Value << report.validation_single_iou << YAML::Key
+       << "best_code_iou" << YAML::Value << report.validation_best_iou << YAML::Key
        << "disagreement_seen" << YAML::Value << report.validation_disagreement_seen << YAML::Key
-       << "disagreement_unseen" << YAML::Value << report.validation_disagreement_unseen
-       << YAML::Key << "unseen_share_of_disagreement" << YAML::Value
-       << report.validation_unseen_share;
+       << "disagreement_unseen" << YAML::Value << report.validation_disagreement_unseen << YAML::Key
+       << "unseen_share_of_disagreement" << YAML::Value << report.validation_unseen_share;
   meta << YAML::EndMap;
   if (posterior_measured) {  // C-VAE steps trained in this run
     meta << YAML::Key << "posterior" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
