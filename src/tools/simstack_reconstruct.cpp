@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <iostream>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "perception_options.h"
 #include "simstack/io/image_io.h"
@@ -74,27 +76,31 @@ DepthView readView(const std::string& depth_path, double depth_scale, const std:
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string depth_path, intrinsics, pose_path, mask_path, output;
+  std::vector<std::string> depth_paths, pose_paths;
+  std::string intrinsics, mask_path, output;
   double depth_scale = 0.001;
   CLI::App app{
-      "Reconstruct a pile from one depth image: superquadrics (YAML), instance meshes (PLY), a "
-      "labelled instance cloud (PCD), the predicted grids (HDF5) and PNG pictures."};
-  app.add_option("--depth", depth_path,
+      "Reconstruct a pile from one depth image (or several posed ones): superquadrics (YAML), "
+      "instance meshes (PLY), a labelled instance cloud (PCD), the predicted grids (HDF5) and PNG "
+      "pictures."};
+  app.add_option("--depth", depth_paths,
                  "16-bit PNG (units of --depth-scale), 32-bit float TIFF in metres, or an "
-                 "organized PCD")
+                 "organized PCD; repeat it for more views of the scene, each with its "
+                 "--table-pose (the outputs are drawn over the first)")
       ->required()
       ->check(CLI::ExistingFile);
   app.add_option("--intrinsics", intrinsics, "fx,fy,cx,cy in pixels")->required();
   app.add_option("--depth-scale", depth_scale, "metres per unit of a 16-bit PNG")
       ->capture_default_str()
       ->check(FinitePositive);
-  app.add_option("--table-pose", pose_path,
-                 "YAML with T_table_camera (a view file of simstack_generate --views); without "
-                 "it the table plane is estimated from the depth (RANSAC)")
+  app.add_option("--table-pose", pose_paths,
+                 "YAML with T_table_camera (a view file of simstack_generate --views), one per "
+                 "--depth in the same order; without it (one depth only) the table plane is "
+                 "estimated from the depth (RANSAC)")
       ->check(CLI::ExistingFile);
   app.add_option("--mask", mask_path,
-                 "8-bit PNG of the depth's size: pixels where it is 0 are ignored (not the "
-                 "workspace), also for the table plane")
+                 "8-bit PNG of the (first) depth's size: pixels where it is 0 are ignored (not "
+                 "the workspace), also for the table plane")
       ->check(CLI::ExistingFile);
   app.add_option("--output", output, "output directory (created)")->required();
   const PerceptionOptions perception(app);
@@ -102,18 +108,31 @@ int main(int argc, char** argv) {
   keepFreedMemoryForReuse();  // the network runs in this process
 
   try {
-    const DepthView view = readView(depth_path, depth_scale, intrinsics, pose_path, mask_path);
+    if (depth_paths.size() > 1 && pose_paths.size() != depth_paths.size())
+      throw std::invalid_argument(std::to_string(depth_paths.size()) +
+                                  " --depth files need as many " + "--table-pose files (given " +
+                                  std::to_string(pose_paths.size()) +
+                                  "): views after the first must be posed");
+    if (pose_paths.size() > depth_paths.size())
+      throw std::invalid_argument("more --table-pose files than --depth files");
+    std::vector<DepthView> views;
+    for (size_t i = 0; i < depth_paths.size(); ++i)
+      views.push_back(readView(depth_paths[i], depth_scale, intrinsics,
+                               i < pose_paths.size() ? pose_paths[i] : "",
+                               i == 0 ? mask_path : ""));
+    const DepthView& view = views.front();
+    const std::string pose_path = pose_paths.empty() ? "" : pose_paths.front();
     const PerceptionConfig config = perception.config();
     StagedDirectory staged(output);  // a bad --output fails here, before the work
     const ScenePerception pipeline(config);
-    const SceneEstimate est = pipeline.perceive(view);
+    const SceneEstimate est = pipeline.perceive(views);
     const std::vector<std::string> files =
         writeReconstruction(staged.path(), view, est, config.min_pile_height_m);
     staged.commit();  // replaces an earlier run's directory whole
 
     const StageTimings& t = est.timings;
-    std::cout << "table " << (est.table_estimated ? "estimated by RANSAC" : "from " + pose_path)
-              << "\n"
+    std::cout << views.size() << (views.size() == 1 ? " view" : " views") << "; table "
+              << (est.table_estimated ? "estimated by RANSAC" : "from " + pose_path) << "\n"
               << est.instances().size() << " objects in " << est.tiles
               << (est.tiles == 1 ? " tile" : " tiles")
               << (est.tiles_cropped ? " (workspace.max_tiles reached: the pile is cut)" : "")

@@ -1,8 +1,12 @@
-// Inference latency (1 and 3 samples, R = 32 and 64) and training throughput of the C-VAE.
+// Inference latency (1 and 3 samples, R = 32 and 64), latent optimisation against further
+// views, and training throughput of the C-VAE.
 #include <benchmark/benchmark.h>
+
+#include <filesystem>
 
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/model/cvae.h"
+#include "simstack/model/cvae_inference.h"
 
 using namespace simstack;
 
@@ -32,6 +36,34 @@ BENCHMARK(BM_CvaeInference)
     ->Args({64, 3})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
+
+// The paper's section 4.2 at R = 32: S = 3 codes, 10 Adam steps against 3 views' partial TSDFs
+// (a network of the shipped size with random weights: the time does not depend on them).
+static void BM_RefineThreeViews(benchmark::State& state) {
+  const int r = 32, iterations = static_cast<int>(state.range(0));
+  const std::string path =
+      (std::filesystem::temp_directory_path() / "simstack_bench_refine.pt").string();
+  {
+    Cvae model(configFor(r));
+    saveCvae(path, model);
+  }
+  const CvaeInference net(path, 2);
+  std::filesystem::remove(path);
+  const GridSpec grid = GridSpec::sceneGrid(Vec2::Zero(), 0.64, r);
+  torch::manual_seed(3);
+  auto randomGrid = [&](float lo, float hi) {
+    Grid3<float> g(grid, 0.0f);
+    const torch::Tensor t = torch::rand({grid.voxelCount()}) * (hi - lo) + lo;
+    std::copy(t.data_ptr<float>(), t.data_ptr<float>() + grid.voxelCount(), g.data.begin());
+    return g;
+  };
+  std::vector<ViewEvidence> views;
+  for (int k = 0; k < 3; ++k) views.push_back({randomGrid(-0.06f, 0.06f), randomGrid(-1.0f, 1.0f)});
+  for (auto _ : state)
+    benchmark::DoNotOptimize(
+        net.refine(views[0].tsdf_m, views[0].weight, views, 3, 1, false, {iterations, 0.3}));
+}
+BENCHMARK(BM_RefineThreeViews)->Arg(0)->Arg(10)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 static void BM_CvaeTrainingStep(benchmark::State& state) {
   const int r = 32, b = 8;

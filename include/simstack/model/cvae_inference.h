@@ -19,6 +19,24 @@ struct CvaePrediction {
   Grid3<Vec3f> votes;   ///< centre-vote field
 };
 
+/// A further view's own partial TSDF (metres) and weights on the prediction's grid: what the
+/// latent optimisation matches (refine()).
+struct ViewEvidence {
+  Grid3<float> tsdf_m, weight;
+};
+
+struct RefineOptions {
+  int iterations = 10;         ///< Adam steps on the codes
+  double learning_rate = 0.3;  ///< Adam step size (codes are standard normal draws)
+};
+
+/// What refine() did: the depth-evidence loss of the kept code at each iteration (index 0:
+/// before the first step), and the time.
+struct RefineReport {
+  std::vector<double> loss;
+  double ms = 0;
+};
+
 /// Loads once; predict() is const but not thread-safe (torch state): use one per thread.
 class CvaeInference {
  public:
@@ -36,7 +54,22 @@ class CvaeInference {
                                       const Grid3<float>& weight, int samples, uint64_t seed = 0,
                                       bool zero_code_first = false) const;
 
+  /// The paper's section 4.2: the S codes of predict() (same seed) optimised, the network
+  /// fixed, so that the decoded TSDF agrees with every view's own partial TSDF where that view
+  /// observed the scene (weight > 0): the mean over views of sum |tsdf - view tsdf| / tau
+  /// (both clamped to +-1) over the view's observed voxels. Predictions best first (lowest
+  /// loss); the FC baseline, having no code, returns predict()'s. `views` must lie on the
+  /// partial TSDF's grid (std::invalid_argument).
+  std::vector<CvaePrediction> refine(const Grid3<float>& partial_tsdf_m, const Grid3<float>& weight,
+                                     const std::vector<ViewEvidence>& views, int samples,
+                                     uint64_t seed, bool zero_code_first,
+                                     const RefineOptions& options,
+                                     RefineReport* report = nullptr) const;
+
  private:
+  /// std::invalid_argument for a grid the model does not take; sets the torch threads.
+  void checkInput(const Grid3<float>& partial_tsdf_m, const Grid3<float>& weight,
+                  int samples) const;
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

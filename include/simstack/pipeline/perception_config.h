@@ -31,7 +31,11 @@ struct PerceptionConfig {
   double min_pile_height_m = 0.01;  ///< depth points lower than this are table
   double min_depth_m = 0.1;         ///< the sensor's range: depth outside [min, max] is missing
   double max_depth_m = 10.0;
-  int threads = 2;                ///< capped at the machine's cores
+  int threads = 2;  ///< capped at the machine's cores
+  /// Given several posed views: Adam steps on the S codes so that the decoded TSDF agrees with
+  /// each view's own partial TSDF (the paper's section 4.2, CvaeInference::refine); 0 = off.
+  int refine_iterations = 0;
+  double refine_learning_rate = 0.3;
   HoughConfig hough;              ///< the model's (model card)
   SurfaceSegmentConfig segments;  ///< the split along the observed surface's convex patches
   FitConfig fit;

@@ -1,11 +1,40 @@
 #include "simstack/model/cvae_inference.h"
 
+#include <algorithm>
+#include <chrono>
+#include <limits>
 #include <stdexcept>
 
 #include "simstack/model/cvae.h"
 #include "simstack/tsdf/network_input.h"
 
 namespace simstack {
+
+namespace {
+
+/// Network outputs [S, ...] as predictions on grid g.
+std::vector<CvaePrediction> toPredictions(const CvaeOutput& out, const GridSpec& g, int samples,
+                                          double truncation_m) {
+  const torch::Tensor tsdf = (out.tsdf * truncation_m).contiguous();
+  const torch::Tensor votes = out.votes.contiguous();
+  std::vector<CvaePrediction> result(samples);
+  const size_t n = static_cast<size_t>(g.voxelCount());
+  for (int s = 0; s < samples; ++s) {
+    result[s].tsdf_m = Grid3<float>(g, 0.0f);
+    result[s].votes = Grid3<Vec3f>(g, Vec3f::Zero());
+    const float* t = tsdf.data_ptr<float>() + s * n;
+    std::copy(t, t + n, result[s].tsdf_m.data.begin());
+    const float* v = votes.data_ptr<float>() + s * 3 * n;
+    for (size_t i = 0; i < n; ++i) result[s].votes.data[i] = Vec3f(v[i], v[n + i], v[2 * n + i]);
+  }
+  return result;
+}
+
+torch::Tensor gridTensor(const std::vector<float>& values, int r) {
+  return torch::from_blob(const_cast<float*>(values.data()), {1, 1, r, r, r}).clone();
+}
+
+}  // namespace
 
 struct CvaeInference::Impl {
   Cvae model{nullptr};
@@ -23,11 +52,9 @@ CvaeInference::CvaeInference(const std::string& path, int threads)
 CvaeInference::~CvaeInference() = default;
 
 const CvaeConfig& CvaeInference::config() const { return impl_->model->config(); }
-const std::string& CvaeInference::metadata() const { return impl_->metadata; }
 
-std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_tsdf_m,
-                                                   const Grid3<float>& weight, int samples,
-                                                   uint64_t seed, bool zero_code_first) const {
+void CvaeInference::checkInput(const Grid3<float>& partial_tsdf_m, const Grid3<float>& weight,
+                               int samples) const {
   const CvaeConfig& c = config();
   const GridSpec& g = partial_tsdf_m.spec;
   if (g.resolution != c.resolution || std::abs(g.extent_m() - c.extent_m) > 1e-9) {
@@ -38,10 +65,19 @@ std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_t
   }
   if (!(weight.spec == g)) throw std::invalid_argument("partial TSDF and weight grids differ");
   if (samples < 1) throw std::invalid_argument("need at least one sample");
-  torch::NoGradGuard no_grad;
   // Setting the thread count rebuilds libtorch's thread pool even when the count is unchanged:
   // doing it every frame took 1-6 ms and left the next forward pass 1.6x slower (cold threads).
   if (torch::get_num_threads() != impl_->threads) torch::set_num_threads(impl_->threads);
+}
+const std::string& CvaeInference::metadata() const { return impl_->metadata; }
+
+std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_tsdf_m,
+                                                   const Grid3<float>& weight, int samples,
+                                                   uint64_t seed, bool zero_code_first) const {
+  const CvaeConfig& c = config();
+  const GridSpec& g = partial_tsdf_m.spec;
+  checkInput(partial_tsdf_m, weight, samples);
+  torch::NoGradGuard no_grad;
   const int r = c.resolution;
   const std::vector<float> channels = partialChannels(partial_tsdf_m, weight, c.truncation_m());
   const torch::Tensor one =
@@ -56,19 +92,72 @@ std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_t
     out.tsdf = out.tsdf.expand({samples, -1, -1, -1, -1});
     out.votes = out.votes.expand({samples, -1, -1, -1, -1});
   }
-  const torch::Tensor tsdf = (out.tsdf * c.truncation_m()).contiguous();
-  const torch::Tensor votes = out.votes.contiguous();
-  std::vector<CvaePrediction> result(samples);
-  const size_t n = static_cast<size_t>(g.voxelCount());
-  for (int s = 0; s < samples; ++s) {
-    result[s].tsdf_m = Grid3<float>(g, 0.0f);
-    result[s].votes = Grid3<Vec3f>(g, Vec3f::Zero());
-    const float* t = tsdf.data_ptr<float>() + s * n;
-    std::copy(t, t + n, result[s].tsdf_m.data.begin());
-    const float* v = votes.data_ptr<float>() + s * 3 * n;
-    for (size_t i = 0; i < n; ++i) result[s].votes.data[i] = Vec3f(v[i], v[n + i], v[2 * n + i]);
+  return toPredictions(out, g, samples, c.truncation_m());
+}
+
+std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_tsdf_m,
+                                                  const Grid3<float>& weight,
+                                                  const std::vector<ViewEvidence>& views,
+                                                  int samples, uint64_t seed, bool zero_code_first,
+                                                  const RefineOptions& options,
+                                                  RefineReport* report) const {
+  const CvaeConfig& c = config();
+  const GridSpec& g = partial_tsdf_m.spec;
+  for (const ViewEvidence& v : views)
+    if (!(v.tsdf_m.spec == g) || !(v.weight.spec == g))
+      throw std::invalid_argument("refine: every view's TSDF must lie on the prediction's grid");
+  if (options.iterations < 0 || !(options.learning_rate > 0))
+    throw std::invalid_argument("refine: iterations >= 0 and learning_rate > 0 are required");
+  if (!c.hasLatentCode() || views.empty() || options.iterations == 0)
+    return predict(partial_tsdf_m, weight, samples, seed, zero_code_first);
+  checkInput(partial_tsdf_m, weight, samples);
+  const auto start = std::chrono::steady_clock::now();
+  const int r = c.resolution;
+  const double tau = c.truncation_m();
+  const std::vector<float> channels = partialChannels(partial_tsdf_m, weight, tau);
+  const torch::Tensor one =
+      torch::from_blob(const_cast<float*>(channels.data()), {1, 2, r, r, r}).clone();
+  // Targets in units of tau, and where each view observed the scene.
+  std::vector<torch::Tensor> target, observed;
+  for (const ViewEvidence& v : views) {
+    target.push_back((gridTensor(v.tsdf_m.data, r) / tau).clamp(-1.0, 1.0));
+    observed.push_back((gridTensor(v.weight.data, r) > 0).to(torch::kFloat));
   }
-  return result;
+  torch::Generator gen = at::detail::createCPUGenerator(seed);
+  torch::Tensor z = torch::randn({samples, c.latent_size}, gen);
+  if (zero_code_first) z[0].zero_();
+  z.set_requires_grad(true);
+  torch::optim::Adam adam({z}, torch::optim::AdamOptions(options.learning_rate));
+  auto lossOf = [&](const torch::Tensor& tsdf) {  // per code [S]
+    torch::Tensor sum = torch::zeros({tsdf.size(0)});
+    for (size_t k = 0; k < target.size(); ++k)
+      sum = sum + ((tsdf - target[k]).abs() * observed[k]).flatten(1).sum(1);
+    return sum / static_cast<double>(target.size());
+  };
+  // The best code of each start so far (the loss may rise again after a step).
+  torch::Tensor best_z = z.detach().clone();
+  torch::Tensor best_loss = torch::full({samples}, std::numeric_limits<float>::infinity());
+  for (int it = 0; it <= options.iterations; ++it) {
+    adam.zero_grad();
+    const torch::Tensor loss = lossOf(impl_->model->generate(one, z).tsdf);
+    {
+      torch::NoGradGuard no_grad;
+      const torch::Tensor better = loss.detach() < best_loss;
+      best_loss = torch::where(better, loss.detach(), best_loss);
+      best_z = torch::where(better.unsqueeze(1), z.detach(), best_z);
+    }
+    if (report) report->loss.push_back(best_loss.min().item<double>());
+    if (it == options.iterations) break;
+    loss.sum().backward();
+    adam.step();
+  }
+  torch::NoGradGuard no_grad;
+  const torch::Tensor order = std::get<1>(best_loss.sort());
+  const CvaeOutput out = impl_->model->generate(one, best_z.index_select(0, order));
+  if (report)
+    report->ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return toPredictions(out, g, samples, tau);
 }
 
 }  // namespace simstack

@@ -25,6 +25,8 @@ void perceptionFields(C& c, F&& f) {
   f("min_depth_m", c.min_depth_m);
   f("max_depth_m", c.max_depth_m);
   f("threads", c.threads);
+  f("refine_iterations", c.refine_iterations);
+  f("refine_learning_rate", c.refine_learning_rate);
 }
 template <class C, class F>
 void houghFields(C& c, F&& f) {

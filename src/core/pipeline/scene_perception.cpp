@@ -199,6 +199,8 @@ void validate(const PerceptionConfig& config) {
   if (config.points_per_instance < 10)
     throw std::invalid_argument("points_per_instance must be >= 10");
   if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
+  if (config.refine_iterations < 0 || !(config.refine_learning_rate > 0.0))
+    throw std::invalid_argument("refine_iterations must be >= 0 and refine_learning_rate > 0");
   config.fit.validate();
   config.workspace.validate();
   config.segments.validate();
@@ -272,6 +274,26 @@ std::pair<Grid3<float>, Grid3<float>> partialTsdf(const GridSpec& grid,
   return {partial.tsdf(), partial.weight()};
 }
 
+/// The network's S hypotheses for one tile from its partial TSDF; with several views and
+/// `refine_iterations`, their codes fitted to each view's own partial TSDF.
+std::vector<CvaePrediction> predictTile(const CvaeInference& model,
+                                        const std::pair<Grid3<float>, Grid3<float>>& partial,
+                                        const std::vector<DepthView>& views,
+                                        const Transform& T_table_first, const PerceptionConfig& c) {
+  if (c.refine_iterations == 0 || views.size() < 2)
+    return model.predict(partial.first, partial.second, c.samples, c.seed, c.zero_code_first);
+  std::vector<ViewEvidence> evidence;
+  for (size_t i = 0; i < views.size(); ++i) {
+    DepthView one = views[i];
+    if (i == 0) one.T_table_camera = T_table_first;
+    auto [tsdf, weight] =
+        partialTsdf(partial.first.spec, {one}, *one.T_table_camera, model.config().truncation_m());
+    evidence.push_back({std::move(tsdf), std::move(weight)});
+  }
+  return model.refine(partial.first, partial.second, evidence, c.samples, c.seed, c.zero_code_first,
+                      {c.refine_iterations, c.refine_learning_rate});
+}
+
 /// The network's S hypotheses over one group's grid: each tile predicted from its own partial
 /// TSDF, then the tiles blended (workspace.h).
 std::vector<SceneHypothesis> predictGroup(
@@ -282,12 +304,11 @@ std::vector<SceneHypothesis> predictGroup(
   std::vector<std::vector<CvaePrediction>> tiles;
   for (const GridSpec& tile : group.tiles) {
     if (tile == scene_partial.first.spec) {  // the common case: computed already
-      tiles.push_back(model.predict(scene_partial.first, scene_partial.second, c.samples, c.seed,
-                                    c.zero_code_first));
+      tiles.push_back(predictTile(model, scene_partial, views, T_table_first, c));
       continue;
     }
-    const auto [tsdf, weight] = partialTsdf(tile, views, T_table_first, truncation);
-    tiles.push_back(model.predict(tsdf, weight, c.samples, c.seed, c.zero_code_first));
+    tiles.push_back(predictTile(model, partialTsdf(tile, views, T_table_first, truncation), views,
+                                T_table_first, c));
   }
   std::vector<SceneHypothesis> out(tiles.front().size());
   for (size_t k = 0; k < out.size(); ++k) {
