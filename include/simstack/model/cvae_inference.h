@@ -34,6 +34,7 @@ struct RefineOptions {
 /// before the first step), and the time.
 struct RefineReport {
   std::vector<double> loss;
+  std::vector<double> code_loss;  ///< per hypothesis: its code's loss at its best step
   double ms = 0;
 };
 
@@ -57,9 +58,10 @@ class CvaeInference {
   /// The paper's section 4.2: the S codes of predict() (same seed) optimised, the network
   /// fixed, so that the decoded TSDF agrees with every view's own partial TSDF where that view
   /// observed the scene (weight > 0): the mean over views of sum |tsdf - view tsdf| / tau
-  /// (both clamped to +-1) over the view's observed voxels. Predictions best first (lowest
-  /// loss); the FC baseline, having no code, returns predict()'s. `views` must lie on the
-  /// partial TSDF's grid (std::invalid_argument).
+  /// (both clamped to +-1) over the view's observed voxels. Hypothesis k is code k at its best
+  /// step (the order of predict()'s, so tiles of one scene blend matching hypotheses; the
+  /// report has each code's loss); the FC baseline, having no code, returns predict()'s.
+  /// `views` must lie on the partial TSDF's grid (std::invalid_argument).
   std::vector<CvaePrediction> refine(const Grid3<float>& partial_tsdf_m, const Grid3<float>& weight,
                                      const std::vector<ViewEvidence>& views, int samples,
                                      uint64_t seed, bool zero_code_first,

@@ -112,6 +112,7 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
     return predict(partial_tsdf_m, weight, samples, seed, zero_code_first);
   checkInput(partial_tsdf_m, weight, samples);
   const auto start = std::chrono::steady_clock::now();
+  torch::AutoGradMode grad_mode(true);  // also when the caller turned gradients off
   const int r = c.resolution;
   const double tau = c.truncation_m();
   const std::vector<float> channels = partialChannels(partial_tsdf_m, weight, tau);
@@ -138,7 +139,6 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
   torch::Tensor best_z = z.detach().clone();
   torch::Tensor best_loss = torch::full({samples}, std::numeric_limits<float>::infinity());
   for (int it = 0; it <= options.iterations; ++it) {
-    adam.zero_grad();
     const torch::Tensor loss = lossOf(impl_->model->generate(one, z).tsdf);
     {
       torch::NoGradGuard no_grad;
@@ -148,15 +148,18 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
     }
     if (report) report->loss.push_back(best_loss.min().item<double>());
     if (it == options.iterations) break;
-    loss.sum().backward();
+    // The gradient of the codes alone: the network's weights get none (they are shared, and
+    // their gradients would cost a backward pass through every layer's weights).
+    z.mutable_grad() = torch::autograd::grad({loss.sum()}, {z})[0];
     adam.step();
   }
   torch::NoGradGuard no_grad;
-  const torch::Tensor order = std::get<1>(best_loss.sort());
-  const CvaeOutput out = impl_->model->generate(one, best_z.index_select(0, order));
-  if (report)
+  const CvaeOutput out = impl_->model->generate(one, best_z);
+  if (report) {
+    report->code_loss.assign(best_loss.data_ptr<float>(), best_loss.data_ptr<float>() + samples);
     report->ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  }
   return toPredictions(out, g, samples, tau);
 }
 

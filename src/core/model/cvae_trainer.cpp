@@ -346,7 +346,10 @@ double scoreValidationView(Cvae& model, const CvaeConfig& mc, const TrainingSamp
   const int r = mc.resolution;
   const Batch b = toBatch({s}, r);
   const torch::Tensor z = torch::randn({samples, mc.latent_size});
-  const CvaeOutput o = model->generate(b.partial.expand({samples, 2, r, r, r}).contiguous(), z);
+  // One condition shared by the codes (encoded once); the FC baseline, which ignores the code,
+  // gets one per code so that its S (equal) outputs are scored like hypotheses.
+  const CvaeOutput o = model->generate(
+      mc.hasLatentCode() ? b.partial : b.partial.expand({samples, 2, r, r, r}).contiguous(), z);
   std::vector<std::vector<float>> preds;
   for (int j = 0; j < samples; ++j) preds.push_back(values(o.tsdf[j]));
   const OccupancyScores sc = scoreOccupancy(s.tsdf, preds);
