@@ -541,6 +541,8 @@ TEST(Cvae, TinyModelOverfitsOneScene) {
   EXPECT_LT(last_votes, 0.5 * inside);
 }
 
+std::string shippedModel() { return std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt"; }
+
 // Latent optimisation (the paper's section 4.2) on the shipped model: a generated pile seen
 // first from one side, then from more; the codes are fitted to the further views' TSDFs.
 struct PileViews {
@@ -583,9 +585,8 @@ double disagreement(const std::vector<CvaePrediction>& preds) {
 }
 
 TEST(ShippedModel, LatentOptimisationLowersItsLossOnFurtherViews) {
-  const std::string path = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
-  ASSERT_TRUE(fs::exists(path)) << path;
-  const CvaeInference net(path, 2);
+  ASSERT_TRUE(fs::exists(shippedModel())) << shippedModel();
+  const CvaeInference net(shippedModel(), 2);
   const PileViews pile{net};
   const ViewEvidence first = pile.seenFrom({0.0});
   const std::vector<ViewEvidence> further = {pile.seenFrom({2.1}), pile.seenFrom({4.2})};
@@ -609,9 +610,8 @@ TEST(ShippedModel, LatentOptimisationLowersItsLossOnFurtherViews) {
 }
 
 TEST(ShippedModel, APileSeenFromAllSidesIsReconstructedBetterAndAgreedOn) {
-  const std::string path = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
-  ASSERT_TRUE(fs::exists(path)) << path;
-  const CvaeInference net(path, 2);
+  ASSERT_TRUE(fs::exists(shippedModel())) << shippedModel();
+  const CvaeInference net(shippedModel(), 2);
   const PileViews pile{net};
   const ViewEvidence one = pile.seenFrom({0.0});
   std::vector<double> around;
@@ -661,9 +661,8 @@ TEST(TrainingSample, GridFollowsTheVisiblePile) {
 }
 
 TEST(ShippedModel, LoadsAndPredictsThreeSamplesInOnePass) {
-  const std::string path = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
-  ASSERT_TRUE(fs::exists(path)) << path;
-  const CvaeInference net(path, 2);
+  ASSERT_TRUE(fs::exists(shippedModel())) << shippedModel();
+  const CvaeInference net(shippedModel(), 2);
   EXPECT_EQ(net.config().resolution, 32);
   EXPECT_EQ(net.config().architecture, "cvae");
   EXPECT_NE(net.metadata().find("dataset_seed"), std::string::npos);

@@ -127,13 +127,16 @@ class CvaeImpl : public torch::nn::Module {
   CvaeOutput generate(const torch::Tensor& partial, const torch::Tensor& z);
   /// Decodes exactly the codes z (no prior applied): a posterior code, or an optimised one.
   CvaeOutput decodeCodes(const torch::Tensor& partial, const torch::Tensor& z);
+  /// The condition's feature maps, finest first: encode once, then generateFrom() any codes.
+  std::vector<torch::Tensor> encodeCondition(const torch::Tensor& partial);
+  /// generate() with the condition already encoded.
+  CvaeOutput generateFrom(const std::vector<torch::Tensor>& cond, const torch::Tensor& z);
   const CvaeConfig& config() const { return config_; }
   /// Replaces the stored config by one that describes the same network (only the loss
   /// settings may differ); throws std::invalid_argument otherwise.
   void setConfig(const CvaeConfig& config);
 
  private:
-  std::vector<torch::Tensor> encodeCondition(const torch::Tensor& partial);
   torch::Tensor decodeCondition(const torch::Tensor& features);
   /// `z` is undefined for the FC baseline; with latent_injection "every_scale" it is added, as
   /// projected per-channel offsets, before each joint block.

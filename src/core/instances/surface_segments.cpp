@@ -15,6 +15,7 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace simstack {
 
@@ -181,6 +182,14 @@ double seenFreeShare(const SurfaceSegments& s, const std::vector<int>& a, const 
 
 namespace {
 
+/// Per point: its labelled voxel (nearestLabelledVoxel), -1 none.
+std::vector<int> pointVoxels(const SurfaceSegments& segments, const Grid3<int>& labels) {
+  std::vector<int> out(segments.points_table.size());
+  for (size_t i = 0; i < out.size(); ++i)
+    out[i] = nearestLabelledVoxel(labels, segments.points_table[i]);
+  return out;
+}
+
 /// The visible points of every (instance, patch) pair, and the voxel each point falls in.
 struct VisibleParts {
   std::vector<std::map<int, std::vector<int>>> seen;  ///< per instance: patch -> point indices
@@ -188,16 +197,16 @@ struct VisibleParts {
   std::vector<int> voxel_of;                          ///< per point: its labelled voxel, -1 none
 };
 
-VisibleParts visibleParts(const SurfaceSegments& segments, const Grid3<int>& labels,
-                          int instances) {
+/// `voxel_of`: the points' labelled voxels (pointVoxels), which relabelling the instances keeps.
+VisibleParts visibleParts(const SurfaceSegments& segments, const Grid3<int>& labels, int instances,
+                          std::vector<int> voxel_of) {
   VisibleParts out;
   out.seen.resize(instances);
   out.visible.assign(instances, 0);
-  out.voxel_of.assign(segments.points_table.size(), -1);
+  out.voxel_of = std::move(voxel_of);
   for (size_t i = 0; i < segments.points_table.size(); ++i) {
-    const int v = nearestLabelledVoxel(labels, segments.points_table[i]);
+    const int v = out.voxel_of[i];
     if (v < 0) continue;
-    out.voxel_of[i] = v;
     const int k = labels.data[v];
     ++out.visible[k];
     if (segments.patch[i] >= 0) out.seen[k][segments.patch[i]].push_back(static_cast<int>(i));
@@ -410,9 +419,9 @@ InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments
   const int instances = hough.size();
   if (instances < 1) return out;
   Grid3<int> labels = hough.labels;
-  VisibleParts parts = visibleParts(segments, labels, instances);
+  VisibleParts parts = visibleParts(segments, labels, instances, pointVoxels(segments, labels));
   const bool joined = joinUnseen(parts.visible, config.max_unseen_points, &labels);
-  if (joined) parts = visibleParts(segments, labels, instances);
+  if (joined) parts = visibleParts(segments, labels, instances, std::move(parts.voxel_of));
   std::vector<PatchGroup> groups = initialGroups(segments, parts, config);
   if (groups.empty() && !joined) return out;
   joinGroups(segments, config, &groups);

@@ -409,7 +409,10 @@ CvaeOutput CvaeImpl::decodeCodes(const torch::Tensor& partial, const torch::Tens
 }
 
 CvaeOutput CvaeImpl::generate(const torch::Tensor& partial, const torch::Tensor& z) {
-  const std::vector<torch::Tensor> cond = encodeCondition(partial);
+  return generateFrom(encodeCondition(partial), z);
+}
+
+CvaeOutput CvaeImpl::generateFrom(const std::vector<torch::Tensor>& cond, const torch::Tensor& z) {
   if (!prior_mu || !config_.hasLatentCode()) return decodeWith(cond, z);
   const auto [mean, logvar] = priorOf(cond);
   return decodeWith(cond, mean + torch::exp(0.5 * logvar) * z);

@@ -135,11 +135,17 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
       sum = sum + ((tsdf - target[k]).abs() * observed[k]).flatten(1).sum(1);
     return sum / static_cast<double>(target.size());
   };
+  // The condition does not change: encoded once, without a graph.
+  std::vector<torch::Tensor> cond;
+  {
+    torch::NoGradGuard no_grad;
+    cond = impl_->model->encodeCondition(one);
+  }
   // The best code of each start so far (the loss may rise again after a step).
   torch::Tensor best_z = z.detach().clone();
   torch::Tensor best_loss = torch::full({samples}, std::numeric_limits<float>::infinity());
   for (int it = 0; it <= options.iterations; ++it) {
-    const torch::Tensor loss = lossOf(impl_->model->generate(one, z).tsdf);
+    const torch::Tensor loss = lossOf(impl_->model->generateFrom(cond, z).tsdf);
     {
       torch::NoGradGuard no_grad;
       const torch::Tensor better = loss.detach() < best_loss;
@@ -154,7 +160,7 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
     adam.step();
   }
   torch::NoGradGuard no_grad;
-  const CvaeOutput out = impl_->model->generate(one, best_z);
+  const CvaeOutput out = impl_->model->generateFrom(cond, best_z);
   if (report) {
     report->code_loss.assign(best_loss.data_ptr<float>(), best_loss.data_ptr<float>() + samples);
     report->ms =

@@ -39,6 +39,22 @@ std::vector<float> values(const torch::Tensor& t) {
   return std::vector<float>(c.data_ptr<float>(), c.data_ptr<float>() + c.numel());
 }
 
+/// std::runtime_error when the dataset's grids are not the model's (`model_name` in the message).
+void checkDatasetFitsModel(const DatasetInfo& info, const CvaeConfig& model,
+                           const std::string& dataset_path, const std::string& model_name) {
+  if (info.resolution != model.resolution || std::abs(info.extent_m - model.extent_m) > 1e-9) {
+    throw std::runtime_error("dataset " + dataset_path + " has " + std::to_string(info.resolution) +
+                             "^3 grids over " + std::to_string(info.extent_m) + " m, " +
+                             model_name + " wants " + std::to_string(model.resolution) +
+                             "^3 over " + std::to_string(model.extent_m) + " m");
+  }
+  if (std::abs(info.truncation_m - model.truncation_m()) > 1e-9) {
+    throw std::runtime_error("dataset " + dataset_path + " is truncated at " +
+                             std::to_string(info.truncation_m) + " m, " + model_name + " at " +
+                             std::to_string(model.truncation_m()) + " m");
+  }
+}
+
 struct Batch {
   torch::Tensor partial, tsdf, votes;
 };
@@ -241,17 +257,7 @@ CvaeTrainer::CvaeTrainer(const std::string& dataset_path, const CvaeConfig& mode
   impl_->config = training;
   impl_->reader = std::make_unique<DatasetReader>(dataset_path);
   const DatasetInfo& info = impl_->reader->info();
-  if (info.resolution != model.resolution || std::abs(info.extent_m - model.extent_m) > 1e-9) {
-    throw std::runtime_error("dataset " + dataset_path + " has " + std::to_string(info.resolution) +
-                             "^3 grids over " + std::to_string(info.extent_m) +
-                             " m, the model config wants " + std::to_string(model.resolution) +
-                             "^3 over " + std::to_string(model.extent_m) + " m");
-  }
-  if (std::abs(info.truncation_m - model.truncation_m()) > 1e-9) {
-    throw std::runtime_error("dataset " + dataset_path + " is truncated at " +
-                             std::to_string(info.truncation_m) + " m, the model config at " +
-                             std::to_string(model.truncation_m()) + " m");
-  }
+  checkDatasetFitsModel(info, model, dataset_path, "the model config");
   impl_->train_scenes = info.num_scenes - training.validation_scenes;
   if (impl_->train_scenes < 1) {
     throw std::runtime_error("dataset " + dataset_path + " has " + std::to_string(info.num_scenes) +
@@ -277,11 +283,7 @@ TrainingReport CvaeTrainer::validateModel(const std::string& dataset_path,
   impl.reader = std::make_unique<DatasetReader>(dataset_path);
   const DatasetInfo& info = impl.reader->info();
   const CvaeConfig& mc = impl.model_config;
-  if (info.resolution != mc.resolution || std::abs(info.extent_m - mc.extent_m) > 1e-9 ||
-      std::abs(info.truncation_m - mc.truncation_m()) > 1e-9)
-    throw std::runtime_error("dataset " + dataset_path + " (" + std::to_string(info.resolution) +
-                             "^3 over " + std::to_string(info.extent_m) +
-                             " m) does not match model " + model_path);
+  checkDatasetFitsModel(info, mc, dataset_path, "model " + model_path);
   impl.train_scenes = std::max(0, info.num_scenes - training.validation_scenes);
   torch::set_num_threads(training.threads);
   torch::manual_seed(training.seed);
