@@ -4,12 +4,14 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 
 #include "simstack/eval/evaluator.h"
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/eval/segmentation.h"
 #include "simstack/io/scene_io.h"
 #include "simstack/pipeline/classical_baseline.h"
+#include "simstack/pipeline/evaluated_methods.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/pile_generator.h"
 #include "simstack/scene/scene.h"
@@ -212,21 +214,24 @@ class KnownAnswer : public EvaluatedMethod {
   int scene_ = 0;
 };
 
-TEST(Evaluator, TheTruthScoresPerfectlyAndNothingScoresNothing) {
-  const std::filesystem::path path =
-      std::filesystem::temp_directory_path() / "simstack_evaluator_test.h5";
+/// A dataset of two generated piles in a temporary file.
+std::filesystem::path twoPileDataset(const std::string& name) {
+  const std::filesystem::path path = std::filesystem::temp_directory_path() / name;
   DatasetInfo info;
   info.num_scenes = 2;
-  {
-    DatasetWriter writer(path.string(), info);
-    const PileGenerator generator{PileConfig()};
-    for (int k = 0; k < 2; ++k) {
-      const Scene scene = generator.generate(31 + k).scene;
-      const GridSpec grid =
-          GridSpec::sceneGrid(scene.surfaceCentroid().head<2>(), info.extent_m, info.resolution);
-      writer.write(k, scene, computeGroundTruth(scene, grid, info.truncation_m));
-    }
+  DatasetWriter writer(path.string(), info);
+  const PileGenerator generator{PileConfig()};
+  for (int k = 0; k < 2; ++k) {
+    const Scene scene = generator.generate(31 + k).scene;
+    const GridSpec grid =
+        GridSpec::sceneGrid(scene.surfaceCentroid().head<2>(), info.extent_m, info.resolution);
+    writer.write(k, scene, computeGroundTruth(scene, grid, info.truncation_m));
   }
+  return path;
+}
+
+TEST(Evaluator, TheTruthScoresPerfectlyAndNothingScoresNothing) {
+  const std::filesystem::path path = twoPileDataset("simstack_evaluator_test.h5");
   const DatasetReader reader(path.string());
   KnownAnswer truth("truth", reader, true), nothing("nothing", reader, false);
   EvaluationOptions options;
@@ -257,6 +262,85 @@ TEST(Evaluator, TheTruthScoresPerfectlyAndNothingScoresNothing) {
   EXPECT_FALSE(j["methods"]["truth"].contains("views"));
   EXPECT_TRUE(resultsJson(r, true)["methods"]["nothing"].contains("views"));
   EXPECT_NE(resultsTable(r).find("| truth | "), std::string::npos);
+  std::filesystem::remove(path);
+}
+
+// A method that keeps the views it was given and predicts nothing.
+class ViewRecorder : public EvaluatedMethod {
+ public:
+  explicit ViewRecorder(const DatasetInfo& info) : info_(info) {}
+  const std::string& name() const override { return name_; }
+  MethodInfo info() const override { return {}; }
+  MethodEstimate estimate(const DepthView& view, const GridSpec* grid,
+                          const Vec2& pile_xy) override {
+    return estimateViews({view}, grid, pile_xy);
+  }
+  MethodEstimate estimateViews(const std::vector<DepthView>& views, const GridSpec*,
+                               const Vec2& pile_xy) override {
+    seen.push_back(views);
+    MethodEstimate out;
+    out.grid = GridSpec::sceneGrid(pile_xy, info_.extent_m, info_.resolution);
+    out.hypotheses_tsdf.emplace_back(out.grid.voxelCount(), 1.0f);
+    out.surfaces.emplace_back();
+    out.objects = false;
+    return out;
+  }
+  std::vector<std::vector<DepthView>> seen;
+
+ private:
+  DatasetInfo info_;
+  std::string name_ = "recorder";
+};
+
+// The multi-view protocol: its first view is the single-view protocol's, the others circle the
+// pile at the same distance and height; TSDF fusion scores higher with more views; a method
+// that takes one view is refused.
+TEST(Evaluator, MultiViewCirclesThePileFromTheSingleView) {
+  const std::filesystem::path path = twoPileDataset("simstack_evaluator_multiview.h5");
+  const DatasetReader reader(path.string());
+  EvaluationOptions options;
+  options.views = 1;
+  options.stability = false;
+  options.noise = true;
+  options.width = 160;
+  options.height = 120;
+  std::map<int, std::vector<double>> fusion_iou, visible;
+  std::map<int, std::vector<std::vector<DepthView>>> seen;
+  for (const int k : {1, 3, 6}) {
+    options.views_per_estimate = k;
+    ViewRecorder recorder(reader.info());
+    FusionMethod fusion(reader.info().extent_m, reader.info().resolution,
+                        reader.info().truncation_m);
+    const EvaluationResults r = evaluateDataset(reader, {&recorder, &fusion}, options);
+    for (const Row& row : r.methods[1].rows) {
+      fusion_iou[k].push_back(row.at("iou"));
+      visible[k].push_back(row.at("visible_ratio"));
+      EXPECT_EQ(row.count("count_exact"), 0u);  // fusion finds no objects
+    }
+    seen[k] = recorder.seen;
+  }
+  for (int scene = 0; scene < 2; ++scene) {
+    const Vec3 centre = reader.read(scene).scene.surfaceCentroid();
+    const DepthView& single = seen[1][scene].front();
+    ASSERT_EQ(seen[3][scene].size(), 3u);
+    EXPECT_EQ(seen[3][scene].front().depth.pixels, single.depth.pixels);  // noise included
+    for (const DepthView& v : seen[6][scene]) {
+      const Vec3 eye = v.T_table_camera->translation() - centre;
+      const Vec3 first = single.T_table_camera->translation() - centre;
+      EXPECT_NEAR(eye.norm(), first.norm(), 1e-9);
+      EXPECT_NEAR(eye.z(), first.z(), 1e-9);
+    }
+    const Vec3 a = seen[3][scene][0].T_table_camera->translation() - centre,
+               b = seen[3][scene][1].T_table_camera->translation() - centre;
+    EXPECT_NEAR(std::atan2(a.x() * b.y() - a.y() * b.x(), a.head<2>().dot(b.head<2>())),
+                2.0 * M_PI / 3.0, 1e-9);
+    EXPECT_GT(visible[6][scene], visible[1][scene] + 0.1);
+    EXPECT_GT(fusion_iou[6][scene], fusion_iou[1][scene] + 0.05);
+    EXPECT_GE(visible[6][scene], visible[3][scene]);
+  }
+  KnownAnswer one_view("truth", reader, true);
+  options.views_per_estimate = 2;
+  EXPECT_THROW(evaluateDataset(reader, {&one_view}, options), std::invalid_argument);
   std::filesystem::remove(path);
 }
 

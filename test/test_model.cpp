@@ -443,6 +443,46 @@ TEST(Cvae, EveryScaleCodeWarmStartsFromABottleneckModel) {
   fs::remove(path);
 }
 
+TEST(Cvae, CoarseHiddenConditionHidesTheFineMapsWhereNothingWasSeen) {
+  // hidden_condition "coarse": the condition's two finest maps are zero in unobserved voxels
+  // (16^3: in cells with no observed voxel) and untouched elsewhere; the coarser maps are the
+  // same as with "full", and so is every tensor (a "full" model warm-starts it).
+  CvaeConfig c = tiny();
+  c.hidden_condition = "coarse";
+  torch::manual_seed(8);
+  Cvae coarse(c);
+  torch::manual_seed(8);
+  Cvae full(tiny());
+  coarse->eval();
+  full->eval();
+  EXPECT_EQ(coarse->parameters().size(), full->parameters().size());
+  torch::NoGradGuard no_grad;
+  torch::Tensor partial = torch::rand({1, 2, 16, 16, 16}) * 2 - 1;
+  // Observed: the half x < 8, and one voxel beyond it, at (z, y, x) = (3, 5, 12).
+  torch::Tensor observed = torch::zeros({1, 1, 16, 16, 16});
+  observed.narrow(4, 0, 8).fill_(1.0);
+  observed[0][0][3][5][12] = 1.0;
+  partial.narrow(1, 1, 1).copy_(observed);
+  const std::vector<torch::Tensor> a = coarse->encodeCondition(partial),
+                                   b = full->encodeCondition(partial);
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_TRUE(torch::equal(a[0], b[0] * observed));
+  EXPECT_EQ(a[0][0].select(3, 12).select(2, 5).select(1, 3).abs().sum().item<double>(),
+            b[0][0].select(3, 12).select(2, 5).select(1, 3).abs().sum().item<double>());
+  EXPECT_NEAR(a[0].narrow(4, 8, 8).abs().sum().item<double>(),
+              a[0][0].select(3, 12).select(2, 5).select(1, 3).abs().sum().item<double>(), 1e-3);
+  // The 16^3 map at half size: cells x < 4 and the cell holding (3, 5, 12) stay.
+  EXPECT_TRUE(torch::equal(a[1].narrow(4, 0, 4), b[1].narrow(4, 0, 4)));
+  EXPECT_TRUE(torch::equal(a[1][0].select(3, 6).select(2, 2).select(1, 1),
+                           b[1][0].select(3, 6).select(2, 2).select(1, 1)));
+  EXPECT_GT(b[1].narrow(4, 4, 4).abs().sum().item<double>(), 0.0);
+  EXPECT_NEAR(a[1].narrow(4, 4, 4).abs().sum().item<double>(),
+              a[1][0].select(3, 6).select(2, 2).select(1, 1).abs().sum().item<double>(), 1e-3);
+  for (size_t i = 2; i < a.size(); ++i) EXPECT_TRUE(torch::equal(a[i], b[i])) << i;
+  c.hidden_condition = "none";
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+}
+
 TEST(Cvae, SaveLoadGivesIdenticalOutputs) {
   torch::manual_seed(1);
   Cvae model(tiny());

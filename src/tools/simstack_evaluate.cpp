@@ -22,12 +22,38 @@ void writeJson(const std::string& path, const nlohmann::json& j) {
   if (!f) throw std::runtime_error("cannot write " + path);
 }
 
+/// Every method on the dataset's views; writes the results and prints the table.
+void runDataset(const DatasetReader& reader, const std::string& dataset,
+                const std::vector<std::unique_ptr<EvaluatedMethod>>& methods,
+                const EvaluationOptions& o, const std::string& output, const std::string& summary) {
+  std::vector<EvaluatedMethod*> run;
+  for (const auto& m : methods) run.push_back(m.get());
+  ProgressBar bar("evaluating " + std::to_string(run.size()) + " methods",
+                  o.scenes > 0 ? std::min(o.scenes, reader.size()) : reader.size());
+  const EvaluationResults results =
+      evaluateDataset(reader, run, o, [&](int done, int) { bar.update(done); });
+  bar.finish();
+  for (const bool with_views : {true, false}) {
+    nlohmann::json j = resultsJson(results, with_views);
+    j["dataset"] = dataset;
+    if (with_views || !summary.empty()) writeJson(with_views ? output : summary, j);
+  }
+  std::cout << "\n"
+            << resultsTable(results) << "\n"
+            << results.scenes << " scenes x " << o.views << " views"
+            << (o.views_per_estimate > 1
+                    ? " of " + std::to_string(o.views_per_estimate) + " posed views each"
+                    : std::string())
+            << "; results: " << output << "\n";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string dataset, output, summary, mesh_dir, real_dir;
   EvaluationOptions o;
   bool no_classical = false, no_stability = false;
+  int refine_iterations = 0;
   CLI::App app{
       "Evaluate trained models and the classical baseline on a test dataset (DESIGN.md section "
       "5): every scene from random viewpoints in the paper's ranges, S latent samples per view "
@@ -61,6 +87,17 @@ int main(int argc, char** argv) {
   app.add_flag("--overhead", o.overhead,
                "views from above, as on a pick station (elevation 60-89 degrees, 0.6-1.0 m "
                "away) instead of the paper's ranges");
+  app.add_option("--multi-view", o.views_per_estimate,
+                 "posed views per estimate (the paper's multi-view experiment): the first as "
+                 "without it, the others turned about the pile by 360/K degrees each; each model "
+                 "conditioned on all views and on the first alone (_first), and TSDF fusion; no "
+                 "classical baseline")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
+  app.add_option("--refine", refine_iterations,
+                 "with --multi-view: also each C-VAE with this many Adam steps fitting its codes "
+                 "to every view (_opt, _first_opt; perception.refine_iterations)")
+      ->check(CLI::PositiveNumber);
   app.add_flag("--no-classical", no_classical, "skip the classical baseline");
   app.add_flag("--no-stability", no_stability, "skip the physics stability test");
   app.add_option("--chamfer-points", o.chamfer_points, "surface samples per Chamfer set")
@@ -73,6 +110,10 @@ int main(int argc, char** argv) {
     return 2;
   }
   o.stability = !no_stability;
+  if (refine_iterations > 0 && o.views_per_estimate < 2) {
+    std::cerr << "simstack_evaluate: --refine needs --multi-view 2 or more\n";
+    return 2;
+  }
   try {
     const std::vector<PerceptionConfig> configs = perception.configs();
     if (!real_dir.empty()) {
@@ -88,22 +129,12 @@ int main(int argc, char** argv) {
     }
     const DatasetReader reader(dataset, mesh_dir);
     const auto methods =
-        evaluatedMethods(configs, !no_classical, reader.info().extent_m, reader.info().resolution);
-    std::vector<EvaluatedMethod*> run;
-    for (const auto& m : methods) run.push_back(m.get());
-    ProgressBar bar("evaluating " + std::to_string(run.size()) + " methods",
-                    o.scenes > 0 ? std::min(o.scenes, reader.size()) : reader.size());
-    const EvaluationResults results =
-        evaluateDataset(reader, run, o, [&](int done, int) { bar.update(done); });
-    bar.finish();
-    for (const bool with_views : {true, false}) {
-      nlohmann::json j = resultsJson(results, with_views);
-      j["dataset"] = dataset;
-      if (with_views || !summary.empty()) writeJson(with_views ? output : summary, j);
-    }
-    std::cout << "\n"
-              << resultsTable(results) << "\n"
-              << results.scenes << " scenes x " << o.views << " views; results: " << output << "\n";
+        o.views_per_estimate > 1
+            ? multiViewMethods(configs, refine_iterations, reader.info().extent_m,
+                               reader.info().resolution, reader.info().truncation_m)
+            : evaluatedMethods(configs, !no_classical, reader.info().extent_m,
+                               reader.info().resolution);
+    runDataset(reader, dataset, methods, o, output, summary);
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_evaluate: error: " << e.what() << "\n";

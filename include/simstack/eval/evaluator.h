@@ -35,6 +35,8 @@ struct MethodEstimate {
   std::vector<std::vector<SuperquadricShape>> further_superquadrics;
   Image<int> pixel_instances;  ///< instance per pixel of the view, -1 none (may stay empty)
   bool table_estimated = false;
+  /// False for a method that finds no objects (TSDF fusion): no object metrics are scored.
+  bool objects = true;
   double perceive_ms = std::numeric_limits<double>::quiet_NaN();
 };
 
@@ -57,6 +59,11 @@ class EvaluatedMethod {
   /// pile's x/y centre, for a method that needs a grid without choosing one itself.
   virtual MethodEstimate estimate(const DepthView& view, const GridSpec* grid,
                                   const Vec2& pile_xy) = 0;
+  /// The estimate from several posed views of one scene, `views[0]` the reference view (the
+  /// multi-view protocol, EvaluationOptions::views_per_estimate). This default takes one
+  /// view (std::invalid_argument for more).
+  virtual MethodEstimate estimateViews(const std::vector<DepthView>& views, const GridSpec* grid,
+                                       const Vec2& pile_xy);
 };
 
 struct EvaluationOptions {
@@ -68,6 +75,11 @@ struct EvaluationOptions {
   bool stability = true;          ///< the physics stability test
   int chamfer_points = 1000;      ///< surface samples per Chamfer set
   bool overhead = false;          ///< views from above (ViewpointRange::overhead())
+  /// Posed views per estimate (the paper's multi-view experiment): the first drawn as in the
+  /// single-view protocol (the same view and noise), the others that viewpoint turned about
+  /// the vertical through the pile's centre by 360 / views_per_estimate degrees each. Visible
+  /// shares count what any of them sees; the visible Chamfer stays the first view's.
+  int views_per_estimate = 1;
 };
 
 using Row = std::map<std::string, double>;

@@ -73,6 +73,12 @@ struct CvaeConfig {
   /// down to the finest grid, as the probabilistic U-Net feeds its code to the last layers).
   /// A network setting, stored with the model; the FC baseline has no code and ignores it.
   std::string latent_injection = "bottleneck";
+  /// What the condition tells the decoder about voxels the view did not observe: "full" (the
+  /// paper: all its feature maps everywhere) or "coarse" (its two finest maps, 32^3 and 16^3
+  /// at R = 32, are zero in unobserved voxels and in 16^3 cells with no observed voxel, so the
+  /// hidden part's shape must come from the coarser maps and the latent code). A network
+  /// setting, stored with the model; inference masks the same way.
+  std::string hidden_condition = "full";
   /// How a training step draws the code from the encoder: "gaussian" (z = mu + sigma * noise,
   /// the reparameterised sample) or "deterministic" (z = mu, the MMD autoencoder of InfoVAE's
   /// tutorial and of WAE-MMD: the MMD alone makes the codes look like the prior, and the

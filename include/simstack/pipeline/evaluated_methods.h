@@ -28,6 +28,10 @@ class NetworkMethod : public EvaluatedMethod {
   MethodInfo info() const override;
   MethodEstimate estimate(const DepthView& view, const GridSpec* grid,
                           const Vec2& pile_xy) override;
+  /// ScenePerception on all the views (its multi-view settings: condition_views,
+  /// refine_iterations).
+  MethodEstimate estimateViews(const std::vector<DepthView>& views, const GridSpec* grid,
+                               const Vec2& pile_xy) override;
   /// The model's architecture (cvae, fc, fc_plain).
   const std::string& architecture() const;
 
@@ -53,6 +57,35 @@ class ClassicalMethod : public EvaluatedMethod {
   int resolution_;
   std::string name_ = "classical";
 };
+
+/// TSDF fusion, the paper's multi-view baseline: the views' fused partial TSDF on the grid
+/// of an earlier method (else one centred on the true pile), occupied where observed and
+/// <= 0; unobserved voxels count as free. It finds no objects.
+class FusionMethod : public EvaluatedMethod {
+ public:
+  FusionMethod(double extent_m, int resolution, double truncation_m);
+  const std::string& name() const override { return name_; }
+  MethodInfo info() const override { return {}; }
+  MethodEstimate estimate(const DepthView& view, const GridSpec* grid,
+                          const Vec2& pile_xy) override;
+  MethodEstimate estimateViews(const std::vector<DepthView>& views, const GridSpec* grid,
+                               const Vec2& pile_xy) override;
+
+ private:
+  double extent_m_;
+  int resolution_;
+  double truncation_m_;
+  std::string name_ = "fusion";
+};
+
+/// The methods of the multi-view protocol (the paper's section 4.2) for each config's model:
+/// conditioned on all views (named by architecture) and on the first alone (`_first`, the
+/// single-view figure on the same views); for a model with a latent code and
+/// `refine_iterations` > 0 also each of them with its codes optimised against every view
+/// (`_opt`, `_first_opt`: the paper's multi-view optimisation); then TSDF fusion.
+std::vector<std::unique_ptr<EvaluatedMethod>> multiViewMethods(
+    const std::vector<PerceptionConfig>& configs, int refine_iterations, double extent_m,
+    int resolution, double truncation_m);
 
 /// The methods of the dataset protocol: one NetworkMethod per config with random latent codes
 /// (not the zero code first, as the paper evaluates), named by architecture (a repeated

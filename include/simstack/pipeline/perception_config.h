@@ -36,6 +36,11 @@ struct PerceptionConfig {
   /// each view's own partial TSDF (the paper's section 4.2, CvaeInference::refine); 0 = off.
   int refine_iterations = 0;
   double refine_learning_rate = 0.3;
+  /// Given several posed views, the ones the network is conditioned on: "all" (their fused
+  /// partial TSDF: the paper's multi-view conditioning) or "first" (the first view alone, the
+  /// others reaching the codes only through refine_iterations: the paper's multi-view
+  /// optimisation).
+  std::string condition_views = "all";
   HoughConfig hough;              ///< the model's (model card)
   SurfaceSegmentConfig segments;  ///< the split along the observed surface's convex patches
   FitConfig fit;

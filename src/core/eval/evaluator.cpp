@@ -50,9 +50,11 @@ struct SceneTruth {
   Points3 full;  ///< samples of the whole true surface
 };
 
-/// One rendered view and its ground truth on the visible side.
+/// One rendered view (and the further views of the multi-view protocol) and its ground truth
+/// on the visible side.
 struct ViewTruth {
   DepthView view;
+  std::vector<DepthView> views;  ///< `view` first
   Transform T_table_camera;
   Points3 visible;  ///< samples of the visible true surface
   double visible_ratio = 0;
@@ -78,6 +80,7 @@ void scoreEstimate(const MethodEstimate& est, const SceneRecord& rec, const Scen
   const OccupancyScores sc = scoreOccupancy(gt.tsdf.data, est.hypotheses_tsdf);
   (*row)["iou"] = sc.iou;
   (*row)["bce"] = sc.bce;
+  if (!est.objects) return;
   const std::vector<SuperquadricShape>& shapes = est.superquadrics;
   (*row)["chamfer_full_sq_m"] =
       chamferDistance(samplePoints(superquadricsMesh(shapes), points, rng), scene.full);
@@ -108,11 +111,28 @@ void evaluateView(const SceneRecord& rec, int k, int v, const SceneTruth& scene,
   const RenderResult r =
       renderer.render(camera, vt.T_table_camera,
                       options.noise ? SensorNoiseConfig::kinect(view_seed) : SensorNoiseConfig());
-  const TriangleMesh gt_visible =
-      subMesh(scene.mesh, visibleTriangles(scene.mesh, camera, vt.T_table_camera));
-  vt.visible = samplePoints(gt_visible, options.chamfer_points, rng);
-  vt.visible_ratio = gt_visible.area() / scene.mesh.area();
+  std::vector<bool> seen = visibleTriangles(scene.mesh, camera, vt.T_table_camera);
+  vt.visible = samplePoints(subMesh(scene.mesh, seen), options.chamfer_points, rng);
   vt.view = DepthView{r.depth, camera, vt.T_table_camera};
+  vt.views = {vt.view};
+  // The further views turn the first about the vertical through the pile's centre; their
+  // noise has its own stream, so the first view is the single-view protocol's.
+  const Vec3 centre = rec.scene.surfaceCentroid();
+  for (int j = 1; j < options.views_per_estimate; ++j) {
+    const double angle = 2.0 * M_PI * j / options.views_per_estimate;
+    const Transform T = Eigen::Translation3d(centre) * Eigen::AngleAxisd(angle, Vec3::UnitZ()) *
+                        Eigen::Translation3d(-centre) * vt.T_table_camera;
+    const uint64_t noise_seed = view_seed ^ (0x9e3779b97f4a7c15ull * static_cast<uint64_t>(j));
+    vt.views.push_back(DepthView{
+        renderer
+            .render(camera, T,
+                    options.noise ? SensorNoiseConfig::kinect(noise_seed) : SensorNoiseConfig())
+            .depth,
+        camera, T});
+    const std::vector<bool> also = visibleTriangles(scene.mesh, camera, T);
+    for (size_t t = 0; t < seen.size(); ++t) seen[t] = seen[t] || also[t];
+  }
+  vt.visible_ratio = subMesh(scene.mesh, seen).area() / scene.mesh.area();
   GridSpec grid;
   GroundTruthGrids gt;
   bool have_gt = false;
@@ -123,8 +143,8 @@ void evaluateView(const SceneRecord& rec, int k, int v, const SceneTruth& scene,
             {"view", v},
             {"visible_ratio", vt.visible_ratio},
             {"objects", static_cast<double>(rec.scene.objects.size())}};
-    const MethodEstimate est = methods[i]->estimate(vt.view, have_gt ? &grid : nullptr,
-                                                    rec.scene.surfaceCentroid().head<2>());
+    const MethodEstimate est = methods[i]->estimateViews(vt.views, have_gt ? &grid : nullptr,
+                                                         rec.scene.surfaceCentroid().head<2>());
     if (!have_gt) {  // the first method's grid is the ground truth's
       grid = est.grid;
       gt = computeGroundTruth(rec.scene, grid, truncation_m);
@@ -143,6 +163,13 @@ std::string fixed(double value, int digits) {
 
 }  // namespace
 
+MethodEstimate EvaluatedMethod::estimateViews(const std::vector<DepthView>& views,
+                                              const GridSpec* grid, const Vec2& pile_xy) {
+  if (views.size() != 1)
+    throw std::invalid_argument(name() + " takes one view, not " + std::to_string(views.size()));
+  return estimate(views.front(), grid, pile_xy);
+}
+
 EvaluationResults evaluateDataset(const DatasetReader& reader,
                                   const std::vector<EvaluatedMethod*>& methods,
                                   const EvaluationOptions& options,
@@ -151,6 +178,9 @@ EvaluationResults evaluateDataset(const DatasetReader& reader,
   out.options = options;
   out.dataset = reader.info();
   out.scenes = options.scenes > 0 ? std::min(options.scenes, reader.size()) : reader.size();
+  if (options.views_per_estimate < 1)
+    throw std::invalid_argument("views_per_estimate must be >= 1, not " +
+                                std::to_string(options.views_per_estimate));
   for (EvaluatedMethod* m : methods) out.methods.push_back({m->name(), m->info(), {}});
   const PinholeCamera camera = scaledKinect(options.width, options.height);
   for (int k = 0; k < out.scenes; ++k) {
@@ -209,6 +239,7 @@ json resultsJson(const EvaluationResults& r, bool with_views) {
   out["image"] = std::to_string(o.width) + "x" + std::to_string(o.height);
   out["noise"] = o.noise;
   out["overhead"] = o.overhead;
+  out["views_per_estimate"] = o.views_per_estimate;
   out["chamfer_points"] = o.chamfer_points;
   if (!r.truth_stable.empty())
     out["ground_truth"] = {{"stable", mean(r.truth_stable)},
@@ -231,12 +262,17 @@ std::string resultsTable(const EvaluationResults& r) {
   for (const MethodResults& m : r.methods) {
     const json s = summarise(m.rows);
     auto val = [&](const char* key, double scale, int digits) {
-      return fixed(s[key]["mean"].get<double>() * scale, digits);
+      const double v = s[key]["mean"].get<double>();
+      return std::isfinite(v) ? fixed(v * scale, digits) : std::string("-");
+    };
+    auto percent = [&](const char* key) {
+      const std::string v = val(key, 100, 0);
+      return v == "-" ? v : v + " %";
     };
     o << "| " << m.name << " | " << val("chamfer_visible_m", 1000, 1) << " | "
       << val("chamfer_full_m", 1000, 1) << " | " << val("chamfer_full_sq_m", 1000, 1) << " | "
       << val("iou", 1, 3) << " | " << val("bce", 1, 3) << " | " << val("displacement_m", 1000, 1)
-      << " | " << val("stable", 100, 0) << " % | " << val("count_exact", 100, 0) << " % |\n";
+      << " | " << percent("stable") << " | " << percent("count_exact") << " |\n";
   }
   if (!r.truth_stable.empty())
     o << "\nthe true piles under the same stability test: " << fixed(100 * mean(r.truth_stable), 0)

@@ -285,6 +285,12 @@ std::vector<torch::Tensor> CvaeImpl::encodeCondition(const torch::Tensor& partia
     x = block(x);
     features.push_back(x);
   }
+  if (config_.hidden_condition == "coarse") {
+    // Channel 1 is the observed mask; a 16^3 cell counts as observed when any voxel in it is.
+    const torch::Tensor observed = partial.narrow(1, 1, 1);
+    features[0] = features[0] * observed;
+    features[1] = features[1] * torch::max_pool3d(observed, 2);
+  }
   return features;
 }
 

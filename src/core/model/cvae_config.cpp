@@ -39,6 +39,7 @@ void cvaeFields(C& c, F&& f) {
   f("hidden_size", c.hidden_size);
   f("norm", c.norm);
   f("latent_injection", c.latent_injection);
+  f("hidden_condition", c.hidden_condition);
   f("alpha", c.alpha);
   f("beta", c.beta);
   f("gamma", c.gamma);
@@ -98,6 +99,8 @@ void CvaeConfig::validate() const {
           "norm must be 'batch' or 'group', got '" + norm + "'");
   require(latent_injection == "bottleneck" || latent_injection == "every_scale",
           "latent_injection must be 'bottleneck' or 'every_scale', got '" + latent_injection + "'");
+  require(hidden_condition == "full" || hidden_condition == "coarse",
+          "hidden_condition must be 'full' or 'coarse', got '" + hidden_condition + "'");
   require(mmd_prior_samples >= 2, "mmd_prior_samples must be >= 2");
   require(!mmd_kernel_widths.empty(), "mmd_kernel_widths needs at least one width");
   for (double w : mmd_kernel_widths) require(w > 0.0, "mmd_kernel_widths must be > 0");

@@ -1,9 +1,12 @@
 #include "simstack/pipeline/evaluated_methods.h"
 
+#include <algorithm>
+
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/tsdf/network_input.h"
+#include "simstack/tsdf/projective_tsdf.h"
 
 namespace simstack {
 
@@ -24,8 +27,14 @@ MethodInfo NetworkMethod::info() const {
   return {c.model_path, c.samples, perceptionYaml(c)};
 }
 
-MethodEstimate NetworkMethod::estimate(const DepthView& view, const GridSpec*, const Vec2&) {
-  const SceneEstimate est = perception_->perceive(view);
+MethodEstimate NetworkMethod::estimate(const DepthView& view, const GridSpec* grid,
+                                       const Vec2& pile_xy) {
+  return estimateViews({view}, grid, pile_xy);
+}
+
+MethodEstimate NetworkMethod::estimateViews(const std::vector<DepthView>& views, const GridSpec*,
+                                            const Vec2&) {
+  const SceneEstimate est = perception_->perceive(views);
   MethodEstimate out;
   out.grid = est.grid;
   for (const SceneHypothesis& h : est.hypotheses) {
@@ -38,7 +47,7 @@ MethodEstimate NetworkMethod::estimate(const DepthView& view, const GridSpec*, c
     for (const InstanceEstimate& e : est.hypotheses[h].instances)
       out.further_superquadrics.back().push_back(e.superquadric);
   }
-  if (label_pixels_) out.pixel_instances = pixelInstances(view, est);
+  if (label_pixels_) out.pixel_instances = pixelInstances(views.front(), est);
   out.table_estimated = est.table_estimated;
   out.perceive_ms = est.timings.total_ms;
   return out;
@@ -61,6 +70,66 @@ MethodEstimate ClassicalMethod::estimate(const DepthView& view, const GridSpec* 
   out.hypotheses_tsdf.push_back(superquadricOccupancy(out.superquadrics, out.grid));
   out.surfaces.push_back(superquadricsMesh(out.superquadrics));
   return out;
+}
+
+FusionMethod::FusionMethod(double extent_m, int resolution, double truncation_m)
+    : extent_m_(extent_m), resolution_(resolution), truncation_m_(truncation_m) {}
+
+MethodEstimate FusionMethod::estimate(const DepthView& view, const GridSpec* grid,
+                                      const Vec2& pile_xy) {
+  return estimateViews({view}, grid, pile_xy);
+}
+
+MethodEstimate FusionMethod::estimateViews(const std::vector<DepthView>& views,
+                                           const GridSpec* grid, const Vec2& pile_xy) {
+  MethodEstimate out;
+  out.objects = false;
+  out.grid = grid ? *grid : GridSpec::sceneGrid(pile_xy, extent_m_, resolution_);
+  ProjectiveTsdfConfig tc;
+  tc.truncation_m = truncation_m_;
+  ProjectiveTsdf fused(out.grid, tc);
+  for (const DepthView& v : views) {
+    if (!v.T_table_camera) throw std::invalid_argument("fusion: every view needs its pose");
+    fused.integrate(v.depth, v.camera, *v.T_table_camera);
+  }
+  Grid3<float> tsdf = fused.tsdf();
+  const Grid3<float>& weight = fused.weight();
+  for (size_t i = 0; i < tsdf.data.size(); ++i)
+    if (!(weight.data[i] > 0.0f)) tsdf.data[i] = static_cast<float>(truncation_m_);
+  out.surfaces.push_back(extractSurface(tsdf));
+  out.hypotheses_tsdf.push_back(std::move(tsdf.data));
+  return out;
+}
+
+std::vector<std::unique_ptr<EvaluatedMethod>> multiViewMethods(
+    const std::vector<PerceptionConfig>& configs, int refine_iterations, double extent_m,
+    int resolution, double truncation_m) {
+  std::vector<std::unique_ptr<EvaluatedMethod>> methods;
+  std::vector<std::string> bases;  // each config's name: its architecture, indexed when repeated
+  for (size_t i = 0; i < configs.size(); ++i) {
+    for (const std::string condition : {"all", "first"}) {
+      for (const bool optimise : {false, true}) {
+        PerceptionConfig c = configs[i];
+        c.zero_code_first = false;  // random codes, as the paper evaluates
+        c.condition_views = condition;
+        c.refine_iterations = optimise ? refine_iterations : 0;
+        auto m = std::make_unique<NetworkMethod>(c);
+        if (optimise && (refine_iterations == 0 || m->architecture() != "cvae")) continue;
+        if (bases.size() == i) {
+          const bool repeated =
+              std::find(bases.begin(), bases.end(), m->architecture()) != bases.end();
+          bases.push_back(m->architecture() + (repeated ? "_" + std::to_string(i) : ""));
+        }
+        std::string name = bases[i];
+        if (condition == "first") name += "_first";
+        if (optimise) name += "_opt";
+        m->rename(name);
+        methods.push_back(std::move(m));
+      }
+    }
+  }
+  methods.push_back(std::make_unique<FusionMethod>(extent_m, resolution, truncation_m));
+  return methods;
 }
 
 std::vector<std::unique_ptr<EvaluatedMethod>> evaluatedMethods(

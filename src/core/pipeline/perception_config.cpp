@@ -27,6 +27,7 @@ void perceptionFields(C& c, F&& f) {
   f("threads", c.threads);
   f("refine_iterations", c.refine_iterations);
   f("refine_learning_rate", c.refine_learning_rate);
+  f("condition_views", c.condition_views);
 }
 template <class C, class F>
 void houghFields(C& c, F&& f) {

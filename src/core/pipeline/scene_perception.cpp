@@ -201,6 +201,9 @@ void validate(const PerceptionConfig& config) {
   if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
   if (config.refine_iterations < 0 || !(config.refine_learning_rate > 0.0))
     throw std::invalid_argument("refine_iterations must be >= 0 and refine_learning_rate > 0");
+  if (config.condition_views != "all" && config.condition_views != "first")
+    throw std::invalid_argument("condition_views must be 'all' or 'first', not '" +
+                                config.condition_views + "'");
   config.fit.validate();
   config.workspace.validate();
   config.segments.validate();
@@ -274,6 +277,13 @@ std::pair<Grid3<float>, Grid3<float>> partialTsdf(const GridSpec& grid,
   return {partial.tsdf(), partial.weight()};
 }
 
+/// The views the network is conditioned on (PerceptionConfig::condition_views).
+std::vector<DepthView> conditioningViews(const std::vector<DepthView>& views,
+                                         const PerceptionConfig& c) {
+  if (c.condition_views == "first") return {views.front()};
+  return views;
+}
+
 /// The network's S hypotheses for one tile from its partial TSDF; with several views and
 /// `refine_iterations`, their codes fitted to each view's own partial TSDF.
 std::vector<CvaePrediction> predictTile(const CvaeInference& model,
@@ -307,8 +317,9 @@ std::vector<SceneHypothesis> predictGroup(
       tiles.push_back(predictTile(model, scene_partial, views, T_table_first, c));
       continue;
     }
-    tiles.push_back(predictTile(model, partialTsdf(tile, views, T_table_first, truncation), views,
-                                T_table_first, c));
+    tiles.push_back(predictTile(
+        model, partialTsdf(tile, conditioningViews(views, c), T_table_first, truncation), views,
+        T_table_first, c));
   }
   std::vector<SceneHypothesis> out(tiles.front().size());
   for (size_t k = 0; k < out.size(); ++k) {
@@ -436,7 +447,7 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
   out.tiles = plan.tileCount();
   out.tiles_cropped = plan.cropped;
   std::pair<Grid3<float>, Grid3<float>> partial =
-      partialTsdf(out.grid, views, out.T_table_camera, mc.truncation_m());
+      partialTsdf(out.grid, conditioningViews(views, c), out.T_table_camera, mc.truncation_m());
   out.timings.tsdf_ms = msSince(t);
 
   // Each group as a scene of its own; one group is the scene.
