@@ -61,8 +61,11 @@ def plot_set(paths, sets, out_dir):
         ax.set_xlabel("visible share of the pile surface")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    fig.suptitle(f"{name}: {results['scenes']} scenes x {results['views']} views, "
-                 f"dataset seed {results['dataset_seed']}")
+    per = results.get("views_per_estimate", 1)
+    fig.suptitle(f"{name}: {results['scenes']} scenes x {results['views']} views"
+                 + (f" of {per} posed views each" if per > 1 else "")
+                 + (" from above" if results.get("overhead", False) else "")
+                 + f", dataset seed {results['dataset_seed']}")
     fig.tight_layout()
     out = os.path.join(out_dir, f"{name}.png")
     fig.savefig(out, dpi=110)
@@ -84,7 +87,9 @@ def main():
             if "methods" not in results:
                 print(f"plot_evaluation: {path}: no methods (real-data report?), skipped")
                 continue
-            key = (results["dataset_seed"], results["scenes"], results["views"])
+            # Runs of one test set under one protocol share a figure.
+            key = (results["dataset_seed"], results["scenes"], results["views"],
+                   results.get("views_per_estimate", 1), results.get("overhead", False))
         except (OSError, KeyError, json.JSONDecodeError) as e:
             sys.exit(f"plot_evaluation: {path}: {e}")
         paths, sets = groups.setdefault(key, ([], []))

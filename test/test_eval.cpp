@@ -334,6 +334,12 @@ TEST(Evaluator, MultiViewCirclesThePileFromTheSingleView) {
                b = seen[3][scene][1].T_table_camera->translation() - centre;
     EXPECT_NEAR(std::atan2(a.x() * b.y() - a.y() * b.x(), a.head<2>().dot(b.head<2>())),
                 2.0 * M_PI / 3.0, 1e-9);
+    // The turned camera looks the same way relative to the pile: its optical axis turned too.
+    const Eigen::AngleAxisd turn(2.0 * M_PI / 3.0, Vec3::UnitZ());
+    EXPECT_LT((seen[3][scene][1].T_table_camera->linear().col(2) -
+               turn * seen[3][scene][0].T_table_camera->linear().col(2))
+                  .norm(),
+              1e-9);
     EXPECT_GT(visible[6][scene], visible[1][scene] + 0.1);
     EXPECT_GT(fusion_iou[6][scene], fusion_iou[1][scene] + 0.05);
     EXPECT_GE(visible[6][scene], visible[3][scene]);

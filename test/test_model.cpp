@@ -119,6 +119,10 @@ TEST(Cvae, LossesMatchHandComputedValues) {
   const auto vt_in = torch::tensor({0.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f}).view({1, 3, 2, 1, 1});
   EXPECT_NEAR(voteLoss(vp, vt_in, false).item<double>(), 3.0 + 1.0, 1e-5);
   EXPECT_NEAR(voteLoss(vp, vt_in, true).item<double>(), 1.0, 1e-5);
+  // Per-voxel weights 2 and 5: 2 x 3 + 5 x 1, and 5 x 1 over the occupied voxel alone.
+  const auto w = torch::tensor({2.0f, 5.0f}).view({1, 1, 2, 1, 1});
+  EXPECT_NEAR(voteLoss(vp, vt_in, false, w).item<double>(), 2.0 * 3.0 + 5.0, 1e-5);
+  EXPECT_NEAR(voteLoss(vp, vt_in, true, w).item<double>(), 5.0, 1e-5);
   // Occupancy, sharpness 10: voxel 0 free (target 0.25), logit -5, -log(1 - sigmoid(-5));
   // voxel 1 occupied (target -0.5), logit 2, -log(sigmoid(2)). A target of exactly 0 is
   // occupied (eq. 8).
@@ -673,6 +677,41 @@ TEST(ShippedModel, APileSeenFromAllSidesIsReconstructedBetterAndAgreedOn) {
   EXPECT_GT(iou_refined, iou_one + 0.05);
   // What the views leave open is where hypotheses differ: less of it seen from all sides.
   EXPECT_LT(disagreement(conditioned), disagreement(alone));
+}
+
+TEST(TrainingSample, VoteWeightsMarkVoxelsNearAnotherObject) {
+  // Two slabs along x in an 8^3 grid: object 1 in x = 0-2, object 2 in x = 4-7, free x = 3.
+  // Within 2 voxels of the other object: x = 2 (object 1) and x = 4 (object 2).
+  const int r = 8;
+  std::vector<uint8_t> labels(r * r * r, 0);
+  for (int z = 0; z < r; ++z)
+    for (int y = 0; y < r; ++y)
+      for (int x = 0; x < r; ++x) labels[(z * r + y) * r + x] = x <= 2 ? 1 : x >= 4 ? 2 : 0;
+  const std::vector<float> w = voteBoundaryWeights(labels, r, 4.0f);
+  for (int x = 0; x < r; ++x) {
+    const bool near = x == 2 || x == 4;
+    EXPECT_FLOAT_EQ(w[(3 * r + 3) * r + x], near ? 5.0f : 1.0f) << x;
+  }
+  EXPECT_THROW(voteBoundaryWeights(labels, 7, 4.0f), std::invalid_argument);
+  // The builder fills them only when the loss uses them; a lone sphere has no such voxel.
+  const Scene scene = test::sphereScene(0.08, Vec3(0.0, 0.0, 0.08));
+  SceneRecord rec;
+  rec.scene = scene;
+  CvaeConfig c = tiny();
+  c.resolution = 32;
+  rec.grid = GridSpec::sceneGrid(Vec2(0.0, 0.0), c.extent_m, c.resolution);
+  rec.ground_truth = computeGroundTruth(scene, rec.grid, c.truncation_m());
+  const Transform eye = lookAt(Vec3(0.6, 0.0, 0.4), Vec3(0, 0, 0.08));
+  EXPECT_TRUE(TrainingSampleBuilder(c, scaledKinect(320, 240), false)
+                  .build(rec, eye, 0)
+                  .vote_weight.empty());
+  c.vote_boundary_weight = 4.0;
+  const TrainingSample s =
+      TrainingSampleBuilder(c, scaledKinect(320, 240), false).build(rec, eye, 0);
+  ASSERT_EQ(s.vote_weight.size(), s.tsdf.size());
+  for (float x : s.vote_weight) EXPECT_EQ(x, 1.0f);
+  c.vote_boundary_weight = -1.0;
+  EXPECT_THROW(c.validate(), std::invalid_argument);
 }
 
 TEST(TrainingSample, GridFollowsTheVisiblePile) {

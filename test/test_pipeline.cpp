@@ -271,6 +271,7 @@ TEST(ScenePerception, TwoViewsFuse) {
   const SceneEstimate cond = first_only.perceive(
       {DepthView{p.view.depth, p.camera, p.T_table_camera}, DepthView{r2.depth, p.camera, second}});
   EXPECT_EQ(cond.partial_weight.data, one.partial_weight.data);
+  ASSERT_EQ(cond.hypotheses.size(), one.hypotheses.size());
   // (to rounding: the network's last bits may follow where its buffers lie)
   for (size_t k = 0; k < one.hypotheses.size(); ++k) {
     float most = 0.0f;
@@ -279,6 +280,19 @@ TEST(ScenePerception, TwoViewsFuse) {
           most, std::abs(cond.hypotheses[k].tsdf_m.data[i] - one.hypotheses[k].tsdf_m.data[i]));
     EXPECT_LT(most, 1e-4f) << k;
   }
+  // Decomposed, too, the first view's instances: the second view reaches nothing.
+  first.decompose_samples = 1;
+  const ScenePerception first_decomposed(first);
+  PerceptionConfig single = config;
+  single.decompose_samples = 1;
+  const SceneEstimate alone =
+      ScenePerception(single).perceive(DepthView{p.view.depth, p.camera, p.T_table_camera});
+  const SceneEstimate both = first_decomposed.perceive(
+      {DepthView{p.view.depth, p.camera, p.T_table_camera}, DepthView{r2.depth, p.camera, second}});
+  ASSERT_FALSE(alone.instances().empty());
+  ASSERT_EQ(both.instances().size(), alone.instances().size());
+  for (size_t i = 0; i < alone.instances().size(); ++i)
+    EXPECT_EQ(both.instances()[i].voxels, alone.instances()[i].voxels) << i;
   first.condition_views = "second";
   EXPECT_THROW(ScenePerception{first}, std::invalid_argument);
 }

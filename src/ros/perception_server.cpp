@@ -255,7 +255,9 @@ void PerceptionServer::process(const Frame& frame) {
     if (node_.accumulate_views && view.T_table_camera) {
       views_.push_back(view);
       if (static_cast<int>(views_.size()) > node_.max_views) views_.erase(views_.begin());
-      views = views_;
+      // The newest frame first: it places the grid, its patches regroup the instances and the
+      // labels are drawn over it (with condition_views: first, it alone conditions the network).
+      views.assign(views_.rbegin(), views_.rend());
     }
   }
   if (views.empty()) views = {view};

@@ -114,6 +114,10 @@ int main(int argc, char** argv) {
     std::cerr << "simstack_evaluate: --refine needs --multi-view 2 or more\n";
     return 2;
   }
+  if (!real_dir.empty() && o.views_per_estimate > 1) {
+    std::cerr << "simstack_evaluate: --multi-view needs --dataset (a real scene is one view)\n";
+    return 2;
+  }
   try {
     const std::vector<PerceptionConfig> configs = perception.configs();
     if (!real_dir.empty()) {

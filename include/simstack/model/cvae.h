@@ -180,9 +180,10 @@ torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Te
 torch::Tensor occupancyLoss(const torch::Tensor& pred, const torch::Tensor& target,
                             double sharpness);
 /// Eq. 2: sum over voxels of the Euclidean norm of the vote error, averaged over the batch;
-/// with `occupied_only`, only over voxels whose target vote is non-zero (inside an object).
+/// with `occupied_only`, only over voxels whose target vote is non-zero (inside an object);
+/// with `weight` [B, 1, R, R, R], each voxel's norm weighted.
 torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target,
-                       bool occupied_only = false);
+                       bool occupied_only = false, const torch::Tensor& weight = {});
 /// Maximum mean discrepancy between codes z [B, d] and prior samples [N, d] with the Gaussian
 /// kernel exp(-|a - b|^2 / (w d)) averaged over the widths w (InfoVAE, Zhao et al. 2019, uses
 /// w = 1), unbiased (zero in expectation when z follows the prior; may be slightly negative).
@@ -197,9 +198,10 @@ struct CvaeLosses {
 /// occupancy term when its weight is not 0 (its value is reported either way). With a learned
 /// prior the `mmd` slot holds KL(posterior || prior) (weight kl_weight, above its free bits)
 /// instead.
+/// `vote_weight` [B, 1, R, R, R]: eq. 2's per-voxel weights (undefined: 1).
 CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
                          const torch::Tensor& tsdf, const torch::Tensor& votes,
-                         const CvaeConfig& config);
+                         const CvaeConfig& config, const torch::Tensor& vote_weight = {});
 
 /// Saves weights, buffers and the config (YAML) in one archive, plus `metadata` YAML text.
 void saveCvae(const std::string& path, Cvae& model, const std::string& metadata = "");

@@ -62,6 +62,10 @@ struct CvaeConfig {
   /// "all" the ~30,000 free voxels pull every vote to zero with unit-size gradients, and our
   /// models learned zero votes everywhere (loss = number of occupied voxels).
   std::string vote_loss = "occupied";
+  /// Eq. 2's weight in occupied voxels within 2 voxels (26-neighbourhood twice) of another
+  /// object's voxel is 1 + this: the votes there are what tells touching objects apart, and
+  /// they are a small share of the sum. 0 (the default) weighs every voxel alike.
+  double vote_boundary_weight = 0.0;
   /// Training only: the probability that a sample's decoder loses the condition's two finest
   /// feature maps (32^3 and 16^3 at R = 32) for that step, so that it must take the shape from
   /// coarser features and the latent code. 0 (the default) never drops them; inference never
@@ -73,11 +77,12 @@ struct CvaeConfig {
   /// down to the finest grid, as the probabilistic U-Net feeds its code to the last layers).
   /// A network setting, stored with the model; the FC baseline has no code and ignores it.
   std::string latent_injection = "bottleneck";
-  /// What the condition tells the decoder about voxels the view did not observe: "full" (the
+  /// What the condition tells the network about voxels the view did not observe: "full" (the
   /// paper: all its feature maps everywhere) or "coarse" (its two finest maps, 32^3 and 16^3
-  /// at R = 32, are zero in unobserved voxels and in 16^3 cells with no observed voxel, so the
-  /// hidden part's shape must come from the coarser maps and the latent code). A network
-  /// setting, stored with the model; inference masks the same way.
+  /// at R = 32, are zero in unobserved voxels and in 16^3 cells with no observed voxel, for the
+  /// decoder and the posterior encoder, so the hidden part's shape must come from the coarser
+  /// maps and the latent code; `fc_plain` reads neither map). A network setting, stored with
+  /// the model; inference masks the same way.
   std::string hidden_condition = "full";
   /// How a training step draws the code from the encoder: "gaussian" (z = mu + sigma * noise,
   /// the reparameterised sample) or "deterministic" (z = mu, the MMD autoencoder of InfoVAE's

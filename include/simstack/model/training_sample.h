@@ -20,7 +20,15 @@ struct TrainingSample {
   std::vector<float> partial;  ///< [2, R, R, R]
   std::vector<float> tsdf;     ///< [R, R, R], full TSDF / tau
   std::vector<float> votes;    ///< [3, R, R, R]
+  /// [R, R, R] eq. 2's per-voxel weight (CvaeConfig::vote_boundary_weight); empty when it is 0.
+  std::vector<float> vote_weight;
 };
+
+/// Eq. 2's per-voxel weights for a label grid ([R, R, R], 0 free, k object k): 1 + `boundary`
+/// in a voxel of an object with a voxel of another object at most 2 voxels away in every
+/// axis, else 1.
+std::vector<float> voteBoundaryWeights(const std::vector<uint8_t>& labels, int resolution,
+                                       float boundary);
 
 class TrainingSampleBuilder {
  public:

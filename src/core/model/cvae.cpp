@@ -440,10 +440,12 @@ torch::Tensor occupancyLoss(const torch::Tensor& pred, const torch::Tensor& targ
       .mean();
 }
 
-torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target, bool occupied_only) {
+torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target, bool occupied_only,
+                       const torch::Tensor& weight) {
   // sqrt(. + 1e-12): the norm's gradient is undefined where prediction and target agree.
   torch::Tensor per_voxel = ((pred - target).pow(2).sum(1) + 1e-12).sqrt();
   if (occupied_only) per_voxel = per_voxel * (target.pow(2).sum(1) > 0.25).to(per_voxel.dtype());
+  if (weight.defined()) per_voxel = per_voxel * weight.squeeze(1);
   return per_voxel.flatten(1).sum(1).mean();
 }
 
@@ -468,12 +470,12 @@ torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior,
 }
 
 CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
-                         const torch::Tensor& tsdf, const torch::Tensor& votes,
-                         const CvaeConfig& c) {
+                         const torch::Tensor& tsdf, const torch::Tensor& votes, const CvaeConfig& c,
+                         const torch::Tensor& vote_weight) {
   CvaeLosses l;
   l.tsdf = inverseTsdfWeightedLoss(out.tsdf, tsdf, c.tsdf_epsilon);
   l.partial = inverseTsdfWeightedLoss(out.partial_recon, partial.narrow(1, 0, 1), c.tsdf_epsilon);
-  l.votes = voteLoss(out.votes, votes, c.vote_loss == "occupied");
+  l.votes = voteLoss(out.votes, votes, c.vote_loss == "occupied", vote_weight);
   torch::Tensor latent;  // the weighted latent term of the total
   if (out.prior_mu.defined()) {
     // KL(N(mu, e^logvar) || N(prior_mu, e^prior_logvar)) per code dimension, batch mean;

@@ -50,6 +50,7 @@ void cvaeFields(C& c, F&& f) {
   f("occupancy_weight", c.occupancy_weight);
   f("occupancy_sharpness", c.occupancy_sharpness);
   f("vote_loss", c.vote_loss);
+  f("vote_boundary_weight", c.vote_boundary_weight);
   f("condition_dropout", c.condition_dropout);
   f("posterior", c.posterior);
   f("prior", c.prior);
@@ -117,6 +118,7 @@ void CvaeConfig::validate() const {
           "a learned prior needs posterior 'gaussian' (the KL compares two Gaussians)");
   require(kl_weight >= 0.0, "kl_weight must be >= 0");
   require(kl_free_nats >= 0.0, "kl_free_nats must be >= 0");
+  require(vote_boundary_weight >= 0.0, "vote_boundary_weight must be >= 0");
   require(vote_loss == "occupied" || vote_loss == "all",
           "vote_loss must be 'occupied' or 'all', got '" + vote_loss + "'");
 }
@@ -132,6 +134,7 @@ void CvaeConfig::copyLossSettings(const CvaeConfig& o) {
   occupancy_weight = o.occupancy_weight;
   occupancy_sharpness = o.occupancy_sharpness;
   vote_loss = o.vote_loss;
+  vote_boundary_weight = o.vote_boundary_weight;
   condition_dropout = o.condition_dropout;
   posterior = o.posterior;
   kl_weight = o.kl_weight;

@@ -56,7 +56,7 @@ void checkDatasetFitsModel(const DatasetInfo& info, const CvaeConfig& model,
 }
 
 struct Batch {
-  torch::Tensor partial, tsdf, votes;
+  torch::Tensor partial, tsdf, votes, vote_weight;  ///< vote_weight undefined when not used
 };
 
 Batch toBatch(const std::vector<TrainingSample>& samples, int r) {
@@ -65,11 +65,16 @@ Batch toBatch(const std::vector<TrainingSample>& samples, int r) {
   batch.partial = torch::empty({b, 2, r, r, r});
   batch.tsdf = torch::empty({b, 1, r, r, r});
   batch.votes = torch::empty({b, 3, r, r, r});
+  if (!samples.empty() && !samples.front().vote_weight.empty())
+    batch.vote_weight = torch::empty({b, 1, r, r, r});
   for (int64_t i = 0; i < b; ++i) {
     std::copy(samples[i].partial.begin(), samples[i].partial.end(),
               batch.partial[i].data_ptr<float>());
     std::copy(samples[i].tsdf.begin(), samples[i].tsdf.end(), batch.tsdf[i].data_ptr<float>());
     std::copy(samples[i].votes.begin(), samples[i].votes.end(), batch.votes[i].data_ptr<float>());
+    if (batch.vote_weight.defined())
+      std::copy(samples[i].vote_weight.begin(), samples[i].vote_weight.end(),
+                batch.vote_weight[i].data_ptr<float>());
   }
   return batch;
 }
@@ -539,7 +544,8 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
         static_cast<torch::optim::AdamOptions&>(group.options()).lr(learningRate(tc, step));
       optimizer.zero_grad();
       const CvaeOutput o = model->forward(batch.partial, batch.tsdf, batch.votes);
-      const CvaeLosses l = computeLosses(o, batch.partial, batch.tsdf, batch.votes, mc);
+      const CvaeLosses l =
+          computeLosses(o, batch.partial, batch.tsdf, batch.votes, mc, batch.vote_weight);
       l.total.backward();
       optimizer.step();
       ++trained;

@@ -62,6 +62,7 @@ TrainingSample TrainingSampleBuilder::build(const SceneRecord& rec, const Transf
   const size_t n = static_cast<size_t>(r) * r * r;
   s.tsdf.assign(n, 1.0f);
   s.votes.assign(3 * n, 0.0f);
+  std::vector<uint8_t> labels(n, 0);
   const float inv_tau = static_cast<float>(1.0 / config_.truncation_m());
   for (int z = 0; z < r; ++z) {
     for (int y = 0; y < r; ++y) {
@@ -72,10 +73,42 @@ TrainingSample TrainingSampleBuilder::build(const SceneRecord& rec, const Transf
         const size_t j = static_cast<size_t>(stored.linear(ox, oy, z));
         s.tsdf[i] = std::clamp(rec.ground_truth.tsdf.data[j] * inv_tau, -1.0f, 1.0f);
         for (int c = 0; c < 3; ++c) s.votes[c * n + i] = rec.ground_truth.votes.data[j][c];
+        labels[i] = rec.ground_truth.labels.data[j];
       }
     }
   }
+  if (config_.vote_boundary_weight > 0.0)
+    s.vote_weight =
+        voteBoundaryWeights(labels, r, static_cast<float>(config_.vote_boundary_weight));
   return s;
+}
+
+std::vector<float> voteBoundaryWeights(const std::vector<uint8_t>& labels, int r, float boundary) {
+  const size_t n = static_cast<size_t>(r) * r * r;
+  if (labels.size() != n)
+    throw std::invalid_argument("voteBoundaryWeights: " + std::to_string(labels.size()) +
+                                " labels for a grid of " + std::to_string(n));
+  std::vector<float> weight(n, 1.0f);
+  const auto at = [&](int x, int y, int z) {
+    return labels[(static_cast<size_t>(z) * r + y) * r + x];
+  };
+  for (int z = 0; z < r; ++z)
+    for (int y = 0; y < r; ++y)
+      for (int x = 0; x < r; ++x) {
+        const uint8_t k = at(x, y, z);
+        if (k == 0) continue;
+        bool near = false;
+        for (int dz = -2; dz <= 2 && !near; ++dz)
+          for (int dy = -2; dy <= 2 && !near; ++dy)
+            for (int dx = -2; dx <= 2 && !near; ++dx) {
+              const int a = x + dx, b = y + dy, c = z + dz;
+              if (a < 0 || b < 0 || c < 0 || a >= r || b >= r || c >= r) continue;
+              const uint8_t l = at(a, b, c);
+              near = l != 0 && l != k;
+            }
+        if (near) weight[(static_cast<size_t>(z) * r + y) * r + x] = 1.0f + boundary;
+      }
+  return weight;
 }
 
 }  // namespace simstack

@@ -107,14 +107,16 @@ std::vector<std::unique_ptr<EvaluatedMethod>> multiViewMethods(
   std::vector<std::unique_ptr<EvaluatedMethod>> methods;
   std::vector<std::string> bases;  // each config's name: its architecture, indexed when repeated
   for (size_t i = 0; i < configs.size(); ++i) {
+    bool has_code = true;  // known from the first method made of this config
     for (const std::string condition : {"all", "first"}) {
       for (const bool optimise : {false, true}) {
+        if (optimise && (refine_iterations == 0 || !has_code)) continue;
         PerceptionConfig c = configs[i];
         c.zero_code_first = false;  // random codes, as the paper evaluates
         c.condition_views = condition;
         c.refine_iterations = optimise ? refine_iterations : 0;
         auto m = std::make_unique<NetworkMethod>(c);
-        if (optimise && (refine_iterations == 0 || m->architecture() != "cvae")) continue;
+        has_code = m->architecture() == "cvae";
         if (bases.size() == i) {
           const bool repeated =
               std::find(bases.begin(), bases.end(), m->architecture()) != bases.end();

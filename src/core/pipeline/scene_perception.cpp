@@ -354,10 +354,12 @@ std::vector<SceneHypothesis> perceiveGroup(
                                 &group.grid);
     timings->instances_ms += msSince(t);
   }
-  // The patches are the first view's: with more views, an instance it misses may be seen by
-  // another, so none is joined for being unseen.
+  // The patches are the first view's: when more views reach the hypotheses (conditioning or
+  // code fitting), an instance it misses may be seen by another, so none is joined for being
+  // unseen.
   PerceptionConfig one_view = c;
-  if (views.size() > 1) one_view.segments.max_unseen_points = 0;
+  if (conditioningViews(views, c).size() > 1 || (c.refine_iterations > 0 && views.size() > 1))
+    one_view.segments.max_unseen_points = 0;
   for (int k = 0; k < c.decompose_samples; ++k)
     decompose(&hypotheses[k], one_view, timings, segments ? &*segments : nullptr);
   return hypotheses;
