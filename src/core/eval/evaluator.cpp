@@ -53,8 +53,7 @@ struct SceneTruth {
 /// One rendered view (and the further views of the multi-view protocol) and its ground truth
 /// on the visible side.
 struct ViewTruth {
-  DepthView view;
-  std::vector<DepthView> views;  ///< `view` first
+  std::vector<DepthView> views;  ///< the protocol's view first
   Transform T_table_camera;
   Points3 visible;  ///< samples of the visible true surface
   double visible_ratio = 0;
@@ -64,7 +63,7 @@ struct ViewTruth {
 void scoreEstimate(const MethodEstimate& est, const SceneRecord& rec, const SceneTruth& scene,
                    const ViewTruth& vt, const GroundTruthGrids& gt,
                    const EvaluationOptions& options, std::mt19937_64& rng, Row* row) {
-  const PinholeCamera& camera = vt.view.camera;
+  const PinholeCamera& camera = vt.views.front().camera;
   const int points = options.chamfer_points;
   double full = 0, visible = 0;
   for (const TriangleMesh& surface : est.surfaces) {
@@ -113,8 +112,7 @@ void evaluateView(const SceneRecord& rec, int k, int v, const SceneTruth& scene,
                       options.noise ? SensorNoiseConfig::kinect(view_seed) : SensorNoiseConfig());
   std::vector<bool> seen = visibleTriangles(scene.mesh, camera, vt.T_table_camera);
   vt.visible = samplePoints(subMesh(scene.mesh, seen), options.chamfer_points, rng);
-  vt.view = DepthView{r.depth, camera, vt.T_table_camera};
-  vt.views = {vt.view};
+  vt.views = {DepthView{r.depth, camera, vt.T_table_camera}};
   // The further views turn the first about the vertical through the pile's centre; their
   // noise has its own stream, so the first view is the single-view protocol's.
   const Vec3 centre = rec.scene.surfaceCentroid();

@@ -263,25 +263,30 @@ Transform firstViewPose(const DepthView& view, const PerceptionConfig& c, bool* 
   return estimateTablePlane(view.depth, view.camera, c.table, c.workspace).T_table_camera;
 }
 
-/// The views' partial TSDF and weight over `grid`.
+/// The partial TSDF and weight over `grid` of views [begin, end) (the first view posed by
+/// `T_table_first`, the others by their own poses).
 std::pair<Grid3<float>, Grid3<float>> partialTsdf(const GridSpec& grid,
                                                   const std::vector<DepthView>& views,
                                                   const Transform& T_table_first,
-                                                  double truncation_m) {
+                                                  double truncation_m, size_t begin, size_t end) {
   ProjectiveTsdfConfig tc;
   tc.truncation_m = truncation_m;
   ProjectiveTsdf partial(grid, tc);
-  for (size_t i = 0; i < views.size(); ++i)
+  for (size_t i = begin; i < end; ++i)
     partial.integrate(views[i].depth, views[i].camera,
                       i == 0 ? T_table_first : *views[i].T_table_camera);
   return {partial.tsdf(), partial.weight()};
 }
 
-/// The views the network is conditioned on (PerceptionConfig::condition_views).
-std::vector<DepthView> conditioningViews(const std::vector<DepthView>& views,
-                                         const PerceptionConfig& c) {
-  if (c.condition_views == "first") return {views.front()};
-  return views;
+/// How many of the views, from the first, the network is conditioned on
+/// (PerceptionConfig::condition_views).
+size_t conditioningViews(const std::vector<DepthView>& views, const PerceptionConfig& c) {
+  return c.condition_views == "first" ? 1 : views.size();
+}
+
+/// Whether views after the first reach the hypotheses, by conditioning or code fitting.
+bool furtherViewsReach(const std::vector<DepthView>& views, const PerceptionConfig& c) {
+  return conditioningViews(views, c) > 1 || (c.refine_iterations > 0 && views.size() > 1);
 }
 
 /// The network's S hypotheses for one tile from its partial TSDF; with several views and
@@ -294,10 +299,8 @@ std::vector<CvaePrediction> predictTile(const CvaeInference& model,
     return model.predict(partial.first, partial.second, c.samples, c.seed, c.zero_code_first);
   std::vector<ViewEvidence> evidence;
   for (size_t i = 0; i < views.size(); ++i) {
-    DepthView one = views[i];
-    if (i == 0) one.T_table_camera = T_table_first;
-    auto [tsdf, weight] =
-        partialTsdf(partial.first.spec, {one}, *one.T_table_camera, model.config().truncation_m());
+    auto [tsdf, weight] = partialTsdf(partial.first.spec, views, T_table_first,
+                                      model.config().truncation_m(), i, i + 1);
     evidence.push_back({std::move(tsdf), std::move(weight)});
   }
   return model.refine(partial.first, partial.second, evidence, c.samples, c.seed, c.zero_code_first,
@@ -318,8 +321,8 @@ std::vector<SceneHypothesis> predictGroup(
       continue;
     }
     tiles.push_back(predictTile(
-        model, partialTsdf(tile, conditioningViews(views, c), T_table_first, truncation), views,
-        T_table_first, c));
+        model, partialTsdf(tile, views, T_table_first, truncation, 0, conditioningViews(views, c)),
+        views, T_table_first, c));
   }
   std::vector<SceneHypothesis> out(tiles.front().size());
   for (size_t k = 0; k < out.size(); ++k) {
@@ -358,8 +361,7 @@ std::vector<SceneHypothesis> perceiveGroup(
   // code fitting), an instance it misses may be seen by another, so none is joined for being
   // unseen.
   PerceptionConfig one_view = c;
-  if (conditioningViews(views, c).size() > 1 || (c.refine_iterations > 0 && views.size() > 1))
-    one_view.segments.max_unseen_points = 0;
+  if (furtherViewsReach(views, c)) one_view.segments.max_unseen_points = 0;
   for (int k = 0; k < c.decompose_samples; ++k)
     decompose(&hypotheses[k], one_view, timings, segments ? &*segments : nullptr);
   return hypotheses;
@@ -448,8 +450,8 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
   out.grid = plan.scene;
   out.tiles = plan.tileCount();
   out.tiles_cropped = plan.cropped;
-  std::pair<Grid3<float>, Grid3<float>> partial =
-      partialTsdf(out.grid, conditioningViews(views, c), out.T_table_camera, mc.truncation_m());
+  std::pair<Grid3<float>, Grid3<float>> partial = partialTsdf(
+      out.grid, views, out.T_table_camera, mc.truncation_m(), 0, conditioningViews(views, c));
   out.timings.tsdf_ms = msSince(t);
 
   // Each group as a scene of its own; one group is the scene.
