@@ -12,8 +12,10 @@
 /// when wider than a tile, on overlapping tiles whose predictions are blended into the group's
 /// grid, where its instances are found once (objects cut by a tile border whole). The groups'
 /// TSDFs and votes are then blended into one scene grid (a cube holding every group, z from the
-/// table up) for the outputs; a group off the scene's voxel lattice is resampled there. One
-/// tile, placed as before tiles existed, is the common case.
+/// table up) for the outputs. Every tile lies on the table frame's voxel lattice (its training
+/// placement moved by up to half a voxel), so a group's grid is copied into the scene grid
+/// without resampling, and the grid stays put while the pile's centre estimate jitters by a
+/// few millimetres from frame to frame. One tile is the common case.
 
 #include <algorithm>
 #include <array>
@@ -68,7 +70,7 @@ struct TileGroup {
 };
 
 struct TilePlan {
-  GridSpec scene;                 ///< holds every group, on the first group's lattice
+  GridSpec scene;                 ///< holds every group, on the table frame's voxel lattice
   std::vector<TileGroup> groups;  ///< the largest first; one group of one tile, the scene
                                   ///< itself, is the common case
   bool cropped = false;           ///< the pile needed more than max_tiles (or a wider square): its
@@ -85,10 +87,11 @@ struct TilePlan {
 /// median of a group of points to where training would centre a grid on that group.
 /// Otherwise the points are split into groups (gaps of two voxels; groups whose joint spread fits
 /// one tile kept together), each perceived as a scene of its own: one tile placed as in
-/// training when it fits, else the fewest tiles overlapping by at least `tile_overlap_m` (on the
-/// first one's voxel lattice); the largest groups first, at most `max_tiles` tiles in all and
+/// training when it fits, else the fewest tiles overlapping by at least `tile_overlap_m`; the
+/// largest groups first, at most `max_tiles` tiles in all and
 /// within a square of ceil(sqrt(max_tiles)) tiles' side (`cropped` says when groups were left
-/// out). Flying pixels alone (groups of fewer than 10 points) take the single tile.
+/// out). Flying pixels alone (groups of fewer than 10 points) take the single tile. Every tile's
+/// origin is then moved (by up to half a voxel) onto the table frame's voxel lattice.
 TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_centre,
                    const std::function<Vec2(const Vec2&)>& placement, double extent_m,
                    int resolution, const WorkspaceConfig& workspace);

@@ -183,14 +183,17 @@ std::vector<Vec2> clusterTiles(const Cluster& c, const Vec2& placement, double v
   return out;
 }
 
-/// The group of tiles at these origins, all on the first one's voxel lattice (moved by up to
-/// half a voxel), and the cube holding them on that lattice.
+/// The nearest point of the table frame's voxel lattice (x/y multiples of `voxel`).
+Vec2 onLattice(const Vec2& p, double voxel) { return (p / voxel).array().round().matrix() * voxel; }
+
+/// The group of tiles at these origins, each moved by up to half a voxel onto the table frame's
+/// voxel lattice, and the cube holding them on that lattice.
 TileGroup tileGroup(std::vector<Vec2> origins, double voxel, int resolution) {
   TileGroup g;
-  const Vec2 anchor = origins.front();
+  const Vec2 front = origins.front(), anchor = onLattice(front, voxel);
   Vec2 first = anchor, last = anchor;
   for (Vec2& o : origins) {
-    o = anchor + ((o - anchor) / voxel).array().round().matrix() * voxel;
+    o = anchor + ((o - front) / voxel).array().round().matrix() * voxel;
     first = first.cwiseMin(o);
     last = last.cwiseMax(o);
   }
@@ -237,6 +240,7 @@ TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_cent
     for (int a = 0; a < 2; ++a)
       centre[a] = std::min(std::max(centre[a], hi[a] - 0.5 * extent_m), lo[a] + 0.5 * extent_m);
     plan.scene = GridSpec::sceneGrid(centre, extent_m, resolution);
+    plan.scene.origin_table.head<2>() = onLattice(plan.scene.origin_table.head<2>(), voxel);
     TileGroup g;
     g.grid = plan.scene;
     g.tiles.push_back(plan.scene);
@@ -283,7 +287,7 @@ TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_cent
     plan.groups.back().lo = c.lo;
     plan.groups.back().hi = c.hi;
   }
-  // The scene cube: on the largest group's lattice, holding every group.
+  // The scene cube, holding every group, on the lattice they share.
   const Vec2 anchor = plan.groups.front().grid.origin_table.head<2>();
   Vec2 first = anchor, last = anchor;
   for (const TileGroup& g : plan.groups) {
