@@ -34,6 +34,14 @@ assert tried or own, h
 assert p["samples"] == 3, p
 PY
 fi
+# Several validation sets pool their views and each is scored on its own.
+"$generate" --scenes 2 --seed 10 --objects 5:6 --sizes 0.05:0.15 --output "$dir/val58.h5" > /dev/null
+"$tune" --dataset "$dir/val.h5" --dataset "$dir/val58.h5" --views 1 --threads 1 --refinement 5 \
+  --min-traversals 3 --bandwidth 0.03 0.05 --min-instance-voxels 10 --min-vote-norm 0 \
+  --output "$dir/pooled.yaml" > "$dir/pooled.txt" 2> /dev/null
+grep -q "^5 views, model" "$dir/pooled.txt" || { echo "views not pooled"; cat "$dir/pooled.txt"; exit 1; }
+grep -q "val58.h5 (2 views): " "$dir/pooled.txt" || { echo "no per-dataset line"; cat "$dir/pooled.txt"; exit 1; }
+grep -q "val.h5 + .*val58.h5 (5 views)" "$dir/pooled.yaml" || { cat "$dir/pooled.yaml"; exit 1; }
 if "$tune" --dataset "$dir/nope.h5" --output "$dir/x.yaml" 2> "$dir/e1"; then
   echo "accepted a missing dataset"; exit 1; fi
 grep -q "nope.h5" "$dir/e1" || { cat "$dir/e1"; exit 1; }

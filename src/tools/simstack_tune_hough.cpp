@@ -6,6 +6,9 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <iterator>
+#include <string>
+#include <vector>
 
 #include "perception_options.h"
 #include "progress.h"
@@ -14,8 +17,46 @@
 
 using namespace simstack;
 
+namespace {
+
+/// The views of every dataset in turn; `ends[d]` is where dataset d's views end.
+std::vector<TuningView> pooledViews(const std::vector<std::string>& datasets,
+                                    const PerceptionConfig& pc, int scenes, int views_per_scene,
+                                    uint64_t seed, bool noise, std::vector<size_t>* ends) {
+  std::vector<TuningView> views;
+  for (const std::string& dataset : datasets) {
+    const DatasetReader reader(dataset);
+    ProgressBar bar("running the network on " + dataset,
+                    scenes > 0 ? std::min(scenes, reader.size()) : reader.size());
+    std::vector<TuningView> more = tuningViews(reader, pc, scenes, views_per_scene, seed, noise,
+                                               [&](int k, int) { bar.update(k); });
+    bar.finish();
+    std::move(more.begin(), more.end(), std::back_inserter(views));
+    ends->push_back(views.size());
+  }
+  return views;
+}
+
+/// Count exact on each dataset's views alone, for the chosen setting and the model's own.
+void reportPerDataset(const std::vector<std::string>& datasets,
+                      const std::vector<TuningView>& views, const std::vector<size_t>& ends,
+                      const HoughScore& chosen, const HoughScore& own, const PerceptionConfig& pc) {
+  std::cout << "\nper dataset, count exact: chosen / the model's setting\n";
+  for (size_t d = 0; d < datasets.size(); ++d) {
+    const std::vector<TuningView> part(views.begin() + (d == 0 ? 0 : ends[d - 1]),
+                                       views.begin() + ends[d]);
+    const double a = scoreHoughSetting(part, chosen.hough, pc.segments).exact;
+    const double b = scoreHoughSetting(part, own.hough, pc.segments).exact;
+    std::cout << "  " << datasets[d] << " (" << part.size() << " views): " << std::fixed
+              << std::setprecision(1) << 100 * a << " % / " << 100 * b << " %\n";
+  }
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
-  std::string dataset, output;
+  std::vector<std::string> datasets;
+  std::string output;
   int views_per_scene = 2, scenes = 0, top = 10;
   uint64_t seed = 7;
   bool noise = false;
@@ -25,9 +66,10 @@ int main(int argc, char** argv) {
       "training nor for testing): the network runs once per rendered view, every combination "
       "of the listed values is scored by the share of views whose instance count is exact "
       "(then by voxel segmentation agreement), and the best is written as the perception: "
-      "section of the model's card (models/<name>.yaml)."};
+      "section of the model's card (models/<name>.yaml). Several --dataset files pool their "
+      "views (piles of 3-4 objects and of 5-8, say), so that one setting serves both."};
   const PerceptionOptions perception(app, {false, false, false});
-  app.add_option("--dataset", dataset, "validation piles (simstack_generate)")
+  app.add_option("--dataset", datasets, "validation piles (simstack_generate); repeatable")
       ->required()
       ->check(CLI::ExistingFile);
   app.add_option("--output", output, "YAML with the model card's perception: section")->required();
@@ -65,12 +107,9 @@ int main(int argc, char** argv) {
   keepFreedMemoryForReuse();  // the network runs in this process
   try {
     const PerceptionConfig pc = perception.config();
-    const DatasetReader reader(dataset);
-    ProgressBar bar("running the network",
-                    scenes > 0 ? std::min(scenes, reader.size()) : reader.size());
-    const std::vector<TuningView> views = tuningViews(reader, pc, scenes, views_per_scene, seed,
-                                                      noise, [&](int k, int) { bar.update(k); });
-    bar.finish();
+    std::vector<size_t> ends;  // each dataset's views end here
+    const std::vector<TuningView> views =
+        pooledViews(datasets, pc, scenes, views_per_scene, seed, noise, &ends);
     // The model's own setting is the first candidate: a tie keeps it, so the chosen setting is
     // never worse on these views than the one it replaces.
     const std::vector<HoughConfig> candidates = houghCandidates(pc.hough, sweep);
@@ -91,8 +130,11 @@ int main(int argc, char** argv) {
               << (pc.model_card_path.empty() ? "defaults: no model card" : pc.model_card_path)
               << "):\n"
               << houghScoreRow(before) << "\n";
+    if (datasets.size() > 1) reportPerDataset(datasets, views, ends, scores.front(), before, pc);
+    std::string sets;
+    for (const std::string& d : datasets) sets += (sets.empty() ? "" : " + ") + d;
     std::ofstream f(output);
-    f << "# simstack_tune_hough on " << dataset << " (" << views.size() << " views): count exact "
+    f << "# simstack_tune_hough on " << sets << " (" << views.size() << " views): count exact "
       << std::fixed << std::setprecision(3) << scores.front().exact << ", voxel agreement "
       << scores.front().agreement << "\n# the perception: section of "
       << modelCardPath(pc.model_path) << "\n"
