@@ -40,6 +40,7 @@ fi
   --min-traversals 3 --bandwidth 0.03 0.05 --min-instance-voxels 10 --min-vote-norm 0 \
   --output "$dir/pooled.yaml" > "$dir/pooled.txt" 2> /dev/null
 grep -q "^5 views, model" "$dir/pooled.txt" || { echo "views not pooled"; cat "$dir/pooled.txt"; exit 1; }
+grep -q "/val.h5 (3 views): " "$dir/pooled.txt" || { echo "no per-dataset line"; cat "$dir/pooled.txt"; exit 1; }
 grep -q "val58.h5 (2 views): " "$dir/pooled.txt" || { echo "no per-dataset line"; cat "$dir/pooled.txt"; exit 1; }
 grep -q "val.h5 + .*val58.h5 (5 views)" "$dir/pooled.yaml" || { cat "$dir/pooled.yaml"; exit 1; }
 if "$tune" --dataset "$dir/nope.h5" --output "$dir/x.yaml" 2> "$dir/e1"; then
@@ -49,4 +50,9 @@ echo "not hdf5" > "$dir/bad.h5"
 if "$tune" --dataset "$dir/bad.h5" --output "$dir/x.yaml" > /dev/null 2> "$dir/e2"; then
   echo "accepted a corrupt dataset"; exit 1; fi
 grep -q "bad.h5" "$dir/e2" || { cat "$dir/e2"; exit 1; }
+# A bad file among several is named before the network runs on the good one.
+if "$tune" --dataset "$dir/val.h5" --dataset "$dir/bad.h5" --output "$dir/x.yaml" > "$dir/o3" 2> "$dir/e3"; then
+  echo "accepted a corrupt second dataset"; exit 1; fi
+grep -q "bad.h5" "$dir/e3" || { cat "$dir/e3"; exit 1; }
+if grep -q "running the network" "$dir/o3" "$dir/e3"; then echo "ran the network before checking"; exit 1; fi
 echo "simstack_tune_hough ok"

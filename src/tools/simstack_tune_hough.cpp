@@ -23,6 +23,8 @@ namespace {
 std::vector<TuningView> pooledViews(const std::vector<std::string>& datasets,
                                     const PerceptionConfig& pc, int scenes, int views_per_scene,
                                     uint64_t seed, bool noise, std::vector<size_t>* ends) {
+  // Every file opened first, so that a bad one is named before any network runs.
+  for (const std::string& dataset : datasets) DatasetReader check(dataset);
   std::vector<TuningView> views;
   for (const std::string& dataset : datasets) {
     const DatasetReader reader(dataset);
@@ -45,10 +47,14 @@ void reportPerDataset(const std::vector<std::string>& datasets,
   for (size_t d = 0; d < datasets.size(); ++d) {
     const std::vector<TuningView> part(views.begin() + (d == 0 ? 0 : ends[d - 1]),
                                        views.begin() + ends[d]);
+    std::cout << "  " << datasets[d] << " (" << part.size() << " views): ";
+    if (part.empty()) {
+      std::cout << "no views\n";
+      continue;
+    }
     const double a = scoreHoughSetting(part, chosen.hough, pc.segments).exact;
     const double b = scoreHoughSetting(part, own.hough, pc.segments).exact;
-    std::cout << "  " << datasets[d] << " (" << part.size() << " views): " << std::fixed
-              << std::setprecision(1) << 100 * a << " % / " << 100 * b << " %\n";
+    std::cout << std::fixed << std::setprecision(1) << 100 * a << " % / " << 100 * b << " %\n";
   }
 }
 
@@ -76,7 +82,7 @@ int main(int argc, char** argv) {
   app.add_option("--views", views_per_scene, "random viewpoints per scene")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
-  app.add_option("--scenes", scenes, "only the first N scenes (0 = all)")
+  app.add_option("--scenes", scenes, "only the first N scenes of each dataset (0 = all)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--seed", seed, "viewpoint seed")->capture_default_str();
   app.add_flag("--noise", noise, "Kinect-like sensor noise in the rendered views");

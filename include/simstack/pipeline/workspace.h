@@ -13,7 +13,7 @@
 /// grid, where its instances are found once (objects cut by a tile border whole). The groups'
 /// TSDFs and votes are then blended into one scene grid (a cube holding every group, z from the
 /// table up) for the outputs. Every tile lies on the table frame's voxel lattice (its training
-/// placement moved by up to half a voxel), so a group's grid is copied into the scene grid
+/// placement moved by less than a voxel), so a group's grid is copied into the scene grid
 /// without resampling, and the grid stays put while the pile's centre estimate jitters by a
 /// few millimetres from frame to frame. One tile is the common case.
 
@@ -91,7 +91,7 @@ struct TilePlan {
 /// largest groups first, at most `max_tiles` tiles in all and
 /// within a square of ceil(sqrt(max_tiles)) tiles' side (`cropped` says when groups were left
 /// out). Flying pixels alone (groups of fewer than 10 points) take the single tile. Every tile's
-/// origin is then moved (by up to half a voxel) onto the table frame's voxel lattice.
+/// origin is then moved (by less than a voxel) onto the table frame's voxel lattice.
 TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_centre,
                    const std::function<Vec2(const Vec2&)>& placement, double extent_m,
                    int resolution, const WorkspaceConfig& workspace);

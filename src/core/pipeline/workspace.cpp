@@ -186,8 +186,9 @@ std::vector<Vec2> clusterTiles(const Cluster& c, const Vec2& placement, double v
 /// The nearest point of the table frame's voxel lattice (x/y multiples of `voxel`).
 Vec2 onLattice(const Vec2& p, double voxel) { return (p / voxel).array().round().matrix() * voxel; }
 
-/// The group of tiles at these origins, each moved by up to half a voxel onto the table frame's
-/// voxel lattice, and the cube holding them on that lattice.
+/// The group of tiles at these origins on the table frame's voxel lattice (the first moved by
+/// up to half a voxel, the others keeping their spacing to it rounded: less than a voxel),
+/// and the cube holding them on that lattice.
 TileGroup tileGroup(std::vector<Vec2> origins, double voxel, int resolution) {
   TileGroup g;
   const Vec2 front = origins.front(), anchor = onLattice(front, voxel);
