@@ -7,6 +7,7 @@
 #include <iomanip>
 #include <iostream>
 #include <iterator>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -24,11 +25,13 @@ std::vector<TuningView> pooledViews(const std::vector<std::string>& datasets,
                                     const PerceptionConfig& pc, int scenes, int views_per_scene,
                                     uint64_t seed, bool noise, std::vector<size_t>* ends) {
   // Every file opened first, so that a bad one is named before any network runs.
-  for (const std::string& dataset : datasets) DatasetReader check(dataset);
+  std::vector<std::unique_ptr<DatasetReader>> readers;
+  for (const std::string& dataset : datasets)
+    readers.push_back(std::make_unique<DatasetReader>(dataset));
   std::vector<TuningView> views;
-  for (const std::string& dataset : datasets) {
-    const DatasetReader reader(dataset);
-    ProgressBar bar("running the network on " + dataset,
+  for (size_t d = 0; d < datasets.size(); ++d) {
+    const DatasetReader& reader = *readers[d];
+    ProgressBar bar("running the network on " + datasets[d],
                     scenes > 0 ? std::min(scenes, reader.size()) : reader.size());
     std::vector<TuningView> more = tuningViews(reader, pc, scenes, views_per_scene, seed, noise,
                                                [&](int k, int) { bar.update(k); });

@@ -289,11 +289,10 @@ TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_cent
     plan.groups.back().hi = c.hi;
   }
   // The scene cube, holding every group, on the lattice they share.
-  const Vec2 anchor = plan.groups.front().grid.origin_table.head<2>();
-  Vec2 first = anchor, last = anchor;
+  Vec2 first = plan.groups.front().grid.origin_table.head<2>(), last = first;
   for (const TileGroup& g : plan.groups) {
     const Vec2 o = g.grid.origin_table.head<2>();
-    first = first.cwiseMin(anchor + ((o - anchor) / voxel).array().floor().matrix() * voxel);
+    first = first.cwiseMin(onLattice(o, voxel));
     last = last.cwiseMax(o + Vec2::Constant(g.grid.extent_m()));
   }
   const int n = static_cast<int>(std::ceil((last - first).maxCoeff() / voxel - 1e-6));
