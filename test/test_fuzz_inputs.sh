@@ -118,7 +118,7 @@ succeed "threads 1000 (capped at the cores)" "$reconstruct" --depth "$good" --in
 # sample count and threads out of range in a config.
 pkg=$(cd "$(dirname "$0")/.." && pwd)
 with_model() {  # with_model NAME: a config whose model is $dir/NAME.pt
-  sed "s|model: models/simstack_r32.pt|model: $dir/$1.pt|" "$pkg/config/perception.yaml" > "$dir/$1_config.yaml"
+  sed "s|model: models/[a-z0-9_]*\.pt|model: $dir/$1.pt|" "$pkg/config/perception.yaml" > "$dir/$1_config.yaml"
 }
 head -c 100000 "$pkg/models/simstack_r32.pt" > "$dir/cut_model.pt"
 head -c 3000 /dev/urandom > "$dir/random_model.pt"

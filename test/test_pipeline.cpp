@@ -37,10 +37,14 @@ RenderedPile renderPile(uint64_t seed) {
 TEST(PerceptionConfig, ShippedYamlHoldsTheDefaultsAndTyposAreErrors) {
   const std::string dir = SIMSTACK_SOURCE_DIR;
   const PerceptionConfig c = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
-  EXPECT_EQ(c.model_path, kModel);
+  EXPECT_EQ(c.model_path, dir + "/models/simstack_r32_fc.pt");
+  // With the C-VAE named (its card holds the struct's sample count and Hough setting), the
+  // file is the struct's defaults.
+  const PerceptionConfig with_cvae =
+      loadPerceptionYaml(dir + "/config/perception.yaml", dir, kModel);
   PerceptionConfig defaults;
   defaults.model_path = kModel;
-  EXPECT_EQ(perceptionYaml(c), perceptionYaml(defaults));
+  EXPECT_EQ(perceptionYaml(with_cvae), perceptionYaml(defaults));
   const std::string bad = std::filesystem::temp_directory_path() / "simstack_bad_perception.yaml";
   std::ofstream(bad) << "hough:\n  min_travesals: 3\n";
   try {
@@ -57,7 +61,14 @@ TEST(PerceptionConfig, ShippedYamlHoldsTheDefaultsAndTyposAreErrors) {
 TEST(PerceptionConfig, ModelCardsBringTheirOwnSettings) {
   const std::string dir = SIMSTACK_SOURCE_DIR;
   const std::string config = dir + "/config/perception.yaml";
-  const PerceptionConfig cvae = loadPerceptionYaml(config, dir);
+  // The default model is `fc` (the best test IoU), with its card's setting.
+  const PerceptionConfig fc = loadPerceptionYaml(config, dir);
+  EXPECT_EQ(fc.model_card_path, dir + "/models/simstack_r32_fc.yaml");
+  EXPECT_EQ(fc.samples, 1);
+  EXPECT_EQ(fc.hough.refinement, 8);
+  EXPECT_EQ(fc.hough.min_traversals, 3);
+  // Naming the C-VAE brings its samples and setting.
+  const PerceptionConfig cvae = loadPerceptionYaml(config, dir, dir + "/models/simstack_r32.pt");
   EXPECT_EQ(cvae.model_card_path, dir + "/models/simstack_r32.yaml");
   EXPECT_EQ(cvae.samples, 3);
   EXPECT_EQ(cvae.hough.refinement, 5);

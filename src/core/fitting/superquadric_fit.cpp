@@ -381,6 +381,7 @@ void FitConfig::validate() const {
           "lambda_dist, lambda_coll and lambda_floor must be >= 0");
   require(max_points >= 4 && coarse_points >= 4 && joint_points >= 4 && shape_samples >= 1,
           "need max_points, coarse_points and joint_points >= 4, and shape_samples >= 1");
+  require(surrounded_share >= 0.0, "surrounded_share must be >= 0 (above 1: never)");
   require(contact_margin_m >= 0.0, "contact_margin_m must be >= 0");
   require(joint_rounds >= 1 && start_iterations >= 1 && max_iterations >= 1 &&
               joint_max_iterations >= 1 && threads >= 1,
@@ -481,6 +482,26 @@ std::vector<SuperquadricShape> switchedShapes(const SuperquadricShape& sq) {
   return out;
 }
 
+// The share of 54 cells of directions about the shape's centre (the faces of a cube, 3 x 3
+// cells each, in the shape's frame scaled by its sizes) that hold at least one point: near 1
+// for a surface seen from all sides, about half for a view of one side.
+double surroundedShare(const SuperquadricShape& sq, const Points3& points) {
+  std::array<bool, 54> hit{};
+  const Mat3 R = sq.T_table_object.linear();
+  const Vec3 t = sq.T_table_object.translation();
+  for (const Vec3& p : points) {
+    const Vec3 q = (R.transpose() * (p - t)).cwiseQuotient(sq.scale_m);
+    int axis = 0;
+    const double m = q.cwiseAbs().maxCoeff(&axis);
+    if (m < 1e-12) continue;
+    const auto cell = [&](int i) {
+      return std::clamp(static_cast<int>((q[(axis + i) % 3] / m + 1.0) * 1.5), 0, 2);
+    };
+    hit[9 * (2 * axis + (q[axis] > 0)) + 3 * cell(1) + cell(2)] = true;
+  }
+  return std::count(hit.begin(), hit.end(), true) / 54.0;
+}
+
 struct Solution {
   Params u;  // solver variables
   double cost = std::numeric_limits<double>::infinity();
@@ -535,9 +556,12 @@ SuperquadricShape fitSuperquadric(const Points3& points, const FitConfig& c,
     }
     if (!improved) break;
   }
-  // Last, the chosen basin on the finer cover.
+  // Last, the chosen basin on the finer cover; on every point when they surround the shape.
   const Points3 fine = surfaceCover(points, c.max_points);
   if (fine.size() > coarse.size()) best = solveFrom(best.u, fine, c, c.max_iterations);
+  if (points.size() > fine.size() &&
+      surroundedShare(fromParams(fromSolver(best.u, c)), points) >= c.surrounded_share)
+    best = solveFrom(best.u, points, c, c.max_iterations);
   return canonicalSuperquadric(fromParams(fromSolver(best.u, c)));
 }
 

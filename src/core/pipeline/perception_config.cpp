@@ -69,6 +69,7 @@ void fitFields(C& c, F&& f) {
   f("lambda_coll", c.lambda_coll);
   f("lambda_floor", c.lambda_floor);
   f("max_points", c.max_points);
+  f("surrounded_share", c.surrounded_share);
   f("coarse_points", c.coarse_points);
   f("joint_points", c.joint_points);
   f("shape_samples", c.shape_samples);
