@@ -177,5 +177,12 @@ dd if=/dev/urandom of="$dir/scrambled.h5" bs=1 seek=20000 count=20000 conv=notru
 expect "train on a scrambled dataset" "scrambled.h5" "$bin/simstack_train" --dataset "$dir/scrambled.h5" \
   --config "$train_config" --output "$dir/run3"
 
+# Grasp evaluation: more hypotheses than the model has distinct samples.
+expect "grasps --hypotheses 3 with fc" "no latent code" "$bin/simstack_evaluate_grasps" \
+  --dataset "$dir/two.h5" --scenes 1 --hypotheses 3 --no-classical --output "$dir/grasps.json"
+expect "grasps --hypotheses 5 with the C-VAE's 3 samples" "raise --samples" \
+  "$bin/simstack_evaluate_grasps" --model "$pkg/models/simstack_r32.pt" --dataset "$dir/two.h5" \
+  --scenes 1 --hypotheses 5 --no-classical --output "$dir/grasps.json"
+
 [ $fail -eq 0 ] && echo "fuzz corpus: every case handled"
 exit $fail

@@ -13,6 +13,26 @@
 
 using namespace simstack;
 
+namespace {
+
+/// The network of `c` with `hypotheses` of its samples decomposed; more hypotheses than it
+/// draws distinct samples is an error that says why, rather than a run reporting fewer.
+std::unique_ptr<NetworkMethod> networkMethod(PerceptionConfig c, int hypotheses) {
+  c.decompose_samples = std::min(std::max(c.decompose_samples, hypotheses), c.samples);
+  auto method = std::make_unique<NetworkMethod>(c);
+  const std::string asked = "--hypotheses " + std::to_string(hypotheses) + ": " + c.model_path;
+  if (hypotheses > 1 && method->architecture() != "cvae")
+    throw std::runtime_error(asked +
+                             " has no latent code: one scene; take the C-VAE (--model "
+                             "models/simstack_r32.pt)");
+  if (hypotheses > c.samples)
+    throw std::runtime_error(asked + " draws " + std::to_string(c.samples) +
+                             " samples; raise --samples");
+  return method;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   std::string dataset, output;
   GraspEvaluationOptions o;
@@ -57,10 +77,8 @@ int main(int argc, char** argv) {
     const DatasetReader reader(dataset);
     // As the node runs them: hypothesis 0 is the mean scene, H of them decomposed.
     std::vector<std::unique_ptr<EvaluatedMethod>> methods;
-    for (PerceptionConfig c : perception.configs()) {
-      c.decompose_samples = std::min(std::max(c.decompose_samples, o.hypotheses), c.samples);
-      methods.push_back(std::make_unique<NetworkMethod>(c));
-    }
+    for (const PerceptionConfig& c : perception.configs())
+      methods.push_back(networkMethod(c, o.hypotheses));
     if (!no_classical) {
       ClassicalConfig cc;
       cc.threads = perception.config().threads;

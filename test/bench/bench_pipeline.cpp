@@ -9,6 +9,7 @@
 #include "simstack/fitting/superquadric_fit.h"
 #include "simstack/instances/hough_voting.h"
 #include "simstack/model/cpu_allocator.h"
+#include "simstack/pipeline/perception_config.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/tsdf/ground_truth.h"
@@ -92,21 +93,13 @@ BENCHMARK(BM_JointFitFourObjects)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
-static void BM_Perceive(benchmark::State& state) {
-  const std::string model = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
-  if (!std::filesystem::exists(model)) {
-    state.SkipWithError("shipped model missing");
-    return;
-  }
+// perceive() on a rendered view of the bench pile, with the stage timings as counters.
+void perceiveBenchPile(benchmark::State& state, PerceptionConfig pc) {
   const BenchScene& b = benchScene(32);
   PinholeCamera camera;
   const Vec3 c = b.scene.surfaceCentroid();
   const Transform T = lookAt(c + Vec3(0.55, -0.35, 0.55), Vec3(c.x(), c.y(), 0.05));
   const RenderResult r = DepthRenderer(b.scene).render(camera, T, SensorNoiseConfig::kinect(1));
-  PerceptionConfig pc;
-  pc.model_path = model;
-  pc.samples = static_cast<int>(state.range(0));
-  pc.segments.enabled = state.range(1) != 0;  // its peer: the same frame without the regrouping
   pc.threads = 2;
   const ScenePerception perception(pc);
   StageTimings sum;
@@ -125,12 +118,36 @@ static void BM_Perceive(benchmark::State& state) {
   state.counters["mesh_ms"] = sum.mesh_ms / n;
   state.counters["fitting_ms"] = sum.fitting_ms / n;
 }
+
+static void BM_Perceive(benchmark::State& state) {
+  const std::string model = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
+  if (!std::filesystem::exists(model)) {
+    state.SkipWithError("shipped model missing");
+    return;
+  }
+  PerceptionConfig pc;
+  pc.model_path = model;
+  pc.samples = static_cast<int>(state.range(0));
+  pc.segments.enabled = state.range(1) != 0;  // its peer: the same frame without the regrouping
+  perceiveBenchPile(state, pc);
+}
 BENCHMARK(BM_Perceive)
     ->ArgNames({"samples", "segments"})
     ->Args({3, 1})
     ->Args({3, 0})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
+
+// What a user runs: config/perception.yaml as shipped (its model, `fc`, with its card).
+static void BM_PerceiveDefaultConfig(benchmark::State& state) {
+  const std::string dir = SIMSTACK_SOURCE_DIR;
+  try {
+    perceiveBenchPile(state, loadPerceptionYaml(dir + "/config/perception.yaml", dir));
+  } catch (const std::exception& e) {
+    state.SkipWithError(e.what());
+  }
+}
+BENCHMARK(BM_PerceiveDefaultConfig)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // A 1280x720 frame seen from 1 m above the table, holding one 4-object pile (one tile) or four
 // copies of it 0.8 m apart (four tiles): the cost of a scene wider than one grid.

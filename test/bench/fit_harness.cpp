@@ -203,9 +203,10 @@ int main(int argc, char** argv) {
         const TriangleMesh fitted = sq.meshObject(96).transformed(sq.T_table_object);
         // The metric draws from its own stream: the shapes and views stay the same whatever the
         // fit, so that runs of two fitters compare shape by shape.
-        std::mt19937_64 metric_rng(rng());
+        const uint64_t metric_seed = rng();
+        std::mt19937_64 metric_rng(metric_seed), floor_rng(~metric_seed);
         f.fit_mm.push_back(chamferMm(fitted, truth.mesh, density, metric_rng));
-        f.floor_mm.push_back(chamferMm(truth.mesh, truth.mesh, density, metric_rng));
+        f.floor_mm.push_back(chamferMm(truth.mesh, truth.mesh, density, floor_rng));
         out[set][view].push_back({{"truth", truth.what},
                                   {"fit_mm", f.fit_mm.back()},
                                   {"floor_mm", f.floor_mm.back()},

@@ -33,8 +33,8 @@ struct FitConfig {
   /// (one point per cell of a grid sized for this many cells).
   int max_points = 600;
   /// When the points surround the fitted shape (this share of the directions about its centre
-  /// holds a point: a surface seen from all sides), the final solve takes every point instead.
-  /// Views of one side reach about half; above 1: never.
+  /// holds a point: a surface seen from all sides), `start_iterations` more steps take every
+  /// point. Views of one side reach about half; above 1: never.
   double surrounded_share = 0.9;
   /// Points of the coarser cover on which the starts and the switched alternatives are tried.
   int coarse_points = 60;
@@ -73,9 +73,9 @@ SuperquadricShape initialGuess(const Points3& points_table, double initial_expon
 /// `start` when given; the best that is not collapsed (a quarter of the points' extent at least)
 /// solved to convergence; then its "switched" alternatives (each pair of axes turned by 45
 /// degrees with the conjugate exponent, the passage between a box and a diamond cross-section
-/// that a local solve cannot make), kept when better; last, a solve on `max_points`, or on all
-/// points when they surround the shape (`surrounded_share`). The result is in canonical form
-/// (canonicalSuperquadric).
+/// that a local solve cannot make), kept when better; last, a solve on `max_points`, and a few
+/// steps on all points when they surround the shape (`surrounded_share`). The result is in
+/// canonical form (canonicalSuperquadric).
 SuperquadricShape fitSuperquadric(const Points3& points_table,
                                   const FitConfig& config = FitConfig(),
                                   const std::optional<SuperquadricShape>& start = std::nullopt);

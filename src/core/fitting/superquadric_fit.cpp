@@ -493,7 +493,7 @@ double surroundedShare(const SuperquadricShape& sq, const Points3& points) {
     const Vec3 q = (R.transpose() * (p - t)).cwiseQuotient(sq.scale_m);
     int axis = 0;
     const double m = q.cwiseAbs().maxCoeff(&axis);
-    if (m < 1e-12) continue;
+    if (!(m >= 1e-12)) continue;  // at the centre, or NaN from a diverged solve
     const auto cell = [&](int i) {
       return std::clamp(static_cast<int>((q[(axis + i) % 3] / m + 1.0) * 1.5), 0, 2);
     };
@@ -556,12 +556,14 @@ SuperquadricShape fitSuperquadric(const Points3& points, const FitConfig& c,
     }
     if (!improved) break;
   }
-  // Last, the chosen basin on the finer cover; on every point when they surround the shape.
+  // Last, the chosen basin on the finer cover; then, when the points surround the shape, a few
+  // steps on every point from there (start_iterations: on measured surfaces the solve has
+  // converged by then, on a network's surface it would creep on for 20-30 iterations).
   const Points3 fine = surfaceCover(points, c.max_points);
   if (fine.size() > coarse.size()) best = solveFrom(best.u, fine, c, c.max_iterations);
   if (points.size() > fine.size() &&
       surroundedShare(fromParams(fromSolver(best.u, c)), points) >= c.surrounded_share)
-    best = solveFrom(best.u, points, c, c.max_iterations);
+    best = solveFrom(best.u, points, c, c.start_iterations);
   return canonicalSuperquadric(fromParams(fromSolver(best.u, c)));
 }
 

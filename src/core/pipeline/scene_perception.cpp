@@ -181,7 +181,9 @@ struct ScenePerception::Impl {
 
 namespace {
 
-void validate(const PerceptionConfig& config) {
+/// `latent`: the model has a latent code. Without one every sample is the same scene, so the
+/// sample counts are taken as 1 (forModel) and only need to be in range.
+void validate(const PerceptionConfig& config, bool latent) {
   if (config.samples < 1 || config.samples > kMaxSamples)
     throw std::invalid_argument("samples must lie in [1, " + std::to_string(kMaxSamples) +
                                 "], not " + std::to_string(config.samples));
@@ -194,7 +196,8 @@ void validate(const PerceptionConfig& config) {
         "the sensor range min_depth_m .. max_depth_m must satisfy 0 < min "
         "< max <= 100 m, not " +
         std::to_string(config.min_depth_m) + " .. " + std::to_string(config.max_depth_m));
-  if (config.decompose_samples < 0 || config.decompose_samples > config.samples)
+  if (config.decompose_samples < 0 ||
+      config.decompose_samples > (latent ? config.samples : kMaxSamples))
     throw std::invalid_argument("decompose_samples must lie in [0, samples]");
   if (config.points_per_instance < 10)
     throw std::invalid_argument("points_per_instance must be >= 10");
@@ -235,8 +238,9 @@ PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
 }  // namespace
 
 ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Impl) {
-  validate(config);
+  validate(config, false);  // the ranges before the slow model load, then what the model needs
   impl_->model = std::make_unique<CvaeInference>(config.model_path, cappedThreads(config.threads));
+  validate(config, impl_->model->config().hasLatentCode());
   impl_->config = forModel(config, impl_->model->config());
 }
 
@@ -246,7 +250,7 @@ void ScenePerception::updateSettings(const PerceptionConfig& config) {
                                 ", not " + config.model_path);
   if (cappedThreads(config.threads) != impl_->config.threads)
     throw std::invalid_argument("updateSettings keeps the thread count");
-  validate(config);
+  validate(config, impl_->model->config().hasLatentCode());
   impl_->config = forModel(config, impl_->model->config());
 }
 
