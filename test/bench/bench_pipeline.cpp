@@ -1,6 +1,7 @@
 // Scene decomposition: Hough voting at R = 32 and 64, the joint fit of a 4-object scene, and a
-// whole ScenePerception::perceive() at R = 32 with 3 samples (the shipped model), with and
-// without the regrouping along the observed surface, and with one and with four tiles.
+// whole ScenePerception::perceive() at R = 32 with 3 samples (the C-VAE), with and without the
+// regrouping along the observed surface, with the shipped config (`fc`), and with one and with
+// four tiles.
 #include <benchmark/benchmark.h>
 
 #include <filesystem>
@@ -82,7 +83,7 @@ static void BM_JointFitFourObjects(benchmark::State& state) {
   FitConfig fc;
   fc.threads = 2;
   // Its peer: final solves on the 600-point cover alone (these surfaces surround their shapes,
-  // so by default the final solves take all 1000 points).
+  // so by default the fits end with a few steps on all 1000 points).
   if (state.range(0) == 0) fc.surrounded_share = 2.0;
   for (auto _ : state) benchmark::DoNotOptimize(fitInstances(pts, fc, true));
 }
@@ -122,7 +123,7 @@ void perceiveBenchPile(benchmark::State& state, PerceptionConfig pc) {
 static void BM_Perceive(benchmark::State& state) {
   const std::string model = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
   if (!std::filesystem::exists(model)) {
-    state.SkipWithError("shipped model missing");
+    state.SkipWithError("models/simstack_r32.pt missing");
     return;
   }
   PerceptionConfig pc;
@@ -154,7 +155,7 @@ BENCHMARK(BM_PerceiveDefaultConfig)->Unit(benchmark::kMillisecond)->UseRealTime(
 static void BM_PerceiveTiles(benchmark::State& state) {
   const std::string model = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
   if (!std::filesystem::exists(model)) {
-    state.SkipWithError("shipped model missing");
+    state.SkipWithError("models/simstack_r32.pt missing");
     return;
   }
   const Scene pile = test::fourObjectPile();

@@ -196,9 +196,11 @@ void validate(const PerceptionConfig& config, bool latent) {
         "the sensor range min_depth_m .. max_depth_m must satisfy 0 < min "
         "< max <= 100 m, not " +
         std::to_string(config.min_depth_m) + " .. " + std::to_string(config.max_depth_m));
-  if (config.decompose_samples < 0 ||
-      config.decompose_samples > (latent ? config.samples : kMaxSamples))
-    throw std::invalid_argument("decompose_samples must lie in [0, samples]");
+  const int most_decomposed = latent ? config.samples : kMaxSamples;
+  if (config.decompose_samples < 0 || config.decompose_samples > most_decomposed)
+    throw std::invalid_argument("decompose_samples must lie in [0, " +
+                                std::to_string(most_decomposed) + (latent ? " (samples)" : "") +
+                                "], not " + std::to_string(config.decompose_samples));
   if (config.points_per_instance < 10)
     throw std::invalid_argument("points_per_instance must be >= 10");
   if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
