@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <numeric>
 #include <random>
 
 #include "simstack/fitting/superquadric_fit.h"
@@ -103,17 +104,22 @@ Points3 seenSide(const SuperquadricShape& sq, const Vec3& view, int count, doubl
   return pts;
 }
 
+// Distances of 2000 surface samples of `from` to the surface of `to`.
+std::vector<double> surfaceErrors(const SuperquadricShape& from, const SuperquadricShape& to) {
+  std::mt19937_64 rng(5);
+  std::vector<double> d;
+  for (const SurfacePoint& s : from.sampleSurfaceObject(2000, rng))
+    d.push_back(std::abs(surfaceDistance(to, from.T_table_object * s.position)));
+  return d;
+}
+
 // Median distance of each shape's surface samples from the other's surface (the larger).
 double medianSurfaceError(const SuperquadricShape& a, const SuperquadricShape& b) {
-  auto one_way = [](const SuperquadricShape& from, const SuperquadricShape& to) {
-    std::mt19937_64 rng(5);
-    std::vector<double> d;
-    for (const SurfacePoint& s : from.sampleSurfaceObject(2000, rng))
-      d.push_back(std::abs(surfaceDistance(to, from.T_table_object * s.position)));
+  auto median = [](std::vector<double> d) {
     std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
     return d[d.size() / 2];
   };
-  return std::max(one_way(a, b), one_way(b, a));
+  return std::max(median(surfaceErrors(a, b)), median(surfaceErrors(b, a)));
 }
 
 TEST(SuperquadricFit, RecoversABoxAndACylinderFromOneSideAndABadStart) {
@@ -144,15 +150,10 @@ TEST(SuperquadricFit, RecoversABoxAndACylinderFromOneSideAndABadStart) {
 
 // Mean distance of each shape's surface samples from the other's surface, both ways.
 double meanSurfaceError(const SuperquadricShape& a, const SuperquadricShape& b) {
-  auto one_way = [](const SuperquadricShape& from, const SuperquadricShape& to) {
-    std::mt19937_64 rng(6);
-    double sum = 0.0;
-    const std::vector<SurfacePoint> samples = from.sampleSurfaceObject(2000, rng);
-    for (const SurfacePoint& s : samples)
-      sum += std::abs(surfaceDistance(to, from.T_table_object * s.position));
-    return sum / samples.size();
+  auto mean = [](const std::vector<double>& d) {
+    return std::accumulate(d.begin(), d.end(), 0.0) / d.size();
   };
-  return 0.5 * (one_way(a, b) + one_way(b, a));
+  return 0.5 * (mean(surfaceErrors(a, b)) + mean(surfaceErrors(b, a)));
 }
 
 TEST(SuperquadricFit, TakesEveryPointWhenTheySurroundTheShape) {
