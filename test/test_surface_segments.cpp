@@ -218,8 +218,9 @@ TEST(RegroupAlongSurfaceSegments, JoinsABoxCutInTwoAndKeepsAnUnseenInstance) {
   for (int l : seg.labels.data)
     if (l >= 0) ++seg.voxel_counts[l];
   ASSERT_GT(seg.voxel_counts[1], 20);
+  // The box's votes cross the cut towards its centre: they do not keep the halves apart.
   const InstanceSegmentation out =
-      regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, seg);
+      regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, seg, &gt.votes);
   EXPECT_EQ(out.size(), 3);
   // The corner instance is untouched, whatever its new index.
   const int corner = out.labels.at(0, 0, 0);
@@ -299,6 +300,54 @@ TEST(RegroupAlongSurfaceSegments, JoinsASliverSeenOnAnotherInstancesPatch) {
   EXPECT_GT(segmentationAgreement(truthLabels(gt.labels), out.labels.data).agreement, 0.95);
 }
 
+// Two boxes of one height side by side, staggered: their tops are one flat patch. They meet
+// over 5 cm, a dozen voxel faces of the test grid.
+View staggered() {
+  SuperquadricShape left = box({0.06, 0.04, 0.04}, {-0.06, 0, 0.04});
+  SuperquadricShape right = box({0.06, 0.04, 0.04}, {0.06, 0.03, 0.04});
+  left.exponents = right.exponents = Vec3(40, 40, 40);  // sharp edges: no groove at the seam
+  return look({left, right}, {0.1, -0.35, 0.6}, {0, 0.02, 0.04});
+}
+
+TEST(RegroupAlongSurfaceSegments, KeepsTwoObjectsOnOnePatchApartByTheirVotes) {
+  const View v = staggered();
+  const GroundTruthGrids gt = truthOf(v);
+  // The premise: one patch holds a real share of both boxes' points.
+  std::map<int, std::map<int, int>> points;  // patch -> object -> points
+  const std::vector<int> objects = pointObjects(v);
+  for (size_t i = 0; i < objects.size(); ++i)
+    if (v.segments.patch[i] >= 0) ++points[v.segments.patch[i]][objects[i]];
+  bool shared = false;
+  for (auto& [patch, by_object] : points) shared |= std::min(by_object[1], by_object[2]) >= 200;
+  ASSERT_TRUE(shared);
+  const InstanceSegmentation right = instancesFrom(gt.labels, {-1, 0, 1});
+  int faces = 0;  // between the two boxes' voxels
+  for (int i = 0; i < kGrid.voxelCount(); ++i) {
+    const Vec3i c = kGrid.unravel(i);
+    if (c.x() + 1 < 32 && gt.labels.data[i] == 1 && gt.labels.at(c.x() + 1, c.y(), c.z()) == 2)
+      ++faces;
+  }
+  ASSERT_GE(faces, 2 * SurfaceSegmentConfig().min_boundary_faces);
+  // Each box's votes point to its own centre, away from the other box where they meet.
+  const InstanceSegmentation out =
+      regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, right, &gt.votes);
+  ASSERT_EQ(out.size(), 2);
+  EXPECT_GT(segmentationAgreement(truthLabels(gt.labels), out.labels.data).agreement, 0.95);
+  // Without the votes (or with the test off) the patch joins them.
+  EXPECT_EQ(regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, right).size(), 1);
+  SurfaceSegmentConfig off;
+  off.apart_vote_divergence = 1.0;
+  EXPECT_EQ(regroupAlongSurfaceSegments(v.segments, off, 5, right, &gt.votes).size(), 1);
+  // Nor are they judged on fewer faces than asked for.
+  SurfaceSegmentConfig few;
+  few.min_boundary_faces = faces + 1;
+  EXPECT_EQ(regroupAlongSurfaceSegments(v.segments, few, 5, right, &gt.votes).size(), 1);
+  // Votes on another grid are refused.
+  const Grid3<Vec3f> other(GridSpec::sceneGrid(Vec2(0, 0), 0.64, 16), Vec3f::Zero());
+  EXPECT_THROW(regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, right, &other),
+               std::invalid_argument);
+}
+
 TEST(SurfaceSegments, TheSameViewGivesTheSamePatches) {
   const View v = occlusion();
   for (int i = 0; i < 5; ++i) {
@@ -332,6 +381,12 @@ TEST(SurfaceSegments, EmptyViewsAndBadSettings) {
   EXPECT_THROW(bad.validate(), std::invalid_argument);
   bad = SurfaceSegmentConfig();
   bad.max_unseen_points = -1;
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+  bad = SurfaceSegmentConfig();
+  bad.apart_vote_divergence = 1.5;
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+  bad = SurfaceSegmentConfig();
+  bad.min_boundary_faces = 0;
   EXPECT_THROW(bad.validate(), std::invalid_argument);
   DepthImage wrong(10, 10, 0.5f);
   EXPECT_THROW(segmentVisibleSurface(wrong, PinholeCamera(), Transform::Identity(), 0.01,

@@ -43,6 +43,15 @@ struct SurfaceSegmentConfig {
   /// instance it touches over the most voxel faces: the votes cut it off the hidden side of
   /// an object (0 = off; an instance touching none stays).
   int max_unseen_points = 10;
+  /// Two instances that one patch is part of may not join when, across the voxel faces where
+  /// they meet, the network's votes point away from the other instance by more than this on
+  /// average (per face, the mean of the two unit votes' components along the face normal, each
+  /// taken towards the other voxel and negated; -1..1): two objects, each voting for its own
+  /// centre, not one object the Hough modes cut, whose votes point across the cut. A third
+  /// instance that may join both still links them (1 = off).
+  double apart_vote_divergence = 0.2;
+  /// Fewer faces shared (with a vote on both sides): the votes are not judged.
+  int min_boundary_faces = 4;
   /// Hull points more than this in front of the observed depth are in space seen free.
   double free_space_margin_m = 0.02;
   /// Two groups of patches join when at most this share of their hull's samples is seen free.
@@ -82,12 +91,16 @@ int nearestLabelledVoxel(const Grid3<int>& labels, const Vec3& p_table);
 double seenFreeShare(const SurfaceSegments& s, const std::vector<int>& a, const std::vector<int>& b,
                      const SurfaceSegmentConfig& config, uint64_t seed);
 
-/// The Hough instances regrouped along the patches (see the file comment).
+/// The Hough instances regrouped along the patches (see the file comment); `votes` (the grid of
+/// `hough.labels`, else std::invalid_argument) enables the vote test below.
 /// - First, an instance the camera did not see (fewer than `max_unseen_points` visible points)
 ///   joins the instance it touches most.
 /// - A patch is part of an instance when it holds at least `min_instance_share` of the
 ///   instance's visible points (and `min_segment_points`), or, when it is part of another
 ///   instance, `fragment_share` of them.
+///   A patch that is part of several instances joins them unless their votes diverge where
+///   they meet (`apart_vote_divergence`, with `votes`); the patch then stays with the ones
+///   holding most of its points.
 /// - Patches start as groups; two groups that are part of a common instance join when at most
 ///   `max_free_share` of their hull is seen free, the least free pair first.
 /// - Each voxel of an instance goes to the group whose visible voxels it reaches first through
@@ -103,6 +116,7 @@ double seenFreeShare(const SurfaceSegments& s, const std::vector<int>& a, const 
 InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments,
                                                  const SurfaceSegmentConfig& config,
                                                  int min_part_voxels,
-                                                 const InstanceSegmentation& hough);
+                                                 const InstanceSegmentation& hough,
+                                                 const Grid3<Vec3f>* votes = nullptr);
 
 }  // namespace simstack

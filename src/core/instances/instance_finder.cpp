@@ -20,7 +20,8 @@ InstanceSegmentation InstanceFinder::find(const Grid3<float>& tsdf_m, const Grid
                                           const SurfaceSegments* segments) const {
   InstanceSegmentation seg = houghInstances(tsdf_m, votes, hough_);
   if (segments && segments_.enabled)
-    seg = regroupAlongSurfaceSegments(*segments, segments_, hough_.min_instance_voxels, seg);
+    seg =
+        regroupAlongSurfaceSegments(*segments, segments_, hough_.min_instance_voxels, seg, &votes);
   return seg;
 }
 

@@ -35,6 +35,9 @@ void SurfaceSegmentConfig::validate() const {
   if (hull_samples < 1) fail("hull_samples must be >= 1");
   if (!(fragment_share > 0.0 && fragment_share <= 1.0)) fail("fragment_share must lie in (0, 1]");
   if (max_unseen_points < 0) fail("max_unseen_points must be >= 0");
+  if (!(apart_vote_divergence >= -1.0 && apart_vote_divergence <= 1.0))
+    fail("apart_vote_divergence must lie in [-1, 1]");
+  if (min_boundary_faces < 1) fail("min_boundary_faces must be >= 1");
 }
 
 namespace {
@@ -182,6 +185,26 @@ double seenFreeShare(const SurfaceSegments& s, const std::vector<int>& a, const 
 
 namespace {
 
+/// Calls f(v, w, axis, a, b) for every voxel face between two labelled voxels of different
+/// labels: voxel v (label a) and its neighbour w = v + 1 along `axis` (label b).
+template <class F>
+void forEachLabelFace(const Grid3<int>& labels, F&& f) {
+  const GridSpec& g = labels.spec;
+  for (int v = 0; v < g.voxelCount(); ++v) {
+    const int a = labels.data[v];
+    if (a < 0) continue;
+    const Vec3i c = g.unravel(v);
+    for (int axis = 0; axis < 3; ++axis) {
+      Vec3i n = c;
+      ++n[axis];
+      if (!g.inside(n.x(), n.y(), n.z())) continue;
+      const int w = g.linear(n.x(), n.y(), n.z());
+      const int b = labels.data[w];
+      if (b >= 0 && b != a) f(v, w, axis, a, b);
+    }
+  }
+}
+
 /// Per point: its labelled voxel (nearestLabelledVoxel), -1 none.
 std::vector<int> pointVoxels(const SurfaceSegments& segments, const Grid3<int>& labels) {
   std::vector<int> out(segments.points_table.size());
@@ -214,6 +237,65 @@ VisibleParts visibleParts(const SurfaceSegments& segments, const Grid3<int>& lab
   return out;
 }
 
+/// Whether two instances may be one object, by their votes where they meet: the votes of one
+/// object cut in two point across the cut towards its centre, those of two objects away from
+/// each other. Without votes every pair may join.
+class JoinTest {
+ public:
+  JoinTest(const Grid3<int>& labels, const Grid3<Vec3f>* votes, const SurfaceSegmentConfig& config)
+      : labels_(labels), votes_(votes), config_(config) {}
+
+  bool mayJoin(int a, int b) {
+    if (!votes_ || config_.apart_vote_divergence >= 1.0) return true;
+    const auto key = std::minmax(a, b);
+    if (!measured_) measure();
+    const auto it = divergence_.find(key);
+    if (it == divergence_.end() || it->second.second < config_.min_boundary_faces) return true;
+    return it->second.first / it->second.second <= config_.apart_vote_divergence;
+  }
+
+ private:
+  /// Per pair of labels that share voxel faces: the sum over the faces of how far the two
+  /// unit votes point away from each other across the face, and the face count.
+  void measure() {
+    measured_ = true;
+    forEachLabelFace(labels_, [&](int v, int w, int axis, int a, int b) {
+      const Vec3f va = votes_->data[v], vb = votes_->data[w];
+      if (!(va.norm() > 1e-6f && vb.norm() > 1e-6f)) return;
+      // Along +axis from v to w: v's vote towards w is +va[axis], w's towards v is -vb[axis].
+      auto& [sum, faces] = divergence_[std::minmax(a, b)];
+      sum += 0.5 * (vb[axis] / vb.norm() - va[axis] / va.norm());
+      ++faces;
+    });
+  }
+
+  const Grid3<int>& labels_;
+  const Grid3<Vec3f>* votes_;
+  const SurfaceSegmentConfig& config_;
+  std::map<std::pair<int, int>, std::pair<double, int>> divergence_;
+  bool measured_ = false;
+};
+
+/// The instances a patch is part of, in the sets that may join (JoinTest): connected through
+/// pairs that may join.
+std::vector<std::set<int>> joinableSets(const std::set<int>& instances, JoinTest* test) {
+  const std::vector<int> k(instances.begin(), instances.end());
+  std::vector<int> root(k.size());
+  std::iota(root.begin(), root.end(), 0);
+  auto find = [&](int i) {
+    while (root[i] != i) i = root[i] = root[root[i]];
+    return i;
+  };
+  for (size_t i = 0; i < k.size(); ++i)
+    for (size_t j = i + 1; j < k.size(); ++j)
+      if (find(i) != find(j) && test->mayJoin(k[i], k[j])) root[find(j)] = find(i);
+  std::map<int, std::set<int>> sets;
+  for (size_t i = 0; i < k.size(); ++i) sets[find(i)].insert(k[i]);
+  std::vector<std::set<int>> out;
+  for (auto& [r, set] : sets) out.push_back(std::move(set));
+  return out;
+}
+
 struct PatchGroup {
   std::vector<int> points;  ///< visible points (indices), all the group's patches
   std::set<int> instances;
@@ -221,9 +303,10 @@ struct PatchGroup {
 };
 
 /// One group per patch that makes up a real share of some instance's visible surface, with
-/// the instances it is part of.
+/// the instances it is part of; of instances that may not join (JoinTest), the patch stays
+/// part of the joinable set holding most of its points.
 std::vector<PatchGroup> initialGroups(const SurfaceSegments& segments, const VisibleParts& parts,
-                                      const SurfaceSegmentConfig& config) {
+                                      const SurfaceSegmentConfig& config, JoinTest* join_test) {
   const int instances = static_cast<int>(parts.seen.size());
   std::vector<std::set<int>> part_of(segments.patches);
   for (int k = 0; k < instances; ++k)
@@ -241,12 +324,17 @@ std::vector<PatchGroup> initialGroups(const SurfaceSegments& segments, const Vis
   for (int p = 0; p < segments.patches; ++p) {
     if (part_of[p].empty()) continue;
     PatchGroup grp;
-    grp.instances = part_of[p];
-    grp.patches = {p};
-    for (int k : part_of[p]) {
-      const std::vector<int>& pts = parts.seen[k].at(p);
-      grp.points.insert(grp.points.end(), pts.begin(), pts.end());
+    for (std::set<int>& instances : joinableSets(part_of[p], join_test)) {
+      std::vector<int> points;
+      for (int k : instances) {
+        const std::vector<int>& pts = parts.seen[k].at(p);
+        points.insert(points.end(), pts.begin(), pts.end());
+      }
+      if (points.size() <= grp.points.size()) continue;
+      grp.points = std::move(points);
+      grp.instances = std::move(instances);
     }
+    grp.patches = {p};
     groups.push_back(std::move(grp));
   }
   return groups;
@@ -258,21 +346,10 @@ std::vector<PatchGroup> initialGroups(const SurfaceSegments& segments, const Vis
 bool joinUnseen(const std::vector<int>& visible, int max_unseen, Grid3<int>* labels) {
   const int instances = static_cast<int>(visible.size());
   std::vector<std::map<int, int>> faces(instances);
-  const GridSpec& g = labels->spec;
-  for (int v = 0; v < g.voxelCount(); ++v) {
-    const int a = labels->data[v];
-    if (a < 0) continue;
-    const Vec3i c = g.unravel(v);
-    for (int axis = 0; axis < 3; ++axis) {
-      Vec3i n = c;
-      ++n[axis];
-      if (!g.inside(n.x(), n.y(), n.z())) continue;
-      const int b = labels->data[g.linear(n.x(), n.y(), n.z())];
-      if (b < 0 || b == a) continue;
-      ++faces[a][b];
-      ++faces[b][a];
-    }
-  }
+  forEachLabelFace(*labels, [&](int, int, int, int a, int b) {
+    ++faces[a][b];
+    ++faces[b][a];
+  });
   std::vector<int> root(instances);
   std::iota(root.begin(), root.end(), 0);
   auto find = [&](int k) {
@@ -413,8 +490,13 @@ void relabel(const Grid3<int>& labels, const std::vector<int>& owner, int groups
 InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments,
                                                  const SurfaceSegmentConfig& config,
                                                  int min_part_voxels,
-                                                 const InstanceSegmentation& hough) {
+                                                 const InstanceSegmentation& hough,
+                                                 const Grid3<Vec3f>* votes) {
   config.validate();
+  if (votes && votes->data.size() != hough.labels.data.size())
+    throw std::invalid_argument(
+        "regroupAlongSurfaceSegments: the votes' grid (" + std::to_string(votes->data.size()) +
+        " voxels) is not the instances' (" + std::to_string(hough.labels.data.size()) + ")");
   InstanceSegmentation out = hough;
   const int instances = hough.size();
   if (instances < 1) return out;
@@ -422,7 +504,8 @@ InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments
   VisibleParts parts = visibleParts(segments, labels, instances, pointVoxels(segments, labels));
   const bool joined = joinUnseen(parts.visible, config.max_unseen_points, &labels);
   if (joined) parts = visibleParts(segments, labels, instances, std::move(parts.voxel_of));
-  std::vector<PatchGroup> groups = initialGroups(segments, parts, config);
+  JoinTest join_test(labels, votes, config);
+  std::vector<PatchGroup> groups = initialGroups(segments, parts, config, &join_test);
   if (groups.empty() && !joined) return out;
   joinGroups(segments, config, &groups);
   const std::vector<int> owner = growGroups(labels, groups, parts.voxel_of);

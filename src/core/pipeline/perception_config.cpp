@@ -54,6 +54,8 @@ void segmentFields(C& c, F&& f) {
   f("min_instance_share", c.min_instance_share);
   f("fragment_share", c.fragment_share);
   f("max_unseen_points", c.max_unseen_points);
+  f("apart_vote_divergence", c.apart_vote_divergence);
+  f("min_boundary_faces", c.min_boundary_faces);
   f("free_space_margin_m", c.free_space_margin_m);
   f("max_free_share", c.max_free_share);
   f("hull_samples", c.hull_samples);
