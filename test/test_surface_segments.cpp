@@ -373,21 +373,18 @@ TEST(SurfaceSegments, EmptyViewsAndBadSettings) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("seed_resolution_m"), std::string::npos);
   }
-  bad = SurfaceSegmentConfig();
-  bad.max_free_share = 1.0;
-  EXPECT_THROW(bad.validate(), std::invalid_argument);
-  bad = SurfaceSegmentConfig();
-  bad.fragment_share = 0.0;
-  EXPECT_THROW(bad.validate(), std::invalid_argument);
-  bad = SurfaceSegmentConfig();
-  bad.max_unseen_points = -1;
-  EXPECT_THROW(bad.validate(), std::invalid_argument);
-  bad = SurfaceSegmentConfig();
-  bad.apart_vote_divergence = 1.5;
-  EXPECT_THROW(bad.validate(), std::invalid_argument);
-  bad = SurfaceSegmentConfig();
-  bad.min_boundary_faces = 0;
-  EXPECT_THROW(bad.validate(), std::invalid_argument);
+  const std::vector<std::function<void(SurfaceSegmentConfig*)>> out_of_range = {
+      [](SurfaceSegmentConfig* c) { c->max_free_share = 1.0; },
+      [](SurfaceSegmentConfig* c) { c->fragment_share = 0.0; },
+      [](SurfaceSegmentConfig* c) { c->max_unseen_points = -1; },
+      [](SurfaceSegmentConfig* c) { c->apart_vote_divergence = 1.5; },
+      [](SurfaceSegmentConfig* c) { c->min_boundary_faces = 0; },
+  };
+  for (size_t i = 0; i < out_of_range.size(); ++i) {
+    bad = SurfaceSegmentConfig();
+    out_of_range[i](&bad);
+    EXPECT_THROW(bad.validate(), std::invalid_argument) << "setting " << i;
+  }
   DepthImage wrong(10, 10, 0.5f);
   EXPECT_THROW(segmentVisibleSurface(wrong, PinholeCamera(), Transform::Identity(), 0.01,
                                      SurfaceSegmentConfig()),

@@ -185,6 +185,20 @@ double seenFreeShare(const SurfaceSegments& s, const std::vector<int>& a, const 
 
 namespace {
 
+/// Disjoint sets of 0..n-1 (union-find with path halving).
+class DisjointSets {
+ public:
+  explicit DisjointSets(int n) : root_(n) { std::iota(root_.begin(), root_.end(), 0); }
+  int find(int k) {
+    while (root_[k] != k) k = root_[k] = root_[root_[k]];
+    return k;
+  }
+  void join(int a, int b) { root_[find(a)] = find(b); }
+
+ private:
+  std::vector<int> root_;
+};
+
 /// Calls f(v, w, axis, a, b) for every voxel face between two labelled voxels of different
 /// labels: voxel v (label a) and its neighbour w = v + 1 along `axis` (label b).
 template <class F>
@@ -280,17 +294,13 @@ class JoinTest {
 /// pairs that may join.
 std::vector<std::set<int>> joinableSets(const std::set<int>& instances, JoinTest* test) {
   const std::vector<int> k(instances.begin(), instances.end());
-  std::vector<int> root(k.size());
-  std::iota(root.begin(), root.end(), 0);
-  auto find = [&](int i) {
-    while (root[i] != i) i = root[i] = root[root[i]];
-    return i;
-  };
-  for (size_t i = 0; i < k.size(); ++i)
-    for (size_t j = i + 1; j < k.size(); ++j)
-      if (find(i) != find(j) && test->mayJoin(k[i], k[j])) root[find(j)] = find(i);
+  const int n = static_cast<int>(k.size());
+  DisjointSets joined(n);
+  for (int i = 0; i < n; ++i)
+    for (int j = i + 1; j < n; ++j)
+      if (joined.find(i) != joined.find(j) && test->mayJoin(k[i], k[j])) joined.join(j, i);
   std::map<int, std::set<int>> sets;
-  for (size_t i = 0; i < k.size(); ++i) sets[find(i)].insert(k[i]);
+  for (int i = 0; i < n; ++i) sets[joined.find(i)].insert(k[i]);
   std::vector<std::set<int>> out;
   for (auto& [r, set] : sets) out.push_back(std::move(set));
   return out;
@@ -350,24 +360,19 @@ bool joinUnseen(const std::vector<int>& visible, int max_unseen, Grid3<int>* lab
     ++faces[a][b];
     ++faces[b][a];
   });
-  std::vector<int> root(instances);
-  std::iota(root.begin(), root.end(), 0);
-  auto find = [&](int k) {
-    while (root[k] != k) k = root[k] = root[root[k]];
-    return k;
-  };
+  DisjointSets sets(instances);
   bool joined = false;
   for (int k = 0; k < instances; ++k) {
     if (visible[k] >= max_unseen || faces[k].empty()) continue;
     const auto most =
         std::max_element(faces[k].begin(), faces[k].end(),
                          [](const auto& a, const auto& b) { return a.second < b.second; });
-    root[find(k)] = find(most->first);
+    sets.join(k, most->first);
     joined = true;
   }
   if (!joined) return false;
   for (int& l : labels->data)
-    if (l >= 0) l = find(l);
+    if (l >= 0) l = sets.find(l);
   return true;
 }
 
