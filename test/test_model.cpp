@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <random>
 
 #include <H5Cpp.h>
 
@@ -505,6 +506,93 @@ TEST(Cvae, SaveLoadGivesIdenticalOutputs) {
   const CvaeInference net(path, 1);
   EXPECT_EQ(net.config().resolution, 16);
   fs::remove(path);
+}
+
+namespace {
+// The grid's quarter turn about the vertical, written voxel by voxel: (x, y) goes to
+// (r - 1 - y, x), a vector (vx, vy) to (-vy, vx); and its mirror in x.
+template <class T, class F>
+Grid3<T> moved(const Grid3<T>& g, bool mirror, F&& value) {
+  const int r = g.spec.resolution;
+  Grid3<T> out = g;
+  for (int z = 0; z < r; ++z)
+    for (int y = 0; y < r; ++y)
+      for (int x = 0; x < r; ++x) {
+        const T& v = g.at(x, y, z);
+        if (mirror)
+          out.at(r - 1 - x, y, z) = value(v, true);
+        else
+          out.at(r - 1 - y, x, z) = value(v, false);
+      }
+  return out;
+}
+Grid3<float> moved(const Grid3<float>& g, bool mirror) {
+  return moved(g, mirror, [](float v, bool) { return v; });
+}
+Grid3<Vec3f> moved(const Grid3<Vec3f>& g, bool mirror) {
+  return moved(g, mirror, [](const Vec3f& v, bool m) {
+    return m ? Vec3f(-v.x(), v.y(), v.z()) : Vec3f(-v.y(), v.x(), v.z());
+  });
+}
+// Largest difference between two sets of hypotheses, TSDF and votes.
+double difference(const std::vector<CvaePrediction>& a, const std::vector<CvaePrediction>& b) {
+  double worst = 0;
+  for (size_t s = 0; s < a.size(); ++s)
+    for (size_t i = 0; i < a[s].tsdf_m.data.size(); ++i) {
+      worst = std::max(worst, double(std::abs(a[s].tsdf_m.data[i] - b[s].tsdf_m.data[i])));
+      worst = std::max(worst, double((a[s].votes.data[i] - b[s].votes.data[i]).norm()));
+    }
+  return worst;
+}
+// The hypotheses moved (quarter turn or mirror).
+std::vector<CvaePrediction> moved(std::vector<CvaePrediction> p, bool mirror) {
+  for (CvaePrediction& h : p) h = {moved(h.tsdf_m, mirror), moved(h.votes, mirror)};
+  return p;
+}
+}  // namespace
+
+TEST(Cvae, SymmetricPassesTurnWithThePile) {
+  torch::manual_seed(2);
+  Cvae model(tiny());
+  model->eval();
+  const std::string path = tempPath("simstack_test_symmetries.pt");
+  saveCvae(path, model, "");
+  const CvaeInference net(path, 1);
+  fs::remove(path);
+  const GridSpec grid = GridSpec::sceneGrid(Vec2::Zero(), net.config().extent_m, 16);
+  Grid3<float> tsdf(grid, 0.0f), weight(grid, 0.0f);
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (size_t i = 0; i < tsdf.data.size(); ++i) {
+    tsdf.data[i] = 0.03f * u(rng);
+    weight.data[i] = u(rng) > 0 ? 1.0f : 0.0f;
+  }
+  auto error = [&](int symmetries, bool mirror) {
+    const auto a = net.predict(tsdf, weight, 2, 9, false, symmetries);
+    const auto b = net.predict(moved(tsdf, mirror), moved(weight, mirror), 2, 9, false, symmetries);
+    return difference(moved(a, mirror), b);
+  };
+  // One pass of a random network does not turn with the pile; four turned passes do, and all
+  // eight also mirror with it.
+  EXPECT_GT(error(1, false), 1e-3);
+  EXPECT_LT(error(4, false), 1e-5);
+  EXPECT_GT(error(4, true), 1e-3);
+  EXPECT_LT(error(8, false), 1e-5);
+  EXPECT_LT(error(8, true), 1e-5);
+  EXPECT_THROW(net.predict(tsdf, weight, 1, 0, false, 3), std::invalid_argument);
+  // Two passes (the half turn) turn with a half-turned pile.
+  auto half = [](const auto& g) { return moved(moved(g, false), false); };
+  const auto a = net.predict(tsdf, weight, 2, 9, false, 2);
+  const auto b = net.predict(half(tsdf), half(weight), 2, 9, false, 2);
+  EXPECT_LT(difference(half(a), b), 1e-5);
+  // Code fitting: the codes are fitted on the plain pass (the same losses either way), and the
+  // kept codes decoded with the passes (as predict() decodes them).
+  const std::vector<ViewEvidence> views = {{tsdf, weight}};
+  RefineReport one_report, four_report;
+  const auto one = net.refine(tsdf, weight, views, 2, 9, false, {3, 0.3, 1}, &one_report);
+  const auto four = net.refine(tsdf, weight, views, 2, 9, false, {3, 0.3, 4}, &four_report);
+  EXPECT_EQ(one_report.code_loss, four_report.code_loss);
+  EXPECT_GT(difference(one, four), 1e-3);
 }
 
 TEST(Cvae, BadModelFilesGiveClearErrors) {

@@ -325,6 +325,9 @@ TEST(ScenePerception, TwoViewsFuse) {
     EXPECT_EQ(both.instances()[i].voxels, alone.instances()[i].voxels) << i;
   first.condition_views = "second";
   EXPECT_THROW(ScenePerception{first}, std::invalid_argument);
+  PerceptionConfig odd = config;
+  odd.symmetries = 3;  // not a count of the grid's symmetries the network is run on
+  EXPECT_THROW(ScenePerception{odd}, std::invalid_argument);
 }
 
 }  // namespace

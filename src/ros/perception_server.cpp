@@ -25,6 +25,7 @@ std::string expandHome(const std::string& path) {
 LiveSettingsConfig liveSettings(const PerceptionConfig& c) {
   LiveSettingsConfig live;
   live.samples = c.samples;
+  live.symmetries = c.symmetries;
   live.hough_refinement = c.hough.refinement;
   live.hough_min_traversals = c.hough.min_traversals;
   live.hough_bandwidth_m = c.hough.bandwidth_m;
@@ -222,6 +223,7 @@ void PerceptionServer::applySettings() {
   if (!s) return;
   PerceptionConfig c = perception_->config();
   c.samples = s->samples;
+  c.symmetries = s->symmetries;
   c.hough.refinement = s->hough_refinement;
   c.hough.min_traversals = s->hough_min_traversals;
   c.hough.bandwidth_m = s->hough_bandwidth_m;

@@ -31,6 +31,11 @@ PerceptionOptions::PerceptionOptions(CLI::App& app, Which which) {
   samples_opt_ =
       app.add_option("--samples", samples_, "latent samples S (default: the model card's)")
           ->check(CLI::PositiveNumber);
+  symmetries_opt_ =
+      app.add_option("--symmetries", symmetries_,
+                     "network passes averaged: the view as seen, turned by a half (2) or "
+                     "every quarter turn (4), and mirrored (8) (default: the config's)")
+          ->check(CLI::IsMember({1, 2, 4, 8}));
   if (which.seed)
     seed_opt_ = app.add_option("--seed", seed_, "latent code seed (default: the config's)");
   threads_opt_ = app.add_option("--threads", threads_, "threads (default: the config's)")
@@ -55,6 +60,7 @@ std::vector<PerceptionConfig> PerceptionOptions::configs() const {
     if (samples_opt_->count()) c.samples = samples_;
     if (seed_opt_ && seed_opt_->count()) c.seed = seed_;
     if (threads_opt_->count()) c.threads = threads_;
+    if (symmetries_opt_->count()) c.symmetries = symmetries_;
     if (no_joint_) c.joint_refinement = false;
     out.push_back(std::move(c));
   }

@@ -3,7 +3,7 @@
 /// The options every tool that runs ScenePerception shares, and the one place that turns them
 /// into a PerceptionConfig: the package's config/perception.yaml unless --config names
 /// another, the config's model unless --model names one (whose card brings its sample count
-/// and Hough setting), then --samples, --seed, --threads and --no-joint over both.
+/// and Hough setting), then --samples, --seed, --threads, --symmetries and --no-joint over both.
 
 #include <CLI/CLI.hpp>
 
@@ -54,10 +54,11 @@ class PerceptionOptions {
  private:
   std::string config_path_ = packageFile("config/perception.yaml");
   std::vector<std::string> models_;
-  int samples_ = 3, threads_ = 2;
+  int samples_ = 3, threads_ = 2, symmetries_ = 4;
   uint64_t seed_ = 0;
   bool no_joint_ = false;
-  CLI::Option *samples_opt_ = nullptr, *seed_opt_ = nullptr, *threads_opt_ = nullptr;
+  CLI::Option *samples_opt_ = nullptr, *seed_opt_ = nullptr, *threads_opt_ = nullptr,
+              *symmetries_opt_ = nullptr;
 };
 
 }  // namespace simstack

@@ -130,25 +130,35 @@ static void BM_Perceive(benchmark::State& state) {
   pc.model_path = model;
   pc.samples = static_cast<int>(state.range(0));
   pc.segments.enabled = state.range(1) != 0;  // its peer: the same frame without the regrouping
+  pc.symmetries = static_cast<int>(state.range(2));
   perceiveBenchPile(state, pc);
 }
 BENCHMARK(BM_Perceive)
-    ->ArgNames({"samples", "segments"})
-    ->Args({3, 1})
-    ->Args({3, 0})
+    ->ArgNames({"samples", "segments", "symmetries"})
+    ->Args({3, 1, 1})
+    ->Args({3, 0, 1})
+    ->Args({3, 1, 4})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
-// What a user runs: config/perception.yaml as shipped (its model, `fc`, with its card).
+// What a user runs: config/perception.yaml as shipped (its model, `fc`, with its card; its
+// symmetries: 4), and its peer with one network pass.
 static void BM_PerceiveDefaultConfig(benchmark::State& state) {
   const std::string dir = SIMSTACK_SOURCE_DIR;
   try {
-    perceiveBenchPile(state, loadPerceptionYaml(dir + "/config/perception.yaml", dir));
+    PerceptionConfig pc = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
+    pc.symmetries = static_cast<int>(state.range(0));
+    perceiveBenchPile(state, pc);
   } catch (const std::exception& e) {
     state.SkipWithError(e.what());
   }
 }
-BENCHMARK(BM_PerceiveDefaultConfig)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PerceiveDefaultConfig)
+    ->ArgName("symmetries")
+    ->Arg(4)
+    ->Arg(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 // A 1280x720 frame seen from 1 m above the table, holding one 4-object pile (one tile) or four
 // copies of it 0.8 m apart (four tiles): the cost of a scene wider than one grid.

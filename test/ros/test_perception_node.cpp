@@ -19,6 +19,7 @@
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <random>
@@ -48,33 +49,70 @@ std::vector<SuperquadricShape> knownPile() {
           box(Vec3(0.05, 0.05, 0.04), Vec3(0.0, 0.09, 0.04), -0.2)};
 }
 
+/// The test's topics and tf, advertised and subscribed once for the whole program: a topic
+/// unadvertised at the end of one test and advertised again by the next leaves the nodes to
+/// reconnect to it, and a node whose old connection has not dropped when the new
+/// advertisement reaches it may never reconnect, so that the next frame is lost. One static
+/// broadcaster holds every camera frame sent (a second one's message would replace its own).
+struct Wire {
+  Wire() {
+    image_pub = nh.advertise<sensor_msgs::Image>("/camera/depth/image_rect", 1, true);
+    info_pub = nh.advertise<sensor_msgs::CameraInfo>("/camera/depth/camera_info", 1, true);
+    objects_sub = nh.subscribe<ObjectArray>("/camera/perception/objects", 10,
+                                            [this](const ObjectArray::ConstPtr& msg) {
+                                              std::lock_guard<std::mutex> lock(mutex);
+                                              received.push_back(*msg);
+                                            });
+    markers_sub = nh.subscribe<visualization_msgs::MarkerArray>(
+        "/camera/perception/markers", 10,
+        [this](const visualization_msgs::MarkerArray::ConstPtr& msg) {
+          std::lock_guard<std::mutex> lock(mutex);
+          markers[msg->markers.empty() ? ros::Time() : msg->markers.front().header.stamp] = *msg;
+        });
+    estimated_sub = nh.subscribe<ObjectArray>("/estimating/perception/objects", 10,
+                                              [this](const ObjectArray::ConstPtr& msg) {
+                                                std::lock_guard<std::mutex> lock(mutex);
+                                                estimated.push_back(*msg);
+                                              });
+  }
+  /// Whether both perception nodes fed by the camera topics listen to them and publish to
+  /// the test.
+  bool connected() const {
+    return objects_sub.getNumPublishers() > 0 && markers_sub.getNumPublishers() > 0 &&
+           estimated_sub.getNumPublishers() > 0 && image_pub.getNumSubscribers() >= 2 &&
+           info_pub.getNumSubscribers() >= 2;
+  }
+
+  ros::NodeHandle nh;
+  ros::Publisher image_pub, info_pub;
+  ros::Subscriber objects_sub, markers_sub, estimated_sub;
+  tf2_ros::StaticTransformBroadcaster tf;
+  std::mutex mutex;
+  std::vector<ObjectArray> received, estimated;
+  std::map<ros::Time, visualization_msgs::MarkerArray> markers;
+};
+std::unique_ptr<Wire> wire;  // made by the first test, dropped by main before ROS shuts down
+
 class PerceptionNodeTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    image_pub_ = nh_.advertise<sensor_msgs::Image>("/camera/depth/image_rect", 1, true);
-    info_pub_ = nh_.advertise<sensor_msgs::CameraInfo>("/camera/depth/camera_info", 1, true);
-    objects_sub_ =
-        nh_.subscribe("/camera/perception/objects", 10, &PerceptionNodeTest::onObjects, this);
-    markers_sub_ =
-        nh_.subscribe("/camera/perception/markers", 10, &PerceptionNodeTest::onMarkers, this);
-    estimated_sub_ =
-        nh_.subscribe("/estimating/perception/objects", 10, &PerceptionNodeTest::onEstimated, this);
     T_table_camera_ = lookAt(Vec3(0.45, -0.3, 0.55), Vec3(0.0, 0.0, 0.04));
-    geometry_msgs::TransformStamped t = tf2::eigenToTransform(T_table_camera_);
-    t.header.stamp = ros::Time::now();
-    t.header.frame_id = "table";
-    t.child_frame_id = kCameraFrame;
-    tf_.sendTransform(t);
+    if (!wire) {
+      wire = std::make_unique<Wire>();
+      geometry_msgs::TransformStamped t = tf2::eigenToTransform(T_table_camera_);
+      t.header.stamp = ros::Time::now();
+      t.header.frame_id = "table";
+      t.child_frame_id = kCameraFrame;
+      wire->tf.sendTransform(t);
+    }
     ASSERT_TRUE(ros::service::waitForService("/camera/perception/save_octomap", 60000))
         << "the perception node did not come up";
     // An answer published before a subscription is connected would be lost.
-    for (int i = 0;
-         i < 300 && (objects_sub_.getNumPublishers() == 0 || markers_sub_.getNumPublishers() == 0 ||
-                     estimated_sub_.getNumPublishers() == 0);
-         ++i) {
+    for (int i = 0; i < 300 && !wire->connected(); ++i) {
       ros::spinOnce();
       ros::WallDuration(0.1).sleep();
     }
+    ASSERT_TRUE(wire->connected()) << "the perception nodes are not connected to the test";
   }
 
   /// The depth of `shapes` (metres), as the node's camera sees them.
@@ -102,35 +140,27 @@ class PerceptionNodeTest : public ::testing::Test {
                                   double seconds = 30.0) {
     const ros::Time stamp = ros::Time::now();
     image.header.stamp = info.header.stamp = stamp;
-    info_pub_.publish(info);
-    image_pub_.publish(image);
-    return answerTo(received_, stamp, seconds);
+    wire->info_pub.publish(info);
+    wire->image_pub.publish(image);
+    return answerTo(wire->received, stamp, seconds);
   }
   std::optional<ObjectArray> sendDepth(const DepthImage& depth, double seconds = 30.0) {
     return send(imageMsg(depth, ros::Time(0)), infoMsg(ros::Time(0)), seconds);
   }
 
-  void onObjects(const ObjectArray::ConstPtr& msg) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    received_.push_back(*msg);
-  }
-  void onEstimated(const ObjectArray::ConstPtr& msg) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    estimated_.push_back(*msg);
-  }
   /// The estimating node's answer to the frame of `stamp`, waiting up to `seconds`.
   std::optional<ObjectArray> estimatedFor(ros::Time stamp, double seconds) {
-    return answerTo(estimated_, stamp, seconds);
+    return answerTo(wire->estimated, stamp, seconds);
   }
-  /// The message of `answers` (filled by a callback under mutex_) stamped `stamp`, waiting up
-  /// to `seconds` for it.
+  /// The message of `answers` (filled by a callback under the wire's mutex) stamped `stamp`,
+  /// waiting up to `seconds` for it.
   std::optional<ObjectArray> answerTo(const std::vector<ObjectArray>& answers, ros::Time stamp,
                                       double seconds) {
     const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(seconds);
     while (ros::ok() && ros::WallTime::now() < until) {
       ros::spinOnce();
       {
-        std::lock_guard<std::mutex> lock(mutex_);
+        std::lock_guard<std::mutex> lock(wire->mutex);
         for (const ObjectArray& o : answers)
           if (o.header.stamp == stamp) return o;
       }
@@ -138,20 +168,9 @@ class PerceptionNodeTest : public ::testing::Test {
     }
     return std::nullopt;
   }
-  void onMarkers(const visualization_msgs::MarkerArray::ConstPtr& msg) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    markers_[msg->markers.empty() ? ros::Time() : msg->markers.front().header.stamp] = *msg;
-  }
-
   ros::NodeHandle nh_;
-  ros::Publisher image_pub_, info_pub_;
-  ros::Subscriber objects_sub_, markers_sub_, estimated_sub_;
-  tf2_ros::StaticTransformBroadcaster tf_;
   PinholeCamera camera_;
   Transform T_table_camera_;
-  std::mutex mutex_;
-  std::vector<ObjectArray> received_, estimated_;
-  std::map<ros::Time, visualization_msgs::MarkerArray> markers_;
 };
 
 TEST_F(PerceptionNodeTest, AKnownPileGivesItsObjects) {
@@ -241,9 +260,9 @@ TEST_F(PerceptionNodeTest, AnEmptyTableGivesAnEmptyScene) {
   EXPECT_TRUE(out->objects.empty());
   ros::WallDuration(0.5).sleep();
   ros::spinOnce();
-  std::lock_guard<std::mutex> lock(mutex_);
-  ASSERT_TRUE(markers_.count(out->header.stamp)) << "no markers for the empty scene";
-  const auto& markers = markers_.at(out->header.stamp).markers;
+  std::lock_guard<std::mutex> lock(wire->mutex);
+  ASSERT_TRUE(wire->markers.count(out->header.stamp)) << "no markers for the empty scene";
+  const auto& markers = wire->markers.at(out->header.stamp).markers;
   ASSERT_EQ(markers.size(), 1u);
   EXPECT_EQ(markers[0].action, visualization_msgs::Marker::DELETEALL);
 }
@@ -346,7 +365,7 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
   std::vector<ObjectArray> answers;
   ros::Subscriber sub = nh_.subscribe<ObjectArray>("/accumulating/perception/objects", 10,
                                                    [&](const ObjectArray::ConstPtr& msg) {
-                                                     std::lock_guard<std::mutex> lock(mutex_);
+                                                     std::lock_guard<std::mutex> lock(wire->mutex);
                                                      answers.push_back(*msg);
                                                    });
   std::vector<geometry_msgs::TransformStamped> cameras;
@@ -360,8 +379,7 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
     t.child_frame_id = "accumulating_camera_" + std::to_string(k);
     cameras.push_back(t);
   }
-  tf2_ros::StaticTransformBroadcaster tf;
-  tf.sendTransform(cameras);
+  wire->tf.sendTransform(cameras);
   for (int i = 0; i < 300 && (sub.getNumPublishers() == 0 || image.getNumSubscribers() == 0 ||
                               info.getNumSubscribers() == 0);
        ++i)
@@ -395,5 +413,7 @@ int main(int argc, char** argv) {
   ::testing::InitGoogleTest(&argc, argv);
   ros::init(argc, argv, "test_perception_node");
   ros::NodeHandle nh;
-  return RUN_ALL_TESTS();
+  const int failed = RUN_ALL_TESTS();
+  simstack::wire.reset();
+  return failed;
 }

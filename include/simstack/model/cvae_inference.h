@@ -28,6 +28,7 @@ struct ViewEvidence {
 struct RefineOptions {
   int iterations = 10;         ///< Adam steps on the codes
   double learning_rate = 0.3;  ///< Adam step size (codes are standard normal draws)
+  int symmetries = 1;          ///< the kept codes decoded as predict() does with this many
 };
 
 /// What refine() did: the depth-evidence loss of the kept code at each iteration (index 0:
@@ -37,6 +38,9 @@ struct RefineReport {
   std::vector<double> code_loss;  ///< per hypothesis: its code's loss at its best step
   double ms = 0;
 };
+
+/// std::invalid_argument unless `symmetries` is 1, 2, 4 or 8 (CvaeInference::predict).
+void validateSymmetries(int symmetries);
 
 /// Loads once; predict() is const but not thread-safe (torch state): use one per thread.
 class CvaeInference {
@@ -51,16 +55,22 @@ class CvaeInference {
   /// a grid of the model's resolution and extent (std::invalid_argument otherwise). Codes are
   /// drawn from N(0, I) with `seed`; with `zero_code_first` the first is the mean scene
   /// (z = 0). The FC baseline returns the same prediction for every sample.
+  /// `symmetries` (1, 2, 4 or 8, else std::invalid_argument): the network also runs on the
+  /// input turned about the vertical (2: by a half turn, 4: by every quarter turn) and mirrored
+  /// (8), with the same codes, and each hypothesis is the average of the outputs turned back.
+  /// The prediction of an input so turned (or mirrored) is then the turned prediction. Costs a
+  /// forward pass each.
   std::vector<CvaePrediction> predict(const Grid3<float>& partial_tsdf_m,
                                       const Grid3<float>& weight, int samples, uint64_t seed = 0,
-                                      bool zero_code_first = false) const;
+                                      bool zero_code_first = false, int symmetries = 1) const;
 
   /// The paper's section 4.2: the S codes of predict() (same seed) optimised, the network
   /// fixed, so that the decoded TSDF agrees with every view's own partial TSDF where that view
   /// observed the scene (weight > 0): the mean over views of sum |tsdf - view tsdf| / tau
   /// (both clamped to +-1) over the view's observed voxels. Hypothesis k is code k at its best
   /// step (the order of predict()'s, so tiles of one scene blend matching hypotheses; the
-  /// report has each code's loss); the FC baseline, having no code, returns predict()'s.
+  /// report has each code's loss); the FC baseline, having no code, returns predict()'s. The
+  /// codes are fitted on the plain pass; `options.symmetries` applies to the final decoding.
   /// `views` must lie on the partial TSDF's grid (std::invalid_argument).
   std::vector<CvaePrediction> refine(const Grid3<float>& partial_tsdf_m, const Grid3<float>& weight,
                                      const std::vector<ViewEvidence>& views, int samples,

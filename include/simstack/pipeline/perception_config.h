@@ -19,12 +19,16 @@ namespace simstack {
 constexpr int kMaxSamples = 64;
 
 struct PerceptionConfig {
-  std::string model_path;           ///< a model written by simstack_train (required)
-  std::string model_card_path;      ///< the card samples and hough came from ("" = defaults)
-  int samples = 3;                  ///< S latent samples per frame (model card)
-  bool zero_code_first = true;      ///< hypothesis 0 is the mean scene (z = 0)
-  uint64_t seed = 0;                ///< latent codes; the same seed gives the same hypotheses
-  int decompose_samples = 1;        ///< hypotheses split into instances and fitted (the first ones)
+  std::string model_path;       ///< a model written by simstack_train (required)
+  std::string model_card_path;  ///< the card samples and hough came from ("" = defaults)
+  int samples = 3;              ///< S latent samples per frame (model card)
+  bool zero_code_first = true;  ///< hypothesis 0 is the mean scene (z = 0)
+  uint64_t seed = 0;            ///< latent codes; the same seed gives the same hypotheses
+  int decompose_samples = 1;    ///< hypotheses split into instances and fitted (the first ones)
+  /// Network passes averaged: the view as seen and turned about the vertical (2: by a half
+  /// turn, 4: by every quarter turn) and mirrored (8), each output turned back (1, 2, 4 or 8;
+  /// CvaeInference::predict).
+  int symmetries = 4;
   int points_per_instance = 1000;   ///< mesh samples handed to the fitter
   int min_instance_points = 30;     ///< instances with a smaller surface are dropped
   bool joint_refinement = true;     ///< eqs. 7-9 after the per-instance fits

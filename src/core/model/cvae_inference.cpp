@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <limits>
+#include <map>
 #include <stdexcept>
 
 #include "simstack/model/cvae.h"
@@ -28,6 +29,48 @@ std::vector<CvaePrediction> toPredictions(const CvaeOutput& out, const GridSpec&
     for (size_t i = 0; i < n; ++i) result[s].votes.data[i] = Vec3f(v[i], v[n + i], v[2 * n + i]);
   }
   return result;
+}
+
+/// One of the 8 symmetries of the grid's square cross-section (bit 0: swap x and y, bit 1:
+/// mirror x, bit 2: mirror y; 3, 6 and 5 are the quarter, half and three-quarter turns about
+/// the vertical), on a [B, C, z, y, x] tensor; with `vector` the channels are a vector field
+/// (x, y, z) whose components turn with it. `inverse` undoes it.
+torch::Tensor symmetry(torch::Tensor t, int which, bool vector, bool inverse) {
+  auto swap = [&](torch::Tensor a) {
+    a = a.transpose(3, 4);
+    return vector ? torch::cat({a.narrow(1, 1, 1), a.narrow(1, 0, 1), a.narrow(1, 2, 1)}, 1) : a;
+  };
+  auto mirror = [&](torch::Tensor a, int dim, int component) {
+    a = a.flip({dim});
+    if (vector) a.narrow(1, component, 1).neg_();  // flip() returned a copy
+    return a;
+  };
+  if (!inverse && (which & 1)) t = swap(t);
+  if (which & 2) t = mirror(t, 4, 0);
+  if (which & 4) t = mirror(t, 3, 1);
+  if (inverse && (which & 1)) t = swap(t);
+  return t.contiguous();
+}
+
+/// The network's outputs for the condition `one` [1, ...] and codes `z`, averaged over
+/// `symmetries` (1, 2, 4 or 8; each set a group, so that the average turns with the pile) of the
+/// grid: the input turned, the outputs turned back. A pile turned about the vertical or
+/// mirrored is as plausible as the pile itself, so the errors of the passes partly cancel.
+CvaeOutput generateSymmetric(Cvae& model, const torch::Tensor& one, const torch::Tensor& z,
+                             int symmetries) {
+  static const std::map<int, std::vector<int>> kElements = {
+      {1, {0}}, {2, {0, 6}}, {4, {0, 3, 6, 5}}, {8, {0, 1, 2, 3, 4, 5, 6, 7}}};
+  CvaeOutput out = model->generate(one, z);
+  if (symmetries == 1) return out;
+  for (int which : kElements.at(symmetries)) {
+    if (which == 0) continue;
+    const CvaeOutput o = model->generate(symmetry(one, which, false, false), z);
+    out.tsdf = out.tsdf + symmetry(o.tsdf, which, false, true);
+    out.votes = out.votes + symmetry(o.votes, which, true, true);
+  }
+  out.tsdf = out.tsdf / symmetries;
+  out.votes = out.votes / symmetries;
+  return out;
 }
 
 torch::Tensor gridTensor(const std::vector<float>& values, int r) {
@@ -69,14 +112,23 @@ void CvaeInference::checkInput(const Grid3<float>& partial_tsdf_m, const Grid3<f
   // doing it every frame took 1-6 ms and left the next forward pass 1.6x slower (cold threads).
   if (torch::get_num_threads() != impl_->threads) torch::set_num_threads(impl_->threads);
 }
+
+void validateSymmetries(int symmetries) {
+  if (symmetries != 1 && symmetries != 2 && symmetries != 4 && symmetries != 8)
+    throw std::invalid_argument("symmetries must be 1, 2, 4 or 8, not " +
+                                std::to_string(symmetries));
+}
+
 const std::string& CvaeInference::metadata() const { return impl_->metadata; }
 
 std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_tsdf_m,
                                                    const Grid3<float>& weight, int samples,
-                                                   uint64_t seed, bool zero_code_first) const {
+                                                   uint64_t seed, bool zero_code_first,
+                                                   int symmetries) const {
   const CvaeConfig& c = config();
   const GridSpec& g = partial_tsdf_m.spec;
   checkInput(partial_tsdf_m, weight, samples);
+  validateSymmetries(symmetries);
   torch::NoGradGuard no_grad;
   const int r = c.resolution;
   const std::vector<float> channels = partialChannels(partial_tsdf_m, weight, c.truncation_m());
@@ -87,7 +139,8 @@ std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_t
   if (zero_code_first) z[0].zero_();
   // The condition is encoded once and shared by the S codes; the FC baseline has no code and
   // runs once.
-  CvaeOutput out = impl_->model->generate(one, c.hasLatentCode() ? z : z.narrow(0, 0, 1));
+  CvaeOutput out =
+      generateSymmetric(impl_->model, one, c.hasLatentCode() ? z : z.narrow(0, 0, 1), symmetries);
   if (out.tsdf.size(0) == 1 && samples > 1) {
     out.tsdf = out.tsdf.expand({samples, -1, -1, -1, -1});
     out.votes = out.votes.expand({samples, -1, -1, -1, -1});
@@ -109,8 +162,9 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
   if (options.iterations < 0 || !(options.learning_rate > 0))
     throw std::invalid_argument("refine: iterations >= 0 and learning_rate > 0 are required");
   if (!c.hasLatentCode() || views.empty() || options.iterations == 0)
-    return predict(partial_tsdf_m, weight, samples, seed, zero_code_first);
+    return predict(partial_tsdf_m, weight, samples, seed, zero_code_first, options.symmetries);
   checkInput(partial_tsdf_m, weight, samples);
+  validateSymmetries(options.symmetries);
   const auto start = std::chrono::steady_clock::now();
   torch::AutoGradMode grad_mode(true);  // also when the caller turned gradients off
   const int r = c.resolution;
@@ -160,7 +214,9 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
     adam.step();
   }
   torch::NoGradGuard no_grad;
-  const CvaeOutput out = impl_->model->generateFrom(cond, best_z);
+  const CvaeOutput out = options.symmetries == 1
+                             ? impl_->model->generateFrom(cond, best_z)
+                             : generateSymmetric(impl_->model, one, best_z, options.symmetries);
   if (report) {
     report->code_loss.assign(best_loss.data_ptr<float>(), best_loss.data_ptr<float>() + samples);
     report->ms =

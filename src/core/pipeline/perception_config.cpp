@@ -18,6 +18,7 @@ void perceptionFields(C& c, F&& f) {
   f("zero_code_first", c.zero_code_first);
   f("seed", c.seed);
   f("decompose_samples", c.decompose_samples);
+  f("symmetries", c.symmetries);
   f("points_per_instance", c.points_per_instance);
   f("min_instance_points", c.min_instance_points);
   f("joint_refinement", c.joint_refinement);

@@ -204,6 +204,7 @@ void validate(const PerceptionConfig& config, bool latent) {
   if (config.points_per_instance < 10)
     throw std::invalid_argument("points_per_instance must be >= 10");
   if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
+  validateSymmetries(config.symmetries);
   if (config.refine_iterations < 0 || !(config.refine_learning_rate > 0.0))
     throw std::invalid_argument("refine_iterations must be >= 0 and refine_learning_rate > 0");
   if (config.condition_views != "all" && config.condition_views != "first")
@@ -302,7 +303,8 @@ std::vector<CvaePrediction> predictTile(const CvaeInference& model,
                                         const std::vector<DepthView>& views,
                                         const Transform& T_table_first, const PerceptionConfig& c) {
   if (c.refine_iterations == 0 || views.size() < 2)
-    return model.predict(partial.first, partial.second, c.samples, c.seed, c.zero_code_first);
+    return model.predict(partial.first, partial.second, c.samples, c.seed, c.zero_code_first,
+                         c.symmetries);
   std::vector<ViewEvidence> evidence;
   for (size_t i = 0; i < views.size(); ++i) {
     auto [tsdf, weight] = partialTsdf(partial.first.spec, views, T_table_first,
@@ -310,7 +312,7 @@ std::vector<CvaePrediction> predictTile(const CvaeInference& model,
     evidence.push_back({std::move(tsdf), std::move(weight)});
   }
   return model.refine(partial.first, partial.second, evidence, c.samples, c.seed, c.zero_code_first,
-                      {c.refine_iterations, c.refine_learning_rate});
+                      {c.refine_iterations, c.refine_learning_rate, c.symmetries});
 }
 
 /// The network's S hypotheses over one group's grid: each tile predicted from its own partial
