@@ -46,9 +46,10 @@ simstack::Superquadric superquadricMsg(const SuperquadricShape& sq);
 sensor_msgs::PointCloud2 pointCloud(const std_msgs::Header& header, const Points3& points);
 
 /// The objects of hypothesis 0 of `estimate`, in the table frame named by `header`, and the
-/// superquadrics of the further decomposed hypotheses.
+/// superquadrics of the further decomposed hypotheses; `views`, `samples` and `symmetries` (the
+/// network passes) as the pipeline ran.
 ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& estimate, int views,
-                           int samples);
+                           int samples, int symmetries);
 
 /// Every object's surface samples: x y z label rgb (label k + 1 for object k; rgb packed as
 /// rviz reads it, the colour of the object's marker).

@@ -217,13 +217,14 @@ sensor_msgs::PointCloud2 pointCloud(const std_msgs::Header& header, const Points
 }
 
 ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& est, int views,
-                           int samples) {
+                           int samples, int symmetries) {
   ObjectArray out;
   out.header = header;
   out.table_pose = poseMsg(est.T_table_camera.inverse());
   out.table_estimated = est.table_estimated;
   out.views = static_cast<uint32_t>(views);
   out.samples = static_cast<uint32_t>(samples);
+  out.symmetries = static_cast<uint32_t>(symmetries);
   out.voxel_size_m = static_cast<float>(est.grid.voxel_size_m);
   const StageTimings& t = est.timings;
   out.table_ms = static_cast<float>(t.table_ms);

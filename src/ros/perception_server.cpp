@@ -289,8 +289,9 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
     t.child_frame_id = node_.table_frame;
     tf_broadcaster_.sendTransform(t);
   }
-  objects_pub_.publish(
-      objectArrayMsg(header, estimate, views, static_cast<int>(estimate.hypotheses.size())));
+  objects_pub_.publish(objectArrayMsg(header, estimate, views,
+                                      static_cast<int>(estimate.hypotheses.size()),
+                                      perception_->config().symmetries));
   instances_pub_.publish(instancesCloud(header, estimate));
   markers_pub_.publish(objectMarkers(header, estimate));
   double occupancy_min;

@@ -180,6 +180,7 @@ TEST_F(PerceptionNodeTest, AKnownPileGivesItsObjects) {
   EXPECT_EQ(out->header.frame_id, "table");
   EXPECT_FALSE(out->table_estimated);
   EXPECT_EQ(out->samples, 3u);
+  EXPECT_EQ(out->symmetries, 4u);  // config/perception.yaml's
   EXPECT_GT(out->total_ms, 0.0f);
   ASSERT_EQ(out->objects.size(), truth.size());
   for (const SuperquadricShape& t : truth) {
@@ -311,22 +312,31 @@ TEST_F(PerceptionNodeTest, ResetAndSaveOctomap) {
 
 TEST_F(PerceptionNodeTest, LiveSettingsChangeTheNextFrame) {
   const DepthImage depth = render(knownPile());
-  auto set_samples = [&](int samples) {
+  auto set = [&](const char* name, int value) {
     dynamic_reconfigure::Reconfigure srv;
     dynamic_reconfigure::IntParameter p;
-    p.name = "samples";
-    p.value = samples;
+    p.name = name;
+    p.value = value;
     srv.request.config.ints.push_back(p);
     return ros::service::call("/camera/perception/set_parameters", srv);
   };
-  ASSERT_TRUE(set_samples(1));
+  ASSERT_TRUE(set("samples", 1));
+  ASSERT_TRUE(set("symmetries", 1));
   std::optional<ObjectArray> out = sendDepth(depth, 60.0);
   ASSERT_TRUE(out);
   EXPECT_EQ(out->samples, 1u);
-  ASSERT_TRUE(set_samples(3));
+  EXPECT_EQ(out->symmetries, 1u);
+  // A count of passes the pipeline refuses leaves the one in effect.
+  ASSERT_TRUE(set("symmetries", 3));
+  out = sendDepth(depth, 60.0);
+  ASSERT_TRUE(out);
+  EXPECT_EQ(out->symmetries, 1u);
+  ASSERT_TRUE(set("samples", 3));
+  ASSERT_TRUE(set("symmetries", 4));
   out = sendDepth(depth, 60.0);
   ASSERT_TRUE(out);
   EXPECT_EQ(out->samples, 3u);
+  EXPECT_EQ(out->symmetries, 4u);
 }
 
 TEST_F(PerceptionNodeTest, AnEstimatedTableIsUsedBroadcastAndRefusedWhenThereIsNone) {
