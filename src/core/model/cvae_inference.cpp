@@ -52,17 +52,21 @@ torch::Tensor symmetry(torch::Tensor t, int which, bool vector, bool inverse) {
   return t.contiguous();
 }
 
-/// The network's outputs for the condition `one` [1, ...] and codes `z`, averaged over
-/// `symmetries` (1, 2, 4 or 8; each set a group, so that the average turns with the pile) of the
-/// grid: the input turned, the outputs turned back. A pile turned about the vertical or
-/// mirrored is as plausible as the pile itself, so the errors of the passes partly cancel.
-CvaeOutput generateSymmetric(Cvae& model, const torch::Tensor& one, const torch::Tensor& z,
+/// The symmetries (symmetry()'s `which`) averaged for each allowed count; each set is a group,
+/// so that the average turns with the pile.
+const std::map<int, std::vector<int>> kSymmetryGroups = {
+    {1, {0}}, {2, {0, 6}}, {4, {0, 3, 6, 5}}, {8, {0, 1, 2, 3, 4, 5, 6, 7}}};
+
+/// The network's outputs for the condition `one` [1, ...] (encoded: `cond`) and codes `z`,
+/// averaged over `symmetries` of the grid (kSymmetryGroups): the input turned, the outputs
+/// turned back. A pile turned about the vertical or mirrored is as plausible as the pile
+/// itself, so the errors of the passes partly cancel.
+CvaeOutput generateSymmetric(Cvae& model, const torch::Tensor& one,
+                             const std::vector<torch::Tensor>& cond, const torch::Tensor& z,
                              int symmetries) {
-  static const std::map<int, std::vector<int>> kElements = {
-      {1, {0}}, {2, {0, 6}}, {4, {0, 3, 6, 5}}, {8, {0, 1, 2, 3, 4, 5, 6, 7}}};
-  CvaeOutput out = model->generate(one, z);
+  CvaeOutput out = model->generateFrom(cond, z);
   if (symmetries == 1) return out;
-  for (int which : kElements.at(symmetries)) {
+  for (int which : kSymmetryGroups.at(symmetries)) {
     if (which == 0) continue;
     const CvaeOutput o = model->generate(symmetry(one, which, false, false), z);
     out.tsdf = out.tsdf + symmetry(o.tsdf, which, false, true);
@@ -114,7 +118,7 @@ void CvaeInference::checkInput(const Grid3<float>& partial_tsdf_m, const Grid3<f
 }
 
 void validateSymmetries(int symmetries) {
-  if (symmetries != 1 && symmetries != 2 && symmetries != 4 && symmetries != 8)
+  if (!kSymmetryGroups.count(symmetries))
     throw std::invalid_argument("symmetries must be 1, 2, 4 or 8, not " +
                                 std::to_string(symmetries));
 }
@@ -139,8 +143,8 @@ std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_t
   if (zero_code_first) z[0].zero_();
   // The condition is encoded once and shared by the S codes; the FC baseline has no code and
   // runs once.
-  CvaeOutput out =
-      generateSymmetric(impl_->model, one, c.hasLatentCode() ? z : z.narrow(0, 0, 1), symmetries);
+  CvaeOutput out = generateSymmetric(impl_->model, one, impl_->model->encodeCondition(one),
+                                     c.hasLatentCode() ? z : z.narrow(0, 0, 1), symmetries);
   if (out.tsdf.size(0) == 1 && samples > 1) {
     out.tsdf = out.tsdf.expand({samples, -1, -1, -1, -1});
     out.votes = out.votes.expand({samples, -1, -1, -1, -1});
@@ -214,9 +218,7 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
     adam.step();
   }
   torch::NoGradGuard no_grad;
-  const CvaeOutput out = options.symmetries == 1
-                             ? impl_->model->generateFrom(cond, best_z)
-                             : generateSymmetric(impl_->model, one, best_z, options.symmetries);
+  const CvaeOutput out = generateSymmetric(impl_->model, one, cond, best_z, options.symmetries);
   if (report) {
     report->code_loss.assign(best_loss.data_ptr<float>(), best_loss.data_ptr<float>() + samples);
     report->ms =
