@@ -12,6 +12,7 @@
 
 #include "simstack/dataset/dataset.h"
 #include "simstack/eval/occupancy.h"
+#include "simstack/io/yaml_file.h"
 #include "simstack/model/cvae.h"
 #include "simstack/model/cvae_inference.h"
 #include "simstack/model/cvae_trainer.h"
@@ -990,6 +991,8 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
     warm.learning_rate = warm.final_learning_rate = 1e-9;
     CvaeTrainer(data, every, warm, f, "test").run(false);
     warm.init_from = a + "/model.pt";
+    // The parent's card holds a tuned Hough setting (its perception section is the card's last).
+    std::ofstream(a + "/model.yaml", std::ios::app) << "  hough:\n    refinement: 7\n";
     CvaeTrainer(data, every, warm, w, "test").run(false);
     const torch::Tensor from = probe(a + "/model.pt");
     EXPECT_LT((probe(w + "/model.pt") - from).abs().max().item<double>(),
@@ -998,6 +1001,12 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
     for (const auto& line : lines(w + "/model.yaml"))
       recorded |= line.find("init_from: " + warm.init_from) != std::string::npos;
     EXPECT_TRUE(recorded) << "model.yaml does not name the warm start's file";
+    // The warm start's card carries the parent's Hough setting; a fresh start's has none.
+    const YAML::Node child = loadYamlFile(w + "/model.yaml", "model card")["perception"];
+    const YAML::Node fresh = loadYamlFile(f + "/model.yaml", "model card")["perception"];
+    EXPECT_EQ(child["hough"]["refinement"].as<int>(), 7);
+    EXPECT_EQ(child["samples"].as<int>(), 3);
+    EXPECT_TRUE(fresh.IsMap() && !fresh["hough"]);
     warm.init_from = "/nonexistent/start.pt";
     fs::remove_all(w);
     try {

@@ -108,6 +108,26 @@ TEST(PerceptionConfig, ModelCardsBringTheirOwnSettings) {
   }
   std::ofstream(tmp / "typo.yaml") << "perception:\n  sampels: 3\n";
   EXPECT_THROW(loadPerceptionYaml(config, dir, (tmp / "typo.pt").string()), std::runtime_error);
+  // yaml-cpp answers a repeated key with its first value: a card whose tuned section was
+  // appended below the trainer's would run with the default setting. It is an error instead.
+  std::ofstream(tmp / "twice.yaml") << "model: {}\nperception:\n  samples: 1\n"
+                                    << "perception:\n  hough:\n    refinement: 8\n";
+  try {
+    loadPerceptionYaml(config, dir, (tmp / "twice.pt").string());
+    ADD_FAILURE() << "a card repeating its perception section must be an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("twice.yaml"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("'perception' appears twice (lines 2 and 4)"),
+              std::string::npos)
+        << e.what();
+  }
+  try {  // at any depth, in a config given as text too
+    parsePerceptionYaml("segments:\n  enabled: true\n  enabled: false\n", "inline");
+    ADD_FAILURE() << "a repeated field must be an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("'segments.enabled' appears twice"), std::string::npos)
+        << e.what();
+  }
   std::filesystem::remove_all(tmp);
 }
 

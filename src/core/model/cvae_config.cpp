@@ -4,6 +4,8 @@
 
 #include <stdexcept>
 
+#include "simstack/io/yaml_file.h"
+
 namespace simstack {
 namespace {
 
@@ -194,8 +196,8 @@ TrainConfig TrainConfig::fromYaml(const std::string& text) {
 }
 
 void loadTrainingYaml(const std::string& path, CvaeConfig* model, TrainConfig* training) {
+  const YAML::Node n = loadYamlFile(path, "training config");
   try {
-    const YAML::Node n = YAML::LoadFile(path);
     YAML::Emitter m, t;
     m << n["model"];
     t << n["training"];

@@ -19,6 +19,7 @@
 
 #include "simstack/dataset/dataset.h"
 #include "simstack/eval/occupancy.h"
+#include "simstack/io/yaml_file.h"
 #include "simstack/model/cvae.h"
 #include "simstack/model/training_sample.h"
 
@@ -227,6 +228,32 @@ struct RecentSteps {
   }
 };
 
+// The card's settings read with the model (perception_config.h): a model with a latent code is
+// sampled three times. A warm start keeps its parent's Hough setting (tuned for the nearest
+// network there is); otherwise the default applies until simstack_tune_hough chooses one.
+std::string cardPerceptionSection(const std::string& init_from, bool latent) {
+  YAML::Node hough;  // stays Null unless the parent's card has a hough: map
+  fs::path parent_card;
+  if (!init_from.empty()) {
+    parent_card = fs::path(init_from).replace_extension(".yaml");
+    if (fs::exists(parent_card)) {
+      const YAML::Node root = loadYamlFile(parent_card.string(), "model card");
+      const YAML::Node section = root.IsMap() ? root["perception"] : YAML::Node();
+      if (section && section.IsMap() && section["hough"]) hough = section["hough"];
+    }
+  }
+  YAML::Emitter e;
+  e << YAML::BeginMap << YAML::Key << "perception" << YAML::Value << YAML::BeginMap << YAML::Key
+    << "samples" << YAML::Value << (latent ? 3 : 1);
+  if (hough.IsMap()) e << YAML::Key << "hough" << YAML::Value << hough;
+  e << YAML::EndMap << YAML::EndMap;
+  const std::string note = hough.IsMap()
+                               ? "the Hough setting of " + parent_card.string() +
+                                     " (the warm start's) until simstack_tune_hough writes one"
+                               : "simstack_tune_hough writes its hough: map";
+  return "# read with the model; " + note + "\n" + e.c_str() + "\n";
+}
+
 }  // namespace
 
 double learningRate(const TrainConfig& tc, int64_t step) {
@@ -241,6 +268,7 @@ struct CvaeTrainer::Impl {
   TrainConfig config;
   std::unique_ptr<DatasetReader> reader;
   int train_scenes = 0;
+  std::string card_perception;  // the card's perception: section, read before training
 
   Cvae loadOrCreate(bool resuming, const fs::path& checkpoint) const;
   int64_t restore(Cvae& model, torch::optim::Adam& optimizer, const fs::path& out) const;
@@ -260,6 +288,7 @@ CvaeTrainer::CvaeTrainer(const std::string& dataset_path, const CvaeConfig& mode
   impl_->command_line = command_line;
   impl_->model_config = model;
   impl_->config = training;
+  impl_->card_perception = cardPerceptionSection(training.init_from, model.hasLatentCode());
   impl_->reader = std::make_unique<DatasetReader>(dataset_path);
   const DatasetInfo& info = impl_->reader->info();
   checkDatasetFitsModel(info, model, dataset_path, "the model config");
@@ -482,11 +511,7 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
   indented(yaml, config.toYaml());
   yaml << "provenance:\n";
   indented(yaml, meta.c_str());
-  // The settings read with the model (perception_config.h): a model with a latent code is
-  // sampled three times; without a `hough:` map it gets the default Hough setting until
-  // simstack_tune_hough chooses one for it.
-  yaml << "perception:  # read with the model; simstack_tune_hough writes its hough: map\n"
-       << "  samples: " << (model_config.hasLatentCode() ? 3 : 1) << "\n";
+  yaml << card_perception;
 }
 
 TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& progress) {

@@ -7,6 +7,8 @@
 #include <set>
 #include <stdexcept>
 
+#include "simstack/io/yaml_file.h"
+
 namespace simstack {
 namespace {
 
@@ -142,14 +144,6 @@ void writeSection(YAML::Emitter& e, const char* name, C& c, Fields fields) {
   e << YAML::EndMap;
 }
 
-YAML::Node loadYaml(const std::string& path, const char* what) {
-  try {
-    return YAML::LoadFile(path);
-  } catch (const YAML::Exception& e) {
-    throw std::runtime_error(std::string("cannot read ") + what + " " + path + ": " + e.what());
-  }
-}
-
 void readSamples(const YAML::Node& perception, PerceptionConfig* c, const std::string& path) {
   if (!perception["samples"]) return;
   try {
@@ -200,7 +194,7 @@ std::string modelCardPath(const std::string& model_path) {
 std::string applyModelCard(PerceptionConfig* config) {
   const std::string path = modelCardPath(config->model_path);
   if (config->model_path.empty() || !std::filesystem::exists(path)) return "";
-  const YAML::Node root = loadYaml(path, "model card");
+  const YAML::Node root = loadYamlFile(path, "model card");
   const YAML::Node section = root.IsMap() ? root["perception"] : YAML::Node();
   if (!section) return "";
   if (!section.IsMap()) throw std::runtime_error(path + ": 'perception' must be a map");
@@ -218,17 +212,12 @@ std::string applyModelCard(PerceptionConfig* config) {
 
 PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& base_dir,
                                     const std::string& model_path) {
-  return perceptionFromYaml(loadYaml(path, "perception config"), path, base_dir, model_path);
+  return perceptionFromYaml(loadYamlFile(path, "perception config"), path, base_dir, model_path);
 }
 
 PerceptionConfig parsePerceptionYaml(const std::string& text, const std::string& source,
                                      const std::string& base_dir, const std::string& model_path) {
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    throw std::runtime_error("cannot parse perception config " + source + ": " + e.what());
-  }
+  const YAML::Node root = parseYamlText(text, "perception config", source);
   return perceptionFromYaml(root, source, base_dir, model_path);
 }
 
