@@ -172,6 +172,18 @@ TEST(SceneFiles, SuperquadricsMeshesAndGridsRoundTrip) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("bad.yaml"), std::string::npos);
   }
+  // A field given twice (yaml-cpp would read the first) is named, with where both stand.
+  std::ofstream(dir / "twice.yaml")
+      << "objects:\n  - {scale: [1, 2, 3], exponents: [2, 2, 2], scale: [3, 2, 1]}\n";
+  try {
+    readSuperquadricsYaml((dir / "twice.yaml").string());
+    ADD_FAILURE() << "a repeated field must be rejected";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(
+        std::string(e.what()).find("'objects[0].scale' appears twice (line 2, columns 6 and "),
+        std::string::npos)
+        << e.what();
+  }
   EXPECT_THROW(readDepthPcd((dir / "c.pcd").string()), std::runtime_error);  // not organized
   std::filesystem::remove_all(dir);
 }

@@ -1004,6 +1004,7 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
     // The warm start's card carries the parent's Hough setting; a fresh start's has none.
     const YAML::Node child = loadYamlFile(w + "/model.yaml", "model card")["perception"];
     const YAML::Node fresh = loadYamlFile(f + "/model.yaml", "model card")["perception"];
+    ASSERT_TRUE(child["hough"]) << "the warm start's card lost its parent's Hough setting";
     EXPECT_EQ(child["hough"]["refinement"].as<int>(), 7);
     EXPECT_EQ(child["samples"].as<int>(), 3);
     EXPECT_TRUE(fresh.IsMap() && !fresh["hough"]);

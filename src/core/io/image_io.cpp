@@ -10,6 +10,8 @@
 #include <stdexcept>
 #include <utility>
 
+#include "simstack/io/yaml_file.h"
+
 namespace simstack {
 namespace {
 
@@ -239,8 +241,8 @@ void writeViewYaml(const std::string& path, const ViewDescription& view) {
 
 ViewDescription readViewYaml(const std::string& path) {
   ViewDescription view;
+  const YAML::Node n = loadYamlFile(path, "view description");
   try {
-    const YAML::Node n = YAML::LoadFile(path);
     view.camera.width = n["width"].as<int>();
     view.camera.height = n["height"].as<int>();
     view.camera.fx = n["intrinsics"]["fx"].as<double>();

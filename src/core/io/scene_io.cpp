@@ -16,6 +16,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "simstack/io/yaml_file.h"
+
 namespace simstack {
 namespace {
 
@@ -62,12 +64,7 @@ void writeSuperquadricsYaml(const std::string& path, const std::vector<Superquad
 
 std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path,
                                                      std::vector<int>* ids) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const std::exception& e) {
-    throw std::runtime_error("cannot read superquadrics from " + path + ": " + e.what());
-  }
+  const YAML::Node root = loadYamlFile(path, "superquadrics");
   if (!root["objects"] || !root["objects"].IsSequence())
     throw std::runtime_error(path + ": no 'objects' list");
   std::vector<SuperquadricShape> out;

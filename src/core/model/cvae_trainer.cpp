@@ -237,7 +237,7 @@ std::string cardPerceptionSection(const std::string& init_from, bool latent) {
   if (!init_from.empty()) {
     parent_card = fs::path(init_from).replace_extension(".yaml");
     if (fs::exists(parent_card)) {
-      const YAML::Node root = loadYamlFile(parent_card.string(), "model card");
+      const YAML::Node root = loadYamlFile(parent_card.string(), "the warm start's model card");
       const YAML::Node section = root.IsMap() ? root["perception"] : YAML::Node();
       if (section && section.IsMap() && section["hough"]) hough = section["hough"];
     }
