@@ -1,9 +1,9 @@
 #pragma once
 /// @file yaml_file.h
 /// YAML a person may edit (perception and training configs, model cards, view descriptions,
-/// superquadric files). yaml-cpp keeps a key
-/// written twice in one map and answers a lookup with its first value, so a section appended
-/// below an older one of the same name would be silently ignored; here it is an error.
+/// superquadric files). yaml-cpp keeps a key written twice in one map and answers a lookup with
+/// its first value, so a section appended below an older one of the same name would be silently
+/// ignored; here it is an error.
 
 #include <yaml-cpp/yaml.h>
 
