@@ -155,4 +155,7 @@ struct TrainConfig {
 /// Reads `model:` and `training:` of a YAML file; throws std::runtime_error naming the file.
 void loadTrainingYaml(const std::string& path, CvaeConfig* model, TrainConfig* training);
 
+/// The card of a model file: the same path with the extension .yaml.
+std::string modelCardPath(const std::string& model_path);
+
 }  // namespace simstack

@@ -10,6 +10,7 @@
 #include "simstack/fitting/superquadric_fit.h"
 #include "simstack/instances/hough_voting.h"
 #include "simstack/instances/surface_segments.h"
+#include "simstack/model/cvae_config.h"  // modelCardPath
 #include "simstack/pipeline/table_plane.h"
 #include "simstack/pipeline/workspace.h"
 
@@ -68,8 +69,6 @@ PerceptionConfig parsePerceptionYaml(const std::string& text, const std::string&
                                      const std::string& base_dir = "",
                                      const std::string& model_path = "");
 
-/// The card of a model file: the same path with the extension .yaml.
-std::string modelCardPath(const std::string& model_path);
 /// Reads `samples` and `hough` from the `perception:` section of the card of
 /// `config->model_path` into `config`. Returns the card's path, or "" when the model has no card
 /// or the card no such section (the values in `config` stay). Throws std::runtime_error naming

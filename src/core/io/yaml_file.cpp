@@ -35,10 +35,10 @@ void rejectRepeatedKeys(const YAML::Node& node, const std::string& where) {
   }
 }
 
-YAML::Node checked(const std::string& what, const std::string& source,
-                   YAML::Node (*parse)(const std::string&), const std::string& argument) {
+template <class Parse>
+YAML::Node checked(const std::string& what, const std::string& source, Parse parse) {
   try {
-    YAML::Node root = parse(argument);
+    YAML::Node root = parse();
     rejectRepeatedKeys(root, "");
     return root;
   } catch (const std::runtime_error& e) {  // YAML::Exception is one
@@ -49,14 +49,12 @@ YAML::Node checked(const std::string& what, const std::string& source,
 }  // namespace
 
 YAML::Node loadYamlFile(const std::string& path, const std::string& what) {
-  return checked(
-      what, path, [](const std::string& p) { return YAML::LoadFile(p); }, path);
+  return checked(what, path, [&] { return YAML::LoadFile(path); });
 }
 
 YAML::Node parseYamlText(const std::string& text, const std::string& what,
                          const std::string& source) {
-  return checked(
-      what, source, [](const std::string& t) { return YAML::Load(t); }, text);
+  return checked(what, source, [&] { return YAML::Load(text); });
 }
 
 }  // namespace simstack

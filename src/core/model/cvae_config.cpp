@@ -2,6 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <filesystem>
 #include <stdexcept>
 
 #include "simstack/io/yaml_file.h"
@@ -193,6 +194,10 @@ TrainConfig TrainConfig::fromYaml(const std::string& text) {
   trainFields(c, [&](const char* key, auto& value) { get(n, key, &value); });
   c.validate();
   return c;
+}
+
+std::string modelCardPath(const std::string& model_path) {
+  return std::filesystem::path(model_path).replace_extension(".yaml").string();
 }
 
 void loadTrainingYaml(const std::string& path, CvaeConfig* model, TrainConfig* training) {

@@ -233,14 +233,11 @@ struct RecentSteps {
 // network there is); otherwise the default applies until simstack_tune_hough chooses one.
 std::string cardPerceptionSection(const std::string& init_from, bool latent) {
   YAML::Node hough;  // stays Null unless the parent's card has a hough: map
-  fs::path parent_card;
-  if (!init_from.empty()) {
-    parent_card = fs::path(init_from).replace_extension(".yaml");
-    if (fs::exists(parent_card)) {
-      const YAML::Node root = loadYamlFile(parent_card.string(), "the warm start's model card");
-      const YAML::Node section = root.IsMap() ? root["perception"] : YAML::Node();
-      if (section && section.IsMap() && section["hough"]) hough = section["hough"];
-    }
+  const std::string parent_card = init_from.empty() ? "" : modelCardPath(init_from);
+  if (!parent_card.empty() && fs::exists(parent_card)) {
+    const YAML::Node root = loadYamlFile(parent_card, "the warm start's model card");
+    const YAML::Node section = root.IsMap() ? root["perception"] : YAML::Node();
+    if (section && section.IsMap() && section["hough"]) hough = section["hough"];
   }
   YAML::Emitter e;
   e << YAML::BeginMap << YAML::Key << "perception" << YAML::Value << YAML::BeginMap << YAML::Key
@@ -248,7 +245,7 @@ std::string cardPerceptionSection(const std::string& init_from, bool latent) {
   if (hough.IsMap()) e << YAML::Key << "hough" << YAML::Value << hough;
   e << YAML::EndMap << YAML::EndMap;
   const std::string note = hough.IsMap()
-                               ? "the Hough setting of " + parent_card.string() +
+                               ? "the Hough setting of " + parent_card +
                                      " (the warm start's) until simstack_tune_hough writes one"
                                : "simstack_tune_hough writes its hough: map";
   return "# read with the model; " + note + "\n" + e.c_str() + "\n";

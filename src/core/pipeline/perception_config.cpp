@@ -187,10 +187,6 @@ PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& p
 
 }  // namespace
 
-std::string modelCardPath(const std::string& model_path) {
-  return std::filesystem::path(model_path).replace_extension(".yaml").string();
-}
-
 std::string applyModelCard(PerceptionConfig* config) {
   const std::string path = modelCardPath(config->model_path);
   if (config->model_path.empty() || !std::filesystem::exists(path)) return "";
