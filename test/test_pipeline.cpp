@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "simstack/pipeline/evaluated_methods.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/pile_generator.h"
@@ -129,6 +130,21 @@ TEST(PerceptionConfig, ModelCardsBringTheirOwnSettings) {
         << e.what();
   }
   std::filesystem::remove_all(tmp);
+}
+
+TEST(EvaluatedMethods, ResultsRecordTheModelRelativeToTheWorkingDirectory) {
+  // Results written from checkouts in different places must compare equal: a model below the
+  // working directory is recorded by its relative path, in the config's copy too.
+  const std::string dir = SIMSTACK_SOURCE_DIR;
+  const std::filesystem::path before = std::filesystem::current_path();
+  std::filesystem::current_path(dir);
+  const NetworkMethod method(loadPerceptionYaml(dir + "/config/perception.yaml", dir), false);
+  const MethodInfo info = method.info();
+  std::filesystem::current_path(before);
+  EXPECT_EQ(info.model, "models/simstack_r32_fc.pt");
+  EXPECT_NE(info.config_yaml.find("model: models/simstack_r32_fc.pt"), std::string::npos)
+      << info.config_yaml;
+  EXPECT_EQ(info.config_yaml.find(dir + "/models"), std::string::npos) << info.config_yaml;
 }
 
 TEST(TablePlane, RecoversTheTableOfARenderedScene) {

@@ -124,9 +124,10 @@ int main(int argc, char** argv) {
       NetworkMethod method(configs.front(), true);
       const std::vector<RealSceneResult> scenes = evaluateRealScenes(real_dir, method);
       std::cout << "\n" << realScenesTable(scenes);
+      const MethodInfo info = method.info();
       writeJson(output, {{"real_dir", real_dir},
-                         {"model", configs.front().model_path},
-                         {"config", perceptionYaml(configs.front())},
+                         {"model", info.model},
+                         {"config", info.config_yaml},
                          {"scenes", realScenesJson(scenes)}});
       std::cout << "results: " << output << "\n";
       return 0;

@@ -1,6 +1,7 @@
 #include "simstack/pipeline/evaluated_methods.h"
 
 #include <algorithm>
+#include <filesystem>
 
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/mesh/marching_cubes.h"
@@ -22,8 +23,22 @@ const std::string& NetworkMethod::architecture() const {
   return perception_->modelConfig().architecture;
 }
 
+namespace {
+
+/// A path as a results file records it: relative to the working directory when it lies below
+/// it, so that results written from checkouts in different places compare equal.
+std::string recordedPath(const std::string& path) {
+  std::error_code ec;
+  const std::filesystem::path relative = std::filesystem::proximate(path, ec);
+  if (ec || relative.empty() || *relative.begin() == "..") return path;
+  return relative.string();
+}
+
+}  // namespace
+
 MethodInfo NetworkMethod::info() const {
-  const PerceptionConfig& c = perception_->config();
+  PerceptionConfig c = perception_->config();
+  c.model_path = recordedPath(c.model_path);
   return {c.model_path, c.samples, perceptionYaml(c)};
 }
 
