@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 
 #include <H5Cpp.h>
@@ -272,6 +273,53 @@ TEST(Cvae, DeterministicPosteriorTrainsOnTheMeanCode) {
   EXPECT_TRUE(torch::allclose(a.tsdf, b.tsdf, 1e-5, 1e-6));
   EXPECT_EQ(CvaeConfig::fromYaml(c.toYaml()).posterior, "deterministic");
   c.posterior = "sampled";
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+}
+
+TEST(Cvae, BestOfManyTrainsTheCodeThatScoresBest) {
+  // best_of k: a training step decodes k posterior codes per scene (scene-major), and each
+  // scene's reconstruction terms are those of its best code, picked by the weighted sum.
+  CvaeConfig c = tiny();
+  c.best_of = 3;
+  c.occupancy_weight = 0.5;
+  torch::manual_seed(8);
+  Cvae model(c);
+  model->train();
+  const auto x = torch::rand({2, 2, 16, 16, 16});
+  const auto t = torch::rand({2, 1, 16, 16, 16}) - 0.5;
+  const auto v = torch::rand({2, 3, 16, 16, 16});
+  const CvaeOutput out = model->forward(x, t, v);
+  ASSERT_EQ(out.tsdf.size(0), 6);
+  EXPECT_EQ(out.mu.size(0), 2);
+  EXPECT_FALSE(torch::allclose(out.z[0], out.z[1]));  // separate draws around one mean
+  const CvaeLosses l = computeLosses(out, x, t, v, c);
+  double tsdf = 0, votes = 0;
+  for (int s = 0; s < 2; ++s) {
+    double best = std::numeric_limits<double>::infinity(), best_tsdf = 0, best_votes = 0;
+    for (int j = 0; j < 3; ++j) {
+      const auto one = out.tsdf.narrow(0, 3 * s + j, 1), target = t.narrow(0, s, 1);
+      const double a = inverseTsdfWeightedLoss(one, target, c.tsdf_epsilon).item<double>();
+      const double b =
+          voteLoss(out.votes.narrow(0, 3 * s + j, 1), v.narrow(0, s, 1), true).item<double>();
+      const double o = occupancyLoss(one, target, c.occupancy_sharpness).item<double>();
+      if (a + b + 0.5 * o >= best) continue;
+      best = a + b + 0.5 * o;
+      best_tsdf = a;
+      best_votes = b;
+    }
+    tsdf += best_tsdf / 2;
+    votes += best_votes / 2;
+  }
+  EXPECT_NEAR(l.tsdf.item<double>(), tsdf, 1e-4 * tsdf);
+  EXPECT_NEAR(l.votes.item<double>(), votes, 1e-4 * votes);
+  l.total.backward();  // the selection is not differentiated, the chosen terms are
+  model->eval();
+  EXPECT_EQ(model->forward(x, t, v).tsdf.size(0), 2);  // inference decodes one code per scene
+  EXPECT_EQ(CvaeConfig::fromYaml(c.toYaml()).best_of, 3);
+  c.best_of = 0;
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+  c.best_of = 2;
+  c.posterior = "deterministic";
   EXPECT_THROW(c.validate(), std::invalid_argument);
 }
 

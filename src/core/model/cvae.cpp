@@ -379,10 +379,18 @@ CvaeOutput CvaeImpl::forward(const torch::Tensor& partial, const torch::Tensor& 
   }
   const torch::Tensor mu = enc_mu(x.flatten(1));
   const torch::Tensor logvar = enc_logvar(x.flatten(1)).clamp(-10.0, 10.0);
-  const torch::Tensor z = config_.posterior == "deterministic"
-                              ? mu
-                              : mu + torch::randn_like(mu) * torch::exp(0.5 * logvar);
-  CvaeOutput out = decodeWith(cond, z);
+  // best_of codes per scene, scene-major (scene i's are rows i k ... i k + k - 1).
+  const int64_t k = is_training() ? config_.best_of : 1;
+  std::vector<torch::Tensor> decode_cond = cond;
+  if (k > 1)
+    for (torch::Tensor& t : decode_cond) t = t.repeat_interleave(k, 0);
+  const torch::Tensor m = k > 1 ? mu.repeat_interleave(k, 0) : mu;
+  const torch::Tensor z =
+      config_.posterior == "deterministic"
+          ? m
+          : m + torch::randn_like(m) *
+                    torch::exp(0.5 * (k > 1 ? logvar.repeat_interleave(k, 0) : logvar));
+  CvaeOutput out = decodeWith(decode_cond, z);
   out.partial_recon = partial_recon;
   out.mu = mu;
   out.logvar = logvar;
@@ -424,29 +432,48 @@ CvaeOutput CvaeImpl::generateFrom(const std::vector<torch::Tensor>& cond, const 
   return decodeWith(cond, mean + torch::exp(0.5 * logvar) * z);
 }
 
-torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Tensor& target,
-                                      double eps) {
-  return ((pred - target).abs() / (target.abs() + eps)).flatten(1).sum(1).mean();
+namespace {
+
+/// The loss terms per sample [B], before the batch mean.
+torch::Tensor tsdfTermPerSample(const torch::Tensor& pred, const torch::Tensor& target,
+                                double eps) {
+  return ((pred - target).abs() / (target.abs() + eps)).flatten(1).sum(1);
 }
 
-torch::Tensor occupancyLoss(const torch::Tensor& pred, const torch::Tensor& target,
-                            double sharpness) {
+torch::Tensor occupancyTermPerSample(const torch::Tensor& pred, const torch::Tensor& target,
+                                     double sharpness) {
   const torch::Tensor occupied = (target <= 0).to(pred.dtype());
   return F::binary_cross_entropy_with_logits(
              -sharpness * pred, occupied,
              F::BinaryCrossEntropyWithLogitsFuncOptions().reduction(torch::kNone))
       .flatten(1)
-      .sum(1)
-      .mean();
+      .sum(1);
 }
 
-torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target, bool occupied_only,
-                       const torch::Tensor& weight) {
+torch::Tensor voteTermPerSample(const torch::Tensor& pred, const torch::Tensor& target,
+                                bool occupied_only, const torch::Tensor& weight) {
   // sqrt(. + 1e-12): the norm's gradient is undefined where prediction and target agree.
   torch::Tensor per_voxel = ((pred - target).pow(2).sum(1) + 1e-12).sqrt();
   if (occupied_only) per_voxel = per_voxel * (target.pow(2).sum(1) > 0.25).to(per_voxel.dtype());
   if (weight.defined()) per_voxel = per_voxel * weight.squeeze(1);
-  return per_voxel.flatten(1).sum(1).mean();
+  return per_voxel.flatten(1).sum(1);
+}
+
+}  // namespace
+
+torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Tensor& target,
+                                      double eps) {
+  return tsdfTermPerSample(pred, target, eps).mean();
+}
+
+torch::Tensor occupancyLoss(const torch::Tensor& pred, const torch::Tensor& target,
+                            double sharpness) {
+  return occupancyTermPerSample(pred, target, sharpness).mean();
+}
+
+torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target, bool occupied_only,
+                       const torch::Tensor& weight) {
+  return voteTermPerSample(pred, target, occupied_only, weight).mean();
 }
 
 torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior,
@@ -473,9 +500,38 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
                          const torch::Tensor& tsdf, const torch::Tensor& votes, const CvaeConfig& c,
                          const torch::Tensor& vote_weight) {
   CvaeLosses l;
-  l.tsdf = inverseTsdfWeightedLoss(out.tsdf, tsdf, c.tsdf_epsilon);
+  // k codes per scene (best_of), scene-major: the targets repeat to match.
+  const int64_t scenes = tsdf.size(0), k = out.tsdf.size(0) / scenes;
+  if (k * scenes != out.tsdf.size(0))
+    throw std::invalid_argument("computeLosses: " + std::to_string(out.tsdf.size(0)) +
+                                " predictions for " + std::to_string(scenes) + " scenes");
+  auto repeat = [k](const torch::Tensor& t) {
+    return k > 1 && t.defined() ? t.repeat_interleave(k, 0) : t;
+  };
+  torch::Tensor tsdf_term = tsdfTermPerSample(out.tsdf, repeat(tsdf), c.tsdf_epsilon);
+  torch::Tensor vote_term =
+      voteTermPerSample(out.votes, repeat(votes), c.vote_loss == "occupied", repeat(vote_weight));
+  torch::Tensor occupancy_term;
+  {
+    // Reported also at weight 0, then without a graph: it is not trained.
+    torch::AutoGradMode grad(torch::GradMode::is_enabled() && c.occupancy_weight > 0.0);
+    occupancy_term = occupancyTermPerSample(out.tsdf, repeat(tsdf), c.occupancy_sharpness);
+  }
+  if (k > 1) {
+    // Each scene keeps the code whose reconstruction scores best; only it is trained.
+    const torch::Tensor score =
+        (c.alpha * tsdf_term + c.gamma * vote_term + c.occupancy_weight * occupancy_term)
+            .detach()
+            .view({scenes, k});
+    const torch::Tensor best =
+        score.argmin(1) + torch::arange(scenes, score.options().dtype(torch::kLong)) * k;
+    tsdf_term = tsdf_term.index_select(0, best);
+    vote_term = vote_term.index_select(0, best);
+    occupancy_term = occupancy_term.index_select(0, best);
+  }
+  l.tsdf = tsdf_term.mean();
   l.partial = inverseTsdfWeightedLoss(out.partial_recon, partial.narrow(1, 0, 1), c.tsdf_epsilon);
-  l.votes = voteLoss(out.votes, votes, c.vote_loss == "occupied", vote_weight);
+  l.votes = vote_term.mean();
   torch::Tensor latent;  // the weighted latent term of the total
   if (out.prior_mu.defined()) {
     // KL(N(mu, e^logvar) || N(prior_mu, e^prior_logvar)) per code dimension, batch mean;
@@ -497,11 +553,7 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
             : torch::zeros({}, tsdf.options());
     latent = c.delta * l.mmd;
   }
-  {
-    // Reported also at weight 0, then without a graph: it is not trained.
-    torch::AutoGradMode grad(torch::GradMode::is_enabled() && c.occupancy_weight > 0.0);
-    l.occupancy = occupancyLoss(out.tsdf, tsdf, c.occupancy_sharpness);
-  }
+  l.occupancy = occupancy_term.mean();
   l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + latent +
             c.occupancy_weight * l.occupancy;
   return l;

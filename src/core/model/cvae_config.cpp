@@ -59,6 +59,7 @@ void cvaeFields(C& c, F&& f) {
   f("prior", c.prior);
   f("kl_weight", c.kl_weight);
   f("kl_free_nats", c.kl_free_nats);
+  f("best_of", c.best_of);
 }
 
 template <class C, class F>
@@ -121,6 +122,9 @@ void CvaeConfig::validate() const {
           "a learned prior needs posterior 'gaussian' (the KL compares two Gaussians)");
   require(kl_weight >= 0.0, "kl_weight must be >= 0");
   require(kl_free_nats >= 0.0, "kl_free_nats must be >= 0");
+  require(best_of >= 1 && best_of <= 16, "best_of must lie in 1-16");
+  require(best_of == 1 || (hasLatentCode() && posterior == "gaussian"),
+          "best_of > 1 needs the C-VAE's code drawn from a Gaussian posterior");
   require(vote_boundary_weight >= 0.0, "vote_boundary_weight must be >= 0");
   require(vote_loss == "occupied" || vote_loss == "all",
           "vote_loss must be 'occupied' or 'all', got '" + vote_loss + "'");
@@ -142,6 +146,7 @@ void CvaeConfig::copyLossSettings(const CvaeConfig& o) {
   posterior = o.posterior;
   kl_weight = o.kl_weight;
   kl_free_nats = o.kl_free_nats;
+  best_of = o.best_of;
 }
 
 std::string CvaeConfig::toYaml() const {
