@@ -384,12 +384,9 @@ CvaeOutput CvaeImpl::forward(const torch::Tensor& partial, const torch::Tensor& 
   std::vector<torch::Tensor> decode_cond = cond;
   if (k > 1)
     for (torch::Tensor& t : decode_cond) t = t.repeat_interleave(k, 0);
-  const torch::Tensor m = k > 1 ? mu.repeat_interleave(k, 0) : mu;
+  const torch::Tensor m = mu.repeat_interleave(k, 0), lv = logvar.repeat_interleave(k, 0);
   const torch::Tensor z =
-      config_.posterior == "deterministic"
-          ? m
-          : m + torch::randn_like(m) *
-                    torch::exp(0.5 * (k > 1 ? logvar.repeat_interleave(k, 0) : logvar));
+      config_.posterior == "deterministic" ? m : m + torch::randn_like(m) * torch::exp(0.5 * lv);
   CvaeOutput out = decodeWith(decode_cond, z);
   out.partial_recon = partial_recon;
   out.mu = mu;
