@@ -634,12 +634,14 @@ TEST(Cvae, SymmetricPassesTurnWithThePile) {
   const auto a = net.predict(tsdf, weight, 2, 9, false, 2);
   const auto b = net.predict(half(tsdf), half(weight), 2, 9, false, 2);
   EXPECT_LT(difference(half(a), b), 1e-5);
-  // Code fitting: the codes are fitted on the plain pass (the same losses either way), and the
-  // kept codes decoded with the passes (as predict() decodes them).
+  // Code fitting without fit_on_passes: the codes are fitted on the plain pass (the same
+  // losses either way), and the kept codes decoded with the passes (as predict() decodes them).
   const std::vector<ViewEvidence> views = {{tsdf, weight}};
+  RefineOptions plain_one{3, 0.3, 1}, plain_four{3, 0.3, 4};
+  plain_one.fit_on_passes = plain_four.fit_on_passes = false;
   RefineReport one_report, four_report;
-  const auto one = net.refine(tsdf, weight, views, 2, 9, false, {3, 0.3, 1}, &one_report);
-  const auto four = net.refine(tsdf, weight, views, 2, 9, false, {3, 0.3, 4}, &four_report);
+  const auto one = net.refine(tsdf, weight, views, 2, 9, false, plain_one, &one_report);
+  const auto four = net.refine(tsdf, weight, views, 2, 9, false, plain_four, &four_report);
   EXPECT_EQ(one_report.code_loss, four_report.code_loss);
   EXPECT_GT(difference(one, four), 1e-3);
 }
@@ -788,6 +790,82 @@ TEST(ShippedModel, LatentOptimisationLowersItsLossOnFurtherViews) {
                           {ViewEvidence{Grid3<float>(other, 0.f), Grid3<float>(other, 0.f)}}, 3, 5,
                           false, {4, 0.3}),
                std::invalid_argument);
+}
+
+TEST(ShippedModel, LatentOptimisationStartsFromTheDrawsThatFitTheViewsBest) {
+  ASSERT_TRUE(fs::exists(shippedModel())) << shippedModel();
+  const CvaeInference net(shippedModel(), 2);
+  const PileViews pile{net};
+  const ViewEvidence first = pile.seenFrom({0.0});
+  const std::vector<ViewEvidence> further = {pile.seenFrom({2.1}), pile.seenFrom({4.2})};
+  // 12 prior draws scored, no step taken: the 3 kept are the 3 that fit the views best.
+  RefineOptions choose{0, 0.3};
+  choose.starts = 12;
+  RefineReport report;
+  net.refine(first.tsdf_m, first.weight, further, 3, 5, false, choose, &report);
+  ASSERT_EQ(report.start_loss.size(), 12u);
+  ASSERT_EQ(report.code_loss.size(), 3u);
+  std::vector<double> drawn = report.start_loss;
+  std::sort(drawn.begin(), drawn.end());
+  EXPECT_GT(drawn.back(), drawn.front());  // the draws differ, so choosing means something
+  for (size_t k = 0; k < 3; ++k)           // best first
+    EXPECT_NEAR(report.code_loss[k], drawn[k], 1e-4 * drawn[k]) << k;
+  // Sign evidence scores only disagreement on occupancy: a view whose distances are half the
+  // mean scene's, with its signs, costs that scene nothing, while the distances' terms do.
+  CvaePrediction mean_scene = net.predict(first.tsdf_m, first.weight, 1, 5, true)[0];
+  ViewEvidence halved{mean_scene.tsdf_m, Grid3<float>(mean_scene.tsdf_m.spec, 1.0f)};
+  for (float& t : halved.tsdf_m.data) t *= 0.5f;
+  RefineOptions one_step{1, 0.3};
+  one_step.evidence = "sign";
+  net.refine(first.tsdf_m, first.weight, {halved}, 1, 5, true, one_step, &report);
+  EXPECT_EQ(report.loss.front(), 0.0);
+  one_step.evidence = "tsdf";
+  net.refine(first.tsdf_m, first.weight, {halved}, 1, 5, true, one_step, &report);
+  EXPECT_GT(report.loss.front(), 10.0);
+  one_step.evidence = "depth";
+  EXPECT_THROW(net.refine(first.tsdf_m, first.weight, {halved}, 1, 5, true, one_step),
+               std::invalid_argument);
+  // A prior that outweighs the evidence keeps the mean scene's code where it is.
+  RefineOptions anchored{4, 0.3};
+  anchored.prior_weight = 1e6;
+  const auto held = net.refine(first.tsdf_m, first.weight, further, 3, 5, true, anchored);
+  for (size_t i = 0; i < held[0].tsdf_m.data.size(); ++i)
+    ASSERT_NEAR(held[0].tsdf_m.data[i], mean_scene.tsdf_m.data[i], 1e-5) << i;
+  anchored.prior_weight = -1;
+  EXPECT_THROW(net.refine(first.tsdf_m, first.weight, further, 3, 5, true, anchored),
+               std::invalid_argument);
+}
+
+/// refine()'s sign evidence of one hypothesis: over the views, the mean of the sum over each
+/// view's observed voxels of max(0, -tsdf * view tsdf), both in tau (the view's clamped).
+double signEvidence(const CvaePrediction& p, const std::vector<ViewEvidence>& views, double tau) {
+  double sum = 0;
+  for (const ViewEvidence& v : views)
+    for (size_t i = 0; i < p.tsdf_m.data.size(); ++i) {
+      if (!(v.weight.data[i] > 0)) continue;
+      const double seen = std::clamp(v.tsdf_m.data[i] / tau, -1.0, 1.0);
+      sum += std::max(0.0, -(p.tsdf_m.data[i] / tau) * seen);
+    }
+  return sum / views.size();
+}
+
+TEST(ShippedModel, CodesFittedOnTheSymmetricPassesScoreAsTheyAreDecoded) {
+  ASSERT_TRUE(fs::exists(shippedModel())) << shippedModel();
+  const CvaeInference net(shippedModel(), 2);
+  const PileViews pile{net};
+  const ViewEvidence first = pile.seenFrom({0.0});
+  const std::vector<ViewEvidence> further = {pile.seenFrom({2.1}), pile.seenFrom({4.2})};
+  RefineOptions options{2, 0.3, 4};
+  options.fit_on_passes = true;
+  RefineReport report;
+  const auto fitted =
+      net.refine(first.tsdf_m, first.weight, further, 2, 5, false, options, &report);
+  const double tau = net.config().truncation_m();
+  for (size_t k = 0; k < fitted.size(); ++k) {
+    const double loss = signEvidence(fitted[k], further, tau);
+    EXPECT_GT(loss, 0.0) << k;
+    EXPECT_NEAR(loss, report.code_loss[k], 1e-3 * loss) << k;
+  }
 }
 
 TEST(ShippedModel, APileSeenFromAllSidesIsReconstructedBetterAndAgreedOn) {

@@ -38,9 +38,13 @@ BENCHMARK(BM_CvaeInference)
     ->UseRealTime();
 
 // The paper's section 4.2 at R = 32: S = 3 codes, 10 Adam steps against 3 views' partial TSDFs
-// (a network of the shipped size with random weights: the time does not depend on them).
+// (a network of the shipped size with random weights: the time does not depend on them);
+// the second argument: prior draws scored first, the best 3 kept (RefineOptions::starts); the
+// third: symmetric passes, the codes fitted on their average.
 static void BM_RefineThreeViews(benchmark::State& state) {
   const int r = 32, iterations = static_cast<int>(state.range(0));
+  RefineOptions options{iterations, 0.3, static_cast<int>(state.range(2))};
+  options.starts = static_cast<int>(state.range(1));
   const std::string path =
       (std::filesystem::temp_directory_path() / "simstack_bench_refine.pt").string();
   {
@@ -61,9 +65,17 @@ static void BM_RefineThreeViews(benchmark::State& state) {
   for (int k = 0; k < 3; ++k) views.push_back({randomGrid(-0.06f, 0.06f), randomGrid(-1.0f, 1.0f)});
   for (auto _ : state)
     benchmark::DoNotOptimize(
-        net.refine(views[0].tsdf_m, views[0].weight, views, 3, 1, false, {iterations, 0.3}));
+        net.refine(views[0].tsdf_m, views[0].weight, views, 3, 1, false, options));
 }
-BENCHMARK(BM_RefineThreeViews)->Arg(0)->Arg(10)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RefineThreeViews)
+    ->ArgNames({"steps", "starts", "passes"})
+    ->Args({0, 0, 1})
+    ->Args({10, 0, 1})
+    ->Args({0, 24, 1})
+    ->Args({10, 24, 1})
+    ->Args({10, 0, 4})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 static void BM_CvaeTrainingStep(benchmark::State& state) {
   const int r = 32, b = 8;

@@ -29,13 +29,29 @@ struct RefineOptions {
   int iterations = 10;         ///< Adam steps on the codes
   double learning_rate = 0.3;  ///< Adam step size (codes are standard normal draws)
   int symmetries = 1;          ///< the kept codes decoded as predict() does with this many
+  /// Weight of the prior's negative log-density, |z|^2 / 2, added to each code's evidence
+  /// loss: it keeps the codes where the decoder was trained (0 = the evidence alone).
+  double prior_weight = 0.0;
+  /// Prior draws scored against the evidence before the fitting; the S with the lowest loss
+  /// are fitted, best first (with zero_code_first, z = 0 is the first draw and competes with
+  /// the others). At most `samples` (the default 0 too): the S draws of predict(), in order.
+  int starts = 0;
+  /// What a view's evidence scores: "tsdf", |tsdf - view tsdf| (both in tau, clamped to +-1),
+  /// or "sign", max(0, -tsdf * view tsdf): only where the decoded scene calls occupied what
+  /// the view saw free, or the reverse (a projective TSDF's distances are not the scene's).
+  std::string evidence = "sign";
+  /// Codes scored and fitted on the average of the `symmetries` passes, as they are decoded
+  /// (each step then costs that many decoder passes); false: on the plain pass alone, which
+  /// is faster, but a code so fitted means another scene in the turned passes.
+  bool fit_on_passes = true;
 };
 
 /// What refine() did: the depth-evidence loss of the kept code at each iteration (index 0:
 /// before the first step), and the time.
 struct RefineReport {
   std::vector<double> loss;
-  std::vector<double> code_loss;  ///< per hypothesis: its code's loss at its best step
+  std::vector<double> code_loss;   ///< per hypothesis: its code's loss at its best step
+  std::vector<double> start_loss;  ///< with RefineOptions::starts: each prior draw's loss
   double ms = 0;
 };
 
@@ -66,12 +82,13 @@ class CvaeInference {
 
   /// The paper's section 4.2: the S codes of predict() (same seed) optimised, the network
   /// fixed, so that the decoded TSDF agrees with every view's own partial TSDF where that view
-  /// observed the scene (weight > 0): the mean over views of sum |tsdf - view tsdf| / tau
-  /// (both clamped to +-1) over the view's observed voxels. Hypothesis k is code k at its best
-  /// step (the order of predict()'s, so tiles of one scene blend matching hypotheses; the
-  /// report has each code's loss); the FC baseline, having no code, returns predict()'s. The
-  /// codes are fitted on the plain pass; `options.symmetries` applies to the final decoding.
-  /// `views` must lie on the partial TSDF's grid (std::invalid_argument).
+  /// observed the scene (weight > 0): the mean over views of the sum over the view's observed
+  /// voxels of `options.evidence`'s term, plus `options.prior_weight` times |z|^2 / 2. With
+  /// `options.starts` > S the codes start from the best S of that many prior draws (same seed),
+  /// best first. Hypothesis k is code k at its best step (the report has each code's loss);
+  /// the FC baseline, having no code, returns predict()'s. The codes are fitted on the average
+  /// of `options.symmetries` passes, as decoded (or, without `options.fit_on_passes`, on the
+  /// plain pass). `views` must lie on the partial TSDF's grid (std::invalid_argument).
   std::vector<CvaePrediction> refine(const Grid3<float>& partial_tsdf_m, const Grid3<float>& weight,
                                      const std::vector<ViewEvidence>& views, int samples,
                                      uint64_t seed, bool zero_code_first,

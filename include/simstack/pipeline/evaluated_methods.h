@@ -81,8 +81,9 @@ class FusionMethod : public EvaluatedMethod {
 /// The methods of the multi-view protocol (the paper's section 4.2) for each config's model:
 /// conditioned on all views (named by architecture) and on the first alone (`_first`, the
 /// single-view figure on the same views); for a model with a latent code and
-/// `refine_iterations` > 0 also each of them with its codes optimised against every view
-/// (`_opt`, `_first_opt`: the paper's multi-view optimisation); then TSDF fusion.
+/// `refine_iterations` > 0 (or the config's refine_starts > 0) also each of them with its codes
+/// chosen and optimised against every view (`_opt`, `_first_opt`: the paper's multi-view
+/// optimisation; the others draw their codes without refine_starts); then TSDF fusion.
 std::vector<std::unique_ptr<EvaluatedMethod>> multiViewMethods(
     const std::vector<PerceptionConfig>& configs, int refine_iterations, double extent_m,
     int resolution, double truncation_m);

@@ -41,6 +41,13 @@ struct PerceptionConfig {
   /// each view's own partial TSDF (the paper's section 4.2, CvaeInference::refine); 0 = off.
   int refine_iterations = 0;
   double refine_learning_rate = 0.3;
+  double refine_prior_weight = 0.0;  ///< RefineOptions::prior_weight
+  /// Prior draws scored against the views before the fitting, the best `samples` kept
+  /// (RefineOptions::starts); more than `samples` chooses codes by the evidence even without
+  /// refine_iterations.
+  int refine_starts = 0;
+  std::string refine_evidence = "sign";  ///< RefineOptions::evidence
+  bool refine_on_passes = true;          ///< RefineOptions::fit_on_passes
   /// Given several posed views, the ones the network is conditioned on: "all" (their fused
   /// partial TSDF: the paper's multi-view conditioning) or "first" (the first view alone, the
   /// others reaching the codes only through refine_iterations: the paper's multi-view

@@ -57,20 +57,28 @@ torch::Tensor symmetry(torch::Tensor t, int which, bool vector, bool inverse) {
 const std::map<int, std::vector<int>> kSymmetryGroups = {
     {1, {0}}, {2, {0, 6}}, {4, {0, 3, 6, 5}}, {8, {0, 1, 2, 3, 4, 5, 6, 7}}};
 
-/// The network's outputs for the condition `one` [1, ...] (encoded: `cond`) and codes `z`,
-/// averaged over `symmetries` of the grid (kSymmetryGroups): the input turned, the outputs
-/// turned back. A pile turned about the vertical or mirrored is as plausible as the pile
-/// itself, so the errors of the passes partly cancel.
-CvaeOutput generateSymmetric(Cvae& model, const torch::Tensor& one,
-                             const std::vector<torch::Tensor>& cond, const torch::Tensor& z,
-                             int symmetries) {
-  CvaeOutput out = model->generateFrom(cond, z);
+/// The condition `one` [1, ...] encoded as seen and turned by each symmetry of the group for
+/// `symmetries` (kSymmetryGroups), in the group's order.
+std::vector<std::vector<torch::Tensor>> encodeSymmetric(Cvae& model, const torch::Tensor& one,
+                                                        int symmetries) {
+  std::vector<std::vector<torch::Tensor>> conds;
+  for (int which : kSymmetryGroups.at(symmetries))
+    conds.push_back(model->encodeCondition(which == 0 ? one : symmetry(one, which, false, false)));
+  return conds;
+}
+
+/// The network's outputs for codes `z` and the encoded conditions of encodeSymmetric(),
+/// averaged over the group: each output turned back. A pile turned about the vertical or
+/// mirrored is as plausible as the pile itself, so the errors of the passes partly cancel.
+CvaeOutput generateSymmetric(Cvae& model, const std::vector<std::vector<torch::Tensor>>& conds,
+                             const torch::Tensor& z, int symmetries) {
+  const std::vector<int>& group = kSymmetryGroups.at(symmetries);
+  CvaeOutput out = model->generateFrom(conds[0], z);
   if (symmetries == 1) return out;
-  for (int which : kSymmetryGroups.at(symmetries)) {
-    if (which == 0) continue;
-    const CvaeOutput o = model->generate(symmetry(one, which, false, false), z);
-    out.tsdf = out.tsdf + symmetry(o.tsdf, which, false, true);
-    out.votes = out.votes + symmetry(o.votes, which, true, true);
+  for (size_t k = 1; k < group.size(); ++k) {
+    const CvaeOutput o = model->generateFrom(conds[k], z);
+    out.tsdf = out.tsdf + symmetry(o.tsdf, group[k], false, true);
+    out.votes = out.votes + symmetry(o.votes, group[k], true, true);
   }
   out.tsdf = out.tsdf / symmetries;
   out.votes = out.votes / symmetries;
@@ -79,6 +87,11 @@ CvaeOutput generateSymmetric(Cvae& model, const torch::Tensor& one,
 
 torch::Tensor gridTensor(const std::vector<float>& values, int r) {
   return torch::from_blob(const_cast<float*>(values.data()), {1, 1, r, r, r}).clone();
+}
+
+/// The `samples` codes of `z` [M, L] with the lowest `loss` [M], best first.
+torch::Tensor bestCodes(const torch::Tensor& z, const torch::Tensor& loss, int samples) {
+  return z.index_select(0, std::get<1>(loss.topk(samples, 0, /*largest=*/false))).clone();
 }
 
 }  // namespace
@@ -143,7 +156,7 @@ std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_t
   if (zero_code_first) z[0].zero_();
   // The condition is encoded once and shared by the S codes; the FC baseline has no code and
   // runs once.
-  CvaeOutput out = generateSymmetric(impl_->model, one, impl_->model->encodeCondition(one),
+  CvaeOutput out = generateSymmetric(impl_->model, encodeSymmetric(impl_->model, one, symmetries),
                                      c.hasLatentCode() ? z : z.narrow(0, 0, 1), symmetries);
   if (out.tsdf.size(0) == 1 && samples > 1) {
     out.tsdf = out.tsdf.expand({samples, -1, -1, -1, -1});
@@ -163,12 +176,16 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
   for (const ViewEvidence& v : views)
     if (!(v.tsdf_m.spec == g) || !(v.weight.spec == g))
       throw std::invalid_argument("refine: every view's TSDF must lie on the prediction's grid");
-  if (options.iterations < 0 || !(options.learning_rate > 0))
-    throw std::invalid_argument("refine: iterations >= 0 and learning_rate > 0 are required");
-  if (!c.hasLatentCode() || views.empty() || options.iterations == 0)
+  if (options.iterations < 0 || !(options.learning_rate > 0) || !(options.prior_weight >= 0) ||
+      options.starts < 0 || (options.evidence != "tsdf" && options.evidence != "sign"))
+    throw std::invalid_argument(
+        "refine: iterations >= 0, learning_rate > 0, prior_weight >= 0, starts >= 0 and evidence "
+        "'tsdf' or 'sign' are required");
+  if (!c.hasLatentCode() || views.empty() || (options.iterations == 0 && options.starts <= samples))
     return predict(partial_tsdf_m, weight, samples, seed, zero_code_first, options.symmetries);
   checkInput(partial_tsdf_m, weight, samples);
   validateSymmetries(options.symmetries);
+  if (report) *report = RefineReport{};  // a reused report starts afresh
   const auto start = std::chrono::steady_clock::now();
   torch::AutoGradMode grad_mode(true);  // also when the caller turned gradients off
   const int r = c.resolution;
@@ -182,28 +199,42 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
     target.push_back((gridTensor(v.tsdf_m.data, r) / tau).clamp(-1.0, 1.0));
     observed.push_back((gridTensor(v.weight.data, r) > 0).to(torch::kFloat));
   }
-  torch::Generator gen = at::detail::createCPUGenerator(seed);
-  torch::Tensor z = torch::randn({samples, c.latent_size}, gen);
-  if (zero_code_first) z[0].zero_();
-  z.set_requires_grad(true);
-  torch::optim::Adam adam({z}, torch::optim::AdamOptions(options.learning_rate));
-  auto lossOf = [&](const torch::Tensor& tsdf) {  // per code [S]
+  const bool sign_evidence = options.evidence == "sign";
+  auto lossOf = [&](const torch::Tensor& tsdf, const torch::Tensor& z) {  // per code [S]
     torch::Tensor sum = torch::zeros({tsdf.size(0)});
-    for (size_t k = 0; k < target.size(); ++k)
-      sum = sum + ((tsdf - target[k]).abs() * observed[k]).flatten(1).sum(1);
-    return sum / static_cast<double>(target.size());
+    for (size_t k = 0; k < target.size(); ++k) {
+      const torch::Tensor miss =
+          sign_evidence ? (-tsdf * target[k]).clamp_min(0.0) : (tsdf - target[k]).abs();
+      sum = sum + (miss * observed[k]).flatten(1).sum(1);
+    }
+    return sum / static_cast<double>(target.size()) + options.prior_weight * 0.5 * z.pow(2).sum(1);
   };
-  // The condition does not change: encoded once, without a graph.
-  std::vector<torch::Tensor> cond;
+  torch::Generator gen = at::detail::createCPUGenerator(seed);
+  torch::Tensor z = torch::randn({std::max(samples, options.starts), c.latent_size}, gen);
+  if (zero_code_first) z[0].zero_();
+  // The condition does not change: encoded once (each pass's), without a graph. The codes
+  // are scored on the plain pass, or on the passes' average.
+  const int fit_passes = options.fit_on_passes ? options.symmetries : 1;
+  std::vector<std::vector<torch::Tensor>> conds;
   {
     torch::NoGradGuard no_grad;
-    cond = impl_->model->encodeCondition(one);
+    conds = encodeSymmetric(impl_->model, one, options.symmetries);
+    if (z.size(0) > samples) {
+      const torch::Tensor loss =
+          lossOf(generateSymmetric(impl_->model, conds, z, fit_passes).tsdf, z);
+      if (report)
+        report->start_loss.assign(loss.data_ptr<float>(), loss.data_ptr<float>() + loss.size(0));
+      z = bestCodes(z, loss, samples);
+    }
   }
+  z.set_requires_grad(true);
+  torch::optim::Adam adam({z}, torch::optim::AdamOptions(options.learning_rate));
   // The best code of each start so far (the loss may rise again after a step).
   torch::Tensor best_z = z.detach().clone();
   torch::Tensor best_loss = torch::full({samples}, std::numeric_limits<float>::infinity());
   for (int it = 0; it <= options.iterations; ++it) {
-    const torch::Tensor loss = lossOf(impl_->model->generateFrom(cond, z).tsdf);
+    const torch::Tensor loss =
+        lossOf(generateSymmetric(impl_->model, conds, z, fit_passes).tsdf, z);
     {
       torch::NoGradGuard no_grad;
       const torch::Tensor better = loss.detach() < best_loss;
@@ -218,7 +249,7 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
     adam.step();
   }
   torch::NoGradGuard no_grad;
-  const CvaeOutput out = generateSymmetric(impl_->model, one, cond, best_z, options.symmetries);
+  const CvaeOutput out = generateSymmetric(impl_->model, conds, best_z, options.symmetries);
   if (report) {
     report->code_loss.assign(best_loss.data_ptr<float>(), best_loss.data_ptr<float>() + samples);
     report->ms =

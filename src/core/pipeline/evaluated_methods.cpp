@@ -125,11 +125,13 @@ std::vector<std::unique_ptr<EvaluatedMethod>> multiViewMethods(
     bool has_code = true;  // known from the first method made of this config
     for (const std::string condition : {"all", "first"}) {
       for (const bool optimise : {false, true}) {
-        if (optimise && (refine_iterations == 0 || !has_code)) continue;
+        const bool codes_from_views = refine_iterations > 0 || configs[i].refine_starts > 0;
+        if (optimise && (!codes_from_views || !has_code)) continue;
         PerceptionConfig c = configs[i];
         c.zero_code_first = false;  // random codes, as the paper evaluates
         c.condition_views = condition;
         c.refine_iterations = optimise ? refine_iterations : 0;
+        if (!optimise) c.refine_starts = 0;
         auto m = std::make_unique<NetworkMethod>(c);
         has_code = m->architecture() == "cvae";
         if (bases.size() == i) {

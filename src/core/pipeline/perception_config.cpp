@@ -30,6 +30,10 @@ void perceptionFields(C& c, F&& f) {
   f("threads", c.threads);
   f("refine_iterations", c.refine_iterations);
   f("refine_learning_rate", c.refine_learning_rate);
+  f("refine_prior_weight", c.refine_prior_weight);
+  f("refine_starts", c.refine_starts);
+  f("refine_evidence", c.refine_evidence);
+  f("refine_on_passes", c.refine_on_passes);
   f("condition_views", c.condition_views);
 }
 template <class C, class F>

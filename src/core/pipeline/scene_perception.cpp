@@ -205,8 +205,14 @@ void validate(const PerceptionConfig& config, bool latent) {
     throw std::invalid_argument("points_per_instance must be >= 10");
   if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
   validateSymmetries(config.symmetries);
-  if (config.refine_iterations < 0 || !(config.refine_learning_rate > 0.0))
-    throw std::invalid_argument("refine_iterations must be >= 0 and refine_learning_rate > 0");
+  if (config.refine_iterations < 0 || !(config.refine_learning_rate > 0.0) ||
+      !(config.refine_prior_weight >= 0.0) || config.refine_starts < 0)
+    throw std::invalid_argument(
+        "refine_iterations, refine_prior_weight and refine_starts must be >= 0 and "
+        "refine_learning_rate > 0");
+  if (config.refine_evidence != "tsdf" && config.refine_evidence != "sign")
+    throw std::invalid_argument("refine_evidence must be 'tsdf' or 'sign', not '" +
+                                config.refine_evidence + "'");
   if (config.condition_views != "all" && config.condition_views != "first")
     throw std::invalid_argument("condition_views must be 'all' or 'first', not '" +
                                 config.condition_views + "'");
@@ -291,9 +297,14 @@ size_t conditioningViews(const std::vector<DepthView>& views, const PerceptionCo
   return c.condition_views == "first" ? 1 : views.size();
 }
 
-/// Whether views after the first reach the hypotheses, by conditioning or code fitting.
+/// Whether the codes are chosen or fitted by the views (CvaeInference::refine).
+bool refinesCodes(const std::vector<DepthView>& views, const PerceptionConfig& c) {
+  return views.size() > 1 && (c.refine_iterations > 0 || c.refine_starts > c.samples);
+}
+
+/// Whether views after the first reach the hypotheses, by conditioning or the codes.
 bool furtherViewsReach(const std::vector<DepthView>& views, const PerceptionConfig& c) {
-  return conditioningViews(views, c) > 1 || (c.refine_iterations > 0 && views.size() > 1);
+  return conditioningViews(views, c) > 1 || refinesCodes(views, c);
 }
 
 /// The network's S hypotheses for one tile from its partial TSDF; with several views and
@@ -302,7 +313,7 @@ std::vector<CvaePrediction> predictTile(const CvaeInference& model,
                                         const std::pair<Grid3<float>, Grid3<float>>& partial,
                                         const std::vector<DepthView>& views,
                                         const Transform& T_table_first, const PerceptionConfig& c) {
-  if (c.refine_iterations == 0 || views.size() < 2)
+  if (!refinesCodes(views, c))
     return model.predict(partial.first, partial.second, c.samples, c.seed, c.zero_code_first,
                          c.symmetries);
   std::vector<ViewEvidence> evidence;
@@ -311,8 +322,10 @@ std::vector<CvaePrediction> predictTile(const CvaeInference& model,
                                       model.config().truncation_m(), i, i + 1);
     evidence.push_back({std::move(tsdf), std::move(weight)});
   }
-  return model.refine(partial.first, partial.second, evidence, c.samples, c.seed, c.zero_code_first,
-                      {c.refine_iterations, c.refine_learning_rate, c.symmetries});
+  return model.refine(
+      partial.first, partial.second, evidence, c.samples, c.seed, c.zero_code_first,
+      {c.refine_iterations, c.refine_learning_rate, c.symmetries, c.refine_prior_weight,
+       c.refine_starts, c.refine_evidence, c.refine_on_passes});
 }
 
 /// The network's S hypotheses over one group's grid: each tile predicted from its own partial
