@@ -58,6 +58,9 @@ struct RefineReport {
 /// std::invalid_argument unless `symmetries` is 1, 2, 4 or 8 (CvaeInference::predict).
 void validateSymmetries(int symmetries);
 
+/// std::invalid_argument naming the bad field of `options` (CvaeInference::refine).
+void validateRefineOptions(const RefineOptions& options);
+
 /// Loads once; predict() is const but not thread-safe (torch state): use one per thread.
 class CvaeInference {
  public:

@@ -136,6 +136,17 @@ void validateSymmetries(int symmetries) {
                                 std::to_string(symmetries));
 }
 
+void validateRefineOptions(const RefineOptions& options) {
+  if (options.iterations < 0 || !(options.learning_rate > 0) || !(options.prior_weight >= 0) ||
+      options.starts < 0)
+    throw std::invalid_argument(
+        "refine: iterations, prior_weight and starts must be >= 0 and learning_rate > 0");
+  if (options.evidence != "tsdf" && options.evidence != "sign")
+    throw std::invalid_argument("refine: evidence must be 'tsdf' or 'sign', not '" +
+                                options.evidence + "'");
+  validateSymmetries(options.symmetries);
+}
+
 const std::string& CvaeInference::metadata() const { return impl_->metadata; }
 
 std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_tsdf_m,
@@ -176,15 +187,10 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
   for (const ViewEvidence& v : views)
     if (!(v.tsdf_m.spec == g) || !(v.weight.spec == g))
       throw std::invalid_argument("refine: every view's TSDF must lie on the prediction's grid");
-  if (options.iterations < 0 || !(options.learning_rate > 0) || !(options.prior_weight >= 0) ||
-      options.starts < 0 || (options.evidence != "tsdf" && options.evidence != "sign"))
-    throw std::invalid_argument(
-        "refine: iterations >= 0, learning_rate > 0, prior_weight >= 0, starts >= 0 and evidence "
-        "'tsdf' or 'sign' are required");
+  validateRefineOptions(options);
   if (!c.hasLatentCode() || views.empty() || (options.iterations == 0 && options.starts <= samples))
     return predict(partial_tsdf_m, weight, samples, seed, zero_code_first, options.symmetries);
   checkInput(partial_tsdf_m, weight, samples);
-  validateSymmetries(options.symmetries);
   if (report) *report = RefineReport{};  // a reused report starts afresh
   const auto start = std::chrono::steady_clock::now();
   torch::AutoGradMode grad_mode(true);  // also when the caller turned gradients off

@@ -181,6 +181,12 @@ struct ScenePerception::Impl {
 
 namespace {
 
+/// The code fitting's options (CvaeInference::refine) of a perception config.
+RefineOptions refineOptions(const PerceptionConfig& c) {
+  return {c.refine_iterations, c.refine_learning_rate, c.symmetries,      c.refine_prior_weight,
+          c.refine_starts,     c.refine_evidence,      c.refine_on_passes};
+}
+
 /// `latent`: the model has a latent code. Without one every sample is the same scene, so the
 /// sample counts are taken as 1 (forModel) and only need to be in range.
 void validate(const PerceptionConfig& config, bool latent) {
@@ -205,14 +211,7 @@ void validate(const PerceptionConfig& config, bool latent) {
     throw std::invalid_argument("points_per_instance must be >= 10");
   if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
   validateSymmetries(config.symmetries);
-  if (config.refine_iterations < 0 || !(config.refine_learning_rate > 0.0) ||
-      !(config.refine_prior_weight >= 0.0) || config.refine_starts < 0)
-    throw std::invalid_argument(
-        "refine_iterations, refine_prior_weight and refine_starts must be >= 0 and "
-        "refine_learning_rate > 0");
-  if (config.refine_evidence != "tsdf" && config.refine_evidence != "sign")
-    throw std::invalid_argument("refine_evidence must be 'tsdf' or 'sign', not '" +
-                                config.refine_evidence + "'");
+  validateRefineOptions(refineOptions(config));
   if (config.condition_views != "all" && config.condition_views != "first")
     throw std::invalid_argument("condition_views must be 'all' or 'first', not '" +
                                 config.condition_views + "'");
@@ -322,10 +321,8 @@ std::vector<CvaePrediction> predictTile(const CvaeInference& model,
                                       model.config().truncation_m(), i, i + 1);
     evidence.push_back({std::move(tsdf), std::move(weight)});
   }
-  return model.refine(
-      partial.first, partial.second, evidence, c.samples, c.seed, c.zero_code_first,
-      {c.refine_iterations, c.refine_learning_rate, c.symmetries, c.refine_prior_weight,
-       c.refine_starts, c.refine_evidence, c.refine_on_passes});
+  return model.refine(partial.first, partial.second, evidence, c.samples, c.seed, c.zero_code_first,
+                      refineOptions(c));
 }
 
 /// The network's S hypotheses over one group's grid: each tile predicted from its own partial
