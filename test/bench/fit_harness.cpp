@@ -207,9 +207,17 @@ int main(int argc, char** argv) {
         std::mt19937_64 metric_rng(metric_seed), floor_rng(~metric_seed);
         f.fit_mm.push_back(chamferMm(fitted, truth.mesh, density, metric_rng));
         f.floor_mm.push_back(chamferMm(truth.mesh, truth.mesh, density, floor_rng));
+        // How far the fit reaches behind (along the line of sight) against the truth: the
+        // extent a one-sided view leaves to the shape model.
+        const auto reach = [&](const TriangleMesh& m) {
+          double r = -1e9;
+          for (const Vec3& v : m.vertices) r = std::max(r, v.dot(dir));
+          return r;
+        };
         out[set][view].push_back({{"truth", truth.what},
                                   {"fit_mm", f.fit_mm.back()},
                                   {"floor_mm", f.floor_mm.back()},
+                                  {"behind_mm", 1000.0 * (reach(fitted) - reach(truth.mesh))},
                                   {"ms", f.ms.back()}});
       }
       int worse = 0;

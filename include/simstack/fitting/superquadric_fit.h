@@ -36,6 +36,14 @@ struct FitConfig {
   /// holds a point: a surface seen from all sides), `start_iterations` more steps take every
   /// point. Views of one side reach about half; above 1: never.
   double surrounded_share = 0.9;
+  /// Points that do not surround the shape (a view of one side): eq. 5's volume weight,
+  /// sqrt(a1 a2 a3), also pulls the unseen back of the shape toward the points by about
+  /// noise^2 over how firmly the points hold the depth, so the final solve is followed by one
+  /// with (a1 a2 a3)^one_sided_volume_exponent instead, kept when the volume grows by at most
+  /// `one_sided_growth_limit` (where the points hardly hold the depth, the weaker weight lets
+  /// the back drift away). 0.5 (the paper's weight): no second solve.
+  double one_sided_volume_exponent = 0.125;
+  double one_sided_growth_limit = 1.1;
   /// Points of the coarser cover on which the starts and the switched alternatives are tried.
   int coarse_points = 60;
   /// Points per instance in the joint refinement (every n-th of them).
@@ -75,7 +83,8 @@ SuperquadricShape initialGuess(const Points3& points_table, double initial_expon
 /// degrees with the conjugate exponent, the passage between a box and a diamond cross-section
 /// that a local solve cannot make), kept when better; last, a solve on `max_points`, and a few
 /// steps on all points when they surround the shape (`surrounded_share`). The result is in
-/// canonical form (canonicalSuperquadric).
+/// canonical form (canonicalSuperquadric). Points that do not surround the shape get a last
+/// solve with a weaker volume weight (`one_sided_volume_exponent`).
 SuperquadricShape fitSuperquadric(const Points3& points_table,
                                   const FitConfig& config = FitConfig(),
                                   const std::optional<SuperquadricShape>& start = std::nullopt);

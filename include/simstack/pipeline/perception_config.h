@@ -41,7 +41,7 @@ struct PerceptionConfig {
   /// each view's own partial TSDF (the paper's section 4.2, CvaeInference::refine); 0 = off.
   int refine_iterations = 0;
   double refine_learning_rate = 0.3;
-  double refine_prior_weight = 0.0;  ///< RefineOptions::prior_weight
+  double refine_prior_weight = 1.0;  ///< RefineOptions::prior_weight
   /// Prior draws scored against the views before the fitting, the best `samples` kept
   /// (RefineOptions::starts); more than `samples` chooses codes by the evidence even without
   /// refine_iterations.
@@ -55,7 +55,14 @@ struct PerceptionConfig {
   std::string condition_views = "all";
   HoughConfig hough;              ///< the model's (model card)
   SurfaceSegmentConfig segments;  ///< the split along the observed surface's convex patches
-  FitConfig fit;
+  /// The fitter's settings, but without its one-sided solve: on the pipeline's instances
+  /// (network surfaces cut where objects touch, the classical baseline's visible points) it
+  /// measured neutral to slightly worse (docs/results.md).
+  FitConfig fit = [] {
+    FitConfig f;
+    f.one_sided_volume_exponent = 0.5;
+    return f;
+  }();
   TablePlaneConfig table;
   WorkspaceConfig workspace;  ///< where to look, and the tiles covering it
 };

@@ -148,13 +148,14 @@ struct DistortionResiduals {
   Points3 points;
   double weight;  // sqrt(lambda / N)
   Bounds lo;
+  double volume_exponent;  // of a1 a2 a3 in the squared residuals' weight (eq. 5: 0.5)
   template <typename T>
   bool operator()(const T* u, T* r) const {
     T x[kParams];
     toShape(u, lo, x);
     T R[9];  // column-major: table from object
     ceres::AngleAxisToRotationMatrix(&x[9], R);
-    const T w = T(weight) * pow(x[0] * x[1] * x[2], 0.25);
+    const T w = T(weight) * pow(x[0] * x[1] * x[2], 0.5 * volume_exponent);
     for (size_t k = 0; k < points.size(); ++k) {
       const T d[3] = {points[k].x() - x[6], points[k].y() - x[7], points[k].z() - x[8]};
       T q[3];
@@ -164,10 +165,11 @@ struct DistortionResiduals {
     }
     return true;
   }
-  static ceres::CostFunction* Create(Points3 points, double weight, const Bounds& lo) {
+  static ceres::CostFunction* Create(Points3 points, double weight, const Bounds& lo,
+                                     double volume_exponent) {
     const int n = static_cast<int>(points.size());
     return new ceres::AutoDiffCostFunction<DistortionResiduals, ceres::DYNAMIC, kParams>(
-        new DistortionResiduals{std::move(points), weight, lo}, n);
+        new DistortionResiduals{std::move(points), weight, lo, volume_exponent}, n);
   }
 };
 
@@ -269,11 +271,12 @@ Params fromSolver(const Params& u, const FitConfig& c) {
   return x;
 }
 
-// Eq. 5 over all `points`, weighted by lambda / N.
+// Eq. 5 over all `points`, weighted by lambda / N (and (a1 a2 a3)^volume_exponent).
 void addDistortion(ceres::Problem* problem, double* x, const Points3& points, double lambda,
-                   const Bounds& lo) {
+                   const Bounds& lo, double volume_exponent = 0.5) {
   const double weight = std::sqrt(lambda / points.size());
-  problem->AddResidualBlock(DistortionResiduals::Create(points, weight, lo), nullptr, x);
+  problem->AddResidualBlock(DistortionResiduals::Create(points, weight, lo, volume_exponent),
+                            nullptr, x);
 }
 
 // One point per cell of a cubic grid whose cell is chosen so that about `target` cells are
@@ -382,6 +385,9 @@ void FitConfig::validate() const {
   require(max_points >= 4 && coarse_points >= 4 && joint_points >= 4 && shape_samples >= 1,
           "need max_points, coarse_points and joint_points >= 4, and shape_samples >= 1");
   require(surrounded_share >= 0.0, "surrounded_share must be >= 0 (above 1: never)");
+  require(one_sided_volume_exponent >= 0.0 && one_sided_volume_exponent <= 0.5,
+          "one_sided_volume_exponent must lie in [0, 0.5] (0.5: eq. 5's weight throughout)");
+  require(one_sided_growth_limit >= 1.0, "one_sided_growth_limit must be >= 1");
   require(contact_margin_m >= 0.0, "contact_margin_m must be >= 0");
   require(joint_rounds >= 1 && start_iterations >= 1 && max_iterations >= 1 &&
               joint_max_iterations >= 1 && threads >= 1,
@@ -507,10 +513,11 @@ struct Solution {
   double cost = std::numeric_limits<double>::infinity();
 };
 
-Solution solveFrom(const Params& start, const Points3& points, const FitConfig& c, int iterations) {
+Solution solveFrom(const Params& start, const Points3& points, const FitConfig& c, int iterations,
+                   double volume_exponent = 0.5) {
   Solution s{start};
   ceres::Problem problem;
-  addDistortion(&problem, s.u.data(), points, 1.0, solverBounds(c));
+  addDistortion(&problem, s.u.data(), points, 1.0, solverBounds(c), volume_exponent);
   ceres::Solver::Summary summary;
   ceres::Solve(solverOptions(c, iterations), &problem, &summary);
   s.cost = summary.final_cost;
@@ -558,12 +565,19 @@ SuperquadricShape fitSuperquadric(const Points3& points, const FitConfig& c,
   }
   // Last, the chosen basin on the finer cover; then, when the points surround the shape, a few
   // steps on every point from there (start_iterations: on measured surfaces the solve has
-  // converged by then, on a network's surface it would creep on for 20-30 iterations).
+  // converged by then, on a network's surface it would creep on for 20-30 iterations); when
+  // they do not, a solve with the weaker volume weight, unless it lets the shape grow.
   const Points3 fine = surfaceCover(points, c.max_points);
   if (fine.size() > coarse.size()) best = solveFrom(best.u, fine, c, c.max_iterations);
-  if (points.size() > fine.size() &&
-      surroundedShare(fromParams(fromSolver(best.u, c)), points) >= c.surrounded_share)
-    best = solveFrom(best.u, points, c, c.start_iterations);
+  const auto volume = [&](const Solution& s) {
+    return fromParams(fromSolver(s.u, c)).scale_m.prod();
+  };
+  if (surroundedShare(fromParams(fromSolver(best.u, c)), points) >= c.surrounded_share) {
+    if (points.size() > fine.size()) best = solveFrom(best.u, points, c, c.start_iterations);
+  } else if (c.one_sided_volume_exponent < 0.5) {
+    const Solution s = solveFrom(best.u, fine, c, c.max_iterations, c.one_sided_volume_exponent);
+    if (volume(s) <= c.one_sided_growth_limit * volume(best)) best = s;
+  }
   return canonicalSuperquadric(fromParams(fromSolver(best.u, c)));
 }
 

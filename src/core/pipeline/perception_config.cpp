@@ -79,6 +79,8 @@ void fitFields(C& c, F&& f) {
   f("lambda_floor", c.lambda_floor);
   f("max_points", c.max_points);
   f("surrounded_share", c.surrounded_share);
+  f("one_sided_volume_exponent", c.one_sided_volume_exponent);
+  f("one_sided_growth_limit", c.one_sided_growth_limit);
   f("coarse_points", c.coarse_points);
   f("joint_points", c.joint_points);
   f("shape_samples", c.shape_samples);
