@@ -747,6 +747,8 @@ struct PileViews {
       partial.integrate(DepthRenderer(scene).render(camera, pose(a)).depth, camera, pose(a));
     return ViewEvidence{partial.tsdf(), partial.weight()};
   }
+  /// The two views the latent-optimisation tests fit to, after the first from azimuth 0.
+  std::vector<ViewEvidence> twoFurther() const { return {seenFrom({2.1}), seenFrom({4.2})}; }
   double iou(const std::vector<CvaePrediction>& preds) const {
     const GroundTruthGrids gt = computeGroundTruth(scene, grid, net.config().truncation_m());
     std::vector<std::vector<float>> p;
@@ -772,7 +774,7 @@ TEST(ShippedModel, LatentOptimisationLowersItsLossOnFurtherViews) {
   const CvaeInference net(shippedModel(), 2);
   const PileViews pile{net};
   const ViewEvidence first = pile.seenFrom({0.0});
-  const std::vector<ViewEvidence> further = {pile.seenFrom({2.1}), pile.seenFrom({4.2})};
+  const std::vector<ViewEvidence> further = pile.twoFurther();
   RefineReport report;
   const auto preds =
       net.refine(first.tsdf_m, first.weight, further, 3, 5, false, RefineOptions{8, 0.3}, &report);
@@ -797,7 +799,7 @@ TEST(ShippedModel, LatentOptimisationStartsFromTheDrawsThatFitTheViewsBest) {
   const CvaeInference net(shippedModel(), 2);
   const PileViews pile{net};
   const ViewEvidence first = pile.seenFrom({0.0});
-  const std::vector<ViewEvidence> further = {pile.seenFrom({2.1}), pile.seenFrom({4.2})};
+  const std::vector<ViewEvidence> further = pile.twoFurther();
   // 12 prior draws scored, no step taken: the 3 kept are the 3 that fit the views best.
   RefineOptions choose{0, 0.3};
   choose.starts = 12;
@@ -854,7 +856,7 @@ TEST(ShippedModel, CodesFittedOnTheSymmetricPassesScoreAsTheyAreDecoded) {
   const CvaeInference net(shippedModel(), 2);
   const PileViews pile{net};
   const ViewEvidence first = pile.seenFrom({0.0});
-  const std::vector<ViewEvidence> further = {pile.seenFrom({2.1}), pile.seenFrom({4.2})};
+  const std::vector<ViewEvidence> further = pile.twoFurther();
   RefineOptions options{2, 0.3, 4};
   options.fit_on_passes = true;
   RefineReport report;

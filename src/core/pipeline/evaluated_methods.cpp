@@ -125,7 +125,9 @@ std::vector<std::unique_ptr<EvaluatedMethod>> multiViewMethods(
     bool has_code = true;  // known from the first method made of this config
     for (const std::string condition : {"all", "first"}) {
       for (const bool optimise : {false, true}) {
-        const bool codes_from_views = refine_iterations > 0 || configs[i].refine_starts > 0;
+        // As ScenePerception decides: fitted codes, or more prior draws than kept.
+        const bool codes_from_views =
+            refine_iterations > 0 || configs[i].refine_starts > configs[i].samples;
         if (optimise && (!codes_from_views || !has_code)) continue;
         PerceptionConfig c = configs[i];
         c.zero_code_first = false;  // random codes, as the paper evaluates
