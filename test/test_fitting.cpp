@@ -74,6 +74,44 @@ TEST(SurfaceDistance, StaysFiniteForExtremeExponentsAndScales) {
   EXPECT_GT(surfaceDistance(sq, Vec3(0.3, -0.2, 0.5)), 0.0);
 }
 
+// The solver's Jacobian of eq. 5 is written out by hand: it must match finite differences of
+// its own residuals, across sizes, exponents (up to the top of their range), poses, points
+// inside and outside, and both volume weights the fitter uses.
+TEST(SuperquadricFit, AnalyticJacobianMatchesFiniteDifferences) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> logit(-3.0, 3.0), offset(-0.05, 0.05), angle(-1.5, 1.5),
+      spread(-0.2, 0.2);
+  const FitConfig c;
+  for (int trial = 0; trial < 20; ++trial) {
+    std::array<double, 12> u;
+    for (int i = 0; i < 6; ++i) u[i] = logit(rng);
+    for (int i = 6; i < 9; ++i) u[i] = offset(rng);
+    for (int i = 9; i < 12; ++i) u[i] = trial == 0 ? 0.0 : angle(rng);  // and the identity
+    Points3 points;
+    for (int k = 0; k < 30; ++k) points.emplace_back(spread(rng), spread(rng), spread(rng));
+    const double volume_exponent = trial % 2 ? 0.5 : 0.125;
+    std::vector<double> r, J, r_plus, r_minus, unused;
+    distortionResiduals(points, c, volume_exponent, u, &r, &J);
+    double largest = 0.0;
+    for (double v : J) largest = std::max(largest, std::abs(v));
+    ASSERT_GT(largest, 0.0);
+    for (int m = 0; m < 12; ++m) {
+      const double h = 1e-6;
+      std::array<double, 12> up = u, down = u;
+      up[m] += h;
+      down[m] -= h;
+      distortionResiduals(points, c, volume_exponent, up, &r_plus, &unused);
+      distortionResiduals(points, c, volume_exponent, down, &r_minus, &unused);
+      for (size_t k = 0; k < points.size(); ++k) {
+        const double numeric = (r_plus[k] - r_minus[k]) / (2.0 * h);
+        const double analytic = J[k * 12 + m];
+        EXPECT_NEAR(analytic, numeric, 1e-5 * largest + 1e-4 * std::abs(numeric))
+            << "trial " << trial << ", point " << k << ", variable " << m;
+      }
+    }
+  }
+}
+
 TEST(SuperquadricFit, RecoversKnownShapesFromNoisySamples) {
   const std::vector<SuperquadricShape> truth = {
       makeShape(Vec3(0.05, 0.07, 0.10), Vec3(2, 2, 2), Vec3(0.1, -0.05, 0.12), Vec3(1, 2, 3), 0.7),

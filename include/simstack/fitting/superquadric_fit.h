@@ -13,6 +13,7 @@
 /// then eq. 7 adds L_coll (eq. 8: the mean over samples of j inside i) and L_floor (eq. 9: the
 /// sum over samples below z = 0, as the paper writes it).
 
+#include <array>
 #include <optional>
 #include <vector>
 
@@ -101,6 +102,14 @@ std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points_
 std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Points3>& points,
                                                            const FitConfig& config, bool joint,
                                                            int min_points = 30);
+
+/// Eq. 5's residuals as the solver evaluates them (weighted as for lambda = 1), and their
+/// analytic Jacobian (row-major, 12 columns per point), at the solver's variables `u`: logits
+/// of the three scales and three exponents within `config`'s bounds, then the translation and
+/// the angle-axis vector of the shape's rotation. For the test of the Jacobian.
+void distortionResiduals(const Points3& points_table, const FitConfig& config,
+                         double volume_exponent, const std::array<double, 12>& u,
+                         std::vector<double>* residuals, std::vector<double>* jacobian);
 
 /// Mean squared penetration of `samples` surface samples of `b` into `a` (eq. 8 without
 /// the weight), for reporting and tests.

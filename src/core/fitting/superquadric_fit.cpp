@@ -51,23 +51,38 @@ double valueOf(const ceres::Jet<S, N>& v) {
   return v.a;
 }
 
-/// log sum_i exp(log_w_i + mu e_i), and its slope in mu (the terms' mean exponent).
+/// log sum_i exp(log_w_i + mu e_i), and its slope in mu (the terms' mean exponent); `shares`,
+/// when given, receives each term's share of the sum.
 template <typename T>
-T logSumExp(const T* log_w, const T* e, const T& mu, T* slope) {
+T logSumExp(const T* log_w, const T* e, const T& mu, T* slope, T* shares = nullptr) {
   T terms[3];
   T top = log_w[0] + mu * e[0];
   for (int i = 0; i < 3; ++i) {
     terms[i] = log_w[i] + mu * e[i];
     if (terms[i] > top) top = terms[i];
   }
-  T sum(0.0), weighted(0.0);
+  T sum(0.0), weighted(0.0), w[3];
   for (int i = 0; i < 3; ++i) {
-    const T w = exp(terms[i] - top);
-    sum += w;
-    weighted += e[i] * w;
+    w[i] = exp(terms[i] - top);
+    sum += w[i];
+    weighted += e[i] * w[i];
   }
   if (slope) *slope = weighted / sum;
+  if (shares)
+    for (int i = 0; i < 3; ++i) shares[i] = w[i] / sum;
   return top + log(sum);
+}
+
+/// Newton steps on h(mu) = logSumExp(log_w, e, mu) = 0 from *mu until |h| < 1e-13 (at the
+/// start for equal exponents) or 8 steps; returns h at the last *mu, its slope and the terms'
+/// shares there.
+double newtonOnLogSumExp(const double* log_w, const double* e, double* mu, double* slope,
+                         double* shares = nullptr) {
+  for (int it = 0;; ++it) {
+    const double value = logSumExp(log_w, e, *mu, slope, shares);
+    if (std::abs(value) < 1e-13 || it == 8) return value;
+    *mu -= value / *slope;
+  }
 }
 
 /// Signed distance from the shape's surface along the ray centre -> q, for q in the shape's
@@ -97,13 +112,10 @@ T localRayDistance(const T* x, const T* q) {
   // log-sum-exp, started from the equal-exponent solution, on plain numbers; then one more step
   // in T. At the root that step's derivatives are the implicit function's (d mu = -dh / h'),
   // so the derivatives are exact while the solver's dual numbers go through one evaluation
-  // instead of seven.
+  // instead of one per step.
   double mu_v = -log_f / ((e_v[0] + e_v[1] + e_v[2]) / 3.0);
-  for (int it = 0; it < 6; ++it) {
-    double slope;
-    const double value = logSumExp(lw_v, e_v, mu_v, &slope);
-    mu_v -= value / slope;
-  }
+  double slope_v;
+  newtonOnLogSumExp(lw_v, e_v, &mu_v, &slope_v);
   T slope;
   const T value = logSumExp(lw, &x[3], T(mu_v), &slope);
   const T mu = T(mu_v) - value / slope;
@@ -118,6 +130,48 @@ T rayDistance(const T* x, const T* p) {
   T q[3];
   ceres::AngleAxisRotatePoint(inverse, d, q);
   return localRayDistance(x, q);
+}
+
+/// localRayDistance on plain numbers with its derivatives: in the scales and exponents
+/// (`d_shape`, x[0..5]) and in the local point (`d_q`). Eq. 5's residuals take these instead of
+/// dual numbers: the same distance, with the derivatives of the same final Newton step less its
+/// term in h d(1 / h'), negligible once |h| < 1e-13.
+struct LocalDistance {
+  double value = 0.0;
+  std::array<double, 6> d_shape{};
+  std::array<double, 3> d_q{};
+};
+
+LocalDistance localDistanceWithDerivatives(const double* x, const double* q) {
+  LocalDistance out;
+  double s[3], lw[3];
+  for (int i = 0; i < 3; ++i) {
+    s[i] = q[i] * q[i] / (x[i] * x[i]) + 1e-18;
+    lw[i] = 0.5 * x[3 + i] * std::log(s[i]);
+  }
+  const double norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + 1e-18);
+  const double* e = &x[3];
+  const double log_f = logSumExp(lw, e, 0.0, static_cast<double*>(nullptr));
+  if (norm < 1e-7 || log_f < -27.6) {
+    const int k = static_cast<int>(std::min_element(x, x + 3) - x);
+    out.value = -x[k];
+    out.d_shape[k] = -1.0;
+    return out;
+  }
+  double mu = -log_f / ((e[0] + e[1] + e[2]) / 3.0), slope, shares[3];
+  const double value = newtonOnLogSumExp(lw, e, &mu, &slope, shares);
+  const double root = mu - value / slope;
+  // d root = -d value / slope, with d value = sum_i share_i (d lw_i + mu d e_i).
+  const double along = norm * std::exp(root);  // |q| lambda
+  out.value = norm - along;
+  for (int i = 0; i < 3; ++i) {
+    const double d_root_d_lw = -shares[i] / slope;
+    const double d_lw_d_q = e[i] * q[i] / (x[i] * x[i] * s[i]);
+    out.d_shape[i] = -along * d_root_d_lw * (-d_lw_d_q * q[i] / x[i]);
+    out.d_shape[3 + i] = -along * d_root_d_lw * (lw[i] / e[i] + mu);  // lw_i / e_i = log s_i / 2
+    out.d_q[i] = (1.0 - along / norm) * q[i] / norm - along * d_root_d_lw * d_lw_d_q;
+  }
+  return out;
 }
 
 /// A point on the surface of every superquadric, whatever its sizes and exponents: the signed
@@ -142,35 +196,72 @@ void placeSample(const T* x, const SurfaceSample& w, T* p) {
   for (int i = 0; i < 3; ++i) p[i] += x[6 + i];
 }
 
-/// Eq. 5's residuals of all points of one shape in one block: the bounds' transform and the
-/// rotation are computed once per evaluation instead of once per point.
-struct DistortionResiduals {
-  Points3 points;
-  double weight;  // sqrt(lambda / N)
-  Bounds lo;
-  double volume_exponent;  // of a1 a2 a3 in the squared residuals' weight (eq. 5: 0.5)
-  template <typename T>
-  bool operator()(const T* u, T* r) const {
-    T x[kParams];
-    toShape(u, lo, x);
-    T R[9];  // column-major: table from object
-    ceres::AngleAxisToRotationMatrix(&x[9], R);
-    const T w = T(weight) * pow(x[0] * x[1] * x[2], 0.5 * volume_exponent);
-    for (size_t k = 0; k < points.size(); ++k) {
-      const T d[3] = {points[k].x() - x[6], points[k].y() - x[7], points[k].z() - x[8]};
-      T q[3];
+/// Eq. 5's residuals of all points of one shape in one block, with an analytic Jacobian: the
+/// bounds' transform, the rotation and its derivatives are computed once per evaluation, and
+/// each point costs a few logarithms and exponentials on plain numbers rather than dual numbers
+/// carrying 12 derivatives through every operation.
+class DistortionCost : public ceres::CostFunction {
+ public:
+  DistortionCost(Points3 points, double weight, const Bounds& lo, double volume_exponent)
+      : points_(std::move(points)), weight_(weight), lo_(lo), volume_exponent_(volume_exponent) {
+    set_num_residuals(static_cast<int>(points_.size()));
+    mutable_parameter_block_sizes()->push_back(kParams);
+  }
+
+  bool Evaluate(double const* const* parameters, double* r, double** jacobians) const override {
+    const double* u = parameters[0];
+    double x[kParams];
+    toShape(u, lo_, x);
+    // The rotation (column-major, table from object) with its derivatives in the angle-axis.
+    using Jet3 = ceres::Jet<double, 3>;
+    Jet3 aa[3], R[9];
+    for (int m = 0; m < 3; ++m) aa[m] = Jet3(x[9 + m], m);
+    ceres::AngleAxisToRotationMatrix(aa, R);
+    const double w = weight_ * std::pow(x[0] * x[1] * x[2], 0.5 * volume_exponent_);
+    double* J = jacobians ? jacobians[0] : nullptr;
+    // d x / d u of the bounded parameters (the rest are the solver's own).
+    double dx_du[6];
+    for (int i = 0; i < 6; ++i) {
+      const double range =
+          i < 3 ? lo_.max_scale - lo_.min_scale : lo_.max_exponent - lo_.min_exponent;
+      const double t = std::tanh(0.5 * u[i]);
+      dx_du[i] = 0.25 * range * (1.0 - t * t);
+    }
+    for (size_t k = 0; k < points_.size(); ++k) {
+      const double d[3] = {points_[k].x() - x[6], points_[k].y() - x[7], points_[k].z() - x[8]};
+      double q[3];
       for (int i = 0; i < 3; ++i)
-        q[i] = R[3 * i] * d[0] + R[3 * i + 1] * d[1] + R[3 * i + 2] * d[2];
-      r[k] = w * localRayDistance(x, q);
+        q[i] = R[3 * i].a * d[0] + R[3 * i + 1].a * d[1] + R[3 * i + 2].a * d[2];
+      const LocalDistance ld = localDistanceWithDerivatives(x, q);
+      r[k] = w * ld.value;
+      if (!J) continue;
+      double* row = J + k * kParams;
+      for (int i = 0; i < 3; ++i) {
+        const double d_volume = ld.value * w * 0.5 * volume_exponent_ / x[i];
+        row[i] = (w * ld.d_shape[i] + d_volume) * dx_du[i];
+        row[3 + i] = w * ld.d_shape[3 + i] * dx_du[3 + i];
+      }
+      for (int j = 0; j < 3; ++j) {  // translation: d q_i / d t_j = -R(j, i)
+        double sum = 0.0;
+        for (int i = 0; i < 3; ++i) sum -= ld.d_q[i] * R[3 * i + j].a;
+        row[6 + j] = w * sum;
+      }
+      for (int m = 0; m < 3; ++m) {  // angle-axis: d q_i / d aa_m = sum_j d R(j, i) / d aa_m d_j
+        double sum = 0.0;
+        for (int i = 0; i < 3; ++i)
+          sum += ld.d_q[i] *
+                 (R[3 * i].v[m] * d[0] + R[3 * i + 1].v[m] * d[1] + R[3 * i + 2].v[m] * d[2]);
+        row[9 + m] = w * sum;
+      }
     }
     return true;
   }
-  static ceres::CostFunction* Create(Points3 points, double weight, const Bounds& lo,
-                                     double volume_exponent) {
-    const int n = static_cast<int>(points.size());
-    return new ceres::AutoDiffCostFunction<DistortionResiduals, ceres::DYNAMIC, kParams>(
-        new DistortionResiduals{std::move(points), weight, lo, volume_exponent}, n);
-  }
+
+ private:
+  Points3 points_;
+  double weight_;  // sqrt(lambda / N)
+  Bounds lo_;
+  double volume_exponent_;  // of a1 a2 a3 in the squared residuals' weight (eq. 5: 0.5)
 };
 
 struct CollisionResidual {  // sample q of shape j penetrating shape i
@@ -275,8 +366,7 @@ Params fromSolver(const Params& u, const FitConfig& c) {
 void addDistortion(ceres::Problem* problem, double* x, const Points3& points, double lambda,
                    const Bounds& lo, double volume_exponent = 0.5) {
   const double weight = std::sqrt(lambda / points.size());
-  problem->AddResidualBlock(DistortionResiduals::Create(points, weight, lo, volume_exponent),
-                            nullptr, x);
+  problem->AddResidualBlock(new DistortionCost(points, weight, lo, volume_exponent), nullptr, x);
 }
 
 // One point per cell of a cubic grid whose cell is chosen so that about `target` cells are
@@ -702,6 +792,18 @@ std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Poi
   const std::vector<SuperquadricShape> refined = refineJointly(pts, shapes, c);
   for (size_t k = 0; k < index.size(); ++k) fits[index[k]] = refined[k];
   return fits;
+}
+
+void distortionResiduals(const Points3& points, const FitConfig& c, double volume_exponent,
+                         const std::array<double, 12>& u, std::vector<double>* residuals,
+                         std::vector<double>* jacobian) {
+  const DistortionCost cost(points, std::sqrt(1.0 / points.size()), solverBounds(c),
+                            volume_exponent);
+  residuals->assign(points.size(), 0.0);
+  jacobian->assign(points.size() * kParams, 0.0);
+  const double* parameters[] = {u.data()};
+  double* jacobians[] = {jacobian->data()};
+  cost.Evaluate(parameters, residuals->data(), jacobians);
 }
 
 double collisionCost(const SuperquadricShape& a, const SuperquadricShape& b, int samples) {
