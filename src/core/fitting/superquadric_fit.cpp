@@ -8,6 +8,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <random>
 #include <stdexcept>
 #include <tuple>
@@ -73,15 +74,26 @@ T logSumExp(const T* log_w, const T* e, const T& mu, T* slope, T* shares = nullp
   return top + log(sum);
 }
 
-/// Newton steps on h(mu) = logSumExp(log_w, e, mu) = 0 from *mu until |h| < 1e-13 (at the
-/// start for equal exponents) or 8 steps; returns h at the last *mu, its slope and the terms'
-/// shares there.
-double newtonOnLogSumExp(const double* log_w, const double* e, double* mu, double* slope,
-                         double* shares = nullptr) {
+/// The ray's root on plain numbers: mu = log(lambda) where h(mu) = log sum_i |q_i/a_i|^e_i
+/// exp(mu e_i) = 0, by Newton on the convex log-sum-exp from the equal-exponent solution until
+/// |h| < 1e-13 (at once for equal exponents) or 8 steps; with h, its slope and the terms' shares
+/// at the last mu.
+struct RayRoot {
+  double mu, value, slope, shares[3];
+};
+
+/// `log_w` are log |q_i/a_i|^e_i, `norm` is |q|. None when the ray has no direction (q at the
+/// centre) or q is so deep inside that the terms underflow: the callers then report the
+/// smallest semi-axis, a lower bound of the depth.
+std::optional<RayRoot> rayRoot(const double* log_w, const double* e, double norm) {
+  const double log_f = logSumExp(log_w, e, 0.0, static_cast<double*>(nullptr));
+  if (norm < 1e-7 || log_f < -27.6) return std::nullopt;
+  RayRoot r;
+  r.mu = -log_f / ((e[0] + e[1] + e[2]) / 3.0);
   for (int it = 0;; ++it) {
-    const double value = logSumExp(log_w, e, *mu, slope, shares);
-    if (std::abs(value) < 1e-13 || it == 8) return value;
-    *mu -= value / *slope;
+    r.value = logSumExp(log_w, e, r.mu, &r.slope, r.shares);
+    if (std::abs(r.value) < 1e-13 || it == 8) return r;
+    r.mu -= r.value / r.slope;
   }
 }
 
@@ -99,26 +111,19 @@ T localRayDistance(const T* x, const T* q) {
     e_v[i] = valueOf(x[3 + i]);
   }
   const T norm = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + T(1e-18));
-  const double log_f = logSumExp(lw_v, e_v, 0.0, static_cast<double*>(nullptr));
-  if (norm < T(1e-7) || log_f < -27.6) {
-    // At the centre the ray has no direction: any point there is deep inside; report the
-    // smallest semi-axis, a lower bound of its depth.
+  const std::optional<RayRoot> root = rayRoot(lw_v, e_v, valueOf(norm));
+  if (!root) {
     T smallest = x[0];
     if (x[1] < smallest) smallest = x[1];
     if (x[2] < smallest) smallest = x[2];
     return -smallest;
   }
-  // Solve log sum_i |q_i/a_i|^e_i exp(mu e_i) = 0 for mu = log(lambda): Newton on the convex
-  // log-sum-exp, started from the equal-exponent solution, on plain numbers; then one more step
-  // in T. At the root that step's derivatives are the implicit function's (d mu = -dh / h'),
-  // so the derivatives are exact while the solver's dual numbers go through one evaluation
-  // instead of one per step.
-  double mu_v = -log_f / ((e_v[0] + e_v[1] + e_v[2]) / 3.0);
-  double slope_v;
-  newtonOnLogSumExp(lw_v, e_v, &mu_v, &slope_v);
+  // The root on plain numbers, then one more Newton step in T. At the root that step's
+  // derivatives are the implicit function's (d mu = -dh / h'), so the derivatives are exact
+  // while the solver's dual numbers go through one evaluation instead of one per step.
   T slope;
-  const T value = logSumExp(lw, &x[3], T(mu_v), &slope);
-  const T mu = T(mu_v) - value / slope;
+  const T value = logSumExp(lw, &x[3], T(root->mu), &slope);
+  const T mu = T(root->mu) - value / slope;
   return norm * (T(1.0) - exp(mu));
 }
 
@@ -151,24 +156,22 @@ LocalDistance localDistanceWithDerivatives(const double* x, const double* q) {
   }
   const double norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + 1e-18);
   const double* e = &x[3];
-  const double log_f = logSumExp(lw, e, 0.0, static_cast<double*>(nullptr));
-  if (norm < 1e-7 || log_f < -27.6) {
+  const std::optional<RayRoot> r = rayRoot(lw, e, norm);
+  if (!r) {
     const int k = static_cast<int>(std::min_element(x, x + 3) - x);
     out.value = -x[k];
     out.d_shape[k] = -1.0;
     return out;
   }
-  double mu = -log_f / ((e[0] + e[1] + e[2]) / 3.0), slope, shares[3];
-  const double value = newtonOnLogSumExp(lw, e, &mu, &slope, shares);
-  const double root = mu - value / slope;
+  const double root = r->mu - r->value / r->slope;
   // d root = -d value / slope, with d value = sum_i share_i (d lw_i + mu d e_i).
   const double along = norm * std::exp(root);  // |q| lambda
   out.value = norm - along;
   for (int i = 0; i < 3; ++i) {
-    const double d_root_d_lw = -shares[i] / slope;
+    const double d_root_d_lw = -r->shares[i] / r->slope;
     const double d_lw_d_q = e[i] * q[i] / (x[i] * x[i] * s[i]);
     out.d_shape[i] = -along * d_root_d_lw * (-d_lw_d_q * q[i] / x[i]);
-    out.d_shape[3 + i] = -along * d_root_d_lw * (lw[i] / e[i] + mu);  // lw_i / e_i = log s_i / 2
+    out.d_shape[3 + i] = -along * d_root_d_lw * (lw[i] / e[i] + r->mu);  // lw_i / e_i = log s_i / 2
     out.d_q[i] = (1.0 - along / norm) * q[i] / norm - along * d_root_d_lw * d_lw_d_q;
   }
   return out;
