@@ -11,6 +11,7 @@ The scene is the latest ObjectArray the grasp server received (launch/grasps.lau
 """
 import argparse
 import json
+import os
 import sys
 
 import rospy
@@ -46,6 +47,16 @@ def main():
     parser.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the service")
     parser.add_argument("--json", help="also write the response to this file")
     args = parser.parse_args(rospy.myargv()[1:])
+    # The request's counts are unsigned: a negative one is an argument error, not a traceback.
+    for name in ("candidates", "hypotheses", "rows"):
+        if getattr(args, name) < 0:
+            parser.error("--%s must be >= 0, not %d" % (name, getattr(args, name)))
+    if not args.timeout > 0:
+        parser.error("--timeout must be > 0 s")
+    if args.json:  # fail before the ranking, not after it
+        folder = os.path.dirname(os.path.abspath(args.json))
+        if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
+            parser.error("--json %s: %s is not a writable directory" % (args.json, folder))
     rospy.init_node("rank_grasps_client", anonymous=True)
     service = "/%s/grasps/rank_grasps" % args.camera
     req = RankGraspsRequest(candidates=args.candidates, pull_distance_m=args.pull_distance,
@@ -62,9 +73,12 @@ def main():
         req.target_id = max(scene.objects, key=lambda o: o.superquadric.pose.position.z).id
     else:
         try:
-            req.target_id = int(args.target)
+            target = int(args.target)
         except ValueError:
-            sys.exit("rank_grasps: --target must be an object id or 'top', not %r" % args.target)
+            target = -1
+        if target < 0:
+            sys.exit("rank_grasps: --target must be an object id (>= 0) or 'top', not %r" % args.target)
+        req.target_id = target
     try:
         rospy.wait_for_service(service, timeout=args.timeout)
         res = rospy.ServiceProxy(service, RankGrasps)(req)
@@ -76,7 +90,7 @@ def main():
         req.target_id, res.message, res.pulls, res.hypotheses_used, res.time_s))
     print(table(res, args.rows))
     if args.json:
-        with open(args.json, "w") as f:
+        with open(args.json, "w") as f:  # checked above; a disk that fills still raises
             json.dump({"target_id": req.target_id, "frame": res.header.frame_id,
                        "message": res.message,
                        "baseline_displacement_m": list(res.baseline_displacement_m),

@@ -2,8 +2,11 @@
 
 #include <unistd.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
+
+#include <H5Cpp.h>
 
 #include "simstack/dataset/dataset.h"
 #include "simstack/io/staged_output.h"
@@ -73,6 +76,51 @@ TEST(Dataset, ClearErrorsNameTheFile) {
       (std::filesystem::temp_directory_path() / "simstack_not_hdf5.h5").string();
   { std::ofstream(path) << "not a dataset"; }
   EXPECT_THROW(DatasetReader{path}, std::runtime_error);
+  std::filesystem::remove(path);
+}
+
+// A file whose attributes disagree with its arrays' shapes (hand-edited, or written by another
+// tool) is refused when opened, naming what disagrees, before any read could overrun a buffer.
+TEST(Dataset, ArraysThatDisagreeWithTheAttributesAreRefused) {
+  const std::string path =
+      (std::filesystem::temp_directory_path() / "simstack_test_dataset_shapes.h5").string();
+  DatasetInfo info;
+  info.num_scenes = 1;
+  info.resolution = 16;
+  info.extent_m = 0.64;
+  info.truncation_m = 0.12;
+  info.max_objects_per_scene = 4;
+  const auto rewrite = [&](const char* name, auto value) {
+    {
+      DatasetWriter writer(path, info);
+      const Scene s = PileGenerator{PileConfig()}.generate(5).scene;
+      const GridSpec g = GridSpec::sceneGrid(s.surfaceCentroid().head<2>(), 0.64, 16);
+      writer.write(0, s, computeGroundTruth(s, g, info.truncation_m));
+    }
+    H5::H5File file(path, H5F_ACC_RDWR);
+    H5::Attribute attribute = file.openGroup("/").openAttribute(name);
+    attribute.write(attribute.getDataType(), &value);
+  };
+  const auto expectRefused = [&](const std::string& words) {
+    try {
+      DatasetReader reader(path);
+      ADD_FAILURE() << "opened a file whose " << words;
+    } catch (const std::runtime_error& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(path), std::string::npos) << what;
+      EXPECT_NE(what.find(words), std::string::npos) << what;
+    }
+  };
+  rewrite("max_objects_per_scene", int64_t{2});
+  expectRefused("objects has shape [1, 4, 15], expected [1, 2, 15]");
+  rewrite("resolution", int64_t{8});
+  expectRefused("tsdf has shape [1, 16, 16, 16], expected [1, 8, 8, 8]");
+  rewrite("extent_m", 0.0);
+  expectRefused("extent_m");
+  rewrite("truncation_m", std::nan(""));
+  expectRefused("truncation_m");
+  rewrite("max_objects_per_scene", int64_t{4});
+  EXPECT_EQ(DatasetReader(path).read(0).grid.resolution, 16);
   std::filesystem::remove(path);
 }
 

@@ -131,6 +131,9 @@ done
 sed "s|^perception:|perception:\n  samples: 100000|; s|model: models/|model: $pkg/models/|" \
   "$pkg/config/perception.yaml" > "$dir/samples.yaml"
 expect "samples: 100000" "samples must lie in" "$reconstruct" --config "$dir/samples.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
+sed "s|model: models/|model: $pkg/models/|" "$pkg/config/perception.yaml" > "$dir/gamma.yaml"
+printf 'hough:\n  gamma: .nan\n' >> "$dir/gamma.yaml"
+expect "hough gamma .nan" "hough.gamma" "$reconstruct" --config "$dir/gamma.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
 sed "s|threads: 2 |threads: 1000|; s|model: models/|model: $pkg/models/|" "$pkg/config/perception.yaml" > "$dir/threads.yaml"
 succeed "threads: 1000 in a config (capped)" "$reconstruct" --config "$dir/threads.yaml" --depth "$good" --intrinsics $K --output "$dir/othreads"
 
@@ -168,6 +171,9 @@ sed 's/validation_scenes: [0-9]*/validation_scenes: 1/' "$(dirname "$0")/../conf
 "$bin/simstack_generate" --scenes 2 --seed 6 --output "$dir/two.h5" > /dev/null
 expect "train --resume without a checkpoint" "no checkpoint" "$bin/simstack_train" --dataset "$dir/two.h5" \
   --config "$train_config" --output "$dir/run" --resume
+sed 's/learning_rate:/lerning_rate:/' "$train_config" > "$dir/typo.yaml"
+expect "training config with a misspelt field" "unknown field training.lerning_rate" \
+  "$bin/simstack_train" --dataset "$dir/two.h5" --config "$dir/typo.yaml" --output "$dir/run_typo"
 head -c 3000 "$dir/d.h5" > "$dir/cut.h5"
 expect "train on a truncated dataset" "cut.h5" "$bin/simstack_train" --dataset "$dir/cut.h5" \
   --config "$train_config" --output "$dir/run2"

@@ -2,8 +2,11 @@
 #include <gtest/gtest.h>
 
 #include <array>
+#include <cmath>
+#include <limits>
 #include <map>
 #include <random>
+#include <string>
 
 #include "simstack/instances/convex_split.h"
 #include "simstack/instances/hough_voting.h"
@@ -247,6 +250,23 @@ TEST(HoughVoting, EmptySceneAndBadInput) {
   other.resolution = 8;
   EXPECT_THROW(houghInstances(Grid3<float>(g, 0.06f), Grid3<Vec3f>(other, Vec3f::Zero())),
                std::invalid_argument);
+  // A weight that is not a finite number would leave voxels with no centre; it is refused by
+  // name before any voxel is touched.
+  Grid3<float> tsdf(g, 0.06f);
+  for (int i = 0; i < 50; ++i) tsdf.data[2000 + i] = -0.01f;
+  for (double gamma : {std::nan(""), std::numeric_limits<double>::infinity(), 1e308, -1.0}) {
+    HoughConfig config;
+    config.gamma = gamma;
+    try {
+      houghInstances(tsdf, Grid3<Vec3f>(g, Vec3f(1, 0, 0)), config);
+      ADD_FAILURE() << "gamma " << gamma << " accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("hough.gamma"), std::string::npos) << e.what();
+    }
+  }
+  HoughConfig no_bandwidth;
+  no_bandwidth.bandwidth_m = std::nan("");
+  EXPECT_THROW(no_bandwidth.validate(), std::invalid_argument);
 }
 
 TEST(HoughVoting, ZeroVotesDoNotCrash) {

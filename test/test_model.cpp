@@ -1228,3 +1228,33 @@ TEST(CvaeConfig, RoundTripsThroughYaml) {
   EXPECT_THROW(CvaeConfig::fromYaml("occupancy_weight: -1"), std::invalid_argument);
   EXPECT_THROW(CvaeConfig::fromYaml("occupancy_sharpness: 0"), std::invalid_argument);
 }
+
+TEST(CvaeConfig, TrainingFilesRejectMisspeltFieldsAndNameThem) {
+  const std::string dir = testing::TempDir() + "/train_yaml";
+  fs::create_directories(dir);
+  for (const char* shipped : {"config/train_r32.yaml", "config/train_r64_gpu.yaml"}) {
+    CvaeConfig model;
+    TrainConfig training;
+    EXPECT_NO_THROW(
+        loadTrainingYaml(std::string(SIMSTACK_SOURCE_DIR) + "/" + shipped, &model, &training))
+        << shipped;
+  }
+  const auto expectError = [&](const std::string& text, const std::string& words) {
+    const std::string path = dir + "/bad.yaml";
+    std::ofstream(path) << text;
+    CvaeConfig model;
+    TrainConfig training;
+    try {
+      loadTrainingYaml(path, &model, &training);
+      ADD_FAILURE() << "accepted: " << text;
+    } catch (const std::runtime_error& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(path), std::string::npos) << what;
+      EXPECT_NE(what.find(words), std::string::npos) << what;
+    }
+  };
+  expectError("model:\n  latnet_size: 8\n", "unknown field model.latnet_size");
+  expectError("training:\n  lerning_rate: 0.1\n", "unknown field training.lerning_rate");
+  expectError("trainig:\n  steps: 3\n", "unknown section 'trainig'");
+  expectError("training: 3\n", "'training' must be a map");
+}

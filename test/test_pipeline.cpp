@@ -175,19 +175,36 @@ TEST(TablePlane, FailsClearlyWithoutDepth) {
   EXPECT_THROW(estimateTablePlane(DepthImage(10, 10, 1.0f), camera), std::invalid_argument);
 }
 
-TEST(Decompose, GroundTruthGridsGiveOneFittedShapePerObject) {
-  // Exact votes: the Hough setting for sharp votes (the shipped default is chosen for the
-  // shipped model's blunter ones, and splits one of these five piles' objects in two).
+/// A generated pile with its ground-truth TSDF and votes as the network's output would be.
+struct TruePile {
+  explicit TruePile(uint64_t seed)
+      : scene(PileGenerator(PileConfig()).generate(seed).scene),
+        grid(GridSpec::sceneGrid(scene.surfaceCentroid().head<2>(), 0.64, 32)) {
+    const GroundTruthGrids gt = computeGroundTruth(scene, grid, 3 * grid.voxel_size_m);
+    h.tsdf_m = gt.tsdf;
+    h.votes = gt.votes;
+  }
+  Scene scene;
+  GridSpec grid;
+  SceneHypothesis h;  ///< not yet decomposed
+};
+
+/// Exact votes: the Hough setting for sharp votes (the shipped default is chosen for the
+/// shipped model's blunter ones, and splits one of the first five piles' objects in two).
+PerceptionConfig sharpVotesConfig() {
   PerceptionConfig config;
   config.hough.min_traversals = 5;
   config.hough.bandwidth_m = 0.07;
+  return config;
+}
+
+TEST(Decompose, GroundTruthGridsGiveOneFittedShapePerObject) {
+  const PerceptionConfig config = sharpVotesConfig();
   for (uint64_t seed : {1, 2, 3, 4, 5}) {
-    const Scene scene = PileGenerator(PileConfig()).generate(seed).scene;
-    const GridSpec grid = GridSpec::sceneGrid(scene.surfaceCentroid().head<2>(), 0.64, 32);
-    const GroundTruthGrids gt = computeGroundTruth(scene, grid, 3 * grid.voxel_size_m);
-    SceneHypothesis h;
-    h.tsdf_m = gt.tsdf;
-    h.votes = gt.votes;
+    TruePile pile(seed);
+    const Scene& scene = pile.scene;
+    const GridSpec& grid = pile.grid;
+    SceneHypothesis& h = pile.h;
     StageTimings timings;
     decompose(&h, config, &timings);
     ASSERT_TRUE(h.decomposed);
@@ -204,6 +221,56 @@ TEST(Decompose, GroundTruthGridsGiveOneFittedShapePerObject) {
     }
     EXPECT_GT(timings.fitting_ms, 0.0);
   }
+}
+
+// The label grid numbers voxels by the reported instances (label k is instances[k]), also when
+// an instance is dropped: here the largest (Hough's label 0), its centre put outside the
+// workspace by a bound along x or y.
+TEST(Decompose, LabelsNameTheReportedInstancesWhenOneIsDropped) {
+  const PerceptionConfig config = sharpVotesConfig();
+  for (uint64_t seed = 1; seed <= 10; ++seed) {
+    const TruePile pile(seed);
+    const GridSpec& grid = pile.grid;
+    SceneHypothesis all = pile.h;
+    decompose(&all, config, nullptr);
+    if (all.instances.size() < 3) continue;
+    // An axis along which instance 0 lies beyond every other by a centimetre.
+    const Vec3 dropped = all.instances[0].vote_centre;
+    PerceptionConfig cut = config;
+    for (int axis = 0; axis < 2; ++axis) {
+      double lowest = 1e9, highest = -1e9;
+      for (size_t k = 1; k < all.instances.size(); ++k) {
+        lowest = std::min(lowest, all.instances[k].vote_centre[axis]);
+        highest = std::max(highest, all.instances[k].vote_centre[axis]);
+      }
+      if (dropped[axis] > highest + 0.01) cut.workspace.max_m[axis] = dropped[axis] - 0.005;
+      if (dropped[axis] < lowest - 0.01) cut.workspace.min_m[axis] = dropped[axis] + 0.005;
+    }
+    if (!cut.workspace.bounded()) continue;
+    SceneHypothesis h = pile.h;
+    decompose(&h, cut, nullptr);
+    ASSERT_EQ(h.instances.size(), all.instances.size() - 1) << "seed " << seed;
+    std::vector<Vec3> sum(h.instances.size(), Vec3::Zero());
+    std::vector<int> count(h.instances.size(), 0);
+    for (int i = 0; i < grid.voxelCount(); ++i) {
+      const int l = h.labels.data[i];
+      if (l < 0) continue;
+      ASSERT_LT(l, static_cast<int>(h.instances.size())) << "seed " << seed;
+      const Vec3i v = grid.unravel(i);
+      sum[l] += grid.voxelCentre(v.x(), v.y(), v.z());
+      ++count[l];
+    }
+    for (size_t k = 0; k < h.instances.size(); ++k) {
+      ASSERT_GT(count[k], 0) << "instance " << k << " has no voxel";
+      const Vec3 centre = sum[k] / count[k];
+      for (size_t j = 0; j < h.instances.size(); ++j)
+        EXPECT_LE((centre - h.instances[k].vote_centre).norm(),
+                  (centre - h.instances[j].vote_centre).norm())
+            << "seed " << seed << ": label " << k << " lies nearer instance " << j;
+    }
+    return;
+  }
+  FAIL() << "no pile of seeds 1-10 has its largest instance outermost along x or y";
 }
 
 TEST(ScenePerception, PerceivesARenderedPile) {

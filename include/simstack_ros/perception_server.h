@@ -60,6 +60,11 @@ class PerceptionServer {
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   bool saveOctomap(SaveOctomap::Request& req, SaveOctomap::Response& res);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+  /// Once a second (wall time): diagnostics, and a warning when no frame has come for
+  /// node/input_timeout_s.
+  void onWallTimer();
+  /// Seconds without a frame, or 0 while frames come within input_timeout_s (mutex_ held).
+  double silenceSeconds(const ros::WallTime& now) const;
   void onSettings(LiveSettingsConfig& settings, uint32_t level);
   /// Applies settings changed by dynamic_reconfigure (worker thread, between frames).
   void applySettings();
@@ -79,7 +84,8 @@ class PerceptionServer {
   diagnostic_updater::Updater diagnostics_;
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<LiveSettingsConfig>> reconfigure_;
-  ros::Timer diagnostics_timer_;
+  /// Wall time: simulated time stops with a bag and jumps back when it loops.
+  ros::WallTimer diagnostics_timer_;
 
   std::mutex mutex_;  ///< guards the mailbox, the counters, the last scene and the views
   std::condition_variable wake_;
@@ -89,6 +95,9 @@ class PerceptionServer {
   std::string last_error_, last_kind_;
   bool failing_ = false;  ///< the last frame was skipped
   ros::WallTime last_warning_;
+  ros::WallTime started_, last_arrival_;  ///< when the node started; when the last frame came
+  ros::WallTime last_silence_warning_;    ///< zero while frames arrive
+  ros::Time last_stamp_;                  ///< stamp of the last frame taken by the worker
   long processed_before_ = 0;
   ros::WallTime rate_since_;
   int decompose_samples_ = 1;  ///< as configured at start (samples may change live)

@@ -4,7 +4,10 @@
 
 #include <chrono>
 #include <cmath>
+#include <set>
+#include <sstream>
 #include <stdexcept>
+#include <string>
 
 #include "simstack_ros/grasp_conversions.h"
 
@@ -12,6 +15,26 @@ namespace simstack {
 namespace {
 
 bool positiveFinite(double v) { return std::isfinite(v) && v > 0.0; }
+
+/// A number as a person writes it: 0.1, 2, nan (std::to_string gives 0.100000 and -nan).
+std::string number(double v) {
+  if (std::isnan(v)) return "nan";
+  std::ostringstream out;
+  out << v;
+  return out.str();
+}
+
+/// Why a scene's objects cannot be told apart by id or placed ("" when they can).
+std::string badIds(const ObjectArray& scene) {
+  if (scene.header.frame_id.empty())
+    return "the scene has no header.frame_id: its poses are in no known frame";
+  std::set<uint32_t> seen;
+  for (const Object& o : scene.objects)
+    if (!seen.insert(o.id).second)
+      return "object id " + std::to_string(o.id) +
+             " appears twice in the scene: ids must be unique";
+  return "";
+}
 
 }  // namespace
 
@@ -40,9 +63,20 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
     std::lock_guard<std::mutex> lock(latest_mutex_);
     scene = latest_;
   }
-  if (!scene || scene->objects.empty()) {
-    res.message = "the request has no objects and no scene with objects has arrived on " +
-                  nh_.resolveName(config_.objects_topic) + " yet";
+  const std::string topic = nh_.resolveName(config_.objects_topic);
+  if (!scene) {
+    res.message = "the request has no objects and no scene has arrived on " + topic + " yet";
+    return false;
+  }
+  if (scene->objects.empty()) {
+    res.message = "the request has no objects and the latest scene on " + topic + " (stamp " +
+                  number(scene->header.stamp.toSec()) + " s) has none either";
+    return false;
+  }
+  if (const std::string why = badIds(*scene); !why.empty()) {
+    res.message = (req.scene.objects.empty() ? "the latest scene on " + topic + ": "
+                                             : std::string("the request's scene: ")) +
+                  why;
     return false;
   }
   res.header = scene->header;
@@ -58,21 +92,25 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
     return false;
   }
   if (!positiveFinite(req.pull_distance_m) || req.pull_distance_m > config_.max_pull_distance_m) {
-    res.message = "pull_distance_m must lie in (0, " + std::to_string(config_.max_pull_distance_m) +
-                  "] m, not " + std::to_string(req.pull_distance_m) + " (e.g. 0.10)";
+    res.message = "pull_distance_m must lie in (0, " + number(config_.max_pull_distance_m) +
+                  "] m, not " + number(req.pull_distance_m) + " (e.g. 0.1)";
     return false;
   }
   if (!positiveFinite(req.pull_speed_mps) || req.pull_speed_mps > 2.0) {
-    res.message = "pull_speed_mps must lie in (0, 2] m/s, not " +
-                  std::to_string(req.pull_speed_mps) + " (e.g. 0.20)";
+    res.message =
+        "pull_speed_mps must lie in (0, 2] m/s, not " + number(req.pull_speed_mps) + " (e.g. 0.2)";
     return false;
   }
   const int wanted =
       req.hypotheses == 0 ? 1 : static_cast<int>(std::min<uint32_t>(req.hypotheses, 64));
   *scenes = graspScenes(*scene, wanted);  // throws for a bad pose (caught by rank())
-  for (const auto& s : *scenes)
-    if (const std::string why = checkScene(s); !why.empty()) {
-      res.message = why;
+  for (size_t h = 0; h < scenes->size(); ++h)
+    if (const std::string why = checkScene((*scenes)[h]); !why.empty()) {
+      // checkScene counts objects in the message's order, from 0.
+      res.message =
+          (h == 0 ? std::string("the scene's ")
+                  : "hypothesis " + std::to_string(h) + " (of the scene's hypotheses), ") +
+          why;
       return false;
     }
   std::string notes;

@@ -70,8 +70,9 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   save_srv_ = pnh_.advertiseService("save_octomap", &PerceptionServer::saveOctomap, this);
   diagnostics_.setHardwareID("simstack_perception");
   diagnostics_.add("perception", this, &PerceptionServer::diagnose);
-  diagnostics_timer_ = nh_.createTimer(ros::Duration(1.0),
-                                       [this](const ros::TimerEvent&) { diagnostics_.update(); });
+  started_ = ros::WallTime::now();
+  diagnostics_timer_ = nh_.createWallTimer(ros::WallDuration(1.0),
+                                           [this](const ros::WallTimerEvent&) { onWallTimer(); });
   decompose_samples_ = perception_->config().decompose_samples;
   LiveSettingsConfig live = liveSettings(perception_->config());
   live.occupancy_min = node_.occupancy_min;
@@ -110,19 +111,22 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
 }
 
 PerceptionServer::~PerceptionServer() {
-  // Nothing may call back into this object once its state starts going away.
-  depth_sub_.shutdown();
-  mask_sub_.shutdown();
-  diagnostics_timer_.stop();
-  reset_srv_.shutdown();
-  save_srv_.shutdown();
-  reconfigure_.reset();
+  // The worker first: it uses the subscriber and the reconfigure server while it finishes a
+  // frame. Callbacks arriving meanwhile only touch the mailbox and settings under the lock.
   {
     std::lock_guard<std::mutex> lock(mutex_);
     stop_ = true;
   }
   wake_.notify_all();
   if (worker_.joinable()) worker_.join();
+  // Then nothing may call back into this object once its state starts going away (the timer
+  // reads the subscriber's topic).
+  diagnostics_timer_.stop();
+  depth_sub_.shutdown();
+  mask_sub_.shutdown();
+  reset_srv_.shutdown();
+  save_srv_.shutdown();
+  reconfigure_.reset();
 }
 
 void PerceptionServer::onFrame(const sensor_msgs::ImageConstPtr& image,
@@ -130,6 +134,7 @@ void PerceptionServer::onFrame(const sensor_msgs::ImageConstPtr& image,
   {
     std::lock_guard<std::mutex> lock(mutex_);
     ++received_;
+    last_arrival_ = ros::WallTime::now();
     if (mailbox_) ++dropped_;
     mailbox_ = Frame{image, info};
   }
@@ -251,6 +256,17 @@ void PerceptionServer::process(const Frame& frame) {
   std::vector<DepthView> views;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    // A stamp older than the last frame's: a bag that restarted or loops, or a second
+    // publisher. The frame is perceived, but views of another time are not fused with it.
+    const ros::Time stamp = frame.image->header.stamp;
+    if (stamp < last_stamp_ && !views_.empty()) {
+      ROS_WARN(
+          "simstack perception: frame stamped %.3f s is %.3f s older than the last one on "
+          "%s (a bag restarted?): the accumulated views are cleared",
+          stamp.toSec(), (last_stamp_ - stamp).toSec(), depth_sub_.getTopic().c_str());
+      views_.clear();
+    }
+    last_stamp_ = stamp;
     if (reset_requested_) views_.clear();
     reset_requested_ = false;
     view.mask = mask_;  // a mask of another size makes perceive() refuse the frame
@@ -349,6 +365,38 @@ bool PerceptionServer::saveOctomap(SaveOctomap::Request& req, SaveOctomap::Respo
   return true;
 }
 
+double PerceptionServer::silenceSeconds(const ros::WallTime& now) const {
+  const double silent = (now - (received_ > 0 ? last_arrival_ : started_)).toSec();
+  return silent >= node_.input_timeout_s ? silent : 0.0;
+}
+
+void PerceptionServer::onWallTimer() {
+  const ros::WallTime now = ros::WallTime::now();
+  double silent = 0.0;
+  bool warn = false, resumed = false;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    silent = silenceSeconds(now);
+    // The first warning after input_timeout_s, then one every 30 s while it lasts.
+    if (silent > 0.0 &&
+        (last_silence_warning_.isZero() || (now - last_silence_warning_).toSec() >= 30.0)) {
+      warn = true;
+      last_silence_warning_ = now;
+    } else if (silent == 0.0 && !last_silence_warning_.isZero()) {
+      resumed = true;
+      last_silence_warning_ = ros::WallTime();
+    }
+  }
+  const std::string topics = depth_sub_.getTopic() + " and " + depth_sub_.getInfoTopic();
+  if (warn)
+    ROS_WARN(
+        "simstack perception: no depth frame on %s for %.0f s (is the camera running, and "
+        "its namespace the one given?)",
+        topics.c_str(), silent);
+  if (resumed) ROS_INFO("simstack perception: depth frames arrive again on %s", topics.c_str());
+  diagnostics_.force_update();
+}
+
 void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   std::lock_guard<std::mutex> lock(mutex_);
   const ros::WallTime now = ros::WallTime::now();
@@ -356,12 +404,20 @@ void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   const double rate = (processed_ - processed_before_) / seconds;
   rate_since_ = now;
   processed_before_ = processed_;
-  if (processed_ == 0 && skipped_ > 0)
+  const double silent = silenceSeconds(now);
+  if (silent > 0.0)
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
+                   "no depth frame for " + std::to_string(static_cast<int>(silent)) + " s on " +
+                       depth_sub_.getTopic());
+  else if (processed_ == 0 && skipped_ > 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "no frame processed: " + last_error_);
   else if (failing_)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "frames skipped: " + last_error_);
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "perceiving");
+  status.add("depth topic", depth_sub_.getTopic());
+  status.add("seconds since the last frame",
+             received_ > 0 ? (now - last_arrival_).toSec() : (now - started_).toSec());
   status.add("frames received", received_);
   status.add("frames processed", processed_);
   status.add("frames dropped (newer frame came first)", dropped_);

@@ -62,6 +62,8 @@ void NodeConfig::validate() const {
   if (table_frame.empty()) throw std::invalid_argument("node/table_frame is empty");
   if (!(tf_timeout_s >= 0.0 && tf_timeout_s <= 10.0))
     throw std::invalid_argument("node/tf_timeout_s must lie in [0, 10] s");
+  if (!(input_timeout_s >= 0.5 && input_timeout_s <= 3600.0))
+    throw std::invalid_argument("node/input_timeout_s must lie in [0.5, 3600] s");
   if (!(occupancy_min > 0.0 && occupancy_min <= 1.0))
     throw std::invalid_argument("node/occupancy_min must lie in (0, 1]");
   if (max_views < 1 || max_views > 64)
@@ -106,14 +108,16 @@ NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh) {
     if (given.getType() != XmlRpc::XmlRpcValue::TypeStruct)
       throw std::runtime_error(pnh.resolveName("node") + " must be a map of parameters");
     for (auto& kv : given)
-      if (!std::set<std::string>{"table_frame", "estimate_table", "tf_timeout_s", "image_transport",
-                                 "occupancy_min", "accumulate_views", "max_views", "output_dir"}
+      if (!std::set<std::string>{"table_frame", "estimate_table", "tf_timeout_s", "input_timeout_s",
+                                 "image_transport", "occupancy_min", "accumulate_views",
+                                 "max_views", "output_dir"}
                .count(kv.first))
         throw std::runtime_error("unknown parameter " + pnh.resolveName("node/" + kv.first));
   }
   pnh.param("node/table_frame", c.table_frame, c.table_frame);
   pnh.param("node/estimate_table", c.estimate_table, c.estimate_table);
   pnh.param("node/tf_timeout_s", c.tf_timeout_s, c.tf_timeout_s);
+  pnh.param("node/input_timeout_s", c.input_timeout_s, c.input_timeout_s);
   pnh.param("node/image_transport", c.image_transport, c.image_transport);
   pnh.param("node/occupancy_min", c.occupancy_min, c.occupancy_min);
   pnh.param("node/accumulate_views", c.accumulate_views, c.accumulate_views);

@@ -19,6 +19,7 @@ void writeJson(const std::string& path, const nlohmann::json& j) {
   std::ofstream f(path);
   if (!f) throw std::runtime_error("cannot write " + path);
   f << j.dump(1) << "\n";
+  f.close();  // a failed flush shows only here
   if (!f) throw std::runtime_error("cannot write " + path);
 }
 

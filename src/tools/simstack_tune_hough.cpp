@@ -148,6 +148,7 @@ int main(int argc, char** argv) {
       << scores.front().agreement << "\n# the perception: section of "
       << modelCardPath(pc.model_path) << "\n"
       << modelCardPerceptionYaml(pc.samples, scores.front().hough) << "\n";
+    f.close();  // a failed flush shows only here
     if (!f) throw std::runtime_error("cannot write " + output);
     std::cout << "\nchosen setting written to " << output << "\n";
     return 0;

@@ -95,7 +95,14 @@ class GraspService(unittest.TestCase):
                               (nan_position, "not finite")):
             self.expect_rejected(request(scene=self.scene_with(change)), words)
         self.expect_rejected(request(use_camera_pose=True), "camera_pose")  # all-zero quaternion
-        self.expect_rejected(request(), "no scene with objects", self.lonely)
+        self.expect_rejected(request(), "no scene has arrived", self.lonely)
+        twice = copy.deepcopy(self.scene)
+        self.assertGreater(len(twice.objects), 1)
+        twice.objects[1].id = twice.objects[0].id
+        self.expect_rejected(request(scene=twice), "appears twice")
+        nowhere = copy.deepcopy(self.scene)
+        nowhere.header.frame_id = ""
+        self.expect_rejected(request(scene=nowhere), "frame_id")
         res = self.rank(request())
         self.assertTrue(res.success, res.message)
         self.assertGreater(len(res.grasps), 0)

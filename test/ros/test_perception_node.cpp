@@ -397,8 +397,8 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
   ros::WallDuration(0.5).sleep();
   const DepthRenderer renderer(Scene::fromSuperquadrics(knownPile()));
   // The views fused for the frame of camera k (0 when no answer came within 60 s).
-  auto send = [&](int k) -> unsigned {
-    const ros::Time stamp = ros::Time::now();
+  auto send = [&](int k, double age_s = 0.0) -> unsigned {
+    const ros::Time stamp = ros::Time::now() - ros::Duration(age_s);
     sensor_msgs::Image img = imageMsg(renderer.render(camera_, poses[k]).depth, stamp);
     sensor_msgs::CameraInfo ci = infoMsg(stamp);
     img.header.frame_id = ci.header.frame_id = cameras[k].child_frame_id;
@@ -414,6 +414,11 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
   std_srvs::Empty empty;
   ASSERT_TRUE(ros::service::call("/accumulating/perception/reset", empty));
   EXPECT_EQ(send(0), 1u) << "~reset did not clear the views";
+  EXPECT_EQ(send(1), 2u);
+  // A frame stamped before the last one (a bag that restarted): perceived alone, the views of
+  // the other run cleared, and later frames fuse with it again.
+  EXPECT_EQ(send(2, 30.0), 1u) << "a frame from the past was fused with newer views";
+  EXPECT_EQ(send(3), 2u);
 }
 
 }  // namespace

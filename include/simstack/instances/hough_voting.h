@@ -40,6 +40,7 @@ struct HoughConfig {
   /// instance ends in at most 2^rounds parts.
   int split_max_rounds = 2;
   int threads = 2;
+  void validate() const;  ///< std::invalid_argument naming the field and its bad value
 };
 
 struct InstanceSegmentation {

@@ -2,9 +2,14 @@
 
 #include <H5Cpp.h>
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
 #include <mutex>
 #include <sstream>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "simstack/scene/mesh_catalogue.h"
 
@@ -87,6 +92,49 @@ void slab(const H5::DataSet& ds, int index, const H5::PredType& type, const void
   } else {
     ds.read(const_cast<void*>(data), type, mem_space, file_space);
   }
+}
+
+std::string shapeText(const std::vector<hsize_t>& dims) {
+  std::string s = "[";
+  for (size_t i = 0; i < dims.size(); ++i) s += (i ? ", " : "") + std::to_string(dims[i]);
+  return s + "]";
+}
+
+std::vector<hsize_t> shapeOf(const H5::DataSet& ds) {
+  const H5::DataSpace space = ds.getSpace();
+  std::vector<hsize_t> dims(static_cast<size_t>(std::max(0, space.getSimpleExtentNdims())));
+  if (!dims.empty()) space.getSimpleExtentDims(dims.data());
+  return dims;
+}
+
+hsize_t sceneCount(const H5::DataSet& tsdf) {
+  const std::vector<hsize_t> dims = shapeOf(tsdf);
+  if (dims.size() != 4) throw std::runtime_error("tsdf is not 4-dimensional");
+  if (dims[0] < 1 || dims[0] > static_cast<hsize_t>(std::numeric_limits<int>::max()))
+    throw std::runtime_error("tsdf holds " + std::to_string(dims[0]) + " scenes");
+  return dims[0];
+}
+
+void expectShape(const H5::DataSet& ds, const char* name, const std::vector<hsize_t>& expected) {
+  const std::vector<hsize_t> dims = shapeOf(ds);
+  if (dims != expected)
+    throw std::runtime_error(std::string(name) + " has shape " + shapeText(dims) + ", expected " +
+                             shapeText(expected) + " from the scene count and the attributes");
+}
+
+void checkAttributes(const DatasetInfo& info) {
+  if (info.resolution < 2 || info.resolution > 1024)
+    throw std::runtime_error("attribute resolution " + std::to_string(info.resolution) +
+                             " outside [2, 1024]");
+  if (!(std::isfinite(info.extent_m) && info.extent_m > 0))
+    throw std::runtime_error("attribute extent_m " + std::to_string(info.extent_m) +
+                             " is not a positive length");
+  if (!(std::isfinite(info.truncation_m) && info.truncation_m > 0))
+    throw std::runtime_error("attribute truncation_m " + std::to_string(info.truncation_m) +
+                             " is not a positive length");
+  if (info.max_objects_per_scene < 0 || info.max_objects_per_scene > 10000)
+    throw std::runtime_error("attribute max_objects_per_scene " +
+                             std::to_string(info.max_objects_per_scene) + " outside [0, 10000]");
 }
 
 std::string join(const std::vector<std::string>& v) {
@@ -232,15 +280,18 @@ DatasetReader::DatasetReader(const std::string& path, const std::string& mesh_di
     impl_->origin = impl_->file->openDataSet("grid_origin");
     impl_->count = impl_->file->openDataSet("num_objects");
     impl_->objects = impl_->file->openDataSet("objects");
-    hsize_t dims[4];
-    if (impl_->tsdf.getSpace().getSimpleExtentNdims() != 4)
-      throw std::runtime_error("tsdf is not 4-dimensional");
-    impl_->tsdf.getSpace().getSimpleExtentDims(dims);
-    info.num_scenes = static_cast<int>(dims[0]);
-    if (static_cast<int>(dims[1]) != info.resolution || dims[2] != dims[1] || dims[3] != dims[1]) {
-      throw std::runtime_error("tsdf shape does not match the resolution attribute " +
-                               std::to_string(info.resolution));
-    }
+    checkAttributes(info);
+    const hsize_t n = sceneCount(impl_->tsdf);
+    const hsize_t r = info.resolution, k = info.max_objects_per_scene;
+    // Every read fills a buffer sized from the attributes: a dataset of another shape would
+    // overrun it.
+    expectShape(impl_->tsdf, "tsdf", {n, r, r, r});
+    expectShape(impl_->votes, "votes", {n, 3, r, r, r});
+    expectShape(impl_->labels, "labels", {n, r, r, r});
+    expectShape(impl_->origin, "grid_origin", {n, 3});
+    expectShape(impl_->count, "num_objects", {n});
+    expectShape(impl_->objects, "objects", {n, k, kColumns});
+    info.num_scenes = static_cast<int>(n);
   } catch (const H5::Exception& e) {
     throw std::runtime_error("cannot read dataset " + path + ": " + e.getDetailMsg());
   } catch (const std::runtime_error& e) {

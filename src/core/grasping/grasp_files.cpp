@@ -97,6 +97,7 @@ void writeGraspJson(const std::string& path, const GraspRanking& r, int target_i
                     {"grasps", grasps}};
   std::ofstream f(path);
   f << doc.dump(1) << "\n";
+  f.close();  // a failed flush shows only here
   if (!f) throw std::runtime_error("cannot write " + path);
 }
 

@@ -137,7 +137,8 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
     out.message = "no sealable surface on the target: " + std::to_string(out.candidates.visible) +
                   " of " + std::to_string(out.candidates.surface_samples) + " samples seen, " +
                   std::to_string(out.candidates.reachable) + " reachable, none where a " +
-                  std::to_string(config.candidates.cup_radius_m * 1000.0) + " mm cup seals";
+                  std::to_string(std::lround(config.candidates.cup_radius_m * 1000.0)) +
+                  " mm cup seals";
     return out;
   }
   const int H = static_cast<int>(out.hypotheses.size());

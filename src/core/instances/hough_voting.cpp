@@ -16,6 +16,7 @@
 #include <memory>
 #include <numeric>
 #include <stdexcept>
+#include <string>
 
 namespace simstack {
 namespace {
@@ -249,16 +250,7 @@ void checkHoughInput(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
   if (!(tsdf_m.spec == votes.spec) || tsdf_m.data.size() != votes.data.size() ||
       static_cast<int>(tsdf_m.data.size()) != tsdf_m.spec.voxelCount())
     throw std::invalid_argument("houghInstances: the TSDF and the vote field must share a grid");
-  if (config.refinement < 1 || config.min_traversals < 0 || config.bandwidth_m <= 0)
-    throw std::invalid_argument(
-        "houghInstances: refinement >= 1, min_traversals >= 0 and "
-        "bandwidth_m > 0 are required");
-  if (config.split_below_solidity < 0 || config.split_below_solidity > 1 ||
-      config.split_accept_solidity <= 0 || config.split_accept_solidity > 1 ||
-      config.split_max_rounds < 0)
-    throw std::invalid_argument(
-        "houghInstances: split solidities in [0, 1] (accept > 0) and "
-        "split_max_rounds >= 0 are required");
+  config.validate();
   const double fine = static_cast<double>(tsdf_m.spec.resolution) * config.refinement;
   if (fine * fine * fine >= 4294967295.0)
     throw std::invalid_argument("houghInstances: resolution x refinement too large");
@@ -444,7 +436,10 @@ void assignToCentres(const GridSpec& g, const std::vector<int>& occupied,
       assignment[k] = best_n;
     }
     std::vector<int> counts(centres.size(), 0);
-    for (const int n : assignment) ++counts[n];
+    for (const int n : assignment) {
+      if (n < 0) throw std::logic_error("houghInstances: a voxel was assigned to no centre");
+      ++counts[n];
+    }
     std::vector<Vec3> kept;
     for (size_t n = 0; n < centres.size(); ++n)
       if (counts[n] >= config.min_instance_voxels) kept.push_back(centres[n]);
@@ -468,6 +463,31 @@ void assignToCentres(const GridSpec& g, const std::vector<int>& occupied,
 }
 
 }  // namespace
+
+void HoughConfig::validate() const {
+  const auto require = [](bool ok, const std::string& field, double value, const char* range) {
+    if (!ok)
+      throw std::invalid_argument("hough." + field + " must be " + range + ", not " +
+                                  std::to_string(value));
+  };
+  require(refinement >= 1 && refinement <= 64, "refinement", refinement, "in [1, 64]");
+  require(min_traversals >= 0, "min_traversals", min_traversals, ">= 0");
+  // A non-finite weight would leave voxels with no centre at all.
+  require(std::isfinite(gamma) && gamma >= 0 && gamma <= 1e6, "gamma", gamma, "in [0, 1e6]");
+  require(std::isfinite(bandwidth_m) && bandwidth_m > 0 && bandwidth_m <= 10, "bandwidth_m",
+          bandwidth_m, "in (0, 10] m");
+  require(min_instance_voxels >= 0, "min_instance_voxels", min_instance_voxels, ">= 0");
+  require(std::isfinite(min_vote_norm) && min_vote_norm >= 0, "min_vote_norm", min_vote_norm,
+          "finite and >= 0");
+  require(outside_tolerance_vox >= 0, "outside_tolerance_vox", outside_tolerance_vox, ">= 0");
+  require(reversed_vote_stop_vox >= 0, "reversed_vote_stop_vox", reversed_vote_stop_vox, ">= 0");
+  require(split_below_solidity >= 0 && split_below_solidity <= 1, "split_below_solidity",
+          split_below_solidity, "in [0, 1]");
+  require(split_accept_solidity > 0 && split_accept_solidity <= 1, "split_accept_solidity",
+          split_accept_solidity, "in (0, 1]");
+  require(split_max_rounds >= 0, "split_max_rounds", split_max_rounds, ">= 0");
+  require(threads >= 1, "threads", threads, ">= 1");
+}
 
 InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
                                     const HoughConfig& config) {

@@ -3,6 +3,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <filesystem>
+#include <set>
 #include <stdexcept>
 
 #include "simstack/io/yaml_file.h"
@@ -205,9 +206,37 @@ std::string modelCardPath(const std::string& model_path) {
   return std::filesystem::path(model_path).replace_extension(".yaml").string();
 }
 
+namespace {
+// A misspelt field in a file the user writes must not fall back to its default unnoticed
+// (configs stored inside older model files are parsed leniently instead).
+template <class C, class Fields>
+void rejectUnknownFields(const YAML::Node& section, const char* name, Fields fields) {
+  if (!section) return;
+  if (!section.IsMap()) throw std::invalid_argument(std::string("'") + name + "' must be a map");
+  C defaults;
+  std::set<std::string> known;
+  fields(defaults, [&](const char* key, const auto&) { known.insert(key); });
+  for (const auto& kv : section) {
+    const std::string key = kv.first.as<std::string>();
+    if (!known.count(key))
+      throw std::invalid_argument(std::string("unknown field ") + name + "." + key);
+  }
+}
+}  // namespace
+
 void loadTrainingYaml(const std::string& path, CvaeConfig* model, TrainConfig* training) {
   const YAML::Node n = loadYamlFile(path, "training config");
   try {
+    if (!n.IsMap()) throw std::invalid_argument("expected a YAML map");
+    for (const auto& kv : n) {
+      const std::string section = kv.first.as<std::string>();
+      if (section != "model" && section != "training")
+        throw std::invalid_argument("unknown section '" + section + "' (model, training)");
+    }
+    rejectUnknownFields<CvaeConfig>(n["model"], "model",
+                                    [](auto& c, auto&& f) { cvaeFields(c, f); });
+    rejectUnknownFields<TrainConfig>(n["training"], "training",
+                                     [](auto& c, auto&& f) { trainFields(c, f); });
     YAML::Emitter m, t;
     m << n["model"];
     t << n["training"];

@@ -19,6 +19,7 @@
 
 #include "simstack/dataset/dataset.h"
 #include "simstack/eval/occupancy.h"
+#include "simstack/io/staged_output.h"
 #include "simstack/io/yaml_file.h"
 #include "simstack/model/cvae.h"
 #include "simstack/model/training_sample.h"
@@ -501,7 +502,9 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
     std::istringstream in(text);
     for (std::string line; std::getline(in, line);) os << "  " << line << "\n";
   };
-  std::ofstream yaml((out / "model.yaml").string());
+  // Written whole or not at all, as model.pt is: a card cut short would be read as settings.
+  StagedFile card((out / "model.yaml").string());
+  std::ofstream yaml(card.path());
   yaml << "# simstack model card (the network config is also stored inside model.pt)\nmodel:\n";
   indented(yaml, model_config.toYaml());
   yaml << "training:\n";
@@ -509,6 +512,9 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
   yaml << "provenance:\n";
   indented(yaml, meta.c_str());
   yaml << card_perception;
+  yaml.close();
+  if (!yaml) throw std::runtime_error("cannot write " + (out / "model.yaml").string());
+  card.commit();
 }
 
 TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& progress) {

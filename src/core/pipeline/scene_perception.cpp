@@ -140,8 +140,10 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   const std::vector<std::optional<SuperquadricShape>> fits =
       fitInstances(points, fit, config.joint_refinement, config.min_instance_points);
   h->instances.clear();
+  std::vector<int> reported(parts.size(), -1);  // segmentation label -> index in instances
   for (size_t k = 0; k < parts.size(); ++k) {
     if (!fits[k]) continue;
+    reported[k] = static_cast<int>(h->instances.size());
     InstanceEstimate e;
     e.superquadric = *fits[k];
     e.mesh = parts[k];
@@ -150,6 +152,10 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
     e.voxels = seg.voxel_counts[k];
     h->instances.push_back(std::move(e));
   }
+  // Label k + 1 in the published label image is instances[k]: the voxels of instances given no
+  // superquadric (too few points, outside the workspace) are no object's.
+  for (int& label : h->labels.data)
+    if (label >= 0) label = reported[label];
   h->decomposed = true;
   if (timings) timings->fitting_ms += msSince(t);
 }
@@ -218,6 +224,7 @@ void validate(const PerceptionConfig& config, bool latent) {
   config.fit.validate();
   config.workspace.validate();
   config.segments.validate();
+  config.hough.validate();
 }
 
 /// More threads than cores only make the OpenMP regions and torch slower (1000 threads never
@@ -394,11 +401,16 @@ SceneHypothesis joinGroups(const TilePlan& plan, std::vector<SceneHypothesis>& p
                            float truncation) {
   SceneHypothesis h;
   h.labels = Grid3<int>(plan.scene, -1);
-  std::vector<int> first_label(parts.size(), 0);
-  for (size_t g = 0; g + 1 < parts.size(); ++g) {
-    int most = -1;
-    for (int l : parts[g].labels.data) most = std::max(most, l);
-    first_label[g + 1] = first_label[g] + most + 1;
+  // Each group's instances that are kept, and where: a group's label l becomes joined[g][l].
+  std::vector<std::vector<int>> joined(parts.size());
+  for (size_t g = 0; g < parts.size(); ++g) {
+    h.decomposed = h.decomposed || parts[g].decomposed;
+    for (InstanceEstimate& e : parts[g].instances) {
+      joined[g].push_back(-1);
+      if (plan.groupOf(e.vote_centre) != static_cast<int>(g)) continue;
+      joined[g].back() = static_cast<int>(h.instances.size());
+      h.instances.push_back(std::move(e));
+    }
   }
   const auto weight = [&](size_t g, const Vec3& p) { return groupWeight(plan.groups[g], p); };
   std::vector<Grid3<float>> tsdf;
@@ -420,13 +432,8 @@ SceneHypothesis joinGroups(const TilePlan& plan, std::vector<SceneHypothesis>& p
       const Vec3i j = parts[g].labels.spec.voxelIndex(p);
       if (!parts[g].labels.spec.inside(j.x(), j.y(), j.z())) continue;
       const int l = parts[g].labels.at(j.x(), j.y(), j.z());
-      h.labels.data[i] = l >= 0 ? l + first_label[g] : -1;
+      h.labels.data[i] = l >= 0 && l < static_cast<int>(joined[g].size()) ? joined[g][l] : -1;
     }
-  }
-  for (size_t g = 0; g < parts.size(); ++g) {
-    h.decomposed = h.decomposed || parts[g].decomposed;
-    for (InstanceEstimate& e : parts[g].instances)
-      if (plan.groupOf(e.vote_centre) == static_cast<int>(g)) h.instances.push_back(std::move(e));
   }
   if (h.decomposed) h.surface = extractSurface(h.tsdf_m);
   return h;
