@@ -97,4 +97,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except (OSError, ValueError, UnicodeDecodeError, rosbag.ROSBagException) as e:
+        sys.exit(f"draw_perception: {e}")

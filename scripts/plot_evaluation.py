@@ -78,12 +78,17 @@ def main():
     parser.add_argument("results", nargs="+", help="JSON files written by simstack_evaluate")
     parser.add_argument("--output", default=".", help="directory for the PNG figures")
     args = parser.parse_args()
-    os.makedirs(args.output, exist_ok=True)
+    try:
+        os.makedirs(args.output, exist_ok=True)
+    except OSError as e:
+        sys.exit(f"plot_evaluation: --output {args.output}: {e}")
     groups = {}  # test set -> (paths, results), in the order given
     for path in args.results:
         try:
             with open(path) as f:
                 results = json.load(f)
+            if not isinstance(results, dict):
+                sys.exit(f"plot_evaluation: {path}: not a simstack_evaluate result (a JSON object)")
             if "methods" not in results:
                 print(f"plot_evaluation: {path}: no methods (real-data report?), skipped")
                 continue

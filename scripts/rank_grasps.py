@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """Ranks suction grasps on one perceived object through the simstack grasp service and prints
 them best first (README, "Grasps").
 
@@ -13,7 +13,9 @@ import argparse
 import json
 import os
 import sys
+import time
 
+import rosgraph
 import rospy
 from simstack.msg import ObjectArray
 from simstack.srv import RankGrasps, RankGraspsRequest
@@ -57,6 +59,20 @@ def main():
         folder = os.path.dirname(os.path.abspath(args.json))
         if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
             parser.error("--json %s: %s is not a writable directory" % (args.json, folder))
+    target = None
+    if args.target != "top":
+        try:
+            target = int(args.target)
+        except ValueError:
+            target = -1
+        if target < 0:
+            parser.error("--target must be an object id (>= 0) or 'top', not %r" % args.target)
+    # rospy.init_node waits for a master without end: look for one first, up to --timeout.
+    deadline = time.time() + args.timeout
+    while not rosgraph.is_master_online():
+        if time.time() > deadline:
+            sys.exit("rank_grasps: no ROS master at %s within %g s" % (rosgraph.get_master_uri(), args.timeout))
+        time.sleep(0.2)
     rospy.init_node("rank_grasps_client", anonymous=True)
     service = "/%s/grasps/rank_grasps" % args.camera
     req = RankGraspsRequest(candidates=args.candidates, pull_distance_m=args.pull_distance,
@@ -72,12 +88,6 @@ def main():
         req.scene = scene
         req.target_id = max(scene.objects, key=lambda o: o.superquadric.pose.position.z).id
     else:
-        try:
-            target = int(args.target)
-        except ValueError:
-            target = -1
-        if target < 0:
-            sys.exit("rank_grasps: --target must be an object id (>= 0) or 'top', not %r" % args.target)
         req.target_id = target
     try:
         rospy.wait_for_service(service, timeout=args.timeout)

@@ -143,24 +143,41 @@ TEST(StagedOutput, ACommittedFileReplacesTheTargetAndAnAbandonedOneLeavesNoTrace
   std::string text;
   std::ifstream(target) >> text;
   EXPECT_EQ(text, "complete");
-  // A directory: commit replaces the earlier one whole.
+  // A directory: commit replaces the same tool's earlier result whole; "out/" is "out".
   const std::string out = (dir / "out").string();
-  fs::create_directories(out);
-  std::ofstream(out + "/stale.ply") << "old";
   {
-    StagedDirectory staged(out);
+    StagedDirectory staged(out + "/", "tool_a");
+    std::ofstream(staged.path() + "/stale.ply") << "old";
+    staged.commit();
+  }
+  EXPECT_TRUE(fs::exists(out + "/stale.ply"));
+  {
+    StagedDirectory staged(out, "tool_a");
     std::ofstream(staged.path() + "/new.yaml") << "new";
     staged.commit();
   }
   EXPECT_TRUE(fs::exists(out + "/new.yaml"));
   EXPECT_FALSE(fs::exists(out + "/stale.ply"));
+  // A result directory is readable by others, as any directory the user makes.
+  EXPECT_NE(fs::status(out).permissions() & fs::perms::others_read, fs::perms::none);
   {
-    StagedDirectory staged(out);  // abandoned: the committed one stays
+    StagedDirectory staged(out, "tool_a");  // abandoned: the committed one stays
     std::ofstream(staged.path() + "/other.yaml") << "x";
   }
   EXPECT_TRUE(fs::exists(out + "/new.yaml"));
   EXPECT_FALSE(fs::exists(out + "/other.yaml"));
   EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()), 2);  // sub, out
-  EXPECT_THROW(StagedDirectory((dir / "sub" / "data.h5" / "x").string()), std::runtime_error);
+  EXPECT_THROW(StagedDirectory((dir / "sub" / "data.h5" / "x").string(), "tool_a"),
+               std::runtime_error);
+  // Never the user's own files, nor another tool's result.
+  const std::string mine = (dir / "mine").string();
+  fs::create_directories(mine);
+  std::ofstream(mine + "/notes.txt") << "mine";
+  EXPECT_THROW(StagedDirectory(mine, "tool_a"), std::runtime_error);
+  EXPECT_THROW(StagedDirectory(out, "tool_b"), std::runtime_error);
+  EXPECT_TRUE(fs::exists(mine + "/notes.txt"));
+  EXPECT_TRUE(fs::exists(out + "/new.yaml"));
+  fs::create_directories(dir / "empty");
+  EXPECT_NO_THROW(StagedDirectory((dir / "empty").string(), "tool_a"));
   fs::remove_all(dir);
 }

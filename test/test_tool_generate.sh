@@ -25,6 +25,16 @@ assert set(np.unique(f["labels"][0])) == set(range(n[0] + 1)), np.unique(f["labe
 print("h5py layout ok")
 PY
 fi
+# A second run into the same place replaces the views whole: no view of the first run's scene 1
+# stays beside the new single scene; the views directory is refused when it holds other files.
+"$tool" --scenes 1 --seed 4 --resolution 16 --output "$dir/d.h5" --views 1 > /dev/null
+test -s "$dir/d_views/scene_000000_view_0_depth.png"
+if ls "$dir"/d_views/scene_000001_* > /dev/null 2>&1; then echo "stale views kept"; exit 1; fi
+mkdir -p "$dir/mine_views" && echo notes > "$dir/mine_views/notes.txt"
+if "$tool" --scenes 1 --seed 4 --resolution 16 --output "$dir/mine.h5" --views 1 2> "$dir/err.txt"; then
+  echo "replaced a directory of other files"; exit 1; fi
+grep -q "not an earlier result" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
+test -s "$dir/mine_views/notes.txt"
 # Bad input: a clear message naming the value, non-zero exit.
 if "$tool" --scenes 1 --seed 1 --output "$dir/x.h5" --objects 4:2 2> "$dir/err.txt"; then echo "accepted --objects 4:2"; exit 1; fi
 grep -qi "object count" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }

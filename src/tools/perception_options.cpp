@@ -30,7 +30,7 @@ PerceptionOptions::PerceptionOptions(CLI::App& app, Which which) {
       ->expected(1, which.several_models ? 1 << 16 : 1);
   samples_opt_ =
       app.add_option("--samples", samples_, "latent samples S (default: the model card's)")
-          ->check(CLI::PositiveNumber);
+          ->check(FinitePositive);
   symmetries_opt_ =
       app.add_option("--symmetries", symmetries_,
                      "network passes averaged: the view as seen, turned by a half (2) or "
@@ -39,7 +39,7 @@ PerceptionOptions::PerceptionOptions(CLI::App& app, Which which) {
   if (which.seed)
     seed_opt_ = app.add_option("--seed", seed_, "latent code seed (default: the config's)");
   threads_opt_ = app.add_option("--threads", threads_, "threads (default: the config's)")
-                     ->check(CLI::PositiveNumber);
+                     ->check(FinitePositive);
   if (which.joint) app.add_flag("--no-joint", no_joint_, "skip the joint refinement (eqs. 7-9)");
 }
 

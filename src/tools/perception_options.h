@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "cli_checks.h"
 #include "simstack/pipeline/perception_config.h"
 
 namespace simstack {
@@ -20,19 +21,6 @@ std::string packageDir();
 /// A file shipped with the package (e.g. "config/perception.yaml"): from the source tree, or
 /// where `make install` put it.
 std::string packageFile(const std::string& relative);
-
-/// A finite number > 0 (CLI11's PositiveNumber lets "nan" and "inf" through).
-inline const CLI::Validator FinitePositive(
-    [](std::string& text) -> std::string {
-      try {
-        size_t used = 0;
-        const double v = std::stod(text, &used);
-        if (used == text.size() && std::isfinite(v) && v > 0.0) return {};
-      } catch (const std::exception&) {
-      }
-      return "'" + text + "' is not a finite number > 0";
-    },
-    "FINITE>0");
 
 class PerceptionOptions {
  public:

@@ -5,9 +5,11 @@
 
 #include <fstream>
 #include <iostream>
+#include <optional>
 
 #include "perception_options.h"
 #include "progress.h"
+#include "simstack/io/staged_output.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/pipeline/evaluated_methods.h"
 
@@ -15,18 +17,30 @@ using namespace simstack;
 
 namespace {
 
-void writeJson(const std::string& path, const nlohmann::json& j) {
-  std::ofstream f(path);
-  if (!f) throw std::runtime_error("cannot write " + path);
+/// Writes `j` into its staged file and puts that in place.
+void writeJson(StagedFile& file, const std::string& path, const nlohmann::json& j) {
+  std::ofstream f(file.path());
   f << j.dump(1) << "\n";
   f.close();  // a failed flush shows only here
   if (!f) throw std::runtime_error("cannot write " + path);
+  file.commit();
 }
+
+/// The result files, made (with their directories) before the work, so that a path that
+/// cannot be written fails at once rather than after the evaluation.
+struct ResultFiles {
+  ResultFiles(const std::string& output, const std::string& summary) : results(output) {
+    if (!summary.empty()) this->summary.emplace(summary);
+  }
+  StagedFile results;
+  std::optional<StagedFile> summary;
+};
 
 /// Every method on the dataset's views; writes the results and prints the table.
 void runDataset(const DatasetReader& reader, const std::string& dataset,
                 const std::vector<std::unique_ptr<EvaluatedMethod>>& methods,
-                const EvaluationOptions& o, const std::string& output, const std::string& summary) {
+                const EvaluationOptions& o, const std::string& output, const std::string& summary,
+                ResultFiles& files) {
   std::vector<EvaluatedMethod*> run;
   for (const auto& m : methods) run.push_back(m.get());
   ProgressBar bar("evaluating " + std::to_string(run.size()) + " methods",
@@ -37,7 +51,10 @@ void runDataset(const DatasetReader& reader, const std::string& dataset,
   for (const bool with_views : {true, false}) {
     nlohmann::json j = resultsJson(results, with_views);
     j["dataset"] = dataset;
-    if (with_views || !summary.empty()) writeJson(with_views ? output : summary, j);
+    if (with_views)
+      writeJson(files.results, output, j);
+    else if (files.summary)
+      writeJson(*files.summary, summary, j);
   }
   std::cout << "\n"
             << resultsTable(results) << "\n"
@@ -78,9 +95,9 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(16, 4096));
   app.add_option("--views", o.views, "viewpoints per scene")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(FinitePositive);
   app.add_option("--scenes", o.scenes, "evaluate only the first N scenes (0 = all)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(FiniteNonNegative);
   app.add_option("--seed", o.seed, "viewpoint and Chamfer-sample seed")->capture_default_str();
   app.add_option("--ycb", mesh_dir, "mesh directory for YCB datasets")
       ->check(CLI::ExistingDirectory);
@@ -98,12 +115,12 @@ int main(int argc, char** argv) {
   app.add_option("--refine", refine_iterations,
                  "with --multi-view: also each C-VAE with this many Adam steps fitting its codes "
                  "to every view (_opt, _first_opt; perception.refine_iterations)")
-      ->check(CLI::PositiveNumber);
+      ->check(FinitePositive);
   app.add_flag("--no-classical", no_classical, "skip the classical baseline");
   app.add_flag("--no-stability", no_stability, "skip the physics stability test");
   app.add_option("--chamfer-points", o.chamfer_points, "surface samples per Chamfer set")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(FinitePositive);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
   if (dataset.empty() == real_dir.empty()) {
@@ -120,16 +137,18 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
+    ResultFiles files(output, summary);
     const std::vector<PerceptionConfig> configs = perception.configs();
     if (!real_dir.empty()) {
       NetworkMethod method(configs.front(), true);
       const std::vector<RealSceneResult> scenes = evaluateRealScenes(real_dir, method);
       std::cout << "\n" << realScenesTable(scenes);
       const MethodInfo info = method.info();
-      writeJson(output, {{"real_dir", real_dir},
-                         {"model", info.model},
-                         {"config", info.config_yaml},
-                         {"scenes", realScenesJson(scenes)}});
+      writeJson(files.results, output,
+                {{"real_dir", real_dir},
+                 {"model", info.model},
+                 {"config", info.config_yaml},
+                 {"scenes", realScenesJson(scenes)}});
       std::cout << "results: " << output << "\n";
       return 0;
     }
@@ -140,7 +159,7 @@ int main(int argc, char** argv) {
                                reader.info().resolution, reader.info().truncation_m)
             : evaluatedMethods(configs, !no_classical, reader.info().extent_m,
                                reader.info().resolution);
-    runDataset(reader, dataset, methods, o, output, summary);
+    runDataset(reader, dataset, methods, o, output, summary, files);
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_evaluate: error: " << e.what() << "\n";

@@ -52,7 +52,7 @@ int main(int argc, char** argv) {
   app.add_option("--output", output, "results JSON (summary and every pick)")->required();
   app.add_option("--scenes", o.scenes, "the first N scenes (0 = all)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(FiniteNonNegative);
   app.add_option("--candidates", o.ranking.candidates.max_candidates, "candidates per ranking")
       ->capture_default_str()
       ->check(CLI::Range(1, 1024));

@@ -5,6 +5,7 @@
 
 #include <iostream>
 
+#include "cli_checks.h"
 #include "progress.h"
 #include "simstack/dataset/dataset_generation.h"
 
@@ -46,7 +47,7 @@ int main(int argc, char** argv) {
   CLI::App app{
       "Generate random piles settled under Bullet physics and write the HDF5 dataset "
       "of ground-truth TSDF, centre votes and labels (DESIGN.md section 4)."};
-  app.add_option("--scenes", o.scenes, "number of piles")->required()->check(CLI::PositiveNumber);
+  app.add_option("--scenes", o.scenes, "number of piles")->required()->check(FinitePositive);
   app.add_option("--seed", o.seed, "random seed (scene i uses a hash of seed and i)")->required();
   app.add_option("--resolution", o.resolution, "grid resolution R (R^3 voxels)")
       ->check(CLI::Range(4, 256))
@@ -66,16 +67,16 @@ int main(int argc, char** argv) {
                  "directory of YCB meshes (<dir>/<object>/nontextured.stl): mesh piles instead of "
                  "superquadrics");
   app.add_option("--views", o.views, "rendered views per scene written beside the dataset")
-      ->check(CLI::NonNegativeNumber);
+      ->check(FiniteNonNegative);
   app.add_option("--views-dir", o.views_dir, "where views go (default: <output stem>_views/)");
   app.add_flag("--pictures", o.pictures,
                "also write colour depth and shaded PNG pictures of each view");
   app.add_flag("--noise", o.noise, "Kinect-like noise and missing pixels in the rendered views");
   app.add_option("--extent", o.extent_m, "scene grid side in metres")
-      ->check(CLI::PositiveNumber)
+      ->check(FinitePositive)
       ->capture_default_str();
   app.add_option("--truncation-vox", o.truncation_vox, "TSDF truncation in voxels")
-      ->check(CLI::PositiveNumber)
+      ->check(FinitePositive)
       ->capture_default_str();
   app.add_option(
          "--max-tilt", o.max_tilt_deg,

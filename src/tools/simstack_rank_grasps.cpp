@@ -63,7 +63,7 @@ int main(int argc, char** argv) {
     if (const std::string why = checkScene(scene); !why.empty())
       throw std::invalid_argument(scene_path + ": " + why);
     std::optional<StagedDirectory> staged;  // before the work: a bad --output fails at once
-    if (!output.empty()) staged.emplace(output);
+    if (!output.empty()) staged.emplace(output, "simstack_rank_grasps");
     const auto start = std::chrono::steady_clock::now();
     const GraspRanking ranking =
         rankGrasps({scene}, static_cast<int>(found - ids.begin()), {}, config);

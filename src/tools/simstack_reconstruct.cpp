@@ -123,7 +123,7 @@ int main(int argc, char** argv) {
     const DepthView& view = views.front();
     const std::string pose_path = pose_paths.empty() ? "" : pose_paths.front();
     const PerceptionConfig config = perception.config();
-    StagedDirectory staged(output);  // a bad --output fails here, before the work
+    StagedDirectory staged(output, "simstack_reconstruct");  // a bad --output fails here
     const ScenePerception pipeline(config);
     const SceneEstimate est = pipeline.perceive(views);
     const std::vector<std::string> files =

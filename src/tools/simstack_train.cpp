@@ -3,9 +3,11 @@
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 
+#include "cli_checks.h"
 #include "progress.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/model/cvae_trainer.h"
@@ -83,17 +85,17 @@ int main(int argc, char** argv) {
                  "cvae, fc or fc_plain (overrides model.architecture)")
       ->check(CLI::IsMember({"cvae", "fc", "fc_plain"}));
   app.add_option("--steps", steps, "optimiser steps (overrides training.steps)")
-      ->check(CLI::PositiveNumber);
+      ->check(FinitePositive);
   app.add_option("--init-from", init_from,
                  "warm start from this model file: its tensors of the same name and shape "
                  "(overrides training.init_from; not read with --resume from a checkpoint)")
       ->check(CLI::ExistingFile);
   app.add_option("--validation-scenes", validation_scenes,
                  "held-out scenes at the end of the dataset (overrides training.validation_scenes)")
-      ->check(CLI::PositiveNumber);
+      ->check(FinitePositive);
   app.add_option("--validation-views", validation_views,
                  "viewpoints per validation scene (overrides training.validation_views)")
-      ->check(CLI::PositiveNumber);
+      ->check(FinitePositive);
   app.add_option("--validation-samples", validation_samples,
                  "latent codes per validation view (overrides training.validation_samples)")
       ->check(CLI::Range(2, 256));
@@ -124,6 +126,11 @@ int main(int argc, char** argv) {
                       CvaeTrainer::validateModel(dataset, validate_only, training));
       return 0;
     }
+    // A forgotten --resume must not start over in a run's directory (its checkpoint lost).
+    if (!resume && std::filesystem::exists(std::filesystem::path(output) / "state.yaml"))
+      throw std::runtime_error(output +
+                               " holds a training run: --resume continues it; another --output "
+                               "(or removing it) starts afresh");
     std::string command;
     for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
     CvaeTrainer trainer(dataset, model, training, output, command);

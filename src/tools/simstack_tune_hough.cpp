@@ -13,6 +13,7 @@
 
 #include "perception_options.h"
 #include "progress.h"
+#include "simstack/io/staged_output.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/pipeline/hough_tuning.h"
 
@@ -84,37 +85,36 @@ int main(int argc, char** argv) {
   app.add_option("--output", output, "YAML with the model card's perception: section")->required();
   app.add_option("--views", views_per_scene, "random viewpoints per scene")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(FinitePositive);
   app.add_option("--scenes", scenes, "only the first N scenes of each dataset (0 = all)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(FiniteNonNegative);
   app.add_option("--seed", seed, "viewpoint seed")->capture_default_str();
   app.add_flag("--noise", noise, "Kinect-like sensor noise in the rendered views");
   auto values = [&](const char* name, auto& list, const char* what, CLI::Validator check) {
     app.add_option(name, list, what)->capture_default_str()->check(check);
   };
-  values("--refinement", sweep.refinements, "fine cells per voxel to try", CLI::PositiveNumber);
-  values("--min-traversals", sweep.traversals, "mu values to try", CLI::NonNegativeNumber);
-  values("--bandwidth", sweep.bandwidths, "mean-shift radii to try (m)", CLI::PositiveNumber);
+  values("--refinement", sweep.refinements, "fine cells per voxel to try", FinitePositive);
+  values("--min-traversals", sweep.traversals, "mu values to try", FiniteNonNegative);
+  values("--bandwidth", sweep.bandwidths, "mean-shift radii to try (m)", FinitePositive);
   values("--min-instance-voxels", sweep.min_voxels, "minimum instance sizes to try",
-         CLI::NonNegativeNumber);
+         FiniteNonNegative);
   values("--min-vote-norm", sweep.min_norms,
          "vote lengths to try below which a voxel casts no ray (blunt, unsure votes)",
          CLI::Range(0.0, 1.0));
   values("--reversed-stop", sweep.reversed_stops,
          "consecutive voxels of reversed votes that stop a ray (0 = off) to try",
-         CLI::NonNegativeNumber);
+         FiniteNonNegative);
   values("--split-below", sweep.split_below,
          "split test: solidities below which an instance is cut (0 = off) to try",
          CLI::Range(0.0, 1.0));
   values("--split-accept", sweep.split_accept,
          "split test: joint solidities of the two parts that keep a cut, to try",
          CLI::Range(0.01, 1.0));
-  app.add_option("--top", top, "rows of the table")
-      ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+  app.add_option("--top", top, "rows of the table")->capture_default_str()->check(FinitePositive);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
   try {
+    StagedFile written(output);  // a path that cannot be written fails now, not after the sweep
     const PerceptionConfig pc = perception.config();
     std::vector<size_t> ends;  // each dataset's views end here
     const std::vector<TuningView> views =
@@ -142,7 +142,7 @@ int main(int argc, char** argv) {
     if (datasets.size() > 1) reportPerDataset(datasets, views, ends, scores.front(), before, pc);
     std::string sets;
     for (const std::string& d : datasets) sets += (sets.empty() ? "" : " + ") + d;
-    std::ofstream f(output);
+    std::ofstream f(written.path());
     f << "# simstack_tune_hough on " << sets << " (" << views.size() << " views): count exact "
       << std::fixed << std::setprecision(3) << scores.front().exact << ", voxel agreement "
       << scores.front().agreement << "\n# the perception: section of "
@@ -150,6 +150,7 @@ int main(int argc, char** argv) {
       << modelCardPerceptionYaml(pc.samples, scores.front().hough) << "\n";
     f.close();  // a failed flush shows only here
     if (!f) throw std::runtime_error("cannot write " + output);
+    written.commit();
     std::cout << "\nchosen setting written to " << output << "\n";
     return 0;
   } catch (const std::exception& e) {

@@ -10,10 +10,12 @@
 namespace simstack {
 
 /// A directory: commit() replaces the target directory whole, so that no file of an earlier
-/// run stays beside the new ones.
+/// run stays beside the new ones. It holds a marker file (`.simstack-output`) naming `owner`, the
+/// tool that wrote it; an existing non-empty target without that owner's marker (the user's
+/// files, another tool's result) is refused at construction. "out/" is "out".
 class StagedDirectory {
  public:
-  explicit StagedDirectory(const std::string& target);
+  StagedDirectory(const std::string& target, const std::string& owner);
   ~StagedDirectory();
   StagedDirectory(const StagedDirectory&) = delete;
   StagedDirectory& operator=(const StagedDirectory&) = delete;

@@ -10,6 +10,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <stdexcept>
 #include <thread>
@@ -180,16 +181,19 @@ GenerationSummary generateDataset(const GenerationOptions& o,
   auto writer = std::make_unique<DatasetWriter>(staged.path(), info);
   GenerationSummary summary;
   summary.truncation_m = info.truncation_m;
+  // The views too: staged, and replacing an earlier run's views whole (none of its scenes stay
+  // beside the new ones).
+  std::optional<StagedDirectory> views;
   if (o.views > 0) {
     summary.views_dir = o.views_dir.empty()
                             ? fs::path(o.output).replace_extension("").string() + "_views"
                             : o.views_dir;
-    fs::create_directories(summary.views_dir);
+    views.emplace(summary.views_dir, "simstack_generate");
   }
   const auto t0 = std::chrono::steady_clock::now();
   double undone_steps = 0, all_steps = 0;
   {
-    SceneWorkers workers(o, *generator, info, summary.views_dir);
+    SceneWorkers workers(o, *generator, info, views ? views->path() : std::string());
     summary.threads = workers.threads();
     for (int i = 0; i < o.scenes; ++i) {
       const SceneResult r = workers.take(i);
@@ -205,6 +209,7 @@ GenerationSummary generateDataset(const GenerationOptions& o,
   }
   writer.reset();  // closes the file
   staged.commit();
+  if (views) views->commit();
   summary.undone_share = all_steps > 0 ? undone_steps / all_steps : 0.0;
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return summary;

@@ -1,11 +1,13 @@
 #include "simstack/io/staged_output.h"
 
 #include <stdlib.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 namespace simstack {
@@ -13,7 +15,8 @@ namespace fs = std::filesystem;
 namespace {
 
 fs::path parentOf(const std::string& target) {
-  const fs::path p = fs::absolute(fs::path(target)).lexically_normal();
+  fs::path p = fs::absolute(fs::path(target)).lexically_normal();
+  if (p.filename().empty()) p = p.parent_path();  // "out/" is "out"
   std::error_code ec;
   fs::create_directories(p.parent_path(), ec);
   if (ec)
@@ -32,14 +35,41 @@ std::string uniqueDirectoryBeside(const fs::path& target, const std::string& wha
   return buffer.data();
 }
 
+constexpr const char* kMarker = ".simstack-output";
+
+/// Which tool's result `dir` is ("" when it holds no marker).
+std::string ownerOf(const fs::path& dir) {
+  std::ifstream in(dir / kMarker);
+  std::string owner;
+  std::getline(in, owner);
+  return owner;
+}
+
 }  // namespace
 
-StagedDirectory::StagedDirectory(const std::string& target) {
+StagedDirectory::StagedDirectory(const std::string& target, const std::string& owner) {
   const fs::path t = parentOf(target);
   if (fs::exists(t) && !fs::is_directory(t))
     throw std::runtime_error(target + " exists and is not a directory");
+  // Only an earlier result of the same tool is replaced: never a directory of the user's files,
+  // nor another tool's result (the reconstruction a grasp ranking reads, say).
+  if (fs::is_directory(t) && !fs::is_empty(t) && ownerOf(t) != owner) {
+    const std::string other = ownerOf(t);
+    throw std::runtime_error(
+        target + " is not empty and is not an earlier result of " + owner +
+        (other.empty() ? std::string(" (it has no ") + kMarker + ")" : " but of " + other) +
+        ": choose another directory, or empty it");
+  }
   target_ = t.string();
   staged_ = uniqueDirectoryBeside(t, "partial");
+  // mkdtemp makes it private (0700); a result directory gets the usual mode.
+  const mode_t mask = ::umask(0);
+  ::umask(mask);
+  std::error_code ec;
+  fs::permissions(staged_, static_cast<fs::perms>(0777 & ~mask), ec);
+  std::ofstream marker(fs::path(staged_) / kMarker);
+  marker << owner << "\n";
+  if (!marker) throw std::runtime_error("cannot write in " + staged_);
 }
 
 StagedDirectory::~StagedDirectory() {
