@@ -10,7 +10,7 @@ trap 'rm -rf "$dir"' EXIT
 "$generate" --scenes 3 --seed 9 --output "$dir/val.h5" > /dev/null
 "$tune" --dataset "$dir/val.h5" --views 1 --threads 1 --refinement 5 --min-traversals 2 3 \
   --bandwidth 0.04 0.05 --min-instance-voxels 10 --min-vote-norm 0 --output "$dir/tuned.yaml" \
-  > "$dir/log.txt" 2> /dev/null
+  > "$dir/log.txt" 2> "$dir/err.txt" || { echo "simstack_tune_hough failed:"; cat "$dir/err.txt"; exit 1; }
 grep -q "chosen setting written" "$dir/log.txt" || { cat "$dir/log.txt"; exit 1; }
 # First table row (the chosen one) and the config's own row: count exact is column 8.
 chosen=$(grep -m1 '^| [0-9]' "$dir/log.txt" | awk -F'|' '{print $8}' | tr -d ' %')
@@ -38,7 +38,7 @@ fi
 "$generate" --scenes 2 --seed 10 --objects 5:6 --sizes 0.05:0.15 --output "$dir/val58.h5" > /dev/null
 "$tune" --dataset "$dir/val.h5" --dataset "$dir/val58.h5" --views 1 --threads 1 --refinement 5 \
   --min-traversals 3 --bandwidth 0.03 0.05 --min-instance-voxels 10 --min-vote-norm 0 \
-  --output "$dir/pooled.yaml" > "$dir/pooled.txt" 2> /dev/null
+  --output "$dir/pooled.yaml" > "$dir/pooled.txt" 2> "$dir/err.txt" || { echo "simstack_tune_hough failed:"; cat "$dir/err.txt"; exit 1; }
 grep -q "^5 views, model" "$dir/pooled.txt" || { echo "views not pooled"; cat "$dir/pooled.txt"; exit 1; }
 grep -q "/val.h5 (3 views): " "$dir/pooled.txt" || { echo "no per-dataset line"; cat "$dir/pooled.txt"; exit 1; }
 grep -q "val58.h5 (2 views): " "$dir/pooled.txt" || { echo "no per-dataset line"; cat "$dir/pooled.txt"; exit 1; }

@@ -9,10 +9,10 @@ set -eo pipefail
 build=$1
 seconds=${2:-60}
 root=$(cd "$(dirname "$0")/../.." && pwd)
+export ROS_HOME=$(mktemp -d)  # before the session script, which would make one of its own
 # shellcheck disable=SC1091
 source "$root/scripts/ros_session.bash" "$build"
 set -u
-ROS_HOME=$(mktemp -d)
 ROS_SESSION_REMOVE_HOME=1
 ros_session_start
 results=()

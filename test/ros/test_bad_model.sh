@@ -4,10 +4,10 @@
 # Usage: test_bad_model.sh BUILD_DIR SOURCE_DIR
 set -e
 build=$1
+export ROS_HOME=$(mktemp -d)  # before the session script, which would make one of its own
 # shellcheck disable=SC1091
 source "$2/scripts/ros_session.bash" "$build"
 set -u
-ROS_HOME=$(mktemp -d)
 ROS_SESSION_REMOVE_HOME=1
 ros_session_start
 node="$build/devel/lib/simstack/perception_node"

@@ -4,10 +4,10 @@
 # Usage: test_rviz_screenshot.sh BUILD_DIR SOURCE_DIR
 set -e
 source_dir=$2
+export ROS_HOME=$(mktemp -d)  # before the session script, which would make one of its own
 # shellcheck disable=SC1091
 source "$source_dir/scripts/ros_session.bash" "$1"
 set -u
-ROS_HOME=$(mktemp -d)
 ROS_SESSION_REMOVE_HOME=1
 ros_session_start
 ros_session_xvfb
