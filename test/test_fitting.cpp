@@ -57,6 +57,23 @@ TEST(SurfaceDistance, IsMetresAlongTheRayForEveryExponent) {
   }
 }
 
+// Deep inside a box-like shape |q/a|^e is far below 1e-12 (e = 100 at three quarters of a
+// semi-axis): the distance must still be the ray's, not a fixed stand-in (the smallest
+// semi-axis, as it was), or the joint fit's collision term has nothing to push against.
+TEST(SurfaceDistance, IsTheRaysDeepInsideABoxLikeShape) {
+  for (double e : {50.0, 100.0}) {
+    const SuperquadricShape sq = makeShape(Vec3(0.05, 0.1, 0.1), Vec3::Constant(e),
+                                           Vec3(0.2, -0.1, 0.1), Vec3(0, 1, 1), 0.7);
+    const Vec3 dir_object = Vec3(1, 0.6, -0.2).normalized();
+    const Vec3 surface = sq.surfacePointAlong(dir_object);
+    for (double share : {0.75, 0.5, 0.3, 0.05}) {
+      const Vec3 p = sq.T_table_object * (share * surface);
+      EXPECT_NEAR(surfaceDistance(sq, p), -(1.0 - share) * surface.norm(), 1e-6)
+          << "exponent " << e << ", " << share << " of the way out";
+    }
+  }
+}
+
 TEST(SurfaceDistance, StaysFiniteForExtremeExponentsAndScales) {
   // Exponents 1 and 100 with a 5 mm axis: |q/a|^e spans 1e-200..1e178 (a NaN in the evaluation
   // runs before the distance was computed in logs).

@@ -212,6 +212,9 @@ TEST(GraspRanking, RejectsBadScenesAndSettings) {
   rejects(good, 0, c, "pull_distance_m");
   c = config, c.pull.pull_speed_mps = std::nan("");
   rejects(good, 0, c, "pull_speed_mps");
+  // Bullet would quietly simulate a softer cup than this (its spring bound at 240 Hz steps).
+  c = config, c.pull.cup_stiffness_hz = 10.0;
+  rejects(good, 0, c, "cup_stiffness_hz must be at most 9.5");
   EXPECT_THROW(rankGrasps({}, 0, {}, config), std::invalid_argument);
 }
 

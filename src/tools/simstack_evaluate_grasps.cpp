@@ -8,6 +8,7 @@
 #include "perception_options.h"
 #include "progress.h"
 #include "simstack/eval/grasp_evaluation.h"
+#include "simstack/io/staged_output.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/pipeline/evaluated_methods.h"
 
@@ -72,8 +73,7 @@ int main(int argc, char** argv) {
   keepFreedMemoryForReuse();  // the network runs in this process
   o.noise = !no_noise;
   try {
-    std::ofstream check(output, std::ios::app);  // a bad --output is found before the work
-    if (!check) throw std::runtime_error("cannot write " + output);
+    StagedFile staged(output);  // a bad --output is found (its directory made) before the work
     const DatasetReader reader(dataset);
     // As the node runs them: hypothesis 0 is the mean scene, H of them decomposed.
     std::vector<std::unique_ptr<EvaluatedMethod>> methods;
@@ -107,7 +107,7 @@ int main(int argc, char** argv) {
                       {"toppled", p.outcome.toppled},
                       {"freed", p.outcome.target_freed},
                       {"failed", p.outcome.failed()}});
-    std::ofstream f(output);
+    std::ofstream f(staged.path());
     f << nlohmann::json{{"dataset", dataset},
                         {"scenes", n},
                         {"candidates", o.ranking.candidates.max_candidates},
@@ -118,7 +118,9 @@ int main(int argc, char** argv) {
                         {"picks", rows}}
              .dump(1)
       << "\n";
+    f.close();
     if (!f) throw std::runtime_error("cannot write " + output);
+    staged.commit();
     std::cout << "\n" << graspSummaryTable(summary) << "\nresults: " << output << "\n";
     return 0;
   } catch (const std::exception& e) {

@@ -19,8 +19,9 @@ struct PullConfig {
   double settle_s = 0.25;       ///< held still after the pull while the others settle
   double max_force_n = 30.0;    ///< the seal breaks above this force...
   double cup_radius_m = 0.015;  ///< ...or above max_force x cup radius of moment (peeling)
-  /// The cup's compliance: the held object's natural frequency on it (PhysicsWorld::attachCup).
-  double cup_stiffness_hz = 10.0;
+  /// The cup's compliance: the held object's natural frequency on it (PhysicsWorld::attachCup);
+  /// at most 0.25 / (2 pi timestep), 9.55 Hz at 240 Hz, the most Bullet's spring simulates.
+  double cup_stiffness_hz = 9.5;
   /// Consecutive steps over the limits that break the seal: one step's impulse spike at an
   /// impact is not a pull the seal feels.
   int break_steps = 3;

@@ -78,7 +78,7 @@ class PhysicsWorld {
   /// stiffness gives the held object the natural frequency `stiffness_hz`, critically damped:
   /// the object keeps resting on what supports it until the anchor pulls it away. One cup per
   /// world; attaching again moves the cup to the new object.
-  void attachCup(int index, const Vec3& contact_table, double stiffness_hz = 10.0);
+  void attachCup(int index, const Vec3& contact_table, double stiffness_hz = 9.5);
   /// Places the anchor for the next step: the contact point is driven to `contact_table`
   /// keeping the object's orientation at attachment.
   void moveCup(const Vec3& contact_table);

@@ -83,11 +83,11 @@ struct RayRoot {
 };
 
 /// `log_w` are log |q_i/a_i|^e_i, `norm` is |q|. None when the ray has no direction (q at the
-/// centre) or q is so deep inside that the terms underflow: the callers then report the
-/// smallest semi-axis, a lower bound of the depth.
+/// centre): the callers then report the smallest semi-axis. Deep inside a box-like shape
+/// log f is hundreds below zero; everything stays in logs, so that is no limit.
 std::optional<RayRoot> rayRoot(const double* log_w, const double* e, double norm) {
+  if (norm < 1e-7) return std::nullopt;
   const double log_f = logSumExp(log_w, e, 0.0, static_cast<double*>(nullptr));
-  if (norm < 1e-7 || log_f < -27.6) return std::nullopt;
   RayRoot r;
   r.mu = -log_f / ((e[0] + e[1] + e[2]) / 3.0);
   for (int it = 0;; ++it) {

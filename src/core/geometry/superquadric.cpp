@@ -32,6 +32,7 @@ double SuperquadricShape::radialDistance(const Vec3& p_table) const {
   const Vec3 p = T_table_object.inverse() * p_table;
   const double f = insideOutsideObject(p);
   if (f <= std::numeric_limits<double>::min()) return -scale_m.minCoeff();
+  if (!std::isfinite(f)) return p.norm();  // |x/a|^e overflowed: (f - 1) / f is 1
   return p.norm() * (f - 1.0) / f;
 }
 

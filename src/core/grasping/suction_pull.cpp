@@ -24,6 +24,14 @@ void check(const PullConfig& c) {
   requirePositive(c.cup_stiffness_hz, "cup_stiffness_hz");
   requirePositive(c.topple_rad, "topple_rad");
   requirePositive(c.physics.timestep_s, "physics timestep_s");
+  // Bullet's spring joint quietly lowers a stiffer spring to this bound (omega dt <= 1/4), so a
+  // higher frequency would not be what is simulated.
+  const double most_hz = 0.25 / (2.0 * M_PI * c.physics.timestep_s);
+  if (c.cup_stiffness_hz > most_hz)
+    throw std::invalid_argument("cup_stiffness_hz must be at most " + std::to_string(most_hz) +
+                                " Hz at a " + std::to_string(c.physics.timestep_s) +
+                                " s time step (a stiffer spring is not simulated), not " +
+                                std::to_string(c.cup_stiffness_hz));
   requirePositive(c.physics.density_kgpm3, "density_kgpm3");
   if (!std::isfinite(c.ramp_s) || c.ramp_s < 0.0)
     throw std::invalid_argument("ramp_s must be >= 0");
