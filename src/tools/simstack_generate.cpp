@@ -75,14 +75,14 @@ int main(int argc, char** argv) {
   app.add_option("--extent", o.extent_m, "scene grid side in metres")
       ->check(FinitePositive)
       ->capture_default_str();
-  app.add_option("--truncation-vox", o.truncation_vox, "TSDF truncation in voxels")
-      ->check(FinitePositive)
+  app.add_option("--truncation-vox", o.truncation_vox, "TSDF truncation in voxels (at most 64)")
+      ->check(FinitePositive & CLI::Range(0.0, 64.0))
       ->capture_default_str();
   app.add_option(
          "--max-tilt", o.max_tilt_deg,
          "drop orientation: a face down, random yaw, tilt up to this many degrees; 180 = "
          "uniformly random (the paper); 0 is about 2x faster but gives neater, taller piles")
-      ->check(CLI::Range(0.0, 180.0))
+      ->check(FiniteNonNegative & CLI::Range(0.0, 180.0))  // Range alone lets "nan" through
       ->capture_default_str();
   app.add_option("--threads", o.threads, "worker threads")
       ->check(CLI::Range(1, 64))
