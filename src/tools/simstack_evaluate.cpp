@@ -43,8 +43,10 @@ void runDataset(const DatasetReader& reader, const std::string& dataset,
                 ResultFiles& files) {
   std::vector<EvaluatedMethod*> run;
   for (const auto& m : methods) run.push_back(m.get());
-  ProgressBar bar("evaluating " + std::to_string(run.size()) + " methods",
-                  o.scenes > 0 ? std::min(o.scenes, reader.size()) : reader.size());
+  const int scenes = o.scenes > 0 ? std::min(o.scenes, reader.size()) : reader.size();
+  ProgressBar bar("evaluating " + std::to_string(run.size()) +
+                      (run.size() == 1 ? " method" : " methods") + ", scenes",
+                  scenes);
   const EvaluationResults results =
       evaluateDataset(reader, run, o, [&](int done, int) { bar.update(done); });
   bar.finish();
