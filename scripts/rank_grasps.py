@@ -56,6 +56,8 @@ def main():
     if not args.timeout > 0:
         parser.error("--timeout must be > 0 s")
     if args.json:  # fail before the ranking, not after it
+        if os.path.isdir(args.json):
+            parser.error("--json %s is a directory: name a file" % args.json)
         folder = os.path.dirname(os.path.abspath(args.json))
         if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
             parser.error("--json %s: %s is not a writable directory" % (args.json, folder))

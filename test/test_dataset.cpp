@@ -179,5 +179,9 @@ TEST(StagedOutput, ACommittedFileReplacesTheTargetAndAnAbandonedOneLeavesNoTrace
   EXPECT_TRUE(fs::exists(out + "/new.yaml"));
   fs::create_directories(dir / "empty");
   EXPECT_NO_THROW(StagedDirectory((dir / "empty").string(), "tool_a"));
+  // Nor the working directory, or one holding it: the caller would be left in a deleted one.
+  EXPECT_THROW(StagedDirectory(".", "tool_a"), std::runtime_error);
+  EXPECT_THROW(StagedDirectory(fs::current_path().parent_path().string(), "tool_a"),
+               std::runtime_error);
   fs::remove_all(dir);
 }

@@ -35,6 +35,9 @@ if "$tool" --scenes 1 --seed 4 --resolution 16 --output "$dir/mine.h5" --views 1
   echo "replaced a directory of other files"; exit 1; fi
 grep -q "not an earlier result" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
 test -s "$dir/mine_views/notes.txt"
+if "$tool" --scenes 1 --seed 4 --resolution 16 --output "$dir/same/p.h5" --views 1 --views-dir "$dir/same" \
+  2> "$dir/err.txt"; then echo "views put where they replace the dataset"; exit 1; fi
+grep -q "holds the dataset" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
 # Bad input: a clear message naming the value, non-zero exit.
 if "$tool" --scenes 1 --seed 1 --output "$dir/x.h5" --objects 4:2 2> "$dir/err.txt"; then echo "accepted --objects 4:2"; exit 1; fi
 grep -qi "object count" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }

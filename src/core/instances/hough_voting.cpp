@@ -15,6 +15,7 @@
 #include <map>
 #include <memory>
 #include <numeric>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -466,9 +467,10 @@ void assignToCentres(const GridSpec& g, const std::vector<int>& occupied,
 
 void HoughConfig::validate() const {
   const auto require = [](bool ok, const std::string& field, double value, const char* range) {
-    if (!ok)
-      throw std::invalid_argument("hough." + field + " must be " + range + ", not " +
-                                  std::to_string(value));
+    if (ok) return;
+    std::ostringstream text;  // -1, 0.05, nan, 1e+300: as a person writes them
+    text << "hough." << field << " must be " << range << ", not " << value;
+    throw std::invalid_argument(text.str());
   };
   require(refinement >= 1 && refinement <= 64, "refinement", refinement, "in [1, 64]");
   require(min_traversals >= 0, "min_traversals", min_traversals, ">= 0");

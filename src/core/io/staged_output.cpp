@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <stdexcept>
@@ -59,6 +60,17 @@ StagedDirectory::StagedDirectory(const std::string& target, const std::string& o
         target + " is not empty and is not an earlier result of " + owner +
         (other.empty() ? std::string(" (it has no ") + kMarker + ")" : " but of " + other) +
         ": choose another directory, or empty it");
+  }
+  // Replacing the working directory (or one holding it) would leave the caller in a deleted one.
+  std::error_code cwd_error;
+  const fs::path cwd = fs::current_path(cwd_error).lexically_normal();
+  if (!cwd_error) {
+    const auto [ends, unused] = std::mismatch(t.begin(), t.end(), cwd.begin(), cwd.end());
+    if (ends == t.end())
+      throw std::runtime_error(target +
+                               " is the working directory or holds it: name a directory "
+                               "inside it, e.g. " +
+                               (fs::path(target) / "out").string());
   }
   target_ = t.string();
   staged_ = uniqueDirectoryBeside(t, "partial");

@@ -211,7 +211,7 @@ namespace {
 // (configs stored inside older model files are parsed leniently instead).
 template <class C, class Fields>
 void rejectUnknownFields(const YAML::Node& section, const char* name, Fields fields) {
-  if (!section) return;
+  if (!section || section.IsNull()) return;  // every field commented out: the defaults
   if (!section.IsMap()) throw std::invalid_argument(std::string("'") + name + "' must be a map");
   C defaults;
   std::set<std::string> known;
@@ -227,6 +227,11 @@ void rejectUnknownFields(const YAML::Node& section, const char* name, Fields fie
 void loadTrainingYaml(const std::string& path, CvaeConfig* model, TrainConfig* training) {
   const YAML::Node n = loadYamlFile(path, "training config");
   try {
+    if (n.IsNull()) {  // nothing but comments: the defaults
+      *model = CvaeConfig();
+      *training = TrainConfig();
+      return;
+    }
     if (!n.IsMap()) throw std::invalid_argument("expected a YAML map");
     for (const auto& kv : n) {
       const std::string section = kv.first.as<std::string>();
