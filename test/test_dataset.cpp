@@ -14,15 +14,23 @@
 
 using namespace simstack;
 
+namespace {
+/// A small dataset's header: `scenes` piles on a 16^3 grid of 0.64 m.
+DatasetInfo smallInfo(int scenes) {
+  DatasetInfo info;
+  info.num_scenes = scenes;
+  info.resolution = 16;
+  info.extent_m = 0.64;
+  info.truncation_m = 0.12;
+  return info;
+}
+}  // namespace
+
 TEST(Dataset, WriteReadRoundTrip) {
   const std::string path =
       (std::filesystem::temp_directory_path() / "simstack_test_dataset.h5").string();
   const PileGenerator gen{PileConfig()};
-  DatasetInfo info;
-  info.num_scenes = 3;
-  info.resolution = 16;
-  info.extent_m = 0.64;
-  info.truncation_m = 0.12;
+  DatasetInfo info = smallInfo(3);
   info.seed = 77;
   std::vector<Scene> scenes;
   std::vector<GroundTruthGrids> gts;
@@ -84,11 +92,7 @@ TEST(Dataset, ClearErrorsNameTheFile) {
 TEST(Dataset, ArraysThatDisagreeWithTheAttributesAreRefused) {
   const std::string path =
       (std::filesystem::temp_directory_path() / "simstack_test_dataset_shapes.h5").string();
-  DatasetInfo info;
-  info.num_scenes = 1;
-  info.resolution = 16;
-  info.extent_m = 0.64;
-  info.truncation_m = 0.12;
+  DatasetInfo info = smallInfo(1);
   info.max_objects_per_scene = 4;
   const auto rewrite = [&](const char* name, auto value) {
     {

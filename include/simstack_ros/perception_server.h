@@ -63,7 +63,9 @@ class PerceptionServer {
   /// Once a second (wall time): diagnostics, and a warning when no frame has come for
   /// node/input_timeout_s.
   void onWallTimer();
-  /// Seconds without a frame, or 0 while frames come within input_timeout_s (mutex_ held).
+  /// Seconds since the last frame came (since the start before any), mutex_ held.
+  double secondsWithoutFrame(const ros::WallTime& now) const;
+  /// The same, or 0 while frames come within input_timeout_s (mutex_ held).
   double silenceSeconds(const ros::WallTime& now) const;
   void onSettings(LiveSettingsConfig& settings, uint32_t level);
   /// Applies settings changed by dynamic_reconfigure (worker thread, between frames).

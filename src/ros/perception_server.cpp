@@ -365,8 +365,12 @@ bool PerceptionServer::saveOctomap(SaveOctomap::Request& req, SaveOctomap::Respo
   return true;
 }
 
+double PerceptionServer::secondsWithoutFrame(const ros::WallTime& now) const {
+  return (now - (received_ > 0 ? last_arrival_ : started_)).toSec();
+}
+
 double PerceptionServer::silenceSeconds(const ros::WallTime& now) const {
-  const double silent = (now - (received_ > 0 ? last_arrival_ : started_)).toSec();
+  const double silent = secondsWithoutFrame(now);
   return silent >= node_.input_timeout_s ? silent : 0.0;
 }
 
@@ -416,8 +420,7 @@ void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "perceiving");
   status.add("depth topic", depth_sub_.getTopic());
-  status.add("seconds since the last frame",
-             received_ > 0 ? (now - last_arrival_).toSec() : (now - started_).toSec());
+  status.add("seconds since the last frame", secondsWithoutFrame(now));
   status.add("frames received", received_);
   status.add("frames processed", processed_);
   status.add("frames dropped (newer frame came first)", dropped_);

@@ -9,10 +9,15 @@
 
 namespace simstack {
 
+/// Whether directory `outer` is `inner` or holds it (both taken absolute and normal, "out/" as
+/// "out"): replacing `outer` would remove `inner`.
+bool pathHolds(const std::string& outer, const std::string& inner);
+
 /// A directory: commit() replaces the target directory whole, so that no file of an earlier
 /// run stays beside the new ones. It holds a marker file (`.simstack-output`) naming `owner`, the
 /// tool that wrote it; an existing non-empty target without that owner's marker (the user's
-/// files, another tool's result) is refused at construction. "out/" is "out".
+/// files, another tool's result), or one holding the working directory, is refused at
+/// construction. "out/" is "out".
 class StagedDirectory {
  public:
   StagedDirectory(const std::string& target, const std::string& owner);

@@ -190,11 +190,7 @@ GenerationSummary generateDataset(const GenerationOptions& o,
                             ? fs::path(o.output).replace_extension("").string() + "_views"
                             : o.views_dir;
     // The views directory is replaced whole: it may not hold the dataset itself.
-    const fs::path dataset_dir = fs::absolute(o.output).parent_path().lexically_normal();
-    fs::path views_path = fs::absolute(summary.views_dir).lexically_normal();
-    if (views_path.filename().empty()) views_path = views_path.parent_path();
-    if (std::mismatch(views_path.begin(), views_path.end(), dataset_dir.begin(), dataset_dir.end())
-            .first == views_path.end())
+    if (pathHolds(summary.views_dir, o.output))
       throw std::invalid_argument("--views-dir " + summary.views_dir + " holds the dataset " +
                                   o.output + ": give the views a directory of their own");
     views.emplace(summary.views_dir, "simstack_generate");

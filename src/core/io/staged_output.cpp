@@ -15,9 +15,15 @@ namespace simstack {
 namespace fs = std::filesystem;
 namespace {
 
+/// Absolute and normal, "out/" as "out".
+fs::path normalPath(const fs::path& path) {
+  fs::path p = fs::absolute(path).lexically_normal();
+  if (p.filename().empty()) p = p.parent_path();
+  return p;
+}
+
 fs::path parentOf(const std::string& target) {
-  fs::path p = fs::absolute(fs::path(target)).lexically_normal();
-  if (p.filename().empty()) p = p.parent_path();  // "out/" is "out"
+  const fs::path p = normalPath(target);
   std::error_code ec;
   fs::create_directories(p.parent_path(), ec);
   if (ec)
@@ -48,6 +54,11 @@ std::string ownerOf(const fs::path& dir) {
 
 }  // namespace
 
+bool pathHolds(const std::string& outer, const std::string& inner) {
+  const fs::path o = normalPath(outer), i = normalPath(inner);
+  return std::mismatch(o.begin(), o.end(), i.begin(), i.end()).first == o.end();
+}
+
 StagedDirectory::StagedDirectory(const std::string& target, const std::string& owner) {
   const fs::path t = parentOf(target);
   if (fs::exists(t) && !fs::is_directory(t))
@@ -62,16 +73,11 @@ StagedDirectory::StagedDirectory(const std::string& target, const std::string& o
         ": choose another directory, or empty it");
   }
   // Replacing the working directory (or one holding it) would leave the caller in a deleted one.
-  std::error_code cwd_error;
-  const fs::path cwd = fs::current_path(cwd_error).lexically_normal();
-  if (!cwd_error) {
-    const auto [ends, unused] = std::mismatch(t.begin(), t.end(), cwd.begin(), cwd.end());
-    if (ends == t.end())
-      throw std::runtime_error(target +
-                               " is the working directory or holds it: name a directory "
-                               "inside it, e.g. " +
-                               (fs::path(target) / "out").string());
-  }
+  if (pathHolds(target, "."))
+    throw std::runtime_error(target +
+                             " is the working directory or holds it: name a directory inside "
+                             "it, e.g. " +
+                             (fs::path(target) / "out").string());
   target_ = t.string();
   staged_ = uniqueDirectoryBeside(t, "partial");
   // mkdtemp makes it private (0700); a result directory gets the usual mode.
