@@ -148,6 +148,38 @@ TEST(Cvae, LossesMatchHandComputedValues) {
   EXPECT_NEAR((with.total - without.total).item<double>(), 2.0 * (free0 + occ1), 1e-4);
 }
 
+TEST(Cvae, IouLossIsTheJaccardLossOfTheMistakes) {
+  // Sharpness 10: voxels 0, 1 occupied, 2, 3 free. Voxel 0 right by the margin (logit 1), voxel 1
+  // undecided (logit 0, hinge error 1), voxel 2 right (logit -1), voxel 3 undecided (error 1).
+  // Mistakes {1, 3}: 1 - |{0, 1} minus mistakes| / |{0, 1} or mistakes| = 1 - 1 / 3.
+  const auto target = torch::tensor({-0.5f, -0.5f, 0.5f, 0.5f}).view({1, 1, 4, 1, 1});
+  const auto pred = torch::tensor({-0.1f, 0.0f, 0.1f, 0.0f}).view({1, 1, 4, 1, 1});
+  EXPECT_NEAR(iouLoss(pred, target, 10.0).item<double>(), 2.0 / 3.0, 1e-5);
+  // Every voxel right by the margin or more: no loss; the occupied voxel 1 mistaken as free by
+  // a margin (error 2): twice its share of the Jaccard loss, 2 x (1 - 1/2).
+  const auto right = torch::tensor({-0.3f, -0.1f, 0.1f, 0.4f}).view({1, 1, 4, 1, 1});
+  EXPECT_NEAR(iouLoss(right, target, 10.0).item<double>(), 0.0, 1e-6);
+  const auto wrong = torch::tensor({-0.3f, 0.1f, 0.1f, 0.4f}).view({1, 1, 4, 1, 1});
+  EXPECT_NEAR(iouLoss(wrong, target, 10.0).item<double>(), 1.0, 1e-5);
+  // Its gradient raises the mistaken voxel's occupancy (lowers its TSDF) and leaves the rest.
+  const torch::Tensor p = wrong.clone().requires_grad_(true);
+  iouLoss(p, target, 10.0).backward();
+  const torch::Tensor g = p.grad().flatten();
+  EXPECT_GT(g[1].item<double>(), 0.0);
+  for (int i : {0, 2, 3}) EXPECT_EQ(g[i].item<double>(), 0.0);
+  // In the total only with a weight.
+  CvaeConfig c;
+  c.architecture = "fc";
+  CvaeOutput o;
+  o.tsdf = pred;
+  o.partial_recon = pred;
+  o.votes = torch::zeros({1, 3, 4, 1, 1});
+  const CvaeLosses without = computeLosses(o, torch::cat({target, target}, 1), target, o.votes, c);
+  c.iou_weight = 3.0;
+  const CvaeLosses with = computeLosses(o, torch::cat({target, target}, 1), target, o.votes, c);
+  EXPECT_NEAR((with.total - without.total).item<double>(), 3.0 * 2.0 / 3.0, 1e-4);
+}
+
 TEST(Cvae, MmdSeparatesPriorFromShiftedCodes) {
   torch::manual_seed(3);
   const auto prior = torch::randn({256, 8});
@@ -1055,6 +1087,9 @@ TEST(CvaeTrainer, ValidatesAModelFileAsARunDoes) {
   EXPECT_GE(r.validation_iou_se, 0.0);
   EXPECT_GT(r.validation_bce, 0.0);
   EXPECT_EQ(CvaeTrainer::validateModel(data, a + "/model.pt", v).validation_bce, r.validation_bce);
+  // The training seed does not choose the views or codes: runs of other seeds score alike.
+  v.seed = 7;
+  EXPECT_EQ(CvaeTrainer::validateModel(data, a + "/model.pt", v).validation_bce, r.validation_bce);
   // One scene: no spread over scenes; its three views are not its first view alone.
   v.validation_scenes = 1;
   const TrainingReport three = CvaeTrainer::validateModel(data, a + "/model.pt", v);
@@ -1107,6 +1142,17 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   ASSERT_EQ(resumed.size(), 3u);
   EXPECT_EQ(resumed[2].rfind("4,", 0), 0u);
   EXPECT_TRUE(torch::equal(probe(b + "/model.pt"), probe(c + "/model.pt")));
+  // A log of other columns (an older version's) is not appended to: resuming says so.
+  {
+    std::ofstream old(c + "/train_log.csv");
+    old << "step,total,tsdf,partial,votes,mmd,occupancy,samples_per_s\n";
+  }
+  try {
+    CvaeTrainer(data, tiny(), tc, c, "test").run(true);
+    ADD_FAILURE() << "a log of other columns was appended to";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("other columns"), std::string::npos) << e.what();
+  }
   // A warm start takes the file's weights (the every-scale network adds its code projections),
   // stays nearer to them than a fresh start, and says where it started in model.yaml.
   {
@@ -1216,7 +1262,9 @@ TEST(CvaeConfig, RoundTripsThroughYaml) {
   c.latent_injection = "every_scale";
   c.occupancy_weight = 0.5;
   c.occupancy_sharpness = 4.0;
+  c.iou_weight = 300.0;
   EXPECT_EQ(CvaeConfig::fromYaml(c.toYaml()).toYaml(), c.toYaml());
+  EXPECT_EQ(CvaeConfig::fromYaml(c.toYaml()).iou_weight, 300.0);
   EXPECT_EQ(CvaeConfig::fromYaml(c.toYaml()).occupancy_sharpness, 4.0);
   TrainConfig t;
   t.init_from = "models/some model.pt";
@@ -1227,6 +1275,7 @@ TEST(CvaeConfig, RoundTripsThroughYaml) {
   EXPECT_THROW(CvaeConfig::fromYaml("mmd_kernel_widths: 2"), std::invalid_argument);
   EXPECT_THROW(CvaeConfig::fromYaml("occupancy_weight: -1"), std::invalid_argument);
   EXPECT_THROW(CvaeConfig::fromYaml("occupancy_sharpness: 0"), std::invalid_argument);
+  EXPECT_THROW(CvaeConfig::fromYaml("iou_weight: -1"), std::invalid_argument);
 }
 
 TEST(CvaeConfig, TrainingFilesRejectMisspeltFieldsAndNameThem) {

@@ -42,9 +42,10 @@ void printTrained(const std::string& architecture, const std::string& output,
   std::cout << "trained " << architecture << " for " << r.steps << " steps ("
             << r.samples_per_second << " samples/s)\n  final losses: total " << r.total << ", tsdf "
             << r.tsdf << ", partial " << r.partial << ", votes " << r.votes << ", mmd " << r.mmd
-            << ", occupancy " << r.occupancy << "\n  validation: IoU " << r.validation_iou << " +- "
-            << r.validation_iou_se << ", BCE " << r.validation_bce << ", hypotheses disagree on "
-            << 100.0 * r.validation_disagreement << " % of their voxels";
+            << ", occupancy " << r.occupancy << ", iou " << r.iou << "\n  validation: IoU "
+            << r.validation_iou << " +- " << r.validation_iou_se << ", BCE " << r.validation_bce
+            << ", hypotheses disagree on " << 100.0 * r.validation_disagreement
+            << " % of their voxels";
   if (std::isfinite(r.validation_posterior_iou))
     std::cout << ", IoU from the posterior code " << r.validation_posterior_iou;
   if (std::isfinite(r.posterior_mu_rms)) {

@@ -179,6 +179,10 @@ torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Te
 /// target <= 0, summed over voxels and averaged over the batch (pred and target in units of tau).
 torch::Tensor occupancyLoss(const torch::Tensor& pred, const torch::Tensor& target,
                             double sharpness);
+/// Not in the paper: the Lovasz hinge of the occupancy logits -sharpness * pred against the
+/// occupancy target <= 0 (a convex surrogate of 1 - IoU; equal to it when every hinge error is 0
+/// or 1), averaged over the batch.
+torch::Tensor iouLoss(const torch::Tensor& pred, const torch::Tensor& target, double sharpness);
 /// Eq. 2: sum over voxels of the Euclidean norm of the vote error, averaged over the batch;
 /// with `occupied_only`, only over voxels whose target vote is non-zero (inside an object);
 /// with `weight` [B, 1, R, R, R], each voxel's norm weighted.
@@ -192,7 +196,7 @@ torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior,
                       const std::vector<double>& widths = {1.0});
 
 struct CvaeLosses {
-  torch::Tensor total, tsdf, partial, votes, mmd, occupancy;
+  torch::Tensor total, tsdf, partial, votes, mmd, occupancy, iou;
 };
 /// The weighted sum of the paper's section 3.1.3 (MMD is 0 for the FC baseline), plus the
 /// occupancy term when its weight is not 0 (its value is reported either way). With a learned

@@ -57,6 +57,9 @@ struct CvaeConfig {
   double occupancy_weight = 0.0;
   /// Slope of that sigmoid: a prediction of +-1/occupancy_sharpness tau is 73 % sure.
   double occupancy_sharpness = 10.0;
+  /// Weight of the Lovasz hinge (Berman et al. 2018), a convex surrogate of 1 - IoU per sample,
+  /// on the logits -occupancy_sharpness * tsdf / tau: the evaluation's IoU as a loss. 0 = off.
+  double iou_weight = 0.0;
   /// Voxels where eq. 2 is summed: "occupied" (ground-truth occupied voxels, whose votes the
   /// Hough step reads) or "all" (the paper: every voxel, target zero outside objects). With
   /// "all" the ~30,000 free voxels pull every vote to zero with unit-size gradients, and our

@@ -17,8 +17,8 @@ namespace simstack {
 
 struct TrainingReport {
   int64_t steps = 0;
-  /// Mean of the last 50 steps; occupancy is reported also when its weight is 0.
-  double total = 0, tsdf = 0, partial = 0, votes = 0, mmd = 0, occupancy = 0;
+  /// Mean of the last 50 steps; occupancy and iou are reported also when their weight is 0.
+  double total = 0, tsdf = 0, partial = 0, votes = 0, mmd = 0, occupancy = 0, iou = 0;
   /// IoU and BCE of the expected occupancy of `validation_samples` prior codes (the mean of the
   /// hypotheses, as the evaluation scores them).
   double validation_iou = 0, validation_bce = 0;

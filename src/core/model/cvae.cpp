@@ -447,6 +447,27 @@ torch::Tensor occupancyTermPerSample(const torch::Tensor& pred, const torch::Ten
       .sum(1);
 }
 
+/// Lovasz hinge per sample: the Lovasz extension of the Jaccard loss evaluated on the hinge
+/// errors of the occupancy logits, sorted from the worst.
+torch::Tensor iouTermPerSample(const torch::Tensor& pred, const torch::Tensor& target,
+                               double sharpness) {
+  const torch::Tensor logits = (-sharpness * pred).flatten(1);
+  const torch::Tensor occupied = (target <= 0).to(pred.dtype()).flatten(1);
+  const torch::Tensor errors = 1.0 - logits * (2.0 * occupied - 1.0);
+  const auto [sorted, order] = errors.sort(1, /*descending=*/true);
+  torch::Tensor jaccard_step;
+  {
+    torch::NoGradGuard no_grad;
+    const torch::Tensor gt = occupied.gather(1, order);
+    const torch::Tensor total = gt.sum(1, true);
+    const torch::Tensor jaccard = 1.0 - (total - gt.cumsum(1)) / (total + (1.0 - gt).cumsum(1));
+    const int64_t n = jaccard.size(1);
+    jaccard_step = torch::cat(
+        {jaccard.narrow(1, 0, 1), jaccard.narrow(1, 1, n - 1) - jaccard.narrow(1, 0, n - 1)}, 1);
+  }
+  return (F::relu(sorted) * jaccard_step).sum(1);
+}
+
 torch::Tensor voteTermPerSample(const torch::Tensor& pred, const torch::Tensor& target,
                                 bool occupied_only, const torch::Tensor& weight) {
   // sqrt(. + 1e-12): the norm's gradient is undefined where prediction and target agree.
@@ -466,6 +487,10 @@ torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Te
 torch::Tensor occupancyLoss(const torch::Tensor& pred, const torch::Tensor& target,
                             double sharpness) {
   return occupancyTermPerSample(pred, target, sharpness).mean();
+}
+
+torch::Tensor iouLoss(const torch::Tensor& pred, const torch::Tensor& target, double sharpness) {
+  return iouTermPerSample(pred, target, sharpness).mean();
 }
 
 torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target, bool occupied_only,
@@ -514,6 +539,11 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
     torch::AutoGradMode grad(torch::GradMode::is_enabled() && c.occupancy_weight > 0.0);
     occupancy_term = occupancyTermPerSample(out.tsdf, repeat(tsdf), c.occupancy_sharpness);
   }
+  torch::Tensor iou_term;
+  {
+    torch::AutoGradMode grad(torch::GradMode::is_enabled() && c.iou_weight > 0.0);
+    iou_term = iouTermPerSample(out.tsdf, repeat(tsdf), c.occupancy_sharpness);
+  }
   if (k > 1) {
     // Each scene keeps the code whose reconstruction scores best; only it is trained.
     const torch::Tensor score =
@@ -525,6 +555,7 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
     tsdf_term = tsdf_term.index_select(0, best);
     vote_term = vote_term.index_select(0, best);
     occupancy_term = occupancy_term.index_select(0, best);
+    iou_term = iou_term.index_select(0, best);
   }
   l.tsdf = tsdf_term.mean();
   l.partial = inverseTsdfWeightedLoss(out.partial_recon, partial.narrow(1, 0, 1), c.tsdf_epsilon);
@@ -553,6 +584,8 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
   l.occupancy = occupancy_term.mean();
   l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + latent +
             c.occupancy_weight * l.occupancy;
+  l.iou = iou_term.mean();
+  if (c.iou_weight > 0.0) l.total = l.total + c.iou_weight * l.iou;
   return l;
 }
 

@@ -53,6 +53,7 @@ void cvaeFields(C& c, F&& f) {
   f("tsdf_epsilon", c.tsdf_epsilon);
   f("occupancy_weight", c.occupancy_weight);
   f("occupancy_sharpness", c.occupancy_sharpness);
+  f("iou_weight", c.iou_weight);
   f("vote_loss", c.vote_loss);
   f("vote_boundary_weight", c.vote_boundary_weight);
   f("condition_dropout", c.condition_dropout);
@@ -113,6 +114,7 @@ void CvaeConfig::validate() const {
   require(tsdf_epsilon > 0.0, "tsdf_epsilon must be > 0");
   require(occupancy_weight >= 0.0, "occupancy_weight must be >= 0");
   require(occupancy_sharpness > 0.0, "occupancy_sharpness must be > 0");
+  require(iou_weight >= 0.0, "iou_weight must be >= 0");
   require(condition_dropout >= 0.0 && condition_dropout < 1.0,
           "condition_dropout must lie in [0, 1)");
   require(posterior == "gaussian" || posterior == "deterministic",
@@ -141,6 +143,7 @@ void CvaeConfig::copyLossSettings(const CvaeConfig& o) {
   tsdf_epsilon = o.tsdf_epsilon;
   occupancy_weight = o.occupancy_weight;
   occupancy_sharpness = o.occupancy_sharpness;
+  iou_weight = o.iou_weight;
   vote_loss = o.vote_loss;
   vote_boundary_weight = o.vote_boundary_weight;
   condition_dropout = o.condition_dropout;

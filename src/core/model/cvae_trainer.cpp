@@ -1,5 +1,6 @@
 #include "simstack/model/cvae_trainer.h"
 
+#include <ATen/CPUGeneratorImpl.h>
 #include <omp.h>
 #include <yaml-cpp/yaml.h>
 
@@ -143,18 +144,29 @@ class BatchQueue {
 /// train_log.csv: losses every 10 steps, validation figures at validation steps.
 class TrainingLog {
  public:
+  static constexpr const char* kHeader =
+      "step,total,tsdf,partial,votes,mmd,occupancy,iou,samples_per_s,validation_iou,"
+      "validation_bce,validation_disagreement,posterior_mu_rms,posterior_sigma,"
+      "validation_posterior_iou,validation_iou_se,validation_single_iou,validation_best_iou,"
+      "validation_disagreement_seen,validation_disagreement_unseen,validation_unseen_share";
+
   TrainingLog(const fs::path& path, bool append)
       : path_(path), log_(path.string(), append ? std::ios::app : std::ios::trunc) {
     if (!log_) throw std::runtime_error("cannot write " + path.string());
     log_.seekp(0, std::ios::end);
-    if (log_.tellp() == 0)  // a new log (also when a finished model is trained further)
-      log_ << "step,total,tsdf,partial,votes,mmd,occupancy,samples_per_s,validation_iou,"
-              "validation_bce,validation_disagreement,posterior_mu_rms,posterior_sigma,"
-              "validation_posterior_iou,validation_iou_se,validation_single_iou,"
-              "validation_best_iou,validation_disagreement_seen,validation_disagreement_unseen,"
-              "validation_unseen_share\n";
+    if (log_.tellp() == 0) {  // a new log (also when a finished model is trained further)
+      log_ << kHeader << "\n";
+    } else {
+      std::ifstream previous(path.string());
+      std::string header;
+      std::getline(previous, header);
+      if (header != kHeader)
+        throw std::runtime_error(path.string() +
+                                 " has other columns than this version writes (an older "
+                                 "version's log); move it aside to resume");
+    }
   }
-  void write(int64_t step, const std::array<double, 6>& losses, const TrainingReport& report,
+  void write(int64_t step, const std::array<double, 7>& losses, const TrainingReport& report,
              bool validated, bool posterior_measured) {
     log_ << step;
     for (double v : losses) log_ << "," << v;
@@ -177,14 +189,14 @@ class TrainingLog {
   }
   void flush() { log_.flush(); }
   /// The losses and pace of the last logged step (a resumed run that had nothing left to do).
-  bool lastRow(std::array<double, 6>* losses, double* samples_per_second) const {
+  bool lastRow(std::array<double, 7>* losses, double* samples_per_second) const {
     std::ifstream previous(path_.string());
     std::string line, last;
     while (std::getline(previous, line))
       if (!line.empty() && std::isdigit(static_cast<unsigned char>(line[0]))) last = line;
     auto& l = *losses;
-    return std::sscanf(last.c_str(), "%*[^,],%lf,%lf,%lf,%lf,%lf,%lf,%lf", &l[0], &l[1], &l[2],
-                       &l[3], &l[4], &l[5], samples_per_second) == 7;
+    return std::sscanf(last.c_str(), "%*[^,],%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf", &l[0], &l[1], &l[2],
+                       &l[3], &l[4], &l[5], &l[6], samples_per_second) == 8;
   }
 
  private:
@@ -195,12 +207,13 @@ class TrainingLog {
 /// Running means over the last 50 steps of the losses and of the encoder's posterior on the
 /// training batches (train mode; in eval mode BatchNorm's running statistics give other codes).
 struct RecentSteps {
-  std::deque<std::array<double, 6>> losses;
+  std::deque<std::array<double, 7>> losses;
   std::deque<std::array<double, 2>> posterior;  ///< mean square of mu, mean sigma
 
   void add(const CvaeLosses& l, const CvaeOutput& o, TrainingReport* report) {
     losses.push_back({l.total.item<double>(), l.tsdf.item<double>(), l.partial.item<double>(),
-                      l.votes.item<double>(), l.mmd.item<double>(), l.occupancy.item<double>()});
+                      l.votes.item<double>(), l.mmd.item<double>(), l.occupancy.item<double>(),
+                      l.iou.item<double>()});
     if (losses.size() > 50) losses.pop_front();
     if (!o.mu.defined()) return;
     torch::NoGradGuard no_grad;
@@ -217,7 +230,7 @@ struct RecentSteps {
   }
   void meanInto(TrainingReport* report) const {
     if (losses.empty()) return;
-    std::array<double, 6> mean{};
+    std::array<double, 7> mean{};
     for (const auto& a : losses)
       for (size_t i = 0; i < mean.size(); ++i) mean[i] += a[i] / losses.size();
     report->total = mean[0];
@@ -226,6 +239,7 @@ struct RecentSteps {
     report->votes = mean[3];
     report->mmd = mean[4];
     report->occupancy = mean[5];
+    report->iou = mean[6];
   }
 };
 
@@ -373,13 +387,19 @@ struct ValidationSums {
   int views = 0;
 };
 
+/// Validation views and prior codes come from streams of their own, not from the training seed:
+/// every run, and --validate-only, scores the same views with the same codes, so that two
+/// models compare view by view. (1: the streams of runs with the default seed before.)
+constexpr uint64_t kValidationSeed = 1;
+
 /// One validation view: S prior codes (and the posterior mean for a C-VAE) scored against the
 /// truth; returns the expected-occupancy IoU.
 double scoreValidationView(Cvae& model, const CvaeConfig& mc, const TrainingSample& s, int samples,
-                           ValidationSums* sums) {
+                           uint64_t code_seed, ValidationSums* sums) {
   const int r = mc.resolution;
   const Batch b = toBatch({s}, r);
-  const torch::Tensor z = torch::randn({samples, mc.latent_size});
+  const torch::Tensor z =
+      torch::randn({samples, mc.latent_size}, at::detail::createCPUGenerator(code_seed));
   // One condition shared by the codes (encoded once); the FC baseline, which ignores the code,
   // gets one per code so that its S (equal) outputs are scored like hypotheses.
   const CvaeOutput o = model->generate(
@@ -429,12 +449,15 @@ void CvaeTrainer::Impl::validate(Cvae& model, const TrainingSampleBuilder& build
   for (int k = train_scenes; k < n; ++k) {
     // One stream per scene, its views drawn in turn: the first view is the one a single-view
     // validation drew.
-    std::mt19937_64 rng(mix(config.seed ^ 0xA11DA7Eull, static_cast<uint64_t>(k)));
+    std::mt19937_64 rng(mix(kValidationSeed ^ 0xA11DA7Eull, static_cast<uint64_t>(k)));
     const SceneRecord record = reader->read(k);
     double scene_sum = 0;
-    for (int v = 0; v < config.validation_views; ++v)
+    for (int v = 0; v < config.validation_views; ++v) {
+      const uint64_t code_seed =
+          mix(kValidationSeed ^ 0xC0DE5ull, static_cast<uint64_t>(k) * 64 + v);
       scene_sum += scoreValidationView(model, model_config, builder.build(record, rng),
-                                       config.validation_samples, &sums);
+                                       config.validation_samples, code_seed, &sums);
+    }
     scene_iou.push_back(scene_sum / config.validation_views);
   }
   const double views = sums.views;
@@ -476,7 +499,8 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
        << "total" << YAML::Value << report.total << YAML::Key << "tsdf" << YAML::Value
        << report.tsdf << YAML::Key << "partial" << YAML::Value << report.partial << YAML::Key
        << "votes" << YAML::Value << report.votes << YAML::Key << "mmd" << YAML::Value << report.mmd
-       << YAML::Key << "occupancy" << YAML::Value << report.occupancy << YAML::EndMap;
+       << YAML::Key << "occupancy" << YAML::Value << report.occupancy << YAML::Key << "iou"
+       << YAML::Value << report.iou << YAML::EndMap;
   meta << YAML::Key << "validation" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
        << "iou" << YAML::Value << report.validation_iou << YAML::Key << "iou_se" << YAML::Value
        << report.validation_iou_se << YAML::Key << "bce" << YAML::Value << report.validation_bce
@@ -599,7 +623,7 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
     // Nothing left to train (a resumed run that had reached its steps): still report the
     // figures of the model being written, from the log and a fresh validation.
     impl_->validate(model, builder, &report);
-    std::array<double, 6> row{};
+    std::array<double, 7> row{};
     double rate = 0.0;
     if (log.lastRow(&row, &rate)) {
       recent.losses.push_back(row);
