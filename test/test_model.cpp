@@ -161,6 +161,11 @@ TEST(Cvae, IouLossIsTheJaccardLossOfTheMistakes) {
   EXPECT_NEAR(iouLoss(right, target, 10.0).item<double>(), 0.0, 1e-6);
   const auto wrong = torch::tensor({-0.3f, 0.1f, 0.1f, 0.4f}).view({1, 1, 4, 1, 1});
   EXPECT_NEAR(iouLoss(wrong, target, 10.0).item<double>(), 1.0, 1e-5);
+  // Per sample, then the batch mean: the two samples together score (2/3 + 1) / 2; a sample
+  // with nothing occupied scores its largest hinge error (here 2: voxel 0 occupied by the margin).
+  EXPECT_NEAR(iouLoss(torch::cat({pred, wrong}), torch::cat({target, target}), 10.0).item<double>(),
+              (2.0 / 3.0 + 1.0) / 2.0, 1e-5);
+  EXPECT_NEAR(iouLoss(pred, target.abs(), 10.0).item<double>(), 2.0, 1e-5);
   // Its gradient raises the mistaken voxel's occupancy (lowers its TSDF) and leaves the rest.
   const torch::Tensor p = wrong.clone().requires_grad_(true);
   iouLoss(p, target, 10.0).backward();

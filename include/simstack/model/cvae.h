@@ -199,10 +199,9 @@ struct CvaeLosses {
   torch::Tensor total, tsdf, partial, votes, mmd, occupancy, iou;
 };
 /// The weighted sum of the paper's section 3.1.3 (MMD is 0 for the FC baseline), plus the
-/// occupancy term when its weight is not 0 (its value is reported either way). With a learned
-/// prior the `mmd` slot holds KL(posterior || prior) (weight kl_weight, above its free bits)
-/// instead.
-/// `vote_weight` [B, 1, R, R, R]: eq. 2's per-voxel weights (undefined: 1).
+/// occupancy and IoU terms when their weights are not 0 (their values are reported either way).
+/// With a learned prior the `mmd` slot holds KL(posterior || prior) (weight kl_weight, above its
+/// free bits) instead. `vote_weight` [B, 1, R, R, R]: eq. 2's per-voxel weights (undefined: 1).
 CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
                          const torch::Tensor& tsdf, const torch::Tensor& votes,
                          const CvaeConfig& config, const torch::Tensor& vote_weight = {});

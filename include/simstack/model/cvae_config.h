@@ -107,7 +107,7 @@ struct CvaeConfig {
   /// that is cheap to squeeze out of the code otherwise leaves it empty). 0 = off.
   double kl_free_nats = 0.0;
   /// Training only: each scene decodes this many codes drawn from its posterior, and the
-  /// reconstruction terms (eq. 1, eq. 2, occupancy) are those of the code that scores best
+  /// reconstruction terms (eq. 1, eq. 2, occupancy, IoU) are those of the code that scores best
   /// ("best of many samples", Bhattacharyya et al., CVPR 2018; the minimum over samples of
   /// implicit maximum likelihood estimation). One completion must fit the truth, the others
   /// may differ where the view does not decide; 1 (the default) is the paper's single code.

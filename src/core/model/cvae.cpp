@@ -546,10 +546,10 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
   }
   if (k > 1) {
     // Each scene keeps the code whose reconstruction scores best; only it is trained.
-    const torch::Tensor score =
-        (c.alpha * tsdf_term + c.gamma * vote_term + c.occupancy_weight * occupancy_term)
-            .detach()
-            .view({scenes, k});
+    const torch::Tensor score = (c.alpha * tsdf_term + c.gamma * vote_term +
+                                 c.occupancy_weight * occupancy_term + c.iou_weight * iou_term)
+                                    .detach()
+                                    .view({scenes, k});
     const torch::Tensor best =
         score.argmin(1) + torch::arange(scenes, score.options().dtype(torch::kLong)) * k;
     tsdf_term = tsdf_term.index_select(0, best);

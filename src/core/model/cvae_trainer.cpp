@@ -160,6 +160,7 @@ class TrainingLog {
       std::ifstream previous(path.string());
       std::string header;
       std::getline(previous, header);
+      if (!header.empty() && header.back() == '\r') header.pop_back();
       if (header != kHeader)
         throw std::runtime_error(path.string() +
                                  " has other columns than this version writes (an older "
@@ -389,7 +390,7 @@ struct ValidationSums {
 
 /// Validation views and prior codes come from streams of their own, not from the training seed:
 /// every run, and --validate-only, scores the same views with the same codes, so that two
-/// models compare view by view. (1: the streams of runs with the default seed before.)
+/// models compare view by view. (1: the views of runs with the default seed before.)
 constexpr uint64_t kValidationSeed = 1;
 
 /// One validation view: S prior codes (and the posterior mean for a C-VAE) scored against the
@@ -453,8 +454,8 @@ void CvaeTrainer::Impl::validate(Cvae& model, const TrainingSampleBuilder& build
     const SceneRecord record = reader->read(k);
     double scene_sum = 0;
     for (int v = 0; v < config.validation_views; ++v) {
-      const uint64_t code_seed =
-          mix(kValidationSeed ^ 0xC0DE5ull, static_cast<uint64_t>(k) * 64 + v);
+      const uint64_t code_seed = mix(mix(kValidationSeed ^ 0xC0DE5ull, static_cast<uint64_t>(k)),
+                                     static_cast<uint64_t>(v));
       scene_sum += scoreValidationView(model, model_config, builder.build(record, rng),
                                        config.validation_samples, code_seed, &sums);
     }
