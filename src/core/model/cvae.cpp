@@ -582,10 +582,9 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
     latent = c.delta * l.mmd;
   }
   l.occupancy = occupancy_term.mean();
-  l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + latent +
-            c.occupancy_weight * l.occupancy;
   l.iou = iou_term.mean();
-  if (c.iou_weight > 0.0) l.total = l.total + c.iou_weight * l.iou;
+  l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + latent +
+            c.occupancy_weight * l.occupancy + c.iou_weight * l.iou;
   return l;
 }
 

@@ -141,6 +141,9 @@ class BatchQueue {
   std::thread worker_;  // last: starts after the members it uses
 };
 
+/// One step's losses as logged: total, tsdf, partial, votes, mmd, occupancy, iou.
+using LossRow = std::array<double, 7>;
+
 /// train_log.csv: losses every 10 steps, validation figures at validation steps.
 class TrainingLog {
  public:
@@ -167,8 +170,8 @@ class TrainingLog {
                                  "version's log); move it aside to resume");
     }
   }
-  void write(int64_t step, const std::array<double, 7>& losses, const TrainingReport& report,
-             bool validated, bool posterior_measured) {
+  void write(int64_t step, const LossRow& losses, const TrainingReport& report, bool validated,
+             bool posterior_measured) {
     log_ << step;
     for (double v : losses) log_ << "," << v;
     log_ << "," << report.samples_per_second;
@@ -190,7 +193,7 @@ class TrainingLog {
   }
   void flush() { log_.flush(); }
   /// The losses and pace of the last logged step (a resumed run that had nothing left to do).
-  bool lastRow(std::array<double, 7>* losses, double* samples_per_second) const {
+  bool lastRow(LossRow* losses, double* samples_per_second) const {
     std::ifstream previous(path_.string());
     std::string line, last;
     while (std::getline(previous, line))
@@ -208,7 +211,7 @@ class TrainingLog {
 /// Running means over the last 50 steps of the losses and of the encoder's posterior on the
 /// training batches (train mode; in eval mode BatchNorm's running statistics give other codes).
 struct RecentSteps {
-  std::deque<std::array<double, 7>> losses;
+  std::deque<LossRow> losses;
   std::deque<std::array<double, 2>> posterior;  ///< mean square of mu, mean sigma
 
   void add(const CvaeLosses& l, const CvaeOutput& o, TrainingReport* report) {
@@ -231,7 +234,7 @@ struct RecentSteps {
   }
   void meanInto(TrainingReport* report) const {
     if (losses.empty()) return;
-    std::array<double, 7> mean{};
+    LossRow mean{};
     for (const auto& a : losses)
       for (size_t i = 0; i < mean.size(); ++i) mean[i] += a[i] / losses.size();
     report->total = mean[0];
@@ -624,7 +627,7 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
     // Nothing left to train (a resumed run that had reached its steps): still report the
     // figures of the model being written, from the log and a fresh validation.
     impl_->validate(model, builder, &report);
-    std::array<double, 7> row{};
+    LossRow row{};
     double rate = 0.0;
     if (log.lastRow(&row, &rate)) {
       recent.losses.push_back(row);
