@@ -480,21 +480,42 @@ TEST(Cvae, InferenceFastPathEqualsTheLayerByLayerPass) {
   }
 }
 
+namespace {
+
+// A network of config `from` (seeded), saved to a temporary file, and a network of config `to`
+// warm-started from it; both in eval mode. `fresh` lists the tensors the file did not have.
+struct WarmStart {
+  Cvae source{nullptr}, model{nullptr};
+  std::string path;
+  std::vector<std::string> fresh;
+};
+WarmStart warmStart(const CvaeConfig& from, const CvaeConfig& to, const std::string& file,
+                    int seed) {
+  WarmStart w;
+  torch::manual_seed(seed);
+  w.source = Cvae(from);
+  w.source->eval();
+  w.path = tempPath(file);
+  saveCvae(w.path, w.source);
+  torch::manual_seed(seed + 1);
+  w.model = Cvae(to);
+  w.model->eval();
+  w.fresh = warmStartCvae(w.model, w.path);
+  return w;
+}
+
+}  // namespace
+
 TEST(Cvae, EveryScaleCodeWarmStartsFromABottleneckModel) {
   // latent_injection "every_scale" adds one projection of z per decoder scale and nothing else:
   // a warm start from a bottleneck model copies every other tensor, and with the projections
   // zeroed the two networks agree; with them the code changes the finest output.
-  torch::manual_seed(6);
-  Cvae source(tiny());
-  source->eval();
-  const std::string path = tempPath("simstack_warm_source.pt");
-  saveCvae(path, source);
   CvaeConfig c = tiny();
   c.latent_injection = "every_scale";
-  torch::manual_seed(7);
-  Cvae model(c);
-  model->eval();
-  std::vector<std::string> fresh = warmStartCvae(model, path);
+  WarmStart w = warmStart(tiny(), c, "simstack_warm_source.pt", 6);
+  Cvae &source = w.source, &model = w.model;
+  const std::string& path = w.path;
+  std::vector<std::string> fresh = w.fresh;
   std::sort(fresh.begin(), fresh.end());
   std::vector<std::string> expected;
   for (int i = 0; i <= 4; ++i) {
@@ -532,6 +553,39 @@ TEST(Cvae, EveryScaleCodeWarmStartsFromABottleneckModel) {
   c.latent_injection = "everywhere";
   EXPECT_THROW(c.validate(), std::invalid_argument);
   fs::remove(path);
+}
+
+TEST(Cvae, ConditionInjectionStartsAsTheFcModelItIsWarmStartedFrom) {
+  // latent_injection "condition": the deepest map is fc's (the condition's) plus a projection of
+  // z that starts at zero, so a C-VAE warm-started from an fc model decodes that model's scene
+  // for every code; once the projection moves, the codes decode different scenes.
+  CvaeConfig c = tiny();
+  c.latent_injection = "condition";
+  WarmStart w = warmStart(tiny("fc"), c, "simstack_warm_fc.pt", 8);
+  Cvae &source = w.source, &model = w.model;
+  const std::vector<std::string>& fresh = w.fresh;
+  // The posterior encoder and the code's projection are new; the decoder and condition are fc's.
+  for (const std::string& name : fresh) {
+    EXPECT_TRUE(name.rfind("enc_", 0) == 0 || name.rfind("code_fc", 0) == 0) << name;
+  }
+  EXPECT_NE(std::find(fresh.begin(), fresh.end(), "code_fc2.weight"), fresh.end());
+  torch::NoGradGuard no_grad;
+  const auto partial = torch::rand({1, 2, 16, 16, 16});
+  const auto z = torch::randn({3, 8});
+  const CvaeOutput fc_out = source->generate(partial, {});
+  const torch::Tensor codes = model->generate(partial, z).tsdf;
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_TRUE(torch::allclose(codes[i], fc_out.tsdf[0], 1e-5, 1e-6)) << "code " << i;
+  }
+  for (auto& p : model->named_parameters())
+    if (p.key().rfind("code_fc2", 0) == 0) p.value().normal_(0.0, 0.5);
+  const torch::Tensor moved = model->generate(partial, z).tsdf;
+  EXPECT_FALSE(torch::allclose(moved[0], moved[1], 1e-4, 1e-5));
+  EXPECT_FALSE(torch::allclose(moved[0], fc_out.tsdf[0], 1e-4, 1e-5));
+  // The same code decodes the same scene when the condition is shared or repeated per code.
+  const torch::Tensor repeated = model->generate(partial.repeat({3, 1, 1, 1, 1}), z).tsdf;
+  EXPECT_TRUE(torch::allclose(repeated, moved, 1e-4, 1e-5));
+  fs::remove(w.path);
 }
 
 TEST(Cvae, CoarseHiddenConditionHidesTheFineMapsWhereNothingWasSeen) {

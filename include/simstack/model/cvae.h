@@ -165,6 +165,8 @@ class CvaeImpl : public torch::nn::Module {
   torch::nn::Linear dec_fc1{nullptr}, dec_fc2{nullptr};
   std::vector<ResSEBlock> dec_joint_;
   std::vector<torch::nn::Linear> dec_code_;  // latent_injection "every_scale": z -> offsets
+  // latent_injection "condition": z -> a map added to the condition's deepest one.
+  torch::nn::Linear code_fc1{nullptr}, code_fc2{nullptr};
   std::vector<Upsample> dec_up_;
   ConvBlock head_tsdf{nullptr}, head_votes{nullptr};
   torch::nn::Conv3d out_tsdf{nullptr}, out_votes{nullptr};

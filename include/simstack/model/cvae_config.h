@@ -77,7 +77,10 @@ struct CvaeConfig {
   /// Where the C-VAE's decoder reads the latent code: "bottleneck" (the paper: z becomes the
   /// deepest feature map, and the condition's maps join at every scale) or "every_scale" (z is
   /// also projected to a per-channel offset added before each of the decoder's joint blocks,
-  /// down to the finest grid, as the probabilistic U-Net feeds its code to the last layers).
+  /// down to the finest grid, as the probabilistic U-Net feeds its code to the last layers)
+  /// or "condition" (the deepest map is the condition's own, as in `fc`, plus a projection of z
+  /// whose last layer starts at zero: a C-VAE warm-started from an `fc` model begins as that
+  /// model for every code, and training teaches the code what the condition leaves open).
   /// A network setting, stored with the model; the FC baseline has no code and ignores it.
   std::string latent_injection = "bottleneck";
   /// What the condition tells the network about voxels the view did not observe: "full" (the

@@ -253,6 +253,16 @@ CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
         dec_code_.push_back(proj);
       }
     }
+    if (config.latent_injection == "condition") {
+      code_fc1 =
+          register_module("code_fc1", torch::nn::Linear(config.latent_size, config.hidden_size));
+      code_fc2 = register_module("code_fc2", torch::nn::Linear(config.hidden_size, flat));
+      // Zero at first: the code adds nothing until training gives it a use (gradients still
+      // reach this layer, and through it, once it moves, the encoder).
+      torch::NoGradGuard no_grad;
+      code_fc2->weight.zero_();
+      code_fc2->bias.zero_();
+    }
     enc_mu = register_module("enc_mu", torch::nn::Linear(flat, config.latent_size));
     enc_logvar = register_module("enc_logvar", torch::nn::Linear(flat, config.latent_size));
     if (config.prior == "learned") {
@@ -408,8 +418,10 @@ CvaeOutput CvaeImpl::decodeWith(const std::vector<torch::Tensor>& cond, const to
     throw std::invalid_argument("generate: " + std::to_string(cond[0].size(0)) +
                                 " conditions for " + std::to_string(b) + " codes");
   }
-  const torch::Tensor bottleneck =
-      dec_fc2(torch::relu(dec_fc1(z))).view({b, widths_[4], bottom_, bottom_, bottom_});
+  const std::vector<int64_t> shape{b, widths_[4], bottom_, bottom_, bottom_};
+  const torch::Tensor bottleneck = code_fc2
+                                       ? cond[4] + code_fc2(torch::relu(code_fc1(z))).view(shape)
+                                       : dec_fc2(torch::relu(dec_fc1(z))).view(shape);
   CvaeOutput out = decode(bottleneck, cond, z);
   out.z = z;
   return out;

@@ -104,8 +104,10 @@ void CvaeConfig::validate() const {
   require(alpha >= 0 && beta >= 0 && gamma >= 0 && delta >= 0, "loss weights must be >= 0");
   require(norm == "batch" || norm == "group",
           "norm must be 'batch' or 'group', got '" + norm + "'");
-  require(latent_injection == "bottleneck" || latent_injection == "every_scale",
-          "latent_injection must be 'bottleneck' or 'every_scale', got '" + latent_injection + "'");
+  require(latent_injection == "bottleneck" || latent_injection == "every_scale" ||
+              latent_injection == "condition",
+          "latent_injection must be 'bottleneck', 'every_scale' or 'condition', got '" +
+              latent_injection + "'");
   require(hidden_condition == "full" || hidden_condition == "coarse",
           "hidden_condition must be 'full' or 'coarse', got '" + hidden_condition + "'");
   require(mmd_prior_samples >= 2, "mmd_prior_samples must be >= 2");

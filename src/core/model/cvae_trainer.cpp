@@ -189,7 +189,7 @@ class TrainingLog {
            << report.validation_best_iou << "," << report.validation_disagreement_seen << ","
            << report.validation_disagreement_unseen << "," << report.validation_unseen_share;
     }
-    log_ << "\n";
+    log_ << std::endl;  // each row on disk at once: a long run is followed with tail -f
   }
   void flush() { log_.flush(); }
   /// The losses and pace of the last logged step (a resumed run that had nothing left to do).
