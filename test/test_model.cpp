@@ -569,6 +569,9 @@ TEST(Cvae, ConditionInjectionStartsAsTheFcModelItIsWarmStartedFrom) {
     EXPECT_TRUE(name.rfind("enc_", 0) == 0 || name.rfind("code_fc", 0) == 0) << name;
   }
   EXPECT_NE(std::find(fresh.begin(), fresh.end(), "code_fc2.weight"), fresh.end());
+  // The code reaches the decoder through code_fc1/2 alone: no unused map of it is registered.
+  for (const auto& p : model->named_parameters())
+    EXPECT_NE(p.key().rfind("dec_fc", 0), 0u) << p.key();
   torch::NoGradGuard no_grad;
   const auto partial = torch::rand({1, 2, 16, 16, 16});
   const auto z = torch::randn({3, 8});

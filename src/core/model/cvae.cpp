@@ -213,9 +213,12 @@ CvaeImpl::CvaeImpl(const CvaeConfig& config) : config_(config) {
         register_module("cond_dec" + std::to_string(i), ConvBlock(w[i - 1], w[i - 1], 1, gn)));
   }
   cond_head = register_module("cond_head", makeConv(w[0], 1, 1, 1, true));
-  // Decoder, shared by the C-VAE and the FC baseline.
-  dec_fc1 = register_module("dec_fc1", torch::nn::Linear(config.latent_size, config.hidden_size));
-  dec_fc2 = register_module("dec_fc2", torch::nn::Linear(config.hidden_size, flat));
+  // Decoder, shared by the C-VAE and the FC baseline. The code's own map to the deepest grid
+  // (the FC files hold it unused; "condition" injection has code_fc1/2 in its place).
+  if (config.latent_injection != "condition" || !config.hasLatentCode()) {
+    dec_fc1 = register_module("dec_fc1", torch::nn::Linear(config.latent_size, config.hidden_size));
+    dec_fc2 = register_module("dec_fc2", torch::nn::Linear(config.hidden_size, flat));
+  }
   for (int i = 4; i >= 0; --i) {
     if (i < 4)
       dec_up_.push_back(register_module("dec_up" + std::to_string(i), Upsample(w[i + 1], w[i])));
