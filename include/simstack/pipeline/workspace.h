@@ -51,8 +51,8 @@ std::vector<Vec3> pilePoints(const DepthView& view, const Transform& T_table_cam
                              const WorkspaceConfig& workspace, double min_height_m,
                              double max_height_m, int stride = 2);
 
-/// The x/y median of the points (each coordinate's element at size / 2, as observedPileCentre
-/// takes it). Requires at least one point.
+/// The x/y median of the points (each coordinate's element at size / 2). Requires at least one
+/// point.
 Vec2 medianXY(std::vector<Vec3> points);
 
 /// Depth where the view's mask is 0 marked missing (nothing when the view has no mask).
@@ -82,8 +82,8 @@ struct TilePlan {
 
 /// Covers the pile's points (table frame) with tiles of `resolution` voxels of side `extent_m`.
 /// The pile fits one tile when its x/y spread (0.5 and 99.5 percentiles, two voxels' margin on
-/// each side) is at most the side: that tile is centred on `single_centre` (observedPileCentre,
-/// the placement of training), moved just enough to hold the spread. `placement` maps the
+/// each side) is at most the side: that tile is centred on `single_centre` (placed as in
+/// training), moved just enough to hold the spread. `placement` maps the
 /// median of a group of points to where training would centre a grid on that group.
 /// Otherwise the points are split into groups (gaps of two voxels; groups whose joint spread fits
 /// one tile kept together), each perceived as a scene of its own: one tile placed as in

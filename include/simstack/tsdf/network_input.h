@@ -19,12 +19,6 @@ Vec2 visiblePileCentre(const DepthImage& depth, const PinholeCamera& camera,
                        const Transform& T_table_camera, const Vec2& near_xy, double radius_m,
                        double min_height_m = 0.01);
 
-/// The same centre when nothing is known of the scene (inference): `near_xy` is the median of
-/// the above-table points (every 2nd pixel, at most `extent_m` high), and the centroid is taken
-/// within half the grid's side of it.
-Vec2 observedPileCentre(const DepthImage& depth, const PinholeCamera& camera,
-                        const Transform& T_table_camera, double extent_m, double min_height_m);
-
 /// Network input channels [2][z][y][x]: partial TSDF / tau clamped to [-1, 1], and observed
 /// (weight > 0) as 0 / 1.
 std::vector<float> partialChannels(const Grid3<float>& tsdf_m, const Grid3<float>& weight,

@@ -439,6 +439,17 @@ SceneHypothesis joinGroups(const TilePlan& plan, std::vector<SceneHypothesis>& p
   return h;
 }
 
+/// Where the grid goes when nothing stands on the table: on the table the camera sees (the
+/// median of its points), so that the network is shown seen free space. The camera's own
+/// footprint, the fallback when not even the table is seen, leaves most of the grid unseen.
+Vec2 bareTableCentre(const DepthView& view, const Transform& T_table_camera,
+                     const PerceptionConfig& c) {
+  const std::vector<Vec3> table =
+      pilePoints(view, T_table_camera, c.workspace, -std::numeric_limits<double>::infinity(),
+                 c.min_pile_height_m);
+  return table.empty() ? Vec2(T_table_camera.translation().head<2>()) : medianXY(table);
+}
+
 }  // namespace
 
 SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_given) const {
@@ -462,7 +473,7 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
   out.timings.table_ms = msSince(t);
 
   t = Clock::now();
-  // Training's placement (observedPileCentre's rule) from one pass over the pile's points.
+  // Training's placement (visiblePileCentre near the median of the pile's points).
   const auto placement = [&](const Vec2& near) {
     return visiblePileCentre(views[0].depth, views[0].camera, out.T_table_camera, near,
                              0.5 * mc.extent_m, c.min_pile_height_m);
@@ -470,7 +481,7 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
   const std::vector<Vec3> pile =
       pilePoints(views[0], out.T_table_camera, c.workspace, c.min_pile_height_m, mc.extent_m);
   const Vec2 centre =
-      placement(pile.empty() ? Vec2(out.T_table_camera.translation().head<2>()) : medianXY(pile));
+      placement(pile.empty() ? bareTableCentre(views[0], out.T_table_camera, c) : medianXY(pile));
   const TilePlan plan = planTiles(pile, centre, placement, mc.extent_m, mc.resolution, c.workspace);
   out.grid = plan.scene;
   out.tiles = plan.tileCount();

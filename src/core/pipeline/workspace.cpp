@@ -81,7 +81,7 @@ struct Cluster {
   std::array<std::vector<double>, 2> xy;  // its points' coordinates
   Vec2 lo, hi, median;                    // 0.5 / 99.5 percentiles and median (finish())
 
-  void finish() {  // as observedPileCentre and a single tile take them
+  void finish() {  // as medianXY and a single tile take them
     for (int a = 0; a < 2; ++a) {
       std::vector<double> x = xy[a];
       std::nth_element(x.begin(), x.begin() + x.size() / 2, x.end());

@@ -22,27 +22,6 @@ Vec2 visiblePileCentre(const DepthImage& depth, const PinholeCamera& camera,
   return n > 0 ? Vec2(sum / static_cast<double>(n)) : near_xy;
 }
 
-Vec2 observedPileCentre(const DepthImage& depth, const PinholeCamera& camera,
-                        const Transform& T_table_camera, double extent_m, double min_height_m) {
-  std::vector<double> xs, ys;
-  for (int v = 0; v < depth.height; v += 2)
-    for (int u = 0; u < depth.width; u += 2) {
-      const float d = depth.at(u, v);
-      if (!validDepth(d)) continue;
-      const Vec3 p = T_table_camera * camera.backproject(u, v, d);
-      if (p.z() < min_height_m || p.z() > extent_m) continue;
-      xs.push_back(p.x());
-      ys.push_back(p.y());
-    }
-  Vec2 near = T_table_camera.translation().head<2>();
-  if (!xs.empty()) {
-    std::nth_element(xs.begin(), xs.begin() + xs.size() / 2, xs.end());
-    std::nth_element(ys.begin(), ys.begin() + ys.size() / 2, ys.end());
-    near = Vec2(xs[xs.size() / 2], ys[ys.size() / 2]);
-  }
-  return visiblePileCentre(depth, camera, T_table_camera, near, 0.5 * extent_m, min_height_m);
-}
-
 std::vector<float> partialChannels(const Grid3<float>& tsdf_m, const Grid3<float>& weight,
                                    double truncation_m) {
   const size_t n = tsdf_m.data.size();
