@@ -40,12 +40,15 @@ TEST(PerceptionConfig, ShippedYamlHoldsTheDefaultsAndTyposAreErrors) {
   const std::string dir = SIMSTACK_SOURCE_DIR;
   const PerceptionConfig c = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
   EXPECT_EQ(c.model_path, dir + "/models/simstack_r32_fc.pt");
-  // With the C-VAE named (its card holds the struct's sample count and Hough setting), the
-  // file is the struct's defaults.
+  // With the C-VAE named (its card holds the struct's sample count, and the Hough setting it
+  // shares with `fc`, whose decoder it took), the file is the struct's defaults.
   const PerceptionConfig with_cvae =
       loadPerceptionYaml(dir + "/config/perception.yaml", dir, kModel);
   PerceptionConfig defaults;
   defaults.model_path = kModel;
+  defaults.hough.refinement = 8;
+  defaults.hough.min_traversals = 3;
+  defaults.hough.min_instance_voxels = 25;
   EXPECT_EQ(perceptionYaml(with_cvae), perceptionYaml(defaults));
   const std::string bad = std::filesystem::temp_directory_path() / "simstack_bad_perception.yaml";
   std::ofstream(bad) << "hough:\n  min_travesals: 3\n";
@@ -69,12 +72,13 @@ TEST(PerceptionConfig, ModelCardsBringTheirOwnSettings) {
   EXPECT_EQ(fc.samples, 1);
   EXPECT_EQ(fc.hough.refinement, 8);
   EXPECT_EQ(fc.hough.min_traversals, 3);
-  // Naming the C-VAE brings its samples and setting.
+  // Naming the C-VAE brings its samples and setting (fc's, which is not the struct's default).
   const PerceptionConfig cvae = loadPerceptionYaml(config, dir, dir + "/models/simstack_r32.pt");
   EXPECT_EQ(cvae.model_card_path, dir + "/models/simstack_r32.yaml");
   EXPECT_EQ(cvae.samples, 3);
-  EXPECT_EQ(cvae.hough.refinement, 5);
-  EXPECT_EQ(cvae.hough.min_traversals, 4);
+  EXPECT_EQ(cvae.hough.refinement, 8);
+  EXPECT_EQ(cvae.hough.min_traversals, 3);
+  EXPECT_NE(cvae.hough.refinement, HoughConfig().refinement);
   // Naming another model is enough to get its setting.
   const PerceptionConfig plain =
       loadPerceptionYaml(config, dir, dir + "/models/simstack_r32_fc_plain.pt");
