@@ -43,7 +43,8 @@ def main():
     parser.add_argument("--candidates", type=int, default=0, help="grasps to simulate (0: the node's)")
     parser.add_argument("--pull-distance", type=float, default=0.10, help="metres")
     parser.add_argument("--pull-speed", type=float, default=0.20, help="metres per second")
-    parser.add_argument("--hypotheses", type=int, default=1, help="scene hypotheses (1: objects alone)")
+    parser.add_argument("--hypotheses", type=int, default=0,
+                        help="scene hypotheses (1: objects alone; 0: all the scene carries)")
     parser.add_argument("--camera", default="camera", help="namespace of the perception and grasp nodes")
     parser.add_argument("--rows", type=int, default=10, help="grasps printed")
     parser.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the service")

@@ -101,8 +101,9 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
         "pull_speed_mps must lie in (0, 2] m/s, not " + number(req.pull_speed_mps) + " (e.g. 0.2)";
     return false;
   }
-  const int wanted =
-      req.hypotheses == 0 ? 1 : static_cast<int>(std::min<uint32_t>(req.hypotheses, 64));
+  // 0: every hypothesis the scene carries (what the perception was launched to publish).
+  const int wanted = static_cast<int>(std::min<size_t>(
+      req.hypotheses == 0 ? 1 + scene->hypotheses.size() : size_t{req.hypotheses}, 64));
   *scenes = graspScenes(*scene, wanted);  // throws for a bad pose (caught by rank())
   for (size_t h = 0; h < scenes->size(); ++h)
     if (const std::string why = checkScene((*scenes)[h]); !why.empty()) {

@@ -6,7 +6,7 @@ import unittest
 
 import rospy
 import rostest
-from simstack.msg import ObjectArray, Object
+from simstack.msg import ObjectArray, Object, SceneSample
 from simstack.srv import RankGrasps, RankGraspsRequest
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -126,6 +126,25 @@ class GraspService(unittest.TestCase):
         self.assertTrue(res.success, res.message)
         self.assertEqual(len(res.grasps), 0)
         self.assertIn("no sealable surface", res.message)
+
+    def test_5_hypotheses_default_to_all_the_scene_carries(self):
+        scene = copy.deepcopy(self.scene)
+        del scene.hypotheses[:]
+        for dx in (0.004, -0.004):
+            sample = SceneSample()
+            for o in scene.objects:
+                sq = copy.deepcopy(o.superquadric)
+                sq.pose.position.x += dx
+                sample.superquadrics.append(sq)
+            scene.hypotheses.append(sample)
+        res = self.rank(request(scene=scene, candidates=4))
+        self.assertTrue(res.success, res.message)
+        self.assertEqual(res.hypotheses_used, 3)
+        self.assertEqual(len(res.baseline_displacement_m), 3)
+        self.assertEqual(self.rank(request(scene=scene, candidates=4, hypotheses=1)).hypotheses_used, 1)
+        more = self.rank(request(scene=scene, candidates=4, hypotheses=5))
+        self.assertEqual(more.hypotheses_used, 3)
+        self.assertIn("5 hypotheses asked for, the scene has 3", more.message)
 
 
 if __name__ == "__main__":
