@@ -160,6 +160,26 @@ BENCHMARK(BM_PerceiveDefaultConfig)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
+// What grasps.launch runs by default: the shipped config with the C-VAE and its card, three
+// hypotheses decomposed for the grasp ranking; its peer decomposes the first alone.
+static void BM_PerceiveGraspHypotheses(benchmark::State& state) {
+  const std::string dir = SIMSTACK_SOURCE_DIR;
+  try {
+    PerceptionConfig pc =
+        loadPerceptionYaml(dir + "/config/perception.yaml", dir, dir + "/models/simstack_r32.pt");
+    pc.decompose_samples = static_cast<int>(state.range(0));
+    perceiveBenchPile(state, pc);
+  } catch (const std::exception& e) {
+    state.SkipWithError(e.what());
+  }
+}
+BENCHMARK(BM_PerceiveGraspHypotheses)
+    ->ArgName("decomposed")
+    ->Arg(3)
+    ->Arg(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
 // A 1280x720 frame seen from 1 m above the table, holding one 4-object pile (one tile) or four
 // copies of it 0.8 m apart (four tiles): the cost of a scene wider than one grid.
 static void BM_PerceiveTiles(benchmark::State& state) {
