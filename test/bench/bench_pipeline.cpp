@@ -5,6 +5,7 @@
 #include <benchmark/benchmark.h>
 
 #include <filesystem>
+#include <functional>
 
 #include "../test_scenes.h"
 #include "simstack/fitting/superquadric_fit.h"
@@ -141,17 +142,26 @@ BENCHMARK(BM_Perceive)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
-// What a user runs: config/perception.yaml as shipped (its model, `fc`, with its card; its
-// symmetries: 4), and its peer with one network pass.
-static void BM_PerceiveDefaultConfig(benchmark::State& state) {
+// perceive() with config/perception.yaml as shipped and `model` (empty: the config's) with its
+// card, after `change`.
+void perceiveShippedConfig(benchmark::State& state, const std::string& model,
+                           const std::function<void(PerceptionConfig*)>& change) {
   const std::string dir = SIMSTACK_SOURCE_DIR;
   try {
-    PerceptionConfig pc = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
-    pc.symmetries = static_cast<int>(state.range(0));
+    PerceptionConfig pc = loadPerceptionYaml(dir + "/config/perception.yaml", dir,
+                                             model.empty() ? "" : dir + "/" + model);
+    change(&pc);
     perceiveBenchPile(state, pc);
   } catch (const std::exception& e) {
     state.SkipWithError(e.what());
   }
+}
+
+// What a user runs: config/perception.yaml as shipped (its model, `fc`, with its card; its
+// symmetries: 4), and its peer with one network pass.
+static void BM_PerceiveDefaultConfig(benchmark::State& state) {
+  perceiveShippedConfig(
+      state, "", [&](PerceptionConfig* pc) { pc->symmetries = static_cast<int>(state.range(0)); });
 }
 BENCHMARK(BM_PerceiveDefaultConfig)
     ->ArgName("symmetries")
@@ -163,15 +173,9 @@ BENCHMARK(BM_PerceiveDefaultConfig)
 // What grasps.launch runs by default: the shipped config with the C-VAE and its card, three
 // hypotheses decomposed for the grasp ranking; its peer decomposes the first alone.
 static void BM_PerceiveGraspHypotheses(benchmark::State& state) {
-  const std::string dir = SIMSTACK_SOURCE_DIR;
-  try {
-    PerceptionConfig pc =
-        loadPerceptionYaml(dir + "/config/perception.yaml", dir, dir + "/models/simstack_r32.pt");
-    pc.decompose_samples = static_cast<int>(state.range(0));
-    perceiveBenchPile(state, pc);
-  } catch (const std::exception& e) {
-    state.SkipWithError(e.what());
-  }
+  perceiveShippedConfig(state, "models/simstack_r32.pt", [&](PerceptionConfig* pc) {
+    pc->decompose_samples = static_cast<int>(state.range(0));
+  });
 }
 BENCHMARK(BM_PerceiveGraspHypotheses)
     ->ArgName("decomposed")
