@@ -86,12 +86,15 @@ static void BM_JointFitFourObjects(benchmark::State& state) {
   // Its peer: final solves on the 600-point cover alone (these surfaces surround their shapes,
   // so by default the fits end with a few steps on all 1000 points).
   if (state.range(0) == 0) fc.surrounded_share = 2.0;
+  // Its other peer: the joint refinement's 3 rounds, the default until 2026-11-28.
+  fc.joint_rounds = static_cast<int>(state.range(1));
   for (auto _ : state) benchmark::DoNotOptimize(fitInstances(pts, fc, true));
 }
 BENCHMARK(BM_JointFitFourObjects)
-    ->ArgName("all_points")
-    ->Arg(1)
-    ->Arg(0)
+    ->ArgNames({"all_points", "joint_rounds"})
+    ->Args({1, FitConfig().joint_rounds})
+    ->Args({0, FitConfig().joint_rounds})
+    ->Args({1, 3})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

@@ -54,7 +54,9 @@ struct FitConfig {
   /// A collision or floor sample joins a joint round only when it is within this distance of
   /// penetrating at the round's start (the terms are hinges: farther samples add zeros).
   double contact_margin_m = 0.01;
-  int joint_rounds = 3;           ///< joint solves, samples redrawn and re-selected between them
+  /// Joint solves; the collision and floor samples are redrawn and re-selected between them,
+  /// so each round can catch penetrations the earlier samples missed.
+  int joint_rounds = 10;
   int start_iterations = 10;      ///< Ceres iterations from each start or alternative (stage one)
   int max_iterations = 100;       ///< at most, for a solve to convergence (stage one)
   int joint_max_iterations = 10;  ///< Ceres iterations of each joint round
