@@ -161,15 +161,19 @@ void perceiveShippedConfig(benchmark::State& state, const std::string& model,
 }
 
 // What a user runs: config/perception.yaml as shipped (its model, `fc`, with its card; its
-// symmetries: 4), and its peer with one network pass.
+// symmetries: 4; the seen surface fitted to the depth points), and its peers with one network
+// pass and with mesh samples alone.
 static void BM_PerceiveDefaultConfig(benchmark::State& state) {
-  perceiveShippedConfig(
-      state, "", [&](PerceptionConfig* pc) { pc->symmetries = static_cast<int>(state.range(0)); });
+  perceiveShippedConfig(state, "", [&](PerceptionConfig* pc) {
+    pc->symmetries = static_cast<int>(state.range(0));
+    pc->observed_points = state.range(1) != 0;
+  });
 }
 BENCHMARK(BM_PerceiveDefaultConfig)
-    ->ArgName("symmetries")
-    ->Arg(4)
-    ->Arg(1)
+    ->ArgNames({"symmetries", "observed_points"})
+    ->Args({4, 1})
+    ->Args({1, 1})
+    ->Args({4, 0})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

@@ -30,7 +30,11 @@ struct PerceptionConfig {
   /// turn, 4: by every quarter turn) and mirrored (8), each output turned back (1, 2, 4 or 8;
   /// CvaeInference::predict).
   int symmetries = 4;
-  int points_per_instance = 1000;   ///< mesh samples handed to the fitter
+  int points_per_instance = 1000;  ///< points per instance handed to the fitter
+  /// The part of an instance's surface the first view saw is represented by that view's depth
+  /// points (measured) instead of samples of the network's mesh (up to a voxel off); the
+  /// unseen part keeps the mesh samples. Needs the surface patches (segments.enabled).
+  bool observed_points = true;
   int min_instance_points = 30;     ///< instances with a smaller surface are dropped
   bool joint_refinement = true;     ///< eqs. 7-9 after the per-instance fits
   double min_pile_height_m = 0.01;  ///< depth points lower than this are table

@@ -25,9 +25,11 @@
 namespace simstack {
 
 struct InstanceEstimate {
-  SuperquadricShape superquadric;   ///< table frame
-  TriangleMesh mesh;                ///< this instance's part of the predicted surface
-  Points3 points;                   ///< surface samples of `mesh` (what was fitted)
+  SuperquadricShape superquadric;  ///< table frame
+  TriangleMesh mesh;               ///< this instance's part of the predicted surface
+  /// What was fitted: the first view's depth points on the instance and samples of the part of
+  /// `mesh` the view did not see (PerceptionConfig::observed_points), or samples of `mesh`.
+  Points3 points;
   Vec3 vote_centre = Vec3::Zero();  ///< Hough centre
   int voxels = 0;
   /// Share of `mesh`'s area that the first view's camera sees (0..1): the rest was completed.
@@ -65,8 +67,9 @@ struct SceneEstimate {
 
 /// Splits one hypothesis into instances and fits them (Hough voting, marching cubes, Ceres).
 /// With `segments` (the first view's convex patches, surface_segments.h) and
-/// `config.segments.enabled`, instances are also split along the patches. Adds the time spent
-/// to `timings` when given.
+/// `config.segments.enabled`, instances are also split along the patches, and with
+/// `config.observed_points` the part of each instance that view saw is fitted to its depth
+/// points. Adds the time spent to `timings` when given.
 void decompose(SceneHypothesis* hypothesis, const PerceptionConfig& config,
                StageTimings* timings = nullptr, const SurfaceSegments* segments = nullptr);
 

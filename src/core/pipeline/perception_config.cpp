@@ -22,6 +22,7 @@ void perceptionFields(C& c, F&& f) {
   f("decompose_samples", c.decompose_samples);
   f("symmetries", c.symmetries);
   f("points_per_instance", c.points_per_instance);
+  f("observed_points", c.observed_points);
   f("min_instance_points", c.min_instance_points);
   f("joint_refinement", c.joint_refinement);
   f("min_pile_height_m", c.min_pile_height_m);

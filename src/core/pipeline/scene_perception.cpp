@@ -11,6 +11,7 @@
 
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/instances/instance_finder.h"
+#include "simstack/instances/surface_segments.h"
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/model/cvae_inference.h"
 #include "simstack/tsdf/network_input.h"
@@ -78,6 +79,12 @@ std::vector<DepthView> withinSensorRange(const std::vector<DepthView>& views,
   return out;
 }
 
+double triangleArea(const TriangleMesh& m, size_t i) {
+  const auto& t = m.triangles[i];
+  return 0.5 *
+         (m.vertices[t[1]] - m.vertices[t[0]]).cross(m.vertices[t[2]] - m.vertices[t[0]]).norm();
+}
+
 /// Each instance's visible share: its triangles that are the first surface a ray from the
 /// camera meets, among all instances' triangles.
 void setVisibleFractions(SceneHypothesis* h, const PinholeCamera& camera,
@@ -92,15 +99,69 @@ void setVisibleFractions(SceneHypothesis* h, const PinholeCamera& camera,
   const std::vector<bool> seen = visibleTriangles(all, camera, T_table_camera);
   std::vector<double> area(h->instances.size(), 0.0), visible(h->instances.size(), 0.0);
   for (size_t i = 0; i < all.triangles.size(); ++i) {
-    const auto& t = all.triangles[i];
-    const double a = 0.5 * (all.vertices[t[1]] - all.vertices[t[0]])
-                               .cross(all.vertices[t[2]] - all.vertices[t[0]])
-                               .norm();
+    const double a = triangleArea(all, i);
     area[owner[i]] += a;
     if (seen[i]) visible[owner[i]] += a;
   }
   for (size_t k = 0; k < h->instances.size(); ++k)
     h->instances[k].visible_fraction = area[k] > 0 ? visible[k] / area[k] : 0.0;
+}
+
+/// `n` samples of each instance's mesh (none for an empty one).
+std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, int n, uint64_t seed) {
+  std::vector<Points3> points(parts.size());
+  for (size_t k = 0; k < parts.size(); ++k) {
+    std::mt19937_64 rng(seed * 7919 + k);
+    for (const SurfacePoint& s : parts[k].sampleSurface(n, rng)) points[k].push_back(s.position);
+  }
+  return points;
+}
+
+/// Each instance's points for the fitter: the view's depth points lying on its voxels (at most
+/// `n`), and `n` times the unseen share of its mesh's area in samples of the unseen part (the
+/// triangles that no ray from the view's camera meets first). The measured points outnumber
+/// the seen part's share of `n`: they are the surface itself, where the network's mesh is up
+/// to a voxel off, and the fits weigh them accordingly (docs/experiments.md). When the view
+/// holds fewer of them than that share, samples of the seen mesh make up the difference.
+std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Grid3<int>& labels,
+                               const SurfaceSegments& view, int n, uint64_t seed) {
+  TriangleMesh all;
+  std::vector<size_t> first(parts.size() + 1, 0);
+  for (size_t k = 0; k < parts.size(); ++k) {
+    all.append(parts[k]);
+    first[k + 1] = all.triangles.size();
+  }
+  const std::vector<bool> seen = visibleTriangles(all, view.camera, view.T_table_camera);
+  std::vector<Points3> measured(parts.size());
+  for (const Vec3& p : view.points_table) {
+    const int voxel = nearestLabelledVoxel(labels, p);
+    const int k = voxel >= 0 ? labels.data[voxel] : -1;
+    if (k >= 0 && k < static_cast<int>(parts.size())) measured[k].push_back(p);
+  }
+  std::vector<Points3> points(parts.size());
+  for (size_t k = 0; k < parts.size(); ++k) {
+    if (parts[k].empty()) continue;
+    std::mt19937_64 rng(seed * 7919 + k);
+    std::vector<bool> seen_k(seen.begin() + first[k], seen.begin() + first[k + 1]), unseen_k;
+    double area = 0, seen_area = 0;
+    for (size_t i = 0; i < seen_k.size(); ++i) {
+      const double a = triangleArea(parts[k], i);
+      area += a;
+      seen_area += seen_k[i] ? a : 0.0;
+      unseen_k.push_back(!seen_k[i]);
+    }
+    const int n_seen = area > 0 ? static_cast<int>(std::lround(n * seen_area / area)) : 0;
+    Points3& m = measured[k];
+    std::shuffle(m.begin(), m.end(), rng);
+    if (static_cast<int>(m.size()) > n) m.resize(n);
+    points[k] = m;
+    const int from_seen_mesh = std::max(0, n_seen - static_cast<int>(m.size()));
+    for (const SurfacePoint& s : subMesh(parts[k], seen_k).sampleSurface(from_seen_mesh, rng))
+      points[k].push_back(s.position);
+    for (const SurfacePoint& s : subMesh(parts[k], unseen_k).sampleSurface(n - n_seen, rng))
+      points[k].push_back(s.position);
+  }
+  return points;
 }
 
 }  // namespace
@@ -123,15 +184,14 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
 
   t = Clock::now();
   if (h->surface.empty()) h->surface = extractSurface(h->tsdf_m);
-  const std::vector<TriangleMesh> parts =
+  std::vector<TriangleMesh> parts =
       splitByLabel(h->surface, triangleLabels(h->surface, h->labels), seg.size());
-  std::vector<Points3> points(parts.size());
-  for (size_t k = 0; k < parts.size(); ++k) {
-    if (parts[k].empty() || outside[k]) continue;
-    std::mt19937_64 rng(config.seed * 7919 + k);
-    for (const SurfacePoint& s : parts[k].sampleSurface(config.points_per_instance, rng))
-      points[k].push_back(s.position);
-  }
+  for (size_t k = 0; k < parts.size(); ++k)
+    if (outside[k]) parts[k] = TriangleMesh();
+  const std::vector<Points3> points =
+      config.observed_points && segments
+          ? fitPoints(parts, h->labels, *segments, config.points_per_instance, config.seed)
+          : fitPoints(parts, config.points_per_instance, config.seed);
   if (timings) timings->mesh_ms += msSince(t);
 
   t = Clock::now();
