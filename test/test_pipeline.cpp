@@ -245,7 +245,7 @@ double distanceToScene(const Scene& scene, const Vec3& p) {
 // A network that places every surface 1 cm inside the objects (the true TSDF plus 1 cm): the
 // seen part of each instance is then handed to the fitter as the view's depth points, which
 // lie on the true surface, and the fits come nearer the true volumes than fits to the
-// shrunken mesh alone.
+// shrunken mesh alone. A second view from the other side measures more of each surface.
 TEST(Decompose, TheSeenSurfaceComesFromTheDepthPoints) {
   PerceptionConfig config = sharpVotesConfig();
   for (uint64_t seed : {1, 2, 3}) {
@@ -253,18 +253,24 @@ TEST(Decompose, TheSeenSurfaceComesFromTheDepthPoints) {
     for (float& d : pile.h.tsdf_m.data) d += 0.01f;
     PinholeCamera camera;
     const Vec3 centre = pile.scene.surfaceCentroid();
-    const Transform T_table_camera =
-        lookAt(centre + Vec3(0.55, -0.35, 0.55), Vec3(centre.x(), centre.y(), 0.05));
-    const RenderResult view = DepthRenderer(pile.scene).render(camera, T_table_camera);
+    const Vec3 target(centre.x(), centre.y(), 0.05);
+    const Transform T_first = lookAt(centre + Vec3(0.55, -0.35, 0.55), target);
+    const Transform T_second = lookAt(centre + Vec3(-0.55, 0.35, 0.55), target);
+    const DepthRenderer renderer(pile.scene);
+    const RenderResult first = renderer.render(camera, T_first);
+    const DepthView second{renderer.render(camera, T_second).depth, camera, T_second};
     const std::optional<SurfaceSegments> segments =
         InstanceFinder(config.hough, config.segments)
-            .segmentView(view.depth, camera, T_table_camera, config.min_pile_height_m, &pile.grid);
+            .segmentView(first.depth, camera, T_first, config.min_pile_height_m, &pile.grid);
     ASSERT_TRUE(segments) << "seed " << seed;
-    double near_share[2] = {0, 0}, volume_error[2] = {0, 0};
-    for (bool observed : {false, true}) {
-      config.observed_points = observed;
+    // Mesh samples alone, the first view's depth points, both views' depth points.
+    double near_share[3] = {0, 0, 0}, volume_error[3] = {0, 0, 0};
+    for (int variant = 0; variant < 3; ++variant) {
+      config.observed_points = variant > 0;
+      std::vector<MeasuredView> further;
+      if (variant == 2) further.push_back(measuredView(second, pile.grid, config));
       SceneHypothesis h = pile.h;
-      decompose(&h, config, nullptr, &*segments);
+      decompose(&h, config, nullptr, &*segments, further);
       ASSERT_EQ(h.instances.size(), pile.scene.objects.size()) << "seed " << seed;
       int near = 0, total = 0;
       for (const InstanceEstimate& e : h.instances) {
@@ -278,13 +284,15 @@ TEST(Decompose, TheSeenSurfaceComesFromTheDepthPoints) {
                   (match->T_table_object.translation() - e.superquadric.centroid()).norm())
             match = &o;
         const double truth = match->shape->superquadric().volume();
-        volume_error[observed] += std::abs(e.superquadric.volume() - truth) / truth;
+        volume_error[variant] += std::abs(e.superquadric.volume() - truth) / truth;
       }
-      near_share[observed] = static_cast<double>(near) / total;
+      near_share[variant] = static_cast<double>(near) / total;
     }
     EXPECT_LT(near_share[0], 0.05) << "seed " << seed;
     EXPECT_GT(near_share[1], 0.25) << "seed " << seed;
+    EXPECT_GT(near_share[2], near_share[1] + 0.05) << "seed " << seed;
     EXPECT_LT(volume_error[1], 0.7 * volume_error[0]) << "seed " << seed;
+    EXPECT_LT(volume_error[2], 0.85 * volume_error[1]) << "seed " << seed;
   }
 }
 

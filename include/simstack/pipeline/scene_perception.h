@@ -27,8 +27,8 @@ namespace simstack {
 struct InstanceEstimate {
   SuperquadricShape superquadric;  ///< table frame
   TriangleMesh mesh;               ///< this instance's part of the predicted surface
-  /// What was fitted: the first view's depth points on the instance and samples of the part of
-  /// `mesh` the view did not see (PerceptionConfig::observed_points), or samples of `mesh`.
+  /// What was fitted: the views' depth points on the instance and samples of the part of
+  /// `mesh` no view saw (PerceptionConfig::observed_points), or samples of `mesh`.
   Points3 points;
   Vec3 vote_centre = Vec3::Zero();  ///< Hough centre
   int voxels = 0;
@@ -65,13 +65,28 @@ struct SceneEstimate {
   const std::vector<InstanceEstimate>& instances() const { return hypotheses.front().instances; }
 };
 
+/// Depth points of a posed view in the table frame: the surface it measured, which the fits
+/// take where the view saw an instance (PerceptionConfig::observed_points).
+struct MeasuredView {
+  PinholeCamera camera;
+  Transform T_table_camera = Transform::Identity();
+  Points3 points_table;
+};
+
 /// Splits one hypothesis into instances and fits them (Hough voting, marching cubes, Ceres).
 /// With `segments` (the first view's convex patches, surface_segments.h) and
 /// `config.segments.enabled`, instances are also split along the patches, and with
-/// `config.observed_points` the part of each instance that view saw is fitted to its depth
-/// points. Adds the time spent to `timings` when given.
+/// `config.observed_points` the part of each instance that view (or one of `further_views`)
+/// saw is fitted to their depth points. Adds the time spent to `timings` when given.
 void decompose(SceneHypothesis* hypothesis, const PerceptionConfig& config,
-               StageTimings* timings = nullptr, const SurfaceSegments* segments = nullptr);
+               StageTimings* timings = nullptr, const SurfaceSegments* segments = nullptr,
+               const std::vector<MeasuredView>& further_views = {});
+
+/// The depth points of a posed view as `decompose` takes them: every `segments.pixel_stride`-th
+/// pixel of each row and column, at least `min_pile_height_m` above the table and inside the
+/// box of `grid` (std::invalid_argument when the view has no pose).
+MeasuredView measuredView(const DepthView& view, const GridSpec& grid,
+                          const PerceptionConfig& config);
 
 /// Instance of every pixel of `view` (posed by its own T_table_camera, else by the estimate's
 /// first view's): the label of the labelled

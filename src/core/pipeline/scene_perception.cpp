@@ -117,26 +117,30 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, int n, ui
   return points;
 }
 
-/// Each instance's points for the fitter: the view's depth points lying on its voxels (at most
+/// Each instance's points for the fitter: the views' depth points lying on its voxels (at most
 /// `n`), and `n` times the unseen share of its mesh's area in samples of the unseen part (the
-/// triangles that no ray from the view's camera meets first). The measured points outnumber
+/// triangles that no ray from a view's camera meets first). The measured points outnumber
 /// the seen part's share of `n`: they are the surface itself, where the network's mesh is up
-/// to a voxel off, and the fits weigh them accordingly (docs/experiments.md). When the view
-/// holds fewer of them than that share, samples of the seen mesh make up the difference.
+/// to a voxel off, and the fits weigh them accordingly (docs/experiments.md). When the views
+/// hold fewer of them than that share, samples of the seen mesh make up the difference.
 std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Grid3<int>& labels,
-                               const SurfaceSegments& view, int n, uint64_t seed) {
+                               const std::vector<MeasuredView>& views, int n, uint64_t seed) {
   TriangleMesh all;
   std::vector<size_t> first(parts.size() + 1, 0);
   for (size_t k = 0; k < parts.size(); ++k) {
     all.append(parts[k]);
     first[k + 1] = all.triangles.size();
   }
-  const std::vector<bool> seen = visibleTriangles(all, view.camera, view.T_table_camera);
+  std::vector<bool> seen(all.triangles.size(), false);
   std::vector<Points3> measured(parts.size());
-  for (const Vec3& p : view.points_table) {
-    const int voxel = nearestLabelledVoxel(labels, p);
-    const int k = voxel >= 0 ? labels.data[voxel] : -1;
-    if (k >= 0 && k < static_cast<int>(parts.size())) measured[k].push_back(p);
+  for (const MeasuredView& view : views) {
+    const std::vector<bool> seen_here = visibleTriangles(all, view.camera, view.T_table_camera);
+    for (size_t i = 0; i < seen.size(); ++i) seen[i] = seen[i] || seen_here[i];
+    for (const Vec3& p : view.points_table) {
+      const int voxel = nearestLabelledVoxel(labels, p);
+      const int k = voxel >= 0 ? labels.data[voxel] : -1;
+      if (k >= 0 && k < static_cast<int>(parts.size())) measured[k].push_back(p);
+    }
   }
   std::vector<Points3> points(parts.size());
   for (size_t k = 0; k < parts.size(); ++k) {
@@ -167,7 +171,7 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Gri
 }  // namespace
 
 void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings* timings,
-               const SurfaceSegments* segments) {
+               const SurfaceSegments* segments, const std::vector<MeasuredView>& further_views) {
   auto t = Clock::now();
   HoughConfig hough = config.hough;
   hough.threads = std::max(1, config.threads);
@@ -188,10 +192,15 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
       splitByLabel(h->surface, triangleLabels(h->surface, h->labels), seg.size());
   for (size_t k = 0; k < parts.size(); ++k)
     if (outside[k]) parts[k] = TriangleMesh();
+  std::vector<MeasuredView> measured;
+  if (config.observed_points && segments) {
+    measured.push_back({segments->camera, segments->T_table_camera, segments->points_table});
+    measured.insert(measured.end(), further_views.begin(), further_views.end());
+  }
   const std::vector<Points3> points =
-      config.observed_points && segments
-          ? fitPoints(parts, h->labels, *segments, config.points_per_instance, config.seed)
-          : fitPoints(parts, config.points_per_instance, config.seed);
+      measured.empty()
+          ? fitPoints(parts, config.points_per_instance, config.seed)
+          : fitPoints(parts, h->labels, measured, config.points_per_instance, config.seed);
   if (timings) timings->mesh_ms += msSince(t);
 
   t = Clock::now();
@@ -218,6 +227,24 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
     if (label >= 0) label = reported[label];
   h->decomposed = true;
   if (timings) timings->fitting_ms += msSince(t);
+}
+
+MeasuredView measuredView(const DepthView& view, const GridSpec& grid,
+                          const PerceptionConfig& config) {
+  if (!view.T_table_camera) throw std::invalid_argument("measuredView: the view has no pose");
+  const int stride = std::max(1, config.segments.pixel_stride);
+  MeasuredView out{view.camera, *view.T_table_camera, {}};
+  const Vec3 lo = grid.origin_table, hi = lo + Vec3::Constant(grid.extent_m());
+  for (int v = 0; v < view.depth.height; v += stride)
+    for (int u = 0; u < view.depth.width; u += stride) {
+      const float d = view.depth.at(u, v);
+      if (!validDepth(d)) continue;
+      const Vec3 p = out.T_table_camera * view.camera.backproject(u, v, d);
+      if (p.z() >= config.min_pile_height_m && (p.array() >= lo.array()).all() &&
+          (p.array() <= hi.array()).all())
+        out.points_table.push_back(p);
+    }
+  return out;
 }
 
 Image<int> pixelInstances(const DepthView& view, const SceneEstimate& est, int hypothesis,
@@ -447,8 +474,13 @@ std::vector<SceneHypothesis> perceiveGroup(
   // unseen.
   PerceptionConfig one_view = c;
   if (furtherViewsReach(views, c)) one_view.segments.max_unseen_points = 0;
+  // Every posed view measured part of the surface, whether or not it conditions the network.
+  std::vector<MeasuredView> further;
+  if (c.observed_points && segments)
+    for (size_t i = 1; i < views.size(); ++i)
+      further.push_back(measuredView(views[i], group.grid, c));
   for (int k = 0; k < c.decompose_samples; ++k)
-    decompose(&hypotheses[k], one_view, timings, segments ? &*segments : nullptr);
+    decompose(&hypotheses[k], one_view, timings, segments ? &*segments : nullptr, further);
   return hypotheses;
 }
 
