@@ -257,20 +257,20 @@ TEST(Decompose, TheSeenSurfaceComesFromTheDepthPoints) {
     const Transform T_first = lookAt(centre + Vec3(0.55, -0.35, 0.55), target);
     const Transform T_second = lookAt(centre + Vec3(-0.55, 0.35, 0.55), target);
     const DepthRenderer renderer(pile.scene);
-    const RenderResult first = renderer.render(camera, T_first);
+    const DepthView first_view{renderer.render(camera, T_first).depth, camera, T_first};
     const DepthView second{renderer.render(camera, T_second).depth, camera, T_second};
     const std::optional<SurfaceSegments> segments =
         InstanceFinder(config.hough, config.segments)
-            .segmentView(first.depth, camera, T_first, config.min_pile_height_m, &pile.grid);
+            .segmentView(first_view.depth, camera, T_first, config.min_pile_height_m, &pile.grid);
     ASSERT_TRUE(segments) << "seed " << seed;
     // Mesh samples alone, the first view's depth points, both views' depth points.
     double near_share[3] = {0, 0, 0}, volume_error[3] = {0, 0, 0};
     for (int variant = 0; variant < 3; ++variant) {
       config.observed_points = variant > 0;
-      std::vector<MeasuredView> further;
-      if (variant == 2) further.push_back(measuredView(second, pile.grid, config));
+      std::vector<MeasuredView> measured{measuredView(first_view, T_first, pile.grid, config)};
+      if (variant == 2) measured.push_back(measuredView(second, T_second, pile.grid, config));
       SceneHypothesis h = pile.h;
-      decompose(&h, config, nullptr, &*segments, further);
+      decompose(&h, config, nullptr, &*segments, measured);
       ASSERT_EQ(h.instances.size(), pile.scene.objects.size()) << "seed " << seed;
       int near = 0, total = 0;
       for (const InstanceEstimate& e : h.instances) {

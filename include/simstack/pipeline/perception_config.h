@@ -33,7 +33,7 @@ struct PerceptionConfig {
   int points_per_instance = 1000;  ///< points per instance handed to the fitter
   /// The part of an instance's surface the views saw is represented by their depth points
   /// (measured) instead of samples of the network's mesh (up to a voxel off); the unseen part
-  /// keeps the mesh samples. Needs the surface patches (segments.enabled).
+  /// keeps the mesh samples.
   bool observed_points = true;
   int min_instance_points = 30;     ///< instances with a smaller surface are dropped
   bool joint_refinement = true;     ///< eqs. 7-9 after the per-instance fits

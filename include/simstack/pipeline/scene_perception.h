@@ -75,18 +75,18 @@ struct MeasuredView {
 
 /// Splits one hypothesis into instances and fits them (Hough voting, marching cubes, Ceres).
 /// With `segments` (the first view's convex patches, surface_segments.h) and
-/// `config.segments.enabled`, instances are also split along the patches, and with
-/// `config.observed_points` the part of each instance that view (or one of `further_views`)
-/// saw is fitted to their depth points. Adds the time spent to `timings` when given.
+/// `config.segments.enabled`, instances are also split along the patches; with
+/// `config.observed_points` the part of each instance that one of `measured_views` saw is
+/// fitted to their depth points. Adds the time spent to `timings` when given.
 void decompose(SceneHypothesis* hypothesis, const PerceptionConfig& config,
                StageTimings* timings = nullptr, const SurfaceSegments* segments = nullptr,
-               const std::vector<MeasuredView>& further_views = {});
+               const std::vector<MeasuredView>& measured_views = {});
 
-/// The depth points of a posed view as `decompose` takes them: every `segments.pixel_stride`-th
-/// pixel of each row and column, at least `min_pile_height_m` above the table and inside the
-/// box of `grid` (std::invalid_argument when the view has no pose).
-MeasuredView measuredView(const DepthView& view, const GridSpec& grid,
-                          const PerceptionConfig& config);
+/// The depth points of a view posed by `T_table_camera`, as the surface patches take them:
+/// every `segments.pixel_stride`-th pixel of each row and column, at least `min_pile_height_m`
+/// above the table and inside the box of `grid`.
+MeasuredView measuredView(const DepthView& view, const Transform& T_table_camera,
+                          const GridSpec& grid, const PerceptionConfig& config);
 
 /// Instance of every pixel of `view` (posed by its own T_table_camera, else by the estimate's
 /// first view's): the label of the labelled

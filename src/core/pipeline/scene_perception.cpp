@@ -11,9 +11,9 @@
 
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/instances/instance_finder.h"
-#include "simstack/instances/surface_segments.h"
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/model/cvae_inference.h"
+#include "simstack/pipeline/workspace.h"
 #include "simstack/tsdf/network_input.h"
 #include "simstack/tsdf/projective_tsdf.h"
 
@@ -171,7 +171,7 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Gri
 }  // namespace
 
 void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings* timings,
-               const SurfaceSegments* segments, const std::vector<MeasuredView>& further_views) {
+               const SurfaceSegments* segments, const std::vector<MeasuredView>& measured_views) {
   auto t = Clock::now();
   HoughConfig hough = config.hough;
   hough.threads = std::max(1, config.threads);
@@ -192,15 +192,10 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
       splitByLabel(h->surface, triangleLabels(h->surface, h->labels), seg.size());
   for (size_t k = 0; k < parts.size(); ++k)
     if (outside[k]) parts[k] = TriangleMesh();
-  std::vector<MeasuredView> measured;
-  if (config.observed_points && segments) {
-    measured.push_back({segments->camera, segments->T_table_camera, segments->points_table});
-    measured.insert(measured.end(), further_views.begin(), further_views.end());
-  }
   const std::vector<Points3> points =
-      measured.empty()
-          ? fitPoints(parts, config.points_per_instance, config.seed)
-          : fitPoints(parts, h->labels, measured, config.points_per_instance, config.seed);
+      config.observed_points && !measured_views.empty()
+          ? fitPoints(parts, h->labels, measured_views, config.points_per_instance, config.seed)
+          : fitPoints(parts, config.points_per_instance, config.seed);
   if (timings) timings->mesh_ms += msSince(t);
 
   t = Clock::now();
@@ -229,22 +224,17 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   if (timings) timings->fitting_ms += msSince(t);
 }
 
-MeasuredView measuredView(const DepthView& view, const GridSpec& grid,
-                          const PerceptionConfig& config) {
-  if (!view.T_table_camera) throw std::invalid_argument("measuredView: the view has no pose");
-  const int stride = std::max(1, config.segments.pixel_stride);
-  MeasuredView out{view.camera, *view.T_table_camera, {}};
-  const Vec3 lo = grid.origin_table, hi = lo + Vec3::Constant(grid.extent_m());
-  for (int v = 0; v < view.depth.height; v += stride)
-    for (int u = 0; u < view.depth.width; u += stride) {
-      const float d = view.depth.at(u, v);
-      if (!validDepth(d)) continue;
-      const Vec3 p = out.T_table_camera * view.camera.backproject(u, v, d);
-      if (p.z() >= config.min_pile_height_m && (p.array() >= lo.array()).all() &&
-          (p.array() <= hi.array()).all())
-        out.points_table.push_back(p);
-    }
-  return out;
+MeasuredView measuredView(const DepthView& view, const Transform& T_table_camera,
+                          const GridSpec& grid, const PerceptionConfig& config) {
+  WorkspaceConfig box;
+  for (int a = 0; a < 3; ++a) {
+    box.min_m[a] = grid.origin_table[a];
+    box.max_m[a] = grid.origin_table[a] + grid.extent_m();
+  }
+  return {view.camera, T_table_camera,
+          pilePoints(view, T_table_camera, box, config.min_pile_height_m,
+                     std::numeric_limits<double>::infinity(),
+                     std::max(1, config.segments.pixel_stride))};
 }
 
 Image<int> pixelInstances(const DepthView& view, const SceneEstimate& est, int hypothesis,
@@ -474,13 +464,18 @@ std::vector<SceneHypothesis> perceiveGroup(
   // unseen.
   PerceptionConfig one_view = c;
   if (furtherViewsReach(views, c)) one_view.segments.max_unseen_points = 0;
-  // Every posed view measured part of the surface, whether or not it conditions the network.
-  std::vector<MeasuredView> further;
-  if (c.observed_points && segments)
-    for (size_t i = 1; i < views.size(); ++i)
-      further.push_back(measuredView(views[i], group.grid, c));
+  // Every posed view measured part of the surface, whether or not it conditions the network;
+  // the first view's points are the patches' when they were found.
+  std::vector<MeasuredView> measured;
+  if (c.observed_points && c.decompose_samples > 0)
+    for (size_t i = 0; i < views.size(); ++i)
+      measured.push_back(i == 0 && segments
+                             ? MeasuredView{views[0].camera, T_table_first, segments->points_table}
+                             : measuredView(views[i],
+                                            i == 0 ? T_table_first : *views[i].T_table_camera,
+                                            group.grid, c));
   for (int k = 0; k < c.decompose_samples; ++k)
-    decompose(&hypotheses[k], one_view, timings, segments ? &*segments : nullptr, further);
+    decompose(&hypotheses[k], one_view, timings, segments ? &*segments : nullptr, measured);
   return hypotheses;
 }
 
