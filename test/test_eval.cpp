@@ -184,6 +184,32 @@ TEST(SceneFiles, SuperquadricsMeshesAndGridsRoundTrip) {
         std::string::npos)
         << e.what();
   }
+  // A word where a number belongs, a misspelt key, an id twice, a file that is not a map: each
+  // named with the file.
+  const std::string object =
+      "scale: [0.05, 0.05, 0.05], exponents: [2, 2, 2], position: [0, 0, 0.05], "
+      "orientation: [1, 0, 0, 0]";
+  const std::vector<std::pair<std::string, std::string>> spoiled = {
+      {"objects:\n  - {scale: [0.05, abc, 0.05], exponents: [2, 2, 2], position: [0, 0, 0], "
+       "orientation: [1, 0, 0, 0]}\n",
+       "'scale' must be a list of 3 numbers"},
+      {"objects:\n  - {" + object + ", colour: red}\n", "unknown key 'colour' in object 0"},
+      {"bogus: 1\nobjects:\n  - {" + object + "}\n", "unknown key 'bogus'"},
+      {"objects:\n  - {id: 0, " + object + "}\n  - {id: 0, " + object + "}\n",
+       "id 0 is given twice"},
+      {"just text\n", "no 'objects' list"},
+      {"objects: [1, 2]\n", "object 0 is not a map"}};
+  for (const auto& [text, message] : spoiled) {
+    std::ofstream(dir / "spoiled.yaml") << text;
+    std::vector<int> ids;
+    try {
+      readSuperquadricsYaml((dir / "spoiled.yaml").string(), &ids);
+      ADD_FAILURE() << "accepted: " << text;
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("spoiled.yaml"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << e.what();
+    }
+  }
   EXPECT_THROW(readDepthPcd((dir / "c.pcd").string()), std::runtime_error);  // not organized
   std::filesystem::remove_all(dir);
 }

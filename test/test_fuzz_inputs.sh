@@ -197,5 +197,38 @@ expect "grasps --hypotheses 5 with the C-VAE's 3 samples" "raise --samples" \
   "$bin/simstack_evaluate_grasps" --model "$pkg/models/simstack_r32.pt" --dataset "$dir/two.h5" \
   --scenes 1 --hypotheses 5 --no-classical --output "$dir/grasps.json"
 
+# An output that names an input: refused before the work, the input left as it was.
+cp "$dir/two.h5" "$dir/keep.h5"
+expect "evaluate --output naming its --dataset" "is the input file" "$bin/simstack_evaluate" \
+  --dataset "$dir/keep.h5" --output "$dir/./keep.h5" --scenes 1 --views 1 --no-classical --no-stability
+cmp -s "$dir/two.h5" "$dir/keep.h5" || { echo "FAIL evaluate: the dataset was replaced"; fail=1; }
+expect "evaluate --summary naming --output" "is the input file" "$bin/simstack_evaluate" \
+  --dataset "$dir/keep.h5" --output "$dir/same.json" --summary "$dir/same.json" --scenes 1
+expect "tune_hough --output naming its --dataset" "is the input file" "$bin/simstack_tune_hough" \
+  --dataset "$dir/keep.h5" --output "$dir/keep.h5"
+expect "evaluate_grasps --output naming the model's card" "is the input file" \
+  "$bin/simstack_evaluate_grasps" --dataset "$dir/keep.h5" --model "$dir/bad_card.pt" \
+  --output "$dir/bad_card.yaml"
+expect "tune_hough --refinement 100" "refinement" "$bin/simstack_tune_hough" \
+  --dataset "$dir/keep.h5" --output "$dir/hough.yaml" --refinement 100
+expect "tune_hough --bandwidth nan" "bandwidth" "$bin/simstack_tune_hough" \
+  --dataset "$dir/keep.h5" --output "$dir/hough.yaml" --bandwidth nan
+
+# The table's RANSAC settings and the generator's object counts are checked.
+sed "s|model: models/|model: $pkg/models/|; s|max_iterations: 1000|max_iterations: -5|" \
+  "$pkg/config/perception.yaml" > "$dir/table.yaml"
+expect "table max_iterations -5" "max_iterations" "$reconstruct" --config "$dir/table.yaml" \
+  --depth "$good" --intrinsics $K --output "$dir/o"
+for objects in 3x:4y 3:4:5 1:100000 0:2; do
+  expect "generate --objects $objects" "objects" "$bin/simstack_generate" --scenes 1 --seed 1 \
+    --objects "$objects" --output "$dir/obj.h5"
+done
+
+# A training config's bad value is reported at its line in the file.
+sed 's/^\(  steps:\).*/\1 abc/' "$train_config" > "$dir/steps.yaml"
+line=$(grep -n "steps: abc" "$dir/steps.yaml" | cut -d: -f1)
+expect "training config steps: abc" "line $line," "$bin/simstack_train" --dataset "$dir/two.h5" \
+  --config "$dir/steps.yaml" --output "$dir/run_steps"
+
 [ $fail -eq 0 ] && echo "fuzz corpus: every case handled"
 exit $fail

@@ -58,6 +58,9 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
       perception_(std::make_unique<ScenePerception>(perceptionConfigFromParams(pnh, package_dir))),
       tf_listener_(tf_buffer_),
       it_(nh),
+      // Named after the nodelet, not the manager it is loaded into (two perception nodelets in
+      // one manager must not report under one name); ~diagnostic_period is read from pnh.
+      diagnostics_(nh, pnh, pnh.getNamespace()),
       rate_since_(ros::WallTime::now()) {
   // Latched: a grasp client or rviz that starts later still gets the last scene.
   objects_pub_ = pnh_.advertise<ObjectArray>("objects", 1, true);
@@ -68,7 +71,7 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   labels_pub_ = private_it.advertise("labels", 1);
   reset_srv_ = pnh_.advertiseService("reset", &PerceptionServer::reset, this);
   save_srv_ = pnh_.advertiseService("save_octomap", &PerceptionServer::saveOctomap, this);
-  diagnostics_.setHardwareID("simstack_perception");
+  diagnostics_.setHardwareID("simstack_perception " + pnh_.getNamespace());
   diagnostics_.add("perception", this, &PerceptionServer::diagnose);
   started_ = ros::WallTime::now();
   diagnostics_timer_ = nh_.createWallTimer(ros::WallDuration(1.0),
@@ -270,23 +273,26 @@ void PerceptionServer::process(const Frame& frame) {
     if (reset_requested_) views_.clear();
     reset_requested_ = false;
     view.mask = mask_;  // a mask of another size makes perceive() refuse the frame
+    // The newest frame first: it places the grid, its patches regroup the instances and the
+    // labels are drawn over it (with condition_views: first, it alone conditions the network).
+    views.push_back(view);
     if (node_.accumulate_views && view.T_table_camera) {
-      views_.push_back(view);
-      if (static_cast<int>(views_.size()) > node_.max_views) views_.erase(views_.begin());
-      // The newest frame first: it places the grid, its patches regroup the instances and the
-      // labels are drawn over it (with condition_views: first, it alone conditions the network).
-      views.assign(views_.rbegin(), views_.rend());
+      const size_t older = std::min(views_.size(), static_cast<size_t>(node_.max_views - 1));
+      views.insert(views.end(), views_.rbegin(), views_.rbegin() + older);
     }
   }
-  if (views.empty()) views = {view};
   SceneEstimate estimate;
   try {
     estimate = perception_->perceive(views);
   } catch (const std::exception& e) {
-    return skip(frame, e.what());
+    return skip(frame, e.what());  // not kept: a refused view would spoil every later frame
   }
   publish(frame, view, estimate, static_cast<int>(views.size()));
   std::lock_guard<std::mutex> lock(mutex_);
+  if (node_.accumulate_views && view.T_table_camera) {
+    views_.push_back(std::move(view));
+    while (static_cast<int>(views_.size()) > node_.max_views) views_.erase(views_.begin());
+  }
   ++processed_;
   failing_ = false;
   last_timings_ = estimate.timings;

@@ -1,6 +1,8 @@
 #include "simstack_ros/ros_params.h"
 
+#include <ros/console.h>
 #include <ros/param.h>
+#include <simstack/LiveSettingsConfig.h>
 #include <xmlrpcpp/XmlRpcValue.h>
 
 #include <cmath>
@@ -56,6 +58,43 @@ void emit(std::ostream& out, XmlRpc::XmlRpcValue& v, int indent) {
   }
 }
 
+template <class T>
+void read(const ros::NodeHandle& pnh, const std::string& name, T* value) {
+  if (pnh.hasParam(name) && !pnh.getParam(name, *value))
+    throw std::runtime_error(pnh.resolveName(name) + " has the wrong type");
+}
+
+/// The sections of the node's private namespace that the config reads.
+const std::set<std::string> kSections{"perception", "hough",     "segments", "fitting",
+                                      "table",      "workspace", "node"};
+
+/// Checks what else lies in the node's private namespace. A map there is a config section, and
+/// a misspelt one is an error, except under the node's image topic: image_transport's
+/// publisher plugins (compressed, theora) keep their dynamic_reconfigure settings there, and
+/// those outlive the node, so a restarted node finds them. A scalar there that is none of
+/// dynamic_reconfigure's live settings (nor image_transport's or diagnostic_updater's) is most
+/// likely a `node/` field written without its section: it is ignored with a warning.
+void checkPrivateNamespace(const ros::NodeHandle& pnh) {
+  XmlRpc::XmlRpcValue all;
+  if (!ros::param::get(pnh.getNamespace(), all) || all.getType() != XmlRpc::XmlRpcValue::TypeStruct)
+    return;
+  std::set<std::string> scalars{"image_transport", "diagnostic_period"};
+  for (const auto& d : LiveSettingsConfig::__getParamDescriptions__()) scalars.insert(d->name);
+  for (auto& kv : all) {
+    if (kv.second.getType() == XmlRpc::XmlRpcValue::TypeStruct) {
+      if (!kSections.count(kv.first) && kv.first != "labels")
+        throw std::runtime_error("unknown parameter section " + pnh.resolveName(kv.first) +
+                                 " (perception, hough, segments, fitting, table, workspace or "
+                                 "node)");
+    } else if (!scalars.count(kv.first)) {
+      ROS_WARN(
+          "simstack: parameter %s is not one the node reads and is ignored (the node's own "
+          "settings are under %s)",
+          pnh.resolveName(kv.first).c_str(), pnh.resolveName("node/").c_str());
+    }
+  }
+}
+
 }  // namespace
 
 void NodeConfig::validate() const {
@@ -72,18 +111,7 @@ void NodeConfig::validate() const {
 
 PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
                                             const std::string& package_dir) {
-  // A map under the node's namespace is a config section: a misspelt one is an error (the
-  // scalars there are dynamic_reconfigure's).
-  XmlRpc::XmlRpcValue all;
-  if (ros::param::get(pnh.getNamespace(), all) && all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
-    for (auto& kv : all)
-      if (kv.second.getType() == XmlRpc::XmlRpcValue::TypeStruct &&
-          !std::set<std::string>{"perception", "hough", "segments", "fitting", "table", "workspace",
-                                 "node"}
-               .count(kv.first))
-        throw std::runtime_error("unknown parameter section " + pnh.resolveName(kv.first) +
-                                 " (perception, hough, segments, fitting, table, workspace or "
-                                 "node)");
+  checkPrivateNamespace(pnh);
   // Nothing loaded (a node started by hand): the package's own config, as the tools do.
   if (!pnh.hasParam("perception") && !pnh.hasParam("segments") && !pnh.hasParam("fitting") &&
       !pnh.hasParam("table") && !pnh.hasParam("hough") && !pnh.hasParam("workspace"))
@@ -114,26 +142,20 @@ NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh) {
                .count(kv.first))
         throw std::runtime_error("unknown parameter " + pnh.resolveName("node/" + kv.first));
   }
-  pnh.param("node/table_frame", c.table_frame, c.table_frame);
-  pnh.param("node/estimate_table", c.estimate_table, c.estimate_table);
-  pnh.param("node/tf_timeout_s", c.tf_timeout_s, c.tf_timeout_s);
-  pnh.param("node/input_timeout_s", c.input_timeout_s, c.input_timeout_s);
-  pnh.param("node/image_transport", c.image_transport, c.image_transport);
-  pnh.param("node/occupancy_min", c.occupancy_min, c.occupancy_min);
-  pnh.param("node/accumulate_views", c.accumulate_views, c.accumulate_views);
-  pnh.param("node/max_views", c.max_views, c.max_views);
-  pnh.param("node/output_dir", c.output_dir, c.output_dir);
+  // A value of the wrong type (1 for true, "0.5" for 0.5) stops the node rather than being
+  // replaced by the default unnoticed.
+  read(pnh, "node/table_frame", &c.table_frame);
+  read(pnh, "node/estimate_table", &c.estimate_table);
+  read(pnh, "node/tf_timeout_s", &c.tf_timeout_s);
+  read(pnh, "node/input_timeout_s", &c.input_timeout_s);
+  read(pnh, "node/image_transport", &c.image_transport);
+  read(pnh, "node/occupancy_min", &c.occupancy_min);
+  read(pnh, "node/accumulate_views", &c.accumulate_views);
+  read(pnh, "node/max_views", &c.max_views);
+  read(pnh, "node/output_dir", &c.output_dir);
   c.validate();
   return c;
 }
-
-namespace {
-template <class T>
-void read(const ros::NodeHandle& pnh, const std::string& name, T* value) {
-  if (pnh.hasParam(name) && !pnh.getParam(name, *value))
-    throw std::runtime_error(pnh.resolveName(name) + " has the wrong type");
-}
-}  // namespace
 
 void GraspServerConfig::validate() const {
   const auto positive = [](double v, const char* name) {

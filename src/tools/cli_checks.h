@@ -8,7 +8,10 @@
 
 #include <cmath>
 #include <exception>
+#include <filesystem>
+#include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace simstack {
 
@@ -34,5 +37,27 @@ inline const CLI::Validator FinitePositive =
 /// A finite number >= 0.
 inline const CLI::Validator FiniteNonNegative =
     finiteNumber([](double v) { return v >= 0.0; }, ">= 0", "FINITE>=0");
+
+/// Throws std::runtime_error when the file `output` (given as `option`) would replace one of
+/// `inputs`, by the same or another name (a link, "./", ".."): an evaluation's --output naming
+/// its --dataset would otherwise put its results where the test piles were. Empty names are
+/// skipped.
+inline void requireNotAnInput(const std::string& option, const std::string& output,
+                              const std::vector<std::string>& inputs) {
+  namespace fs = std::filesystem;
+  if (output.empty()) return;
+  std::error_code ec;
+  const fs::path out = fs::weakly_canonical(output, ec);
+  for (const std::string& input : inputs) {
+    if (input.empty()) continue;
+    std::error_code ec_in;
+    const bool same = fs::exists(output) && fs::exists(input)
+                          ? fs::equivalent(output, input, ec_in)
+                          : !ec && out == fs::weakly_canonical(input, ec_in);
+    if (same && !ec_in)
+      throw std::runtime_error(option + " " + output + " is the input file " + input +
+                               ", which it would replace: give another path");
+  }
+}
 
 }  // namespace simstack

@@ -3,6 +3,8 @@
 #include <filesystem>
 #include <stdexcept>
 
+#include "simstack/model/cvae_config.h"
+
 namespace simstack {
 
 std::string packageDir() {
@@ -41,6 +43,15 @@ PerceptionOptions::PerceptionOptions(CLI::App& app, Which which) {
   threads_opt_ = app.add_option("--threads", threads_, "threads (default: the config's)")
                      ->check(FinitePositive);
   if (which.joint) app.add_flag("--no-joint", no_joint_, "skip the joint refinement (eqs. 7-9)");
+}
+
+std::vector<std::string> PerceptionOptions::inputFiles() const {
+  std::vector<std::string> files{config_path_};
+  for (const std::string& m : models_) {
+    files.push_back(m);
+    files.push_back(modelCardPath(m));
+  }
+  return files;
 }
 
 std::vector<PerceptionConfig> PerceptionOptions::configs() const {

@@ -38,6 +38,9 @@ class PerceptionOptions {
   std::vector<PerceptionConfig> configs() const;
   /// The first of configs().
   PerceptionConfig config() const { return configs().front(); }
+  /// The files named by --config and --model (with the models' cards), for outputs to be
+  /// checked against.
+  std::vector<std::string> inputFiles() const;
 
  private:
   std::string config_path_ = packageFile("config/perception.yaml");

@@ -27,12 +27,18 @@ void writeJson(StagedFile& file, const std::string& path, const nlohmann::json& 
 }
 
 /// The result files, made (with their directories) before the work, so that a path that
-/// cannot be written fails at once rather than after the evaluation.
+/// cannot be written, or one that would replace an input or each other, fails at once rather
+/// than after the evaluation.
 struct ResultFiles {
-  ResultFiles(const std::string& output, const std::string& summary) : results(output) {
+  ResultFiles(const std::string& output, const std::string& summary,
+              std::vector<std::string> inputs) {
+    requireNotAnInput("--output", output, inputs);
+    inputs.push_back(output);
+    requireNotAnInput("--summary", summary, inputs);
+    results.emplace(output);
     if (!summary.empty()) this->summary.emplace(summary);
   }
-  StagedFile results;
+  std::optional<StagedFile> results;
   std::optional<StagedFile> summary;
 };
 
@@ -54,7 +60,7 @@ void runDataset(const DatasetReader& reader, const std::string& dataset,
     nlohmann::json j = resultsJson(results, with_views);
     j["dataset"] = dataset;
     if (with_views)
-      writeJson(files.results, output, j);
+      writeJson(*files.results, output, j);
     else if (files.summary)
       writeJson(*files.summary, summary, j);
   }
@@ -65,6 +71,21 @@ void runDataset(const DatasetReader& reader, const std::string& dataset,
                     ? " of " + std::to_string(o.views_per_estimate) + " posed views each"
                     : std::string())
             << "; results: " << output << "\n";
+}
+
+/// The first model on the labelled real scenes of `real_dir`: counts and agreement.
+void runRealScenes(const PerceptionConfig& config, const std::string& real_dir,
+                   const std::string& output, ResultFiles& files) {
+  NetworkMethod method(config, true);
+  const std::vector<RealSceneResult> scenes = evaluateRealScenes(real_dir, method);
+  std::cout << "\n" << realScenesTable(scenes);
+  const MethodInfo info = method.info();
+  writeJson(*files.results, output,
+            {{"real_dir", real_dir},
+             {"model", info.model},
+             {"config", info.config_yaml},
+             {"scenes", realScenesJson(scenes)}});
+  std::cout << "results: " << output << "\n";
 }
 
 }  // namespace
@@ -139,19 +160,12 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    ResultFiles files(output, summary);
+    std::vector<std::string> inputs = perception.inputFiles();
+    inputs.push_back(dataset);
+    ResultFiles files(output, summary, inputs);
     const std::vector<PerceptionConfig> configs = perception.configs();
     if (!real_dir.empty()) {
-      NetworkMethod method(configs.front(), true);
-      const std::vector<RealSceneResult> scenes = evaluateRealScenes(real_dir, method);
-      std::cout << "\n" << realScenesTable(scenes);
-      const MethodInfo info = method.info();
-      writeJson(files.results, output,
-                {{"real_dir", real_dir},
-                 {"model", info.model},
-                 {"config", info.config_yaml},
-                 {"scenes", realScenesJson(scenes)}});
-      std::cout << "results: " << output << "\n";
+      runRealScenes(configs.front(), real_dir, output, files);
       return 0;
     }
     const DatasetReader reader(dataset, mesh_dir);

@@ -73,6 +73,9 @@ int main(int argc, char** argv) {
   keepFreedMemoryForReuse();  // the network runs in this process
   o.noise = !no_noise;
   try {
+    std::vector<std::string> inputs = perception.inputFiles();
+    inputs.push_back(dataset);
+    requireNotAnInput("--output", output, inputs);
     StagedFile staged(output);  // a bad --output is found (its directory made) before the work
     const DatasetReader reader(dataset);
     // As the node runs them: hypothesis 0 is the mean scene, H of them decomposed.

@@ -26,17 +26,27 @@ std::pair<double, double> parseSizes(const std::string& s) {
   }
 }
 
+/// MIN:MAX or N objects, 1 <= MIN <= MAX <= 254 (the labels are 8-bit, 0 is free space).
 std::pair<int, int> parseRange(const std::string& s) {
-  const auto colon = s.find(':');
+  const auto whole = [](const std::string& t) {
+    size_t used = 0;
+    const int n = std::stoi(t, &used);
+    if (used != t.size()) throw std::invalid_argument(t);
+    return n;
+  };
+  std::pair<int, int> r;
   try {
-    if (colon == std::string::npos) {
-      const int n = std::stoi(s);
-      return {n, n};
-    }
-    return {std::stoi(s.substr(0, colon)), std::stoi(s.substr(colon + 1))};
+    const auto colon = s.find(':');
+    r = colon == std::string::npos
+            ? std::pair<int, int>{whole(s), whole(s)}
+            : std::pair<int, int>{whole(s.substr(0, colon)), whole(s.substr(colon + 1))};
   } catch (const std::exception&) {
     throw CLI::ValidationError("--objects", "expected MIN:MAX or N, got '" + s + "'");
   }
+  if (r.first < 1 || r.second < r.first || r.second > 254)
+    throw CLI::ValidationError("--objects",
+                               "the object count '" + s + "' must satisfy 1 <= MIN <= MAX <= 254");
+  return r;
 }
 
 }  // namespace

@@ -93,35 +93,41 @@ int main(int argc, char** argv) {
   auto values = [&](const char* name, auto& list, const char* what, CLI::Validator check) {
     app.add_option(name, list, what)->capture_default_str()->check(check);
   };
-  values("--refinement", sweep.refinements, "fine cells per voxel to try", FinitePositive);
+  values("--refinement", sweep.refinements, "fine cells per voxel to try", CLI::Range(1, 64));
   values("--min-traversals", sweep.traversals, "mu values to try", FiniteNonNegative);
-  values("--bandwidth", sweep.bandwidths, "mean-shift radii to try (m)", FinitePositive);
+  values("--bandwidth", sweep.bandwidths, "mean-shift radii to try (m)",
+         FinitePositive & CLI::Range(0.0, 10.0));
   values("--min-instance-voxels", sweep.min_voxels, "minimum instance sizes to try",
          FiniteNonNegative);
   values("--min-vote-norm", sweep.min_norms,
          "vote lengths to try below which a voxel casts no ray (blunt, unsure votes)",
-         CLI::Range(0.0, 1.0));
+         FiniteNonNegative & CLI::Range(0.0, 1.0));
   values("--reversed-stop", sweep.reversed_stops,
          "consecutive voxels of reversed votes that stop a ray (0 = off) to try",
          FiniteNonNegative);
   values("--split-below", sweep.split_below,
          "split test: solidities below which an instance is cut (0 = off) to try",
-         CLI::Range(0.0, 1.0));
+         FiniteNonNegative & CLI::Range(0.0, 1.0));
   values("--split-accept", sweep.split_accept,
          "split test: joint solidities of the two parts that keep a cut, to try",
-         CLI::Range(0.01, 1.0));
+         FinitePositive & CLI::Range(0.01, 1.0));
   app.add_option("--top", top, "rows of the table")->capture_default_str()->check(FinitePositive);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
   try {
+    std::vector<std::string> inputs = perception.inputFiles();
+    inputs.insert(inputs.end(), datasets.begin(), datasets.end());
+    requireNotAnInput("--output", output, inputs);
     StagedFile written(output);  // a path that cannot be written fails now, not after the sweep
     const PerceptionConfig pc = perception.config();
+    // The model's own setting is the first candidate: a tie keeps it, so the chosen setting is
+    // never worse on these views than the one it replaces. Each is checked before the network
+    // runs on the views.
+    const std::vector<HoughConfig> candidates = houghCandidates(pc.hough, sweep);
+    for (const HoughConfig& c : candidates) c.validate();
     std::vector<size_t> ends;  // each dataset's views end here
     const std::vector<TuningView> views =
         pooledViews(datasets, pc, scenes, views_per_scene, seed, noise, &ends);
-    // The model's own setting is the first candidate: a tie keeps it, so the chosen setting is
-    // never worse on these views than the one it replaces.
-    const std::vector<HoughConfig> candidates = houghCandidates(pc.hough, sweep);
     ProgressBar bar2("scoring " + std::to_string(candidates.size()) + " settings",
                      static_cast<long>(candidates.size()));
     std::vector<HoughScore> scores = scoreHoughSettings(

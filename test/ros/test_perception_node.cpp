@@ -380,9 +380,11 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
                                                    });
   std::vector<geometry_msgs::TransformStamped> cameras;
   std::vector<Transform> poses;
-  for (int k = 0; k < 4; ++k) {
+  for (int k = 0; k < 5; ++k) {
     const double a = 2.0 * M_PI * k / 4 + 0.3;
-    poses.push_back(lookAt(Vec3(0.6 * std::cos(a), 0.6 * std::sin(a), 0.55), Vec3(0, 0, 0.04)));
+    // Camera 4 is below the table: the pipeline refuses its views.
+    poses.push_back(
+        lookAt(Vec3(0.6 * std::cos(a), 0.6 * std::sin(a), k < 4 ? 0.55 : -0.4), Vec3(0, 0, 0.04)));
     geometry_msgs::TransformStamped t = tf2::eigenToTransform(poses.back());
     t.header.stamp = ros::Time::now();
     t.header.frame_id = "table";
@@ -396,15 +398,15 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
     ros::WallDuration(0.1).sleep();
   ros::WallDuration(0.5).sleep();
   const DepthRenderer renderer(Scene::fromSuperquadrics(knownPile()));
-  // The views fused for the frame of camera k (0 when no answer came within 60 s).
-  auto send = [&](int k, double age_s = 0.0) -> unsigned {
+  // The views fused for the frame of camera k (0 when no answer came within `wait_s`).
+  auto send = [&](int k, double age_s = 0.0, double wait_s = 60.0) -> unsigned {
     const ros::Time stamp = ros::Time::now() - ros::Duration(age_s);
     sensor_msgs::Image img = imageMsg(renderer.render(camera_, poses[k]).depth, stamp);
     sensor_msgs::CameraInfo ci = infoMsg(stamp);
     img.header.frame_id = ci.header.frame_id = cameras[k].child_frame_id;
     info.publish(ci);
     image.publish(img);
-    const std::optional<ObjectArray> out = answerTo(answers, stamp, 60.0);
+    const std::optional<ObjectArray> out = answerTo(answers, stamp, wait_s);
     return out ? out->views : 0u;
   };
   EXPECT_EQ(send(0), 1u);
@@ -415,6 +417,9 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
   ASSERT_TRUE(ros::service::call("/accumulating/perception/reset", empty));
   EXPECT_EQ(send(0), 1u) << "~reset did not clear the views";
   EXPECT_EQ(send(1), 2u);
+  // A refused view is not kept: the next frame fuses with the two good ones.
+  EXPECT_EQ(send(4, 0.0, 5.0), 0u) << "a camera below the table was perceived";
+  EXPECT_EQ(send(2), 3u) << "a refused view stayed among the accumulated ones";
   // A frame stamped before the last one (a bag that restarted): perceived alone, the views of
   // the other run cleared, and later frames fuse with it again.
   EXPECT_EQ(send(2, 30.0), 1u) << "a frame from the past was fused with newer views";

@@ -28,6 +28,8 @@ struct TablePlaneConfig {
   /// With a bounded workspace: a plane with more than this share of the points in the
   /// workspace's footprint farther than 2 x inlier_distance_m behind it is not the table.
   double max_behind_share = 0.05;
+  /// Throws std::invalid_argument naming the field out of range.
+  void validate() const;
 };
 
 struct TablePlane {

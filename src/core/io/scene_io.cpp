@@ -27,8 +27,23 @@ std::vector<double> seq(const YAML::Node& n, size_t size, const std::string& wha
     throw std::runtime_error(path + ": '" + what + "' must be a list of " + std::to_string(size) +
                              " numbers");
   std::vector<double> v;
-  for (const auto& x : n) v.push_back(x.as<double>());
+  try {
+    for (const auto& x : n) v.push_back(x.as<double>());
+  } catch (const YAML::Exception&) {
+    throw std::runtime_error(path + ": '" + what + "' must be a list of " + std::to_string(size) +
+                             " numbers (line " + std::to_string(n.Mark().line + 1) + ")");
+  }
   return v;
+}
+
+/// Throws naming the key of `map` that is none of `known`.
+void requireKnownKeys(const YAML::Node& map, const std::set<std::string>& known,
+                      const std::string& where, const std::string& path) {
+  for (const auto& kv : map) {
+    const std::string key = kv.first.as<std::string>();
+    if (!known.count(key))
+      throw std::runtime_error(path + ": unknown key '" + key + "' in " + where);
+  }
 }
 
 }  // namespace
@@ -65,10 +80,15 @@ void writeSuperquadricsYaml(const std::string& path, const std::vector<Superquad
 std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path,
                                                      std::vector<int>* ids) {
   const YAML::Node root = loadYamlFile(path, "superquadrics");
-  if (!root["objects"] || !root["objects"].IsSequence())
+  if (!root.IsMap() || !root["objects"] || !root["objects"].IsSequence())
     throw std::runtime_error(path + ": no 'objects' list");
+  requireKnownKeys(root, {"frame", "objects"}, "the file", path);
   std::vector<SuperquadricShape> out;
+  std::set<int> seen_ids;
   for (const auto& o : root["objects"]) {
+    const std::string which = "object " + std::to_string(out.size());
+    if (!o.IsMap()) throw std::runtime_error(path + ": " + which + " is not a map");
+    requireKnownKeys(o, {"id", "scale", "exponents", "position", "orientation"}, which, path);
     const auto a = seq(o["scale"], 3, "scale", path), e = seq(o["exponents"], 3, "exponents", path),
                p = seq(o["position"], 3, "position", path),
                q = seq(o["orientation"], 4, "orientation", path);
@@ -93,6 +113,8 @@ std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path,
         throw std::runtime_error(path + ": object " + std::to_string(out.size()) +
                                  " has an id that is not an integer");
       }
+      if (!seen_ids.insert(ids->back()).second)
+        throw std::runtime_error(path + ": id " + std::to_string(ids->back()) + " is given twice");
     }
     out.push_back(s);
   }

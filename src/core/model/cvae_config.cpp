@@ -165,12 +165,24 @@ std::string CvaeConfig::toYaml() const {
   return e.c_str();
 }
 
-CvaeConfig CvaeConfig::fromYaml(const std::string& text) {
+namespace {
+// From the node itself, not from text emitted again: a bad value's line is the file's.
+CvaeConfig cvaeFromNode(const YAML::Node& n) {
   CvaeConfig c;
-  const YAML::Node n = parse(text, "model");
   cvaeFields(c, [&](const char* key, auto& value) { get(n, key, &value); });
   c.validate();
   return c;
+}
+TrainConfig trainFromNode(const YAML::Node& n) {
+  TrainConfig c;
+  trainFields(c, [&](const char* key, auto& value) { get(n, key, &value); });
+  c.validate();
+  return c;
+}
+}  // namespace
+
+CvaeConfig CvaeConfig::fromYaml(const std::string& text) {
+  return cvaeFromNode(parse(text, "model"));
 }
 
 void TrainConfig::validate() const {
@@ -200,11 +212,7 @@ std::string TrainConfig::toYaml() const {
 }
 
 TrainConfig TrainConfig::fromYaml(const std::string& text) {
-  TrainConfig c;
-  const YAML::Node n = parse(text, "training");
-  trainFields(c, [&](const char* key, auto& value) { get(n, key, &value); });
-  c.validate();
-  return c;
+  return trainFromNode(parse(text, "training"));
 }
 
 std::string modelCardPath(const std::string& model_path) {
@@ -247,11 +255,9 @@ void loadTrainingYaml(const std::string& path, CvaeConfig* model, TrainConfig* t
                                     [](auto& c, auto&& f) { cvaeFields(c, f); });
     rejectUnknownFields<TrainConfig>(n["training"], "training",
                                      [](auto& c, auto&& f) { trainFields(c, f); });
-    YAML::Emitter m, t;
-    m << n["model"];
-    t << n["training"];
-    *model = n["model"] ? CvaeConfig::fromYaml(m.c_str()) : CvaeConfig();
-    *training = n["training"] ? TrainConfig::fromYaml(t.c_str()) : TrainConfig();
+    *model = n["model"] && !n["model"].IsNull() ? cvaeFromNode(n["model"]) : CvaeConfig();
+    *training =
+        n["training"] && !n["training"].IsNull() ? trainFromNode(n["training"]) : TrainConfig();
   } catch (const std::exception& e) {
     throw std::runtime_error("config " + path + ": " + e.what());
   }

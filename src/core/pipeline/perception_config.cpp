@@ -123,7 +123,7 @@ template <class C, class Fields>
 void readSection(const YAML::Node& root, const char* name, C* c, Fields fields,
                  const std::string& path) {
   const YAML::Node n = root[name];
-  if (!n) return;
+  if (!n || n.IsNull()) return;  // absent, or every field left out: the defaults
   if (!n.IsMap()) throw std::runtime_error(path + ": '" + name + "' must be a map");
   std::set<std::string> known;
   fields(*c, [&](const char* key, auto& value) {

@@ -292,6 +292,9 @@ void validate(const PerceptionConfig& config, bool latent) {
                                 "], not " + std::to_string(config.decompose_samples));
   if (config.points_per_instance < 10)
     throw std::invalid_argument("points_per_instance must be >= 10");
+  if (config.min_instance_points < 0)
+    throw std::invalid_argument("min_instance_points must be >= 0, not " +
+                                std::to_string(config.min_instance_points));
   if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
   validateSymmetries(config.symmetries);
   validateRefineOptions(refineOptions(config));
@@ -302,6 +305,7 @@ void validate(const PerceptionConfig& config, bool latent) {
   config.workspace.validate();
   config.segments.validate();
   config.hough.validate();
+  config.table.validate();
 }
 
 /// More threads than cores only make the OpenMP regions and torch slower (1000 threads never

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -118,18 +119,38 @@ Plane tablePlane(const Cloud::Ptr& cloud, const TablePlaneConfig& config,
 
 }  // namespace
 
+void TablePlaneConfig::validate() const {
+  const auto require = [](bool ok, const char* field, auto value, const char* range) {
+    if (ok) return;
+    std::ostringstream text;
+    text << "table: " << field << " must be " << range << ", not " << value;
+    throw std::invalid_argument(text.str());
+  };
+  require(std::isfinite(inlier_distance_m) && inlier_distance_m > 0 && inlier_distance_m <= 1,
+          "inlier_distance_m", inlier_distance_m, "in (0, 1] m");
+  require(max_iterations >= 1, "max_iterations", max_iterations, ">= 1");
+  require(pixel_stride >= 1, "pixel_stride", pixel_stride, ">= 1");
+  require(std::isfinite(max_depth_m) && max_depth_m > 0, "max_depth_m", max_depth_m,
+          "a positive number of metres");
+  require(min_inlier_share >= 0 && min_inlier_share <= 1, "min_inlier_share", min_inlier_share,
+          "in [0, 1]");
+  require(max_planes >= 1, "max_planes", max_planes, ">= 1");
+  require(max_behind_share >= 0 && max_behind_share <= 1, "max_behind_share", max_behind_share,
+          "in [0, 1]");
+}
+
 TablePlane estimateTablePlane(const DepthImage& depth, const PinholeCamera& camera,
                               const TablePlaneConfig& config, const WorkspaceConfig& workspace) {
   camera.validate();
+  config.validate();
   if (depth.width != camera.width || depth.height != camera.height ||
       depth.pixels.size() != static_cast<size_t>(depth.width) * depth.height)
     throw std::invalid_argument("table plane: the depth image is " + std::to_string(depth.width) +
                                 "x" + std::to_string(depth.height) + " but the camera is " +
                                 std::to_string(camera.width) + "x" + std::to_string(camera.height));
   Cloud::Ptr cloud(new Cloud);
-  const int stride = std::max(1, config.pixel_stride);
-  for (int v = 0; v < depth.height; v += stride)
-    for (int u = 0; u < depth.width; u += stride) {
+  for (int v = 0; v < depth.height; v += config.pixel_stride)
+    for (int u = 0; u < depth.width; u += config.pixel_stride) {
       const float d = depth.at(u, v);
       if (!validDepth(d) || d > config.max_depth_m) continue;
       const Vec3 p = camera.backproject(u, v, d);
