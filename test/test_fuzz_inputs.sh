@@ -39,7 +39,8 @@ succeed() {
 }
 
 # A good view to start from.
-"$bin/simstack_generate" --scenes 1 --seed 5 --output "$dir/d.h5" --views 1 --noise > /dev/null
+"$bin/simstack_generate" --scenes 1 --seed 5 --output "$dir/d.h5" --views 1 --noise > /dev/null ||
+  { echo "FAIL setup: simstack_generate"; exit 1; }
 view="$dir/d_views/scene_000000_view_0"
 good="${view}_depth.png"
 
@@ -56,15 +57,17 @@ for f in text.pcd png.pcd random.pcd short.pcd huge.pcd TEXT.PCD; do
 done
 # A float TIFF of random bits (depths of 1e30 m, NaN, negative): outside the sensor's range.
 head -c $((64 * 48 * 4)) /dev/urandom > "$dir/raw.bin"
+# ImageMagick 6 writes the float TIFF but exits 1 over a predictor tag it cannot set: the file
+# is what counts.
 convert -size 64x48 -depth 32 -define quantum:format=floating-point -endian LSB gray:"$dir/raw.bin" \
   "$dir/random.tiff" 2> /dev/null
-if [ -s "$dir/random.tiff" ]; then
-  survive "random float TIFF" "$reconstruct" --depth "$dir/random.tiff" \
-    --intrinsics 52.5,52.5,31.5,23.5 --output "$dir/o"
-fi
-convert -size 64x48 xc:red -depth 16 PNG48:"$dir/rgb16.png" 2> /dev/null
+[ -s "$dir/random.tiff" ] || { echo "FAIL setup: convert (ImageMagick) made no float TIFF"; exit 1; }
+survive "random float TIFF" "$reconstruct" --depth "$dir/random.tiff" \
+  --intrinsics 52.5,52.5,31.5,23.5 --output "$dir/o"
+convert -size 64x48 xc:red -depth 16 PNG48:"$dir/rgb16.png" ||
+  { echo "FAIL setup: convert"; exit 1; }
 expect "16-bit RGB PNG" "one channel" "$reconstruct" --depth "$dir/rgb16.png" --intrinsics 52.5,52.5,31.5,23.5 --output "$dir/o"
-convert -size 5000x10 xc:black -depth 16 "$dir/wide.png" 2> /dev/null
+convert -size 5000x10 xc:black -depth 16 "$dir/wide.png" || { echo "FAIL setup: convert"; exit 1; }
 expect "5000-pixel-wide PNG" "4096" "$reconstruct" --depth "$dir/wide.png" --intrinsics $K --output "$dir/o"
 
 # A PNG whose header claims 100000 x 100000 pixels: refused before it is decoded.
@@ -102,13 +105,13 @@ expect "depth scale nan" "depth-scale" "$reconstruct" --depth "$good" --intrinsi
 /usr/bin/python3 - "$view.yaml" "$dir" <<'PY'
 import re, sys
 text = open(sys.argv[1]).read()
-open(sys.argv[2] + "/nan_pose.yaml", "w").write(re.sub(r"(translation: \[)[^,\]]+", r"\1.nan", text, count=1))
+open(sys.argv[2] + "/bad_pose.yaml", "w").write(re.sub(r"(translation: \[)[^,\]]+", r"\1.nan", text, count=1))
 # The camera mirrored below the table: z of the translation negated.
 m = re.search(r"translation: \[([^\]]+)\]", text)
 x, y, z = [float(v) for v in m.group(1).split(",")]
 open(sys.argv[2] + "/below.yaml", "w").write(text.replace(m.group(0), "translation: [%g, %g, %g]" % (x, y, -z)))
 PY
-expect "NaN pose" "finite\|nan" "$reconstruct" --depth "$good" --intrinsics $K --table-pose "$dir/nan_pose.yaml" --output "$dir/o"
+expect "NaN pose" "pose is not finite" "$reconstruct" --depth "$good" --intrinsics $K --table-pose "$dir/bad_pose.yaml" --output "$dir/o"
 expect "camera below the table" "above" "$reconstruct" --depth "$good" --intrinsics $K --table-pose "$dir/below.yaml" --output "$dir/o"
 
 # Configs out of range.
@@ -154,7 +157,8 @@ expect "generate with no pile possible" "no pile accepted" "$bin/simstack_genera
 # Results are atomic: nothing on the table is a result with no objects; a second run replaces
 # the first's directory whole; a failed run leaves the earlier result as it was; an output
 # that cannot be made fails before the work.
-convert -size 640x480 xc:'#03E803E803E8' -depth 16 -colorspace gray "$dir/plane.png" 2> /dev/null
+convert -size 640x480 xc:'#03E803E803E8' -depth 16 -colorspace gray "$dir/plane.png" ||
+  { echo "FAIL setup: convert"; exit 1; }
 succeed "nothing on the table" "$reconstruct" --depth "$dir/plane.png" --intrinsics $K --output "$dir/empty"
 grep -q "^0 objects" "$dir/out.txt" || { echo "FAIL nothing on the table: no '0 objects' line"; fail=1; }
 touch "$dir/empty/instance_7.ply"
@@ -171,7 +175,8 @@ expect "output under a file" "afile" "$reconstruct" --depth "$dir/plane.png" --i
 # Training: nothing to resume; a dataset cut short.
 train_config="$dir/train.yaml"  # the default config, validated on the one generated pile
 sed 's/validation_scenes: [0-9]*/validation_scenes: 1/' "$(dirname "$0")/../config/train_r32.yaml" > "$train_config"
-"$bin/simstack_generate" --scenes 2 --seed 6 --output "$dir/two.h5" > /dev/null
+"$bin/simstack_generate" --scenes 2 --seed 6 --output "$dir/two.h5" > /dev/null ||
+  { echo "FAIL setup: simstack_generate"; exit 1; }
 expect "train --resume without a checkpoint" "no checkpoint" "$bin/simstack_train" --dataset "$dir/two.h5" \
   --config "$train_config" --output "$dir/run" --resume
 sed 's/learning_rate:/lerning_rate:/' "$train_config" > "$dir/typo.yaml"

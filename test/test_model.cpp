@@ -8,6 +8,7 @@
 #include <fstream>
 #include <limits>
 #include <random>
+#include <tuple>
 
 #include <H5Cpp.h>
 
@@ -1343,12 +1344,17 @@ TEST(CvaeConfig, RoundTripsThroughYaml) {
 TEST(CvaeConfig, TrainingFilesRejectMisspeltFieldsAndNameThem) {
   const std::string dir = testing::TempDir() + "/train_yaml";
   fs::create_directories(dir);
-  for (const char* shipped : {"config/train_r32.yaml", "config/train_r64_gpu.yaml"}) {
+  // The shipped configs load with their own values, not the defaults.
+  for (const auto& [shipped, resolution, steps] :
+       {std::tuple<const char*, int, int64_t>{"config/train_r32.yaml", 32, 6000},
+        std::tuple<const char*, int, int64_t>{"config/train_r64_gpu.yaml", 64, 100000}}) {
     CvaeConfig model;
     TrainConfig training;
-    EXPECT_NO_THROW(
+    ASSERT_NO_THROW(
         loadTrainingYaml(std::string(SIMSTACK_SOURCE_DIR) + "/" + shipped, &model, &training))
         << shipped;
+    EXPECT_EQ(model.resolution, resolution) << shipped;
+    EXPECT_EQ(training.steps, steps) << shipped;
   }
   const auto expectError = [&](const std::string& text, const std::string& words) {
     const std::string path = dir + "/bad.yaml";

@@ -347,7 +347,7 @@ TEST(Decompose, LabelsNameTheReportedInstancesWhenOneIsDropped) {
 }
 
 TEST(ScenePerception, PerceivesARenderedPile) {
-  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
   PerceptionConfig config;
   config.model_path = kModel;
   const ScenePerception perception(config);
@@ -370,6 +370,8 @@ TEST(ScenePerception, PerceivesARenderedPile) {
     EXPECT_TRUE(est.hypotheses[0].decomposed);
     EXPECT_FALSE(est.hypotheses[1].decomposed);
     EXPECT_FALSE(est.hypotheses[0].surface.empty());
+    EXPECT_NEAR(static_cast<double>(est.instances().size()),
+                static_cast<double>(p.scene.objects.size()), 1.0);
     for (const InstanceEstimate& e : est.instances()) {
       EXPECT_TRUE(e.superquadric.scale_m.allFinite());
       EXPECT_FALSE(e.points.empty());
@@ -380,7 +382,7 @@ TEST(ScenePerception, PerceivesARenderedPile) {
 }
 
 TEST(ScenePerception, BadInputGetsClearErrors) {
-  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
   PerceptionConfig config;
   config.model_path = kModel;
   const ScenePerception perception(config);
@@ -433,7 +435,7 @@ TEST(ScenePerception, BadInputGetsClearErrors) {
 
 TEST(ScenePerception, AModelWithoutACodeGivesOneHypothesis) {
   const std::string fc = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32_fc.pt";
-  if (!std::filesystem::exists(fc)) GTEST_SKIP() << fc << " is missing";
+  ASSERT_TRUE(std::filesystem::exists(fc)) << fc << " is missing (the models are in git)";
   // Hypotheses asked of `fc` (perception.launch decompose_samples:=3 with the default model,
   // whose card says samples: 1): one scene to give, taken as one, not refused.
   PerceptionConfig config;
@@ -444,7 +446,7 @@ TEST(ScenePerception, AModelWithoutACodeGivesOneHypothesis) {
   EXPECT_EQ(perception.config().samples, 1);
   EXPECT_EQ(perception.config().decompose_samples, 1);
   // The C-VAE draws distinct samples: more decomposed than drawn is an error.
-  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
   config.model_path = kModel;
   config.samples = 2;
   EXPECT_THROW(ScenePerception{config}, std::invalid_argument);
@@ -461,7 +463,7 @@ TEST(ScenePerception, EveryShippedModelSeesNothingOnAnEmptyTable) {
   for (const auto& f : std::filesystem::directory_iterator(SIMSTACK_SOURCE_DIR "/models"))
     if (f.path().extension() == ".pt") models.push_back(f.path().string());
   if (const char* extra = std::getenv("SIMSTACK_EXTRA_MODEL")) models.push_back(extra);
-  if (models.empty()) GTEST_SKIP() << "no model in models/";
+  ASSERT_FALSE(models.empty()) << "no model in models/";
   std::sort(models.begin(), models.end());
   const PinholeCamera camera;
   std::vector<DepthView> views;  // the bare table from the side, obliquely and from above
@@ -491,7 +493,7 @@ TEST(ScenePerception, EveryShippedModelSeesNothingOnAnEmptyTable) {
 }
 
 TEST(ScenePerception, TwoViewsFuse) {
-  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
   PerceptionConfig config;
   config.model_path = kModel;
   config.decompose_samples = 0;

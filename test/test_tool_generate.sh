@@ -10,7 +10,7 @@ for f in depth.png mask.png depth_colour.png shaded.png; do
   test -s "$dir/d_views/scene_000001_view_0_$f" || { echo "missing view file $f"; exit 1; }
 done
 test -s "$dir/d_views/scene_000001_view_0.yaml"
-if /usr/bin/python3 -c "import h5py" 2>/dev/null; then
+/usr/bin/python3 -c "import h5py" || { echo "python3-h5py is missing (scripts/setup installs it)"; exit 1; }
   /usr/bin/python3 - "$dir/d.h5" <<'PY'
 import sys, h5py, numpy as np
 f = h5py.File(sys.argv[1], "r")
@@ -24,7 +24,6 @@ assert (f["tsdf"][:] < 0).sum() > 0, "no occupied voxel"
 assert set(np.unique(f["labels"][0])) == set(range(n[0] + 1)), np.unique(f["labels"][0])
 print("h5py layout ok")
 PY
-fi
 # A second run into the same place replaces the views whole: no view of the first run's scene 1
 # stays beside the new single scene; the views directory is refused when it holds other files.
 "$tool" --scenes 1 --seed 4 --resolution 16 --output "$dir/d.h5" --views 1 > /dev/null

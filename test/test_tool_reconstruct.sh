@@ -48,7 +48,7 @@ if "$reconstruct" --depth "${view}_depth.png" --intrinsics 525,525,319.5,239.5 \
   --mask "$dir/small.png" --output "$dir/x" 2> "$dir/e5"; then
   echo "accepted a mask of another size"; exit 1; fi
 grep -q "small.png is 320x240" "$dir/e5" || { cat "$dir/e5"; exit 1; }
-if /usr/bin/python3 -c "import h5py" 2>/dev/null; then
+/usr/bin/python3 -c "import h5py" || { echo "python3-h5py is missing (scripts/setup installs it)"; exit 1; }
   /usr/bin/python3 - "$dir/out/grids.h5" <<'PY'
 import sys, h5py
 f = h5py.File(sys.argv[1], "r")
@@ -58,7 +58,6 @@ assert f.attrs["voxel_size_m"] > 0 and len(f.attrs["origin_table"]) == 3
 p = f["occupancy_probability"][:]
 assert p.min() >= 0 and p.max() <= 1
 PY
-fi
 # Bad input: non-zero exit and a message naming the problem.
 if "$reconstruct" --depth "$dir/nope.png" --intrinsics 525,525,319.5,239.5 --output "$dir/x" 2> "$dir/e1"; then
   echo "accepted a missing file"; exit 1; fi

@@ -18,7 +18,7 @@ own=$(tail -n 4 "$dir/log.txt" | grep '^| [0-9]' | awk -F'|' '{print $8}' | tr -
 [ -n "$chosen" ] && [ -n "$own" ] || { echo "no table rows parsed"; cat "$dir/log.txt"; exit 1; }
 awk -v a="$chosen" -v b="$own" 'BEGIN { exit !(a >= b) }' ||
   { echo "chosen setting ($chosen %) is worse than the config's ($own %)"; cat "$dir/log.txt"; exit 1; }
-if /usr/bin/python3 -c "import yaml" 2>/dev/null; then
+/usr/bin/python3 -c "import yaml" || { echo "python3-yaml is missing (scripts/setup installs it)"; exit 1; }
   /usr/bin/python3 - "$dir/tuned.yaml" "$(dirname "$0")/../models/simstack_r32_fc.yaml" <<'PY'
 import sys, yaml
 c = yaml.safe_load(open(sys.argv[1]))
@@ -33,7 +33,6 @@ own = key(h) == key(o)
 assert tried or own, h
 assert p["samples"] == 1, p  # the default model, `fc`, has no latent code
 PY
-fi
 # Several validation sets pool their views and each is scored on its own.
 "$generate" --scenes 2 --seed 10 --objects 5:6 --sizes 0.05:0.15 --output "$dir/val58.h5" > /dev/null
 "$tune" --dataset "$dir/val.h5" --dataset "$dir/val58.h5" --views 1 --threads 1 --refinement 5 \

@@ -235,7 +235,7 @@ double pileIou(const SceneEstimate& est, const Scene& truth) {
 }
 
 TEST(Tiles, TwoPilesFarApartAreEachPerceivedAsAlone) {
-  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
   PerceptionConfig config;
   config.model_path = kModel;
   const ScenePerception perception(config);
@@ -259,6 +259,7 @@ TEST(Tiles, TwoPilesFarApartAreEachPerceivedAsAlone) {
     for (const Scene* pile : {&left, &right}) {
       const SceneEstimate alone = perception.perceive(render(*pile, camera, pose));
       EXPECT_EQ(alone.tiles, 1);
+      ASSERT_FALSE(alone.instances().empty()) << "seed " << seed;
       for (const InstanceEstimate& a : alone.instances()) {
         int best = -1;
         double best_d = 1e9;
@@ -275,6 +276,7 @@ TEST(Tiles, TwoPilesFarApartAreEachPerceivedAsAlone) {
       EXPECT_LT((shift - shift.array().round().matrix()).norm(), 1e-6) << "seed " << seed;
       const double j = pileIou(est, *pile), a = pileIou(alone, *pile);
       EXPECT_GE(j, a - 1e-3) << "seed " << seed;  // the same last-bit variation
+      EXPECT_GT(a, 0.4) << "seed " << seed;       // a pile, not an empty or wrong scene
       joint_iou += j;
       alone_iou += a;
     }
@@ -298,7 +300,7 @@ Transform ransacConvention(const Transform& T_table_camera) {
 }
 
 TEST(Workspace, ARobotBaseAndAWallOutsideItAreNeitherTableNorObjects) {
-  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
   Scene scene;
   scene.objects = pileAt(31, Vec2::Zero());
   const size_t pile = scene.objects.size();
@@ -355,7 +357,7 @@ namespace simstack {
 namespace {
 
 TEST(Tiles, ARowWiderThanATileIsFoundWholeAcrossTileBorders) {
-  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
   PerceptionConfig config;
   config.model_path = kModel;
   const ScenePerception perception(config);
@@ -395,7 +397,7 @@ Grid3<T> embedded(const Grid3<T>& g, int n, const Vec3i& offset, const T& fill) 
 }
 
 TEST(Tiles, DecompositionDoesNotDependOnTheGridAroundThePile) {
-  if (!std::filesystem::exists(kModel)) GTEST_SKIP() << kModel << " is missing";
+  ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
   PerceptionConfig config;
   config.model_path = kModel;
   config.segments.enabled = false;
@@ -412,6 +414,7 @@ TEST(Tiles, DecompositionDoesNotDependOnTheGridAroundThePile) {
     decompose(&big, config);
     std::cout << "seed " << seed << ": alone " << est.instances().size() << ", embedded "
               << big.instances.size() << "\n";
+    EXPECT_GT(est.instances().size(), 0u) << "seed " << seed;
     EXPECT_EQ(big.instances.size(), est.instances().size()) << "seed " << seed;
   }
 }

@@ -246,21 +246,35 @@ TEST_F(PerceptionNodeTest, BadInputIsSkippedAndTheNodeKeepsPublishing) {
              i->header.frame_id = c->header.frame_id = "nowhere";
            }},
       };
+  const ros::Time first_bad = ros::Time::now();
   for (auto& [name, spoil] : cases) {
     sensor_msgs::Image image = imageMsg(depth, ros::Time(0));
     sensor_msgs::CameraInfo bad_info = info;
     spoil(&image, &bad_info);
     EXPECT_FALSE(send(image, bad_info, 2.0)) << name << ": published for a bad frame";
   }
-  EXPECT_TRUE(sendDepth(depth, 60.0)) << "the node stopped publishing after bad input";
+  const std::optional<ObjectArray> good = sendDepth(depth, 60.0);
+  ASSERT_TRUE(good) << "the node stopped publishing after bad input";
+  // Frames are perceived in order: an answer to a bad frame later than its 2 s would have come
+  // before the good frame's.
+  std::lock_guard<std::mutex> lock(wire->mutex);
+  for (const ObjectArray& o : wire->received)
+    EXPECT_FALSE(o.header.stamp >= first_bad && o.header.stamp < good->header.stamp)
+        << "published for a bad frame (stamp " << o.header.stamp << ")";
 }
 
 TEST_F(PerceptionNodeTest, AnEmptyTableGivesAnEmptyScene) {
   const std::optional<ObjectArray> out = sendDepth(render({}), 60.0);
   ASSERT_TRUE(out);
   EXPECT_TRUE(out->objects.empty());
-  ros::WallDuration(0.5).sleep();
-  ros::spinOnce();
+  // The markers follow the objects on a topic of their own.
+  const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(10.0);
+  for (bool got = false; !got && ros::WallTime::now() < until;) {
+    ros::spinOnce();
+    std::lock_guard<std::mutex> lock(wire->mutex);
+    got = wire->markers.count(out->header.stamp) > 0;
+    if (!got) ros::WallDuration(0.02).sleep();
+  }
   std::lock_guard<std::mutex> lock(wire->mutex);
   ASSERT_TRUE(wire->markers.count(out->header.stamp)) << "no markers for the empty scene";
   const auto& markers = wire->markers.at(out->header.stamp).markers;
