@@ -330,6 +330,26 @@ TEST(SuperquadricFit, RejectsTooFewPoints) {
   EXPECT_THROW(fitSuperquadric(bad), std::invalid_argument);
 }
 
+TEST(SuperquadricFit, InstancesWithPointsAtAFewPlacesGetNoShape) {
+  // A mesh part of zero area samples every point at one triangle's corners: no superquadric
+  // for it (and no exception out of the parallel loop), the others fitted as usual.
+  const SuperquadricShape good =
+      makeShape(Vec3(0.05, 0.04, 0.03), Vec3(2, 2, 2), Vec3(0.1, 0.0, 0.03), Vec3::UnitZ(), 0.3);
+  Points3 corners;
+  for (int i = 0; i < 300; ++i) corners.push_back(Vec3(0.01 * (i % 3), 0.0, 0.05));
+  const std::vector<Points3> points = {noisySurface(good, 500, 0.0005, 3), corners,
+                                       noisySurface(good, 500, 0.0005, 4)};
+  FitConfig c;
+  c.threads = 2;
+  for (bool joint : {false, true}) {
+    const std::vector<std::optional<SuperquadricShape>> fits = fitInstances(points, c, joint, 30);
+    ASSERT_EQ(fits.size(), 3u);
+    EXPECT_TRUE(fits[0] && fits[2]);
+    EXPECT_FALSE(fits[1]);
+  }
+  EXPECT_THROW(fitSuperquadric(corners), std::invalid_argument);
+}
+
 TEST(JointRefinement, RemovesAnInjectedOverlap) {
   // Two boxes whose point sets overlap by 3 cm: fitted independently they intersect.
   const SuperquadricShape a =

@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "simstack/geometry/convex_hull.h"
@@ -115,6 +116,11 @@ TEST(VoxelGrid, IndexingAndTrilinear) {
   const Vec3 p(0.0337, -0.1234, 0.3011);
   EXPECT_NEAR(f.sampleTrilinear(p), linear(p), 1e-5);
   EXPECT_THROW(GridSpec::sceneGrid(Vec2::Zero(), 0.0, 32), std::invalid_argument);
+  // Far outside (a bad depth pixel's 1e30 m) or NaN: just outside, its neighbours too.
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(g.voxelIndex(Vec3(1e30, -1e30, 0.1)), Vec3i(33, -2, 5));
+  EXPECT_EQ(g.voxelIndex(Vec3(nan, 0.0, nan)), Vec3i(-2, 26, -2));
+  EXPECT_EQ(g.voxelIndex(Vec3(-0.23, 0.115, 0.65)), Vec3i(-1, 31, 32));  // near: exact
 }
 
 TEST(PinholeCamera, ProjectBackprojectAndValidation) {

@@ -205,6 +205,8 @@ TEST(GraspRanking, RejectsBadScenesAndSettings) {
   rejects(bad, 0, config, "object 2: orientation");
   bad = good, bad[2].T_table_object.translation().x() = std::nan("");
   rejects(bad, 0, config, "object 2: pose");
+  bad = std::vector<SuperquadricShape>(1000, good[0]);  // hours of pulls for one request
+  rejects(bad, 0, config, "a scene of 1000 objects");
   GraspRankingConfig c = config;
   c.pull.pull_distance_m = 0.0;
   rejects(good, 0, c, "pull_distance_m");
@@ -212,6 +214,8 @@ TEST(GraspRanking, RejectsBadScenesAndSettings) {
   rejects(good, 0, c, "pull_distance_m");
   c = config, c.pull.pull_speed_mps = std::nan("");
   rejects(good, 0, c, "pull_speed_mps");
+  c = config, c.pull.settle_s = 1e7;  // steps beyond an int
+  rejects(good, 0, c, "settle_s");
   // Bullet would quietly simulate a softer cup than this (its spring bound at 240 Hz steps).
   c = config, c.pull.cup_stiffness_hz = 10.0;
   rejects(good, 0, c, "cup_stiffness_hz must be at most 9.5");

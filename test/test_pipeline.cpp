@@ -450,6 +450,20 @@ TEST(ScenePerception, AModelWithoutACodeGivesOneHypothesis) {
   config.model_path = kModel;
   config.samples = 2;
   EXPECT_THROW(ScenePerception{config}, std::invalid_argument);
+  // Tiles whose widest scene, times the Hough refinement, has more fine cells than the voting
+  // indexes: refused when the model is loaded, not on the first wide pile.
+  config.samples = 3;
+  config.decompose_samples = 1;
+  config.hough.refinement = 8;
+  config.workspace.max_tiles = 64;  // 8 tiles' side: 256 voxels x 8
+  try {
+    ScenePerception{config};
+    ADD_FAILURE() << "max_tiles 64 with refinement 8 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("max_tiles"), std::string::npos) << e.what();
+  }
+  config.workspace.max_tiles = 9;
+  EXPECT_NO_THROW(ScenePerception{config});
 }
 
 TEST(ScenePerception, EveryShippedModelSeesNothingOnAnEmptyTable) {

@@ -122,6 +122,24 @@ TEST(PlanTiles, AWidePileIsCoveredByOverlappingTiles) {
   EXPECT_TRUE(capped.cropped);
 }
 
+TEST(PlanTiles, ARowLongerThanTheScenesSquareIsCroppedToIt) {
+  // 5 m of objects in a row, 0.3 m wide: the tiles nearest its middle within the square of
+  // ceil(sqrt(max_tiles)) tiles, not a grid as long as the row (a cube of its length).
+  std::vector<Vec3> points;
+  for (int i = 0; i <= 500; ++i)
+    for (int j = 0; j <= 30; ++j) points.emplace_back(-2.5 + 0.01 * i, 0.01 * j, 0.05);
+  const WorkspaceConfig ws;
+  const TilePlan plan = planTiles(points, Vec2::Zero(), kCentroid, 0.64, 32, ws);
+  EXPECT_TRUE(plan.cropped);
+  ASSERT_EQ(plan.groups.size(), 1u);
+  EXPECT_LE(plan.tileCount(), ws.max_tiles);
+  EXPECT_LE(plan.scene.resolution, 3 * 32);
+  EXPECT_LE(plan.groups.front().grid.resolution, 3 * 32);
+  // The middle of the row is covered.
+  EXPECT_TRUE(
+      covered(plan, {Vec3(0.0, 0.15, 0.05), Vec3(0.6, 0.15, 0.05), Vec3(-0.6, 0.15, 0.05)}));
+}
+
 TEST(PlanTiles, BlendingKeepsAgreeingTilesAndFillsTheRest) {
   std::vector<Vec3> points = cluster(Vec2(-0.45, 0.0), 0.15);
   for (const Vec3& p : cluster(Vec2(0.45, 0.0), 0.15)) points.push_back(p);

@@ -106,11 +106,13 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
                     mask_topic.c_str(), e.what());
         }
       });
-  worker_ = std::thread(&PerceptionServer::work, this);  // last: onFrame only fills the mailbox
   ROS_INFO("simstack perception: model %s (%d samples), table %s '%s', listening on %s",
            perception_->config().model_path.c_str(), perception_->config().samples,
            node_.estimate_table ? "estimated and broadcast as" : "from tf frame",
            node_.table_frame.c_str(), depth_sub_.getTopic().c_str());
+  // Last: from here the worker owns the pipeline (settings change between its frames), and
+  // onFrame only fills the mailbox.
+  worker_ = std::thread(&PerceptionServer::work, this);
 }
 
 PerceptionServer::~PerceptionServer() {

@@ -93,7 +93,7 @@ int main(int argc, char** argv) {
   auto values = [&](const char* name, auto& list, const char* what, CLI::Validator check) {
     app.add_option(name, list, what)->capture_default_str()->check(check);
   };
-  values("--refinement", sweep.refinements, "fine cells per voxel to try", CLI::Range(1, 64));
+  values("--refinement", sweep.refinements, "fine cells per voxel to try", CLI::Range(1, 16));
   values("--min-traversals", sweep.traversals, "mu values to try", FiniteNonNegative);
   values("--bandwidth", sweep.bandwidths, "mean-shift radii to try (m)",
          FinitePositive & CLI::Range(0.0, 10.0));

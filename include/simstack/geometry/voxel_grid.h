@@ -40,10 +40,17 @@ struct GridSpec {
     return (p_table - origin_table) / voxel_size_m - Vec3::Constant(0.5);
   }
   /// Index of the voxel containing the point (may be outside the grid).
+  /// A point far outside (1e30 m from a bad depth pixel) or NaN gives an index just outside
+  /// the grid (-2 or resolution + 1, so that its neighbours are outside too), not an int
+  /// overflow.
   Vec3i voxelIndex(const Vec3& p_table) const {
     const Vec3 c = (p_table - origin_table) / voxel_size_m;
-    return {static_cast<int>(std::floor(c.x())), static_cast<int>(std::floor(c.y())),
-            static_cast<int>(std::floor(c.z()))};
+    const auto index = [this](double v) {
+      if (!(v >= -2.0)) return -2;  // also NaN
+      if (v >= resolution + 1.0) return resolution + 1;
+      return static_cast<int>(std::floor(v));
+    };
+    return {index(c.x()), index(c.y()), index(c.z())};
   }
   /// True when the point lies within the grid's box.
   bool containsPoint(const Vec3& p_table) const {

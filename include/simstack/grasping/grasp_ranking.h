@@ -78,9 +78,12 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
                         const std::vector<Vec3>& camera_positions,
                         const GraspRankingConfig& config);
 
-/// A scene that the grasp simulation accepts: finite poses with unit rotations, semi-axes in
-/// (0, 1] m and exponents in [1, 200]. Empty string when valid, else what is wrong, naming the
-/// object by its index.
+/// Objects in a scene the grasp simulation accepts at most (a pile's labels are 8-bit).
+constexpr size_t kMaxGraspSceneObjects = 255;
+
+/// A scene that the grasp simulation accepts: at most kMaxGraspSceneObjects objects, finite
+/// poses with unit rotations, semi-axes in (0, 1] m and exponents in [1, 200]. Empty string
+/// when valid, else what is wrong, naming the object by its index.
 std::string checkScene(const std::vector<SuperquadricShape>& scene);
 
 }  // namespace simstack

@@ -18,6 +18,10 @@
 
 namespace simstack {
 
+/// Fine cells along a grid's side (resolution x refinement) at most: they are counted with
+/// 32-bit indices (1625^3 < 2^32).
+constexpr int kMaxHoughFineCells = 1625;
+
 struct HoughConfig {
   int refinement = 5;         ///< fine cells per voxel along each axis (the paper: 10)
   int min_traversals = 4;     ///< mu: a fine cell with more traversals is a centre vote (paper: 10)

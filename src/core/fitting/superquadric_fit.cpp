@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <exception>
 #include <limits>
 #include <optional>
 #include <random>
@@ -624,6 +625,8 @@ SuperquadricShape fitSuperquadric(const Points3& points, const FitConfig& c,
   c.validate();
   checkPoints(points);
   const Points3 coarse = surfaceCover(points, c.coarse_points);
+  if (coarse.size() < 4)
+    throw std::invalid_argument("superquadric fitting: the points lie at fewer than 4 places");
   // Each start gets a short solve on the coarse cover; the best is solved to convergence.
   const SuperquadricShape box = initialGuess(coarse, c.initial_exponent);
   std::vector<SuperquadricShape> starts = startingShapes(box);
@@ -771,16 +774,26 @@ std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points,
 std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Points3>& points,
                                                            const FitConfig& c, bool joint,
                                                            int min_points) {
-  c.validate();  // here: an exception must not leave the parallel loop below
+  c.validate();
   const int n = static_cast<int>(points.size());
   std::vector<std::optional<SuperquadricShape>> fits(n);
   FitConfig single = c;
   single.threads = 1;
+  std::exception_ptr error;  // an exception must not leave the parallel loop: rethrown after it
 #pragma omp parallel for schedule(dynamic) num_threads(std::max(1, c.threads))
   for (int i = 0; i < n; ++i) {
     if (static_cast<int>(points[i].size()) < std::max(4, min_points)) continue;
-    fits[i] = fitSuperquadric(points[i], single);
+    try {
+      fits[i] = fitSuperquadric(points[i], single);
+    } catch (const std::invalid_argument&) {
+      // Points that cannot be fitted (all at a few places, or not finite): no superquadric, as
+      // for too few points; the config was checked above.
+    } catch (...) {
+#pragma omp critical(simstack_fit_instances_error)
+      if (!error) error = std::current_exception();
+    }
   }
+  if (error) std::rethrow_exception(error);
   if (!joint) return fits;
   std::vector<Points3> pts;
   std::vector<SuperquadricShape> shapes;

@@ -77,6 +77,10 @@ PullOutcome executeGrasp(const PullSimulator& sim, const std::vector<Superquadri
 }
 
 std::string checkScene(const std::vector<SuperquadricShape>& scene) {
+  // Each pull simulates every object: a scene of thousands would hold a request for hours.
+  if (scene.size() > kMaxGraspSceneObjects)
+    return "a scene of " + std::to_string(scene.size()) + " objects; at most " +
+           std::to_string(kMaxGraspSceneObjects) + " are simulated";
   for (size_t i = 0; i < scene.size(); ++i) {
     const SuperquadricShape& sq = scene[i];
     const std::string name = "object " + std::to_string(i) + ": ";

@@ -33,12 +33,14 @@ void check(const PullConfig& c) {
                                 " s time step (a stiffer spring is not simulated), not " +
                                 std::to_string(c.cup_stiffness_hz));
   requirePositive(c.physics.density_kgpm3, "density_kgpm3");
-  if (!std::isfinite(c.ramp_s) || c.ramp_s < 0.0)
-    throw std::invalid_argument("ramp_s must be >= 0");
-  if (!std::isfinite(c.settle_s) || c.settle_s < 0.0)
-    throw std::invalid_argument("settle_s must be >= 0");
-  if (!std::isfinite(c.presettle_s) || c.presettle_s < 0.0)
-    throw std::invalid_argument("presettle_s must be >= 0");
+  // Simulated seconds of each phase: a minute at most (more is a unit mistake, and the steps
+  // are counted in an int).
+  if (!std::isfinite(c.ramp_s) || c.ramp_s < 0.0 || c.ramp_s > 60.0)
+    throw std::invalid_argument("ramp_s must lie in [0, 60] s");
+  if (!std::isfinite(c.settle_s) || c.settle_s < 0.0 || c.settle_s > 60.0)
+    throw std::invalid_argument("settle_s must lie in [0, 60] s");
+  if (!std::isfinite(c.presettle_s) || c.presettle_s < 0.0 || c.presettle_s > 60.0)
+    throw std::invalid_argument("presettle_s must lie in [0, 60] s");
   if (c.break_steps < 1) throw std::invalid_argument("break_steps must be >= 1");
   // A pull of more than a minute of simulated time is a unit mistake, not a grasp.
   if (c.pull_distance_m / c.pull_speed_mps > 60.0)

@@ -252,8 +252,7 @@ void checkHoughInput(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
       static_cast<int>(tsdf_m.data.size()) != tsdf_m.spec.voxelCount())
     throw std::invalid_argument("houghInstances: the TSDF and the vote field must share a grid");
   config.validate();
-  const double fine = static_cast<double>(tsdf_m.spec.resolution) * config.refinement;
-  if (fine * fine * fine >= 4294967295.0)
+  if (static_cast<int64_t>(tsdf_m.spec.resolution) * config.refinement > kMaxHoughFineCells)
     throw std::invalid_argument("houghInstances: resolution x refinement too large");
 }
 
@@ -472,7 +471,8 @@ void HoughConfig::validate() const {
     text << "hough." << field << " must be " << range << ", not " << value;
     throw std::invalid_argument(text.str());
   };
-  require(refinement >= 1 && refinement <= 64, "refinement", refinement, "in [1, 64]");
+  // 16^3 fine cells per voxel already take 8 kB per occupied voxel and thread in the ray counts.
+  require(refinement >= 1 && refinement <= 16, "refinement", refinement, "in [1, 16]");
   require(min_traversals >= 0, "min_traversals", min_traversals, ">= 0");
   // A non-finite weight would leave voxels with no centre at all.
   require(std::isfinite(gamma) && gamma >= 0 && gamma <= 1e6, "gamma", gamma, "in [0, 1e6]");

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <limits>
 #include <random>
 #include <stdexcept>
@@ -323,6 +324,17 @@ PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
                                 std::to_string(config.workspace.tile_overlap_m) +
                                 " m) must be less than half the model's grid side (" +
                                 std::to_string(0.5 * model.extent_m) + " m, in whole voxels)");
+  // The widest scene the tiles make: a square of ceil(sqrt(max_tiles)) tiles (planTiles).
+  const int widest =
+      static_cast<int>(std::ceil(std::sqrt(config.workspace.max_tiles))) * model.resolution;
+  if (widest * config.hough.refinement > kMaxHoughFineCells)
+    throw std::invalid_argument("workspace.max_tiles " +
+                                std::to_string(config.workspace.max_tiles) +
+                                " and hough.refinement " + std::to_string(config.hough.refinement) +
+                                ": the widest scene grid (" + std::to_string(widest) +
+                                " voxels a side) times the "
+                                "refinement must be at most " +
+                                std::to_string(kMaxHoughFineCells) + "; lower one of them");
   config.threads = cappedThreads(config.threads);
   if (!model.hasLatentCode()) {
     config.samples = 1;

@@ -211,6 +211,26 @@ TileGroup tileGroup(std::vector<Vec2> origins, double voxel, int resolution) {
   return g;
 }
 
+/// The tile origins nearest `middle` that fit, at most `count` of them, in a square of side
+/// `max_side` (tiles of side `extent_m`).
+std::vector<Vec2> nearestTiles(std::vector<Vec2> origins, const Vec2& middle, double extent_m,
+                               double max_side, size_t count) {
+  const Vec2 half = Vec2::Constant(0.5 * extent_m);
+  std::sort(origins.begin(), origins.end(), [&](const Vec2& a, const Vec2& b) {
+    return (a + half - middle).norm() < (b + half - middle).norm();
+  });
+  std::vector<Vec2> kept;
+  Vec2 lo = Vec2::Constant(1e300), hi = Vec2::Constant(-1e300);
+  for (const Vec2& o : origins) {
+    const Vec2 l = lo.cwiseMin(o), h = hi.cwiseMax(o + Vec2::Constant(extent_m));
+    if (kept.size() == count || (h - l).maxCoeff() > max_side + 1e-9) continue;
+    lo = l;
+    hi = h;
+    kept.push_back(o);
+  }
+  return kept;
+}
+
 }  // namespace
 
 TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_centre,
@@ -265,19 +285,19 @@ TilePlan planTiles(const std::vector<Vec3>& pile_points, const Vec2& single_cent
       lo_c = lo_c.cwiseMin(o);
       hi_c = hi_c.cwiseMax(o + Vec2::Constant(extent_m));
     }
-    if (tiles > 0 && (hi_c - lo_c).maxCoeff() > max_side + 1e-9) {
+    const bool too_wide = (hi_c - lo_c).maxCoeff() > max_side + 1e-9;
+    const bool too_many = tiles + origins.size() > static_cast<size_t>(workspace.max_tiles);
+    if (tiles > 0 && (too_wide || too_many)) {
       plan.cropped = true;
-      continue;
+      if (too_wide) continue;
+      break;
     }
-    if (tiles + origins.size() > static_cast<size_t>(workspace.max_tiles)) {
+    if (too_wide || too_many) {
+      // Even the largest group needs more, or a row longer than the square: its tiles
+      // nearest its middle.
       plan.cropped = true;
-      if (tiles > 0) break;
-      // Even the largest group needs more: its tiles nearest its middle.
-      const Vec2 middle = 0.5 * (c.lo + c.hi);
-      std::sort(origins.begin(), origins.end(), [&](const Vec2& a, const Vec2& b) {
-        return (a - middle).norm() < (b - middle).norm();
-      });
-      origins.resize(workspace.max_tiles);
+      origins = nearestTiles(origins, 0.5 * (c.lo + c.hi), extent_m, max_side,
+                             static_cast<size_t>(workspace.max_tiles));
     }
     tiles += origins.size();
     for (const Vec2& o : origins) {
