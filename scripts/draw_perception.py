@@ -33,7 +33,10 @@ def pose_matrix(pose):
 
 
 def image_array(msg):
-    dtype = {"16UC1": np.uint16, "mono16": np.uint16, "32FC1": np.float32}[msg.encoding]
+    dtypes = {"16UC1": np.uint16, "mono16": np.uint16, "32FC1": np.float32}
+    if msg.encoding not in dtypes:
+        raise ValueError("an image of encoding %s (16UC1, mono16 or 32FC1 expected)" % msg.encoding)
+    dtype = dtypes[msg.encoding]
     a = np.frombuffer(msg.data, dtype=dtype).reshape(msg.height, msg.step // np.dtype(dtype).itemsize)
     return a[:, :msg.width].astype(np.float32)
 
@@ -62,7 +65,7 @@ def main():
     labels = image_array(frame["labels"]).astype(int)
     colours = {m.id + 1: (m.color.r, m.color.g, m.color.b) for m in frame["markers"].markers
                if m.ns == "superquadrics"}
-    grey = np.where(depth > 0, 1.0 - np.clip((depth - depth[depth > 0].min()) / np.ptp(depth[depth > 0] + 1e-6), 0, 1) * 0.7, 0)
+    grey = np.where(depth > 0, 1.0 - np.clip((depth - depth[depth > 0].min()) / (np.ptp(depth[depth > 0]) + 1e-6), 0, 1) * 0.7, 0)
     base = np.dstack([grey] * 3)
     os.makedirs(args.output, exist_ok=True)
 

@@ -50,10 +50,10 @@ def main():
     parser.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the service")
     parser.add_argument("--json", help="also write the response to this file")
     args = parser.parse_args(rospy.myargv()[1:])
-    # The request's counts are unsigned: a negative one is an argument error, not a traceback.
+    # The request's counts are uint32: one outside is an argument error, not a traceback.
     for name in ("candidates", "hypotheses", "rows"):
-        if getattr(args, name) < 0:
-            parser.error("--%s must be >= 0, not %d" % (name, getattr(args, name)))
+        if not 0 <= getattr(args, name) <= 2**32 - 1:
+            parser.error("--%s must lie in [0, 4294967295], not %d" % (name, getattr(args, name)))
     if not args.timeout > 0:
         parser.error("--timeout must be > 0 s")
     if args.json:  # fail before the ranking, not after it
@@ -68,8 +68,8 @@ def main():
             target = int(args.target)
         except ValueError:
             target = -1
-        if target < 0:
-            parser.error("--target must be an object id (>= 0) or 'top', not %r" % args.target)
+        if not 0 <= target <= 2**32 - 1:
+            parser.error("--target must be an object id (0 to 4294967295) or 'top', not %r" % args.target)
     # rospy.init_node waits for a master without end: look for one first, up to --timeout.
     deadline = time.time() + args.timeout
     while not rosgraph.is_master_online():

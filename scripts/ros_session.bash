@@ -58,11 +58,20 @@ ros_session_start() {  # a master on a free port
 }
 
 ros_session_xvfb() {  # a virtual display for rviz
-  local n
-  for n in $(seq 90 120); do [ -e "/tmp/.X11-unix/X$n" ] || [ -e "/tmp/.X$n-lock" ] || break; done
-  export DISPLAY=:$n
+  local n free=""
+  for n in $(seq 90 120); do
+    if [ ! -e "/tmp/.X11-unix/X$n" ] && [ ! -e "/tmp/.X$n-lock" ]; then free=$n; break; fi
+  done
+  [ -n "$free" ] || { echo "no free X display in :90-:120 for Xvfb" >&2; return 1; }
+  export DISPLAY=:$free
   ros_session_spawn "$ROS_HOME/xvfb.log" Xvfb "$DISPLAY" -screen 0 1280x800x24
-  for _ in $(seq 50); do xwd -root -silent > /dev/null 2>&1 && return 0; sleep 0.2; done
+  local xvfb=${ROS_SESSION_PIDS[-1]}
+  for _ in $(seq 50); do
+    # Ours, not another server's: the display answers while our Xvfb runs.
+    kill -0 "$xvfb" 2> /dev/null || break
+    xwd -root -silent > /dev/null 2>&1 && return 0
+    sleep 0.2
+  done
   echo "Xvfb did not start (log: $ROS_HOME/xvfb.log)" >&2
   return 1
 }
