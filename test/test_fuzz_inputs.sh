@@ -229,6 +229,11 @@ for objects in 3x:4y 3:4:5 1:100000 0:2; do
     --objects "$objects" --output "$dir/obj.h5"
 done
 
+# A seed below 0 (CLI11 would wrap it to 2^64 - 1); intrinsics with a trailing comma.
+expect "generate --seed -1" "not a seed" "$bin/simstack_generate" --scenes 1 --seed -1 --output "$dir/s.h5"
+expect "intrinsics with a trailing comma" "ends in a comma" "$reconstruct" --depth "$good" \
+  --intrinsics $K, --output "$dir/o"
+
 # A training config's bad value is reported at its line in the file.
 sed 's/^\(  steps:\).*/\1 abc/' "$train_config" > "$dir/steps.yaml"
 line=$(grep -n "steps: abc" "$dir/steps.yaml" | cut -d: -f1)

@@ -33,7 +33,8 @@ int main(int argc, char** argv) {
       "(16UC1, mm), camera_info and tf table -> camera, to replay into the perception node."};
   app.add_option("--output", output, "bag file")->required();
   app.add_option("--seed", seed, "pile seed (simstack_generate's scene seeds)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);  // "-1" would wrap to 2^64 - 1
   app.add_option("--views", views, "viewpoints on the ring")
       ->capture_default_str()
       ->check(CLI::Range(1, 64));

@@ -38,6 +38,16 @@ inline const CLI::Validator FinitePositive =
 inline const CLI::Validator FiniteNonNegative =
     finiteNumber([](double v) { return v >= 0.0; }, ">= 0", "FINITE>=0");
 
+/// A seed: a whole number >= 0 (CLI11 reads "-1" into an unsigned as 2^64 - 1).
+inline const CLI::Validator SeedNumber(
+    [](std::string& text) -> std::string {
+      if (!text.empty() && text.size() <= 20 &&
+          text.find_first_not_of("0123456789") == std::string::npos)
+        return {};
+      return "'" + text + "' is not a seed (a whole number >= 0)";
+    },
+    "SEED");
+
 /// Throws std::runtime_error when the file `output` (given as `option`) would replace one of
 /// `inputs`, by the same or another name (a link, "./", ".."): an evaluation's --output naming
 /// its --dataset would otherwise put its results where the test piles were. Empty names are

@@ -39,7 +39,8 @@ PerceptionOptions::PerceptionOptions(CLI::App& app, Which which) {
                      "every quarter turn (4), and mirrored (8) (default: the config's)")
           ->check(CLI::IsMember({1, 2, 4, 8}));
   if (which.seed)
-    seed_opt_ = app.add_option("--seed", seed_, "latent code seed (default: the config's)");
+    seed_opt_ = app.add_option("--seed", seed_, "latent code seed (default: the config's)")
+                    ->check(SeedNumber);
   threads_opt_ = app.add_option("--threads", threads_, "threads (default: the config's)")
                      ->check(FinitePositive);
   if (which.joint) app.add_flag("--no-joint", no_joint_, "skip the joint refinement (eqs. 7-9)");

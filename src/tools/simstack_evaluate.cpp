@@ -121,7 +121,9 @@ int main(int argc, char** argv) {
       ->check(FinitePositive);
   app.add_option("--scenes", o.scenes, "evaluate only the first N scenes (0 = all)")
       ->check(FiniteNonNegative);
-  app.add_option("--seed", o.seed, "viewpoint and Chamfer-sample seed")->capture_default_str();
+  app.add_option("--seed", o.seed, "viewpoint and Chamfer-sample seed")
+      ->capture_default_str()
+      ->check(SeedNumber);
   app.add_option("--ycb", mesh_dir, "mesh directory for YCB datasets")
       ->check(CLI::ExistingDirectory);
   app.add_flag("--noise", o.noise, "Kinect-like sensor noise in the rendered views");

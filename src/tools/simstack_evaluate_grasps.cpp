@@ -66,7 +66,8 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 16));
   app.add_option("--seed", o.seed, "viewpoints, noise and the random chooser")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(SeedNumber);
   app.add_flag("--no-noise", no_noise, "clean rendered views instead of Kinect-like noise");
   app.add_flag("--no-classical", no_classical, "skip the classical baseline");
   CLI11_PARSE(app, argc, argv);

@@ -58,7 +58,9 @@ int main(int argc, char** argv) {
       "Generate random piles settled under Bullet physics and write the HDF5 dataset "
       "of ground-truth TSDF, centre votes and labels (DESIGN.md section 4)."};
   app.add_option("--scenes", o.scenes, "number of piles")->required()->check(FinitePositive);
-  app.add_option("--seed", o.seed, "random seed (scene i uses a hash of seed and i)")->required();
+  app.add_option("--seed", o.seed, "random seed (scene i uses a hash of seed and i)")
+      ->required()
+      ->check(SeedNumber);
   app.add_option("--resolution", o.resolution, "grid resolution R (R^3 voxels)")
       ->check(CLI::Range(4, 256))
       ->capture_default_str();

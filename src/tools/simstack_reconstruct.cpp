@@ -22,6 +22,8 @@ namespace fs = std::filesystem;
 namespace {
 
 PinholeCamera parseIntrinsics(const std::string& text, int width, int height) {
+  if (!text.empty() && text.back() == ',')  // getline would drop the empty last item
+    throw std::invalid_argument("--intrinsics: '" + text + "' ends in a comma");
   std::stringstream ss(text);
   std::vector<double> v;
   std::string item;

@@ -88,7 +88,7 @@ int main(int argc, char** argv) {
       ->check(FinitePositive);
   app.add_option("--scenes", scenes, "only the first N scenes of each dataset (0 = all)")
       ->check(FiniteNonNegative);
-  app.add_option("--seed", seed, "viewpoint seed")->capture_default_str();
+  app.add_option("--seed", seed, "viewpoint seed")->capture_default_str()->check(SeedNumber);
   app.add_flag("--noise", noise, "Kinect-like sensor noise in the rendered views");
   auto values = [&](const char* name, auto& list, const char* what, CLI::Validator check) {
     app.add_option(name, list, what)->capture_default_str()->check(check);
