@@ -7,6 +7,7 @@
 #include <map>
 
 #include "simstack/eval/evaluator.h"
+#include "simstack/eval/grasp_evaluation.h"
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/eval/segmentation.h"
 #include "simstack/io/scene_io.h"
@@ -141,6 +142,31 @@ TEST(Segmentation, OneToOneMatchingByLargestOverlap) {
   EXPECT_NEAR(segmentationAgreement(truth, std::vector<int>(12, -1)).agreement, 0.0, 1e-12);
   EXPECT_NEAR(segmentationAgreement(truth, truth).agreement, 1.0, 1e-12);
   EXPECT_THROW(segmentationAgreement(truth, std::vector<int>(3, 0)), std::invalid_argument);
+}
+
+TEST(GraspSummary, PicksNeverPulledFreeNothingAndDoNotDiluteThePulls) {
+  // Two pulls (one freed its target and moved the others 10 mm, one broke its seal after
+  // moving them 30 mm and toppling one) and a pick whose estimate had no match for the target.
+  std::vector<PickResult> picks(3);
+  for (PickResult& p : picks) p.method = "m", p.chooser = "ranked";
+  picks[0].outcome.cup_held = true, picks[0].outcome.target_freed = true;
+  picks[0].outcome.mean_displacement_m = 0.010;
+  picks[1].outcome.cup_held = false, picks[1].outcome.mean_displacement_m = 0.030;
+  picks[1].outcome.toppled = 1;
+  picks[2].found = false, picks[2].grasped = false, picks[2].outcome.cup_held = false;
+  const nlohmann::json s = graspSummary(picks);
+  ASSERT_EQ(s.size(), 1u);
+  EXPECT_DOUBLE_EQ(s[0]["picks"].get<double>(), 3.0);
+  EXPECT_NEAR(s[0]["pulled_share"].get<double>(), 2.0 / 3, 1e-12);
+  EXPECT_NEAR(s[0]["freed_share"].get<double>(), 1.0 / 3, 1e-12);
+  EXPECT_NEAR(s[0]["target_found_share"].get<double>(), 2.0 / 3, 1e-12);
+  EXPECT_NEAR(s[0]["seal_broke_share"].get<double>(), 0.5, 1e-12);  // of the two pulls
+  EXPECT_NEAR(s[0]["mean_displacement_mm"].get<double>(), 20.0, 1e-9);
+  EXPECT_NEAR(s[0]["freed_mean_displacement_mm"].get<double>(), 10.0, 1e-9);
+  EXPECT_NEAR(s[0]["toppled_share"].get<double>(), 0.5, 1e-12);
+  EXPECT_NE(graspSummaryTable(s).find("| m | ranked | 3 | 67 % | 33 % | 50 % | 20.0 |"),
+            std::string::npos)
+      << graspSummaryTable(s);
 }
 
 TEST(SceneFiles, SuperquadricsMeshesAndGridsRoundTrip) {

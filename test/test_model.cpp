@@ -361,6 +361,28 @@ TEST(Cvae, BestOfManyTrainsTheCodeThatScoresBest) {
   EXPECT_THROW(c.validate(), std::invalid_argument);
 }
 
+TEST(Cvae, BestOfManyMeasuresTheMmdOnOneCodePerScene) {
+  // k codes of one scene share its posterior: with all of them in the MMD, codes whose scenes'
+  // draws follow the prior would still score far from zero. The term takes each scene's first.
+  CvaeConfig c = tiny();
+  const int64_t scenes = 32, k = 8, r = c.resolution;
+  torch::manual_seed(3);
+  const torch::Tensor distinct = torch::randn({scenes, c.latent_size});
+  CvaeOutput out;
+  out.z = distinct.repeat_interleave(k, 0);  // each scene's codes alike: sigma near 0
+  out.tsdf = torch::zeros({scenes * k, 1, r, r, r});
+  out.votes = torch::zeros({scenes * k, 3, r, r, r});
+  out.partial_recon = torch::zeros({scenes, 1, r, r, r});
+  const auto x = torch::zeros({scenes, 2, r, r, r}), t = torch::zeros({scenes, 1, r, r, r});
+  const auto v = torch::zeros({scenes, 3, r, r, r});
+  torch::manual_seed(4);
+  const double measured = computeLosses(out, x, t, v, c).mmd.item<double>();
+  torch::manual_seed(4);
+  const torch::Tensor prior = torch::randn({c.mmd_prior_samples, c.latent_size});
+  EXPECT_NEAR(measured, mmdLoss(distinct, prior, c.mmd_kernel_widths).item<double>(), 1e-6);
+  EXPECT_GT(mmdLoss(out.z, prior, c.mmd_kernel_widths).item<double>(), 3.0 * measured);
+}
+
 TEST(Cvae, LearnedPriorStartsStandardAndItsKlIsExact) {
   CvaeConfig c = tiny();
   c.prior = "learned";
@@ -1198,11 +1220,15 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   for (const auto& d : {b, c}) {
     fs::remove_all(d);
     CvaeTrainer(data, tiny(), half, d, "test").run(false);
+    // b was killed after logging a step past its checkpoint: that row is trained again and
+    // must not stay twice.
+    if (d == b) std::ofstream(d + "/train_log.csv", std::ios::app) << "3,1,1,1,1,1,1,1,1\n";
     CvaeTrainer(data, tiny(), tc, d, "test").run(true);
   }
   EXPECT_EQ(lines(b + "/state.yaml").at(0), "step: 4");
   const std::vector<std::string> resumed = lines(b + "/train_log.csv");
   ASSERT_EQ(resumed.size(), 3u);
+  EXPECT_EQ(resumed[1].rfind("2,", 0), 0u);
   EXPECT_EQ(resumed[2].rfind("4,", 0), 0u);
   EXPECT_TRUE(torch::equal(probe(b + "/model.pt"), probe(c + "/model.pt")));
   // A log of other columns (an older version's) is not appended to: resuming says so.

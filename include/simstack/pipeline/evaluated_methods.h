@@ -3,6 +3,7 @@
 /// The methods the evaluation (eval/evaluator.h) compares: a trained network through
 /// ScenePerception (the C-VAE and the FC baselines), and the classical baseline.
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -39,6 +40,8 @@ class NetworkMethod : public EvaluatedMethod {
   std::unique_ptr<ScenePerception> perception_;
   std::string name_;
   bool label_pixels_;
+  uint64_t base_seed_ = 0;  ///< the config's seed
+  uint64_t estimates_ = 0;  ///< estimates made so far: the next one's code seed
 };
 
 /// The classical baseline (classical_baseline.h) under the protocol. Without a grid from an

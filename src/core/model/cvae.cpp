@@ -589,11 +589,14 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
         c.kl_weight *
         (c.kl_free_nats > 0.0 ? per_dim.clamp_min(c.kl_free_nats / per_dim.size(0)).sum() : l.mmd);
   } else {
-    l.mmd =
-        out.z.defined()
-            ? mmdLoss(out.z, torch::randn({c.mmd_prior_samples, out.z.size(1)}, out.z.options()),
-                      c.mmd_kernel_widths)
-            : torch::zeros({}, tsdf.options());
+    // One code per scene: a scene's best_of codes share its posterior, and the estimator's
+    // pairs within the codes must be independent draws (with all k of them, codes that follow
+    // the prior still score far above zero, and the term pulls every posterior to N(0, I)).
+    const torch::Tensor z =
+        out.z.defined() && k > 1 ? out.z.view({scenes, k, -1}).select(1, 0) : out.z;
+    l.mmd = z.defined() ? mmdLoss(z, torch::randn({c.mmd_prior_samples, z.size(1)}, z.options()),
+                                  c.mmd_kernel_widths)
+                        : torch::zeros({}, tsdf.options());
     latent = c.delta * l.mmd;
   }
   l.occupancy = occupancy_term.mean();

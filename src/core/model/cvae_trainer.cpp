@@ -153,8 +153,11 @@ class TrainingLog {
       "validation_posterior_iou,validation_iou_se,validation_single_iou,validation_best_iou,"
       "validation_disagreement_seen,validation_disagreement_unseen,validation_unseen_share";
 
-  TrainingLog(const fs::path& path, bool append)
-      : path_(path), log_(path.string(), append ? std::ios::app : std::ios::trunc) {
+  /// `append`: a resumed run, which keeps the rows up to its checkpoint's `step` (those a run
+  /// killed after its last checkpoint wrote are trained again, and logged once).
+  TrainingLog(const fs::path& path, bool append, int64_t step) : path_(path) {
+    if (append) keepRowsThrough(step);
+    log_.open(path.string(), append ? std::ios::app : std::ios::trunc);
     if (!log_) throw std::runtime_error("cannot write " + path.string());
     log_.seekp(0, std::ios::end);
     if (log_.tellp() == 0) {  // a new log (also when a finished model is trained further)
@@ -204,6 +207,22 @@ class TrainingLog {
   }
 
  private:
+  void keepRowsThrough(int64_t step) const {
+    std::ifstream previous(path_.string());
+    if (!previous) return;
+    const fs::path kept = path_.string() + ".tmp";
+    {
+      std::ofstream out(kept.string(), std::ios::trunc);
+      std::string line;
+      while (std::getline(previous, line)) {
+        const bool row = !line.empty() && std::isdigit(static_cast<unsigned char>(line[0]));
+        if (!row || std::stoll(line) <= step) out << line << "\n";
+      }
+      if (!out) throw std::runtime_error("cannot write " + kept.string());
+    }
+    fs::rename(kept, path_);
+  }
+
   fs::path path_;
   std::ofstream log_;
 };
@@ -562,7 +581,7 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
 
   const TrainingSampleBuilder builder(mc, scaledKinect(tc.image_width, tc.image_height),
                                       tc.sensor_noise, tc.overhead_share);
-  TrainingLog log(out / "train_log.csv", resume && start > 0);
+  TrainingLog log(out / "train_log.csv", resume && start > 0, start);
   // Each file is written beside its place and renamed into it, state.yaml last: a run stopped
   // by an error or a kill leaves the previous checkpoint whole, never half of a new one.
   auto save_checkpoint = [&](int64_t step) {

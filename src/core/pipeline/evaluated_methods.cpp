@@ -12,7 +12,7 @@
 namespace simstack {
 
 NetworkMethod::NetworkMethod(const PerceptionConfig& config, bool label_pixels)
-    : label_pixels_(label_pixels) {
+    : label_pixels_(label_pixels), base_seed_(config.seed) {
   perception_ = std::make_unique<ScenePerception>(config);
   name_ = architecture();
 }
@@ -39,6 +39,7 @@ std::string recordedPath(const std::string& path) {
 MethodInfo NetworkMethod::info() const {
   PerceptionConfig c = perception_->config();
   c.model_path = recordedPath(c.model_path);
+  c.seed = base_seed_;  // each estimate's code seed is drawn from it
   return {c.model_path, c.samples, perceptionYaml(c)};
 }
 
@@ -49,6 +50,17 @@ MethodEstimate NetworkMethod::estimate(const DepthView& view, const GridSpec* gr
 
 MethodEstimate NetworkMethod::estimateViews(const std::vector<DepthView>& views, const GridSpec*,
                                             const Vec2&) {
+  // The protocol draws S prior codes for every view, not one draw for the whole run: the n-th
+  // estimate of a model with a code gets its own seed (the same in every run of the same
+  // views). A model without a code keeps the config's seed.
+  if (perception_->modelConfig().hasLatentCode()) {
+    PerceptionConfig c = perception_->config();
+    uint64_t z = base_seed_ + 0x9E3779B97F4A7C15ull * ++estimates_;  // splitmix64
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    c.seed = z ^ (z >> 31);
+    perception_->updateSettings(c);
+  }
   const SceneEstimate est = perception_->perceive(views);
   MethodEstimate out;
   out.grid = est.grid;
