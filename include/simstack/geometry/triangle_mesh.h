@@ -24,6 +24,11 @@ struct TriangleMesh {
   bool empty() const { return triangles.empty(); }
   /// Total surface area in m^2.
   double area() const;
+  /// Area of triangle `i` in m^2.
+  double triangleArea(size_t i) const {
+    const auto& t = triangles[i];
+    return 0.5 * (vertices[t[1]] - vertices[t[0]]).cross(vertices[t[2]] - vertices[t[0]]).norm();
+  }
   /// Enclosed volume in m^3 (divergence theorem; exact for closed, consistently oriented meshes).
   double volume() const;
   /// Centroid of the enclosed solid (uniform density).

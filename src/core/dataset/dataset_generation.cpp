@@ -23,6 +23,7 @@
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/mesh_catalogue.h"
 #include "simstack/scene/pile_generator.h"
+#include "simstack/seeds.h"
 
 namespace fs = std::filesystem;
 
@@ -35,10 +36,7 @@ struct SceneResult {
 };
 
 uint64_t sceneSeed(uint64_t seed, int index) {
-  uint64_t z = seed * 0x9E3779B97F4A7C15ull + static_cast<uint64_t>(index) + 1;
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
+  return splitMix64(seed * 0x9E3779B97F4A7C15ull + static_cast<uint64_t>(index) + 1);
 }
 
 void writeViews(const GenerationOptions& o, const fs::path& dir, int index, const Scene& scene,

@@ -6,9 +6,7 @@ namespace simstack {
 
 double TriangleMesh::area() const {
   double a = 0.0;
-  for (const auto& t : triangles) {
-    a += 0.5 * (vertices[t[1]] - vertices[t[0]]).cross(vertices[t[2]] - vertices[t[0]]).norm();
-  }
+  for (size_t i = 0; i < triangles.size(); ++i) a += triangleArea(i);
   return a;
 }
 
@@ -66,8 +64,7 @@ std::vector<SurfacePoint> TriangleMesh::sampleSurface(int count, std::mt19937_64
   std::vector<double> cumulative(triangles.size());
   double total = 0.0;
   for (size_t i = 0; i < triangles.size(); ++i) {
-    const auto& t = triangles[i];
-    total += 0.5 * (vertices[t[1]] - vertices[t[0]]).cross(vertices[t[2]] - vertices[t[0]]).norm();
+    total += triangleArea(i);
     cumulative[i] = total;
   }
   std::uniform_real_distribution<double> uni(0.0, 1.0);

@@ -24,6 +24,7 @@
 #include "simstack/io/yaml_file.h"
 #include "simstack/model/cvae.h"
 #include "simstack/model/training_sample.h"
+#include "simstack/seeds.h"
 
 namespace fs = std::filesystem;
 
@@ -31,10 +32,7 @@ namespace simstack {
 namespace {
 
 uint64_t mix(uint64_t a, uint64_t b) {
-  uint64_t z = a * 0x9E3779B97F4A7C15ull + b + 0x632BE59BD9B4E019ull;
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
+  return splitMix64(a * 0x9E3779B97F4A7C15ull + b + 0x632BE59BD9B4E019ull);
 }
 
 std::vector<float> values(const torch::Tensor& t) {

@@ -6,6 +6,7 @@
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/pipeline/scene_perception.h"
+#include "simstack/seeds.h"
 #include "simstack/tsdf/network_input.h"
 #include "simstack/tsdf/projective_tsdf.h"
 
@@ -55,10 +56,7 @@ MethodEstimate NetworkMethod::estimateViews(const std::vector<DepthView>& views,
   // views). A model without a code keeps the config's seed.
   if (perception_->modelConfig().hasLatentCode()) {
     PerceptionConfig c = perception_->config();
-    uint64_t z = base_seed_ + 0x9E3779B97F4A7C15ull * ++estimates_;  // splitmix64
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    c.seed = z ^ (z >> 31);
+    c.seed = splitMix64(base_seed_ + 0x9E3779B97F4A7C15ull * ++estimates_);
     perception_->updateSettings(c);
   }
   const SceneEstimate est = perception_->perceive(views);

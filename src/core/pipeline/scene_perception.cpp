@@ -80,12 +80,6 @@ std::vector<DepthView> withinSensorRange(const std::vector<DepthView>& views,
   return out;
 }
 
-double triangleArea(const TriangleMesh& m, size_t i) {
-  const auto& t = m.triangles[i];
-  return 0.5 *
-         (m.vertices[t[1]] - m.vertices[t[0]]).cross(m.vertices[t[2]] - m.vertices[t[0]]).norm();
-}
-
 /// Each instance's visible share: its triangles that are the first surface a ray from the
 /// camera meets, among all instances' triangles.
 void setVisibleFractions(SceneHypothesis* h, const PinholeCamera& camera,
@@ -100,7 +94,7 @@ void setVisibleFractions(SceneHypothesis* h, const PinholeCamera& camera,
   const std::vector<bool> seen = visibleTriangles(all, camera, T_table_camera);
   std::vector<double> area(h->instances.size(), 0.0), visible(h->instances.size(), 0.0);
   for (size_t i = 0; i < all.triangles.size(); ++i) {
-    const double a = triangleArea(all, i);
+    const double a = all.triangleArea(i);
     area[owner[i]] += a;
     if (seen[i]) visible[owner[i]] += a;
   }
@@ -150,7 +144,7 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Gri
     std::vector<bool> seen_k(seen.begin() + first[k], seen.begin() + first[k + 1]), unseen_k;
     double area = 0, seen_area = 0;
     for (size_t i = 0; i < seen_k.size(); ++i) {
-      const double a = triangleArea(parts[k], i);
+      const double a = parts[k].triangleArea(i);
       area += a;
       seen_area += seen_k[i] ? a : 0.0;
       unseen_k.push_back(!seen_k[i]);
