@@ -788,6 +788,26 @@ TEST(Cvae, BadModelFilesGiveClearErrors) {
   EXPECT_NE(mm.find("resolution"), std::string::npos) << mm;
   EXPECT_NE(mm.find(path), std::string::npos) << mm;
   EXPECT_THROW(CvaeInference("/nonexistent/model.pt"), std::runtime_error);
+
+  // Weights of a 16-dimensional code under a config that says 8: the file names the tensor.
+  torch::serialize::InputArchive saved;
+  saved.load_from(path);
+  torch::IValue format, yaml;
+  ASSERT_TRUE(saved.try_read("simstack_format", format));
+  ASSERT_TRUE(saved.try_read("simstack_config", yaml));
+  CvaeConfig wide = tiny();
+  wide.latent_size = 16;
+  Cvae other(wide);
+  torch::serialize::OutputArchive forged;
+  other->save(forged);
+  forged.write("simstack_format", format);
+  forged.write("simstack_config", yaml);
+  const std::string shapes = tempPath("simstack_shapes.pt");
+  forged.save_to(shapes);
+  const std::string ms = message(shapes, nullptr);
+  EXPECT_NE(ms.find(shapes), std::string::npos) << ms;
+  EXPECT_NE(ms.find("shape"), std::string::npos) << ms;
+  fs::remove(shapes);
   fs::remove(path);
 }
 

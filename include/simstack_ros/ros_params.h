@@ -44,7 +44,10 @@ struct GraspServerConfig {
   int max_candidates = 64;                           ///< grasps simulated when a request asks for 0
   int max_candidates_limit = 256;                    ///< requests for more are clamped to this
   double max_pull_distance_m = 0.5;                  ///< longer pulls are rejected
-  GraspRankingConfig ranking;                        ///< cup, seal, physics, threads
+  /// A request without a scene is refused when the latest scene's stamp is older than this
+  /// (the camera or the perception stopped); 0: any age.
+  double max_scene_age_s = 10.0;
+  GraspRankingConfig ranking;  ///< cup, seal, physics, threads
   /// Throws std::invalid_argument naming the parameter.
   void validate() const;
 };

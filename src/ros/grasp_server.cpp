@@ -68,6 +68,17 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
     res.message = "the request has no objects and no scene has arrived on " + topic + " yet";
     return false;
   }
+  if (req.scene.objects.empty() && config_.max_scene_age_s > 0.0 && !scene->header.stamp.isZero()) {
+    // Under simulated time a replayed bag may loop: a stamp ahead of now is not stale.
+    const double age = (ros::Time::now() - scene->header.stamp).toSec();
+    if (age > config_.max_scene_age_s) {
+      res.message = "the latest scene on " + topic + " is " + number(age) +
+                    " s old (max_scene_age_s " + number(config_.max_scene_age_s) +
+                    "): is the perception still running? Send the scene in the request, or " +
+                    "raise ~max_scene_age_s (0: any age)";
+      return false;
+    }
+  }
   if (scene->objects.empty()) {
     res.message = "the request has no objects and the latest scene on " + topic + " (stamp " +
                   number(scene->header.stamp.toSec()) + " s) has none either";

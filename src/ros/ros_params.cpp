@@ -167,6 +167,8 @@ void GraspServerConfig::validate() const {
   if (max_candidates_limit < max_candidates)
     throw std::invalid_argument("max_candidates_limit must be >= max_candidates");
   positive(max_pull_distance_m, "max_pull_distance_m");
+  if (!(max_scene_age_s >= 0.0) || !std::isfinite(max_scene_age_s))
+    throw std::invalid_argument("max_scene_age_s must be >= 0 (0: any age)");
   positive(ranking.candidates.cup_radius_m, "cup_radius_m");
   positive(ranking.candidates.seal_tolerance_m, "seal_tolerance_m");
   positive(ranking.candidates.tool_length_m, "tool_length_m");
@@ -182,7 +184,7 @@ GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
       "objects_topic",       "threads",          "max_candidates",   "max_candidates_limit",
       "max_pull_distance_m", "cup_radius_m",     "seal_tolerance_m", "surface_samples",
       "tool_length_m",       "max_force_n",      "cup_stiffness_hz", "settle_s",
-      "topple_deg",          "match_distance_m", "density_kgpm3"};
+      "topple_deg",          "match_distance_m", "density_kgpm3",    "max_scene_age_s"};
   XmlRpc::XmlRpcValue all;
   if (ros::param::get(pnh.getNamespace(), all) && all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
     for (auto& kv : all)
@@ -198,6 +200,7 @@ GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
   read(pnh, "max_candidates", &c.max_candidates);
   read(pnh, "max_candidates_limit", &c.max_candidates_limit);
   read(pnh, "max_pull_distance_m", &c.max_pull_distance_m);
+  read(pnh, "max_scene_age_s", &c.max_scene_age_s);
   read(pnh, "cup_radius_m", &k.cup_radius_m);
   read(pnh, "seal_tolerance_m", &k.seal_tolerance_m);
   read(pnh, "surface_samples", &k.surface_samples);

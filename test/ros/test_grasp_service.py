@@ -23,10 +23,11 @@ class GraspService(unittest.TestCase):
     def setUpClass(cls):
         rospy.init_node("test_grasp_service")
         cls.scene = rospy.wait_for_message("/camera/perception/objects", ObjectArray, timeout=180)
-        for name in ("grasps", "lonely_grasps"):
+        for name in ("grasps", "lonely_grasps", "strict_grasps"):
             rospy.wait_for_service("/camera/%s/rank_grasps" % name, timeout=60)
         cls.rank = rospy.ServiceProxy("/camera/grasps/rank_grasps", RankGrasps)
         cls.lonely = rospy.ServiceProxy("/camera/lonely_grasps/rank_grasps", RankGrasps)
+        cls.strict = rospy.ServiceProxy("/camera/strict_grasps/rank_grasps", RankGrasps)
 
     def scene_with(self, change):
         scene = copy.deepcopy(self.scene)
@@ -145,6 +146,32 @@ class GraspService(unittest.TestCase):
         more = self.rank(request(scene=scene, candidates=4, hypotheses=5))
         self.assertEqual(more.hypotheses_used, 3)
         self.assertIn("5 hypotheses asked for, the scene has 3", more.message)
+
+    def test_6_a_stale_latest_scene_is_refused_and_a_fresh_one_ranked(self):
+        pub = rospy.Publisher("/camera/strict/objects", ObjectArray, queue_size=1, latch=True)
+        deadline = rospy.Time.now() + rospy.Duration(10)
+        while pub.get_num_connections() == 0 and rospy.Time.now() < deadline:
+            rospy.sleep(0.05)
+        self.assertGreater(pub.get_num_connections(), 0, "strict_grasps never subscribed")
+
+        def publish_and_rank(stamp):
+            scene = copy.deepcopy(self.scene)
+            scene.header.stamp = stamp
+            pub.publish(scene)
+            rospy.sleep(0.2)  # simulated time: the bag's clock, which starts at 1 s
+            return self.strict(request(candidates=4))
+
+        # The bag's clock starts at 1 s, so a scene stamped near 0 is at least 1 s old.
+        stale = publish_and_rank(rospy.Time(0, 1000))
+        self.assertFalse(stale.success, "a stale scene was ranked")
+        self.assertIn("s old (max_scene_age_s 0.8)", stale.message)
+        fresh = publish_and_rank(rospy.Time.now())
+        self.assertTrue(fresh.success, fresh.message)
+        self.assertGreater(len(fresh.grasps), 0)
+        # A scene brought by the request is ranked whatever its stamp.
+        carried = copy.deepcopy(self.scene)
+        carried.header.stamp = rospy.Time(0, 1000)
+        self.assertTrue(self.strict(request(scene=carried, candidates=4)).success)
 
 
 if __name__ == "__main__":

@@ -659,12 +659,26 @@ Cvae loadCvae(const std::string& path, const CvaeConfig* expect, std::string* me
       mismatch("extent_m", std::to_string(config.extent_m), std::to_string(expect->extent_m));
   }
   Cvae model(config);
+  // Module::load takes each stored tensor as it is, whatever its shape: compare with the shapes
+  // the config builds, so that a mismatched file fails here and not in the first forward pass.
+  std::map<std::string, std::vector<int64_t>> built;
+  for (const auto& p : model->named_parameters()) built[p.key()] = p.value().sizes().vec();
+  for (const auto& b : model->named_buffers()) built[b.key()] = b.value().sizes().vec();
   try {
     model->load(archive);
   } catch (const c10::Error& e) {
     throw std::runtime_error("model file " + path +
                              ": weights do not match its config: " + e.what_without_backtrace());
   }
+  auto check = [&](const std::string& name, const torch::Tensor& t) {
+    if (t.sizes().vec() != built.at(name)) {
+      throw std::runtime_error("model file " + path + ": tensor " + name + " has shape " +
+                               c10::str(t.sizes()) + " but its config builds " +
+                               c10::str(c10::IntArrayRef(built.at(name))));
+    }
+  };
+  for (const auto& p : model->named_parameters()) check(p.key(), p.value());
+  for (const auto& b : model->named_buffers()) check(b.key(), b.value());
   if (metadata && archive.try_read("simstack_metadata", meta)) *metadata = meta.toStringRef();
   return model;
 }
