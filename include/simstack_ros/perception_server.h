@@ -60,8 +60,7 @@ class PerceptionServer {
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   bool saveOctomap(SaveOctomap::Request& req, SaveOctomap::Response& res);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
-  /// Once a second (wall time): diagnostics, and a warning when no frame has come for
-  /// node/input_timeout_s.
+  /// Once a second (wall time): a warning when no frame has come for node/input_timeout_s.
   void onWallTimer();
   /// Seconds since the last frame came (since the start before any), mutex_ held.
   double secondsWithoutFrame(const ros::WallTime& now) const;
@@ -87,7 +86,7 @@ class PerceptionServer {
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<LiveSettingsConfig>> reconfigure_;
   /// Wall time: simulated time stops with a bag and jumps back when it loops.
-  ros::WallTimer diagnostics_timer_;
+  ros::WallTimer silence_timer_, diagnostics_timer_;
 
   std::mutex mutex_;  ///< guards the mailbox, the counters, the last scene and the views
   std::condition_variable wake_;

@@ -74,8 +74,17 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   diagnostics_.setHardwareID("simstack_perception " + pnh_.getNamespace());
   diagnostics_.add("perception", this, &PerceptionServer::diagnose);
   started_ = ros::WallTime::now();
-  diagnostics_timer_ = nh_.createWallTimer(ros::WallDuration(1.0),
-                                           [this](const ros::WallTimerEvent&) { onWallTimer(); });
+  // Both on the wall clock, so also while a bag is paused: the silence check once a second,
+  // /diagnostics once per ~diagnostic_period (read by diagnostic_updater; default 1 s).
+  const double period = diagnostics_.getPeriod();
+  if (!std::isfinite(period) || period <= 0.0)
+    throw std::runtime_error(pnh_.resolveName("diagnostic_period") +
+                             " must be a positive number of seconds");
+  silence_timer_ = nh_.createWallTimer(ros::WallDuration(1.0),
+                                       [this](const ros::WallTimerEvent&) { onWallTimer(); });
+  diagnostics_timer_ =
+      nh_.createWallTimer(ros::WallDuration(period),
+                          [this](const ros::WallTimerEvent&) { diagnostics_.force_update(); });
   decompose_samples_ = perception_->config().decompose_samples;
   LiveSettingsConfig live = liveSettings(perception_->config());
   live.occupancy_min = node_.occupancy_min;
@@ -406,7 +415,6 @@ void PerceptionServer::onWallTimer() {
         "its namespace the one given?)",
         topics.c_str(), silent);
   if (resumed) ROS_INFO("simstack perception: depth frames arrive again on %s", topics.c_str());
-  diagnostics_.force_update();
 }
 
 void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {

@@ -1,5 +1,6 @@
 // rostest (test/ros/perception.test): the perception node on synthetic depth frames of known
 // scenes. Every frame carries its own stamp, so an output is matched to the frame it answers.
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <gtest/gtest.h>
 #include <octomap/OcTree.h>
@@ -438,6 +439,46 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
   // the other run cleared, and later frames fuse with it again.
   EXPECT_EQ(send(2, 30.0), 1u) << "a frame from the past was fused with newer views";
   EXPECT_EQ(send(3), 2u);
+}
+
+TEST_F(PerceptionNodeTest, DiagnosticsComeOncePerDiagnosticPeriod) {
+  // Statuses named after the node's namespace, without the leading slash; the accumulating
+  // node's ~diagnostic_period is 0.25 s, the camera node's the default 1 s.
+  std::map<std::string, int> count;
+  std::map<std::string, std::string> hardware;
+  std::mutex mutex;
+  ros::Subscriber sub = nh_.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 100, [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& msg) {
+        std::lock_guard<std::mutex> lock(mutex);
+        for (const auto& s : msg->status) {
+          ++count[s.name];
+          hardware[s.name] = s.hardware_id;
+        }
+      });
+  for (int i = 0; i < 100 && sub.getNumPublishers() < 3; ++i) ros::WallDuration(0.1).sleep();
+  auto spinFor = [](double seconds) {
+    const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(seconds);
+    while (ros::WallTime::now() < until) {
+      ros::spinOnce();
+      ros::WallDuration(0.02).sleep();
+    }
+  };
+  spinFor(0.5);  // what was queued before is not counted
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    count.clear();
+  }
+  spinFor(4.0);
+  std::lock_guard<std::mutex> lock(mutex);
+  const std::string fast = "accumulating/perception: perception",
+                    slow = "camera/perception: perception";
+  ASSERT_TRUE(count.count(fast)) << "no status named '" << fast << "'";
+  ASSERT_TRUE(count.count(slow)) << "no status named '" << slow << "'";
+  EXPECT_GE(count[fast], 12) << "diagnostic_period 0.25 s: about 16 in 4 s";
+  EXPECT_LE(count[fast], 20);
+  EXPECT_GE(count[slow], 3) << "the default 1 s: about 4 in 4 s";
+  EXPECT_LE(count[slow], 6);
+  EXPECT_EQ(hardware[slow], "simstack_perception /camera/perception");
 }
 
 }  // namespace

@@ -476,8 +476,9 @@ void HoughConfig::validate() const {
   require(min_traversals >= 0, "min_traversals", min_traversals, ">= 0");
   // A non-finite weight would leave voxels with no centre at all.
   require(std::isfinite(gamma) && gamma >= 0 && gamma <= 1e6, "gamma", gamma, "in [0, 1e6]");
-  require(std::isfinite(bandwidth_m) && bandwidth_m > 0 && bandwidth_m <= 10, "bandwidth_m",
-          bandwidth_m, "in (0, 10] m");
+  // A millimetre is far below a voxel; the live setting (LiveSettings.cfg) has the same range.
+  require(std::isfinite(bandwidth_m) && bandwidth_m >= 0.001 && bandwidth_m <= 10, "bandwidth_m",
+          bandwidth_m, "in [0.001, 10] m");
   require(min_instance_voxels >= 0, "min_instance_voxels", min_instance_voxels, ">= 0");
   require(std::isfinite(min_vote_norm) && min_vote_norm >= 0, "min_vote_norm", min_vote_norm,
           "finite and >= 0");
