@@ -807,6 +807,7 @@ TEST(Cvae, BadModelFilesGiveClearErrors) {
   const std::string ms = message(shapes, nullptr);
   EXPECT_NE(ms.find(shapes), std::string::npos) << ms;
   EXPECT_NE(ms.find("shape"), std::string::npos) << ms;
+  EXPECT_NE(ms.find("tensor "), std::string::npos) << ms;  // it names the tensor
   fs::remove(shapes);
   fs::remove(path);
 }

@@ -73,9 +73,12 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
     const double age = (ros::Time::now() - scene->header.stamp).toSec();
     if (age > config_.max_scene_age_s) {
       res.message = "the latest scene on " + topic + " is " + number(age) +
-                    " s old (max_scene_age_s " + number(config_.max_scene_age_s) +
-                    "): is the perception still running? Send the scene in the request, or " +
-                    "raise ~max_scene_age_s (0: any age)";
+                    " s old (max_scene_age_s " + number(config_.max_scene_age_s) + "): " +
+                    (age > 86400.0 ? "a day or more apart: is one of this node and the scene's "
+                                     "publisher on simulated time (/use_sim_time) and the other "
+                                     "not? "
+                                   : "is the perception still running? ") +
+                    "Send the scene in the request, or raise ~max_scene_age_s (0: any age)";
       return false;
     }
   }

@@ -74,17 +74,10 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   diagnostics_.setHardwareID("simstack_perception " + pnh_.getNamespace());
   diagnostics_.add("perception", this, &PerceptionServer::diagnose);
   started_ = ros::WallTime::now();
-  // Both on the wall clock, so also while a bag is paused: the silence check once a second,
-  // /diagnostics once per ~diagnostic_period (read by diagnostic_updater; default 1 s).
+  // Read by diagnostic_updater (default 1 s, once, at start).
   const double period = diagnostics_.getPeriod();
-  if (!std::isfinite(period) || period <= 0.0)
-    throw std::runtime_error(pnh_.resolveName("diagnostic_period") +
-                             " must be a positive number of seconds");
-  silence_timer_ = nh_.createWallTimer(ros::WallDuration(1.0),
-                                       [this](const ros::WallTimerEvent&) { onWallTimer(); });
-  diagnostics_timer_ =
-      nh_.createWallTimer(ros::WallDuration(period),
-                          [this](const ros::WallTimerEvent&) { diagnostics_.force_update(); });
+  if (!(period >= 0.01 && period <= 3600.0))
+    throw std::runtime_error(pnh_.resolveName("diagnostic_period") + " must lie in [0.01, 3600] s");
   decompose_samples_ = perception_->config().decompose_samples;
   LiveSettingsConfig live = liveSettings(perception_->config());
   live.occupancy_min = node_.occupancy_min;
@@ -119,6 +112,14 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
            perception_->config().model_path.c_str(), perception_->config().samples,
            node_.estimate_table ? "estimated and broadcast as" : "from tf frame",
            node_.table_frame.c_str(), depth_sub_.getTopic().c_str());
+  // Both on the wall clock, so also while a bag is paused: the silence check once a second,
+  // /diagnostics once a period. Made after everything that may throw, so that no tick reaches
+  // an object whose construction failed.
+  silence_timer_ = nh_.createWallTimer(ros::WallDuration(1.0),
+                                       [this](const ros::WallTimerEvent&) { onWallTimer(); });
+  diagnostics_timer_ =
+      nh_.createWallTimer(ros::WallDuration(period),
+                          [this](const ros::WallTimerEvent&) { diagnostics_.force_update(); });
   // Last: from here the worker owns the pipeline (settings change between its frames), and
   // onFrame only fills the mailbox.
   worker_ = std::thread(&PerceptionServer::work, this);
@@ -135,6 +136,7 @@ PerceptionServer::~PerceptionServer() {
   if (worker_.joinable()) worker_.join();
   // Then nothing may call back into this object once its state starts going away (the timer
   // reads the subscriber's topic).
+  silence_timer_.stop();
   diagnostics_timer_.stop();
   depth_sub_.shutdown();
   mask_sub_.shutdown();

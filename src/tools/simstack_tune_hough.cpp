@@ -96,7 +96,7 @@ int main(int argc, char** argv) {
   values("--refinement", sweep.refinements, "fine cells per voxel to try", CLI::Range(1, 16));
   values("--min-traversals", sweep.traversals, "mu values to try", FiniteNonNegative);
   values("--bandwidth", sweep.bandwidths, "mean-shift radii to try (m)",
-         FinitePositive & CLI::Range(0.0, 10.0));
+         FinitePositive & CLI::Range(0.001, 10.0));
   values("--min-instance-voxels", sweep.min_voxels, "minimum instance sizes to try",
          FiniteNonNegative);
   values("--min-vote-norm", sweep.min_norms,

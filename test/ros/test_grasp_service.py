@@ -2,6 +2,7 @@
 """rostest node of test/ros/grasps.test: the grasp service on the replayed example bag."""
 import copy
 import math
+import time
 import unittest
 
 import rospy
@@ -49,9 +50,9 @@ class GraspService(unittest.TestCase):
             self.assertLessEqual(better.failed_share, worse.failed_share)
         for g in res.grasps:
             self.assertAlmostEqual(math.sqrt(g.approach.x ** 2 + g.approach.y ** 2 + g.approach.z ** 2), 1.0, 4)
-        deadline = rospy.Time.now() + rospy.Duration(10)
-        while not markers and rospy.Time.now() < deadline:
-            rospy.sleep(0.1)
+        deadline = time.time() + 10.0  # wall clock: the looping bag's clock jumps back
+        while not markers and time.time() < deadline:
+            time.sleep(0.1)
         sub.unregister()
         self.assertTrue(markers, "no ~grasps markers")
         arrows = [m for m in markers[-1].markers if m.ns == "grasps" and m.type == Marker.ARROW]
@@ -148,31 +149,39 @@ class GraspService(unittest.TestCase):
         self.assertIn("5 hypotheses asked for, the scene has 3", more.message)
 
     def test_6_a_stale_latest_scene_is_refused_and_a_fresh_one_ranked(self):
+        # Simulated time from the looping bag: its clock restarts at 1 s every few seconds, so
+        # waits here are on the wall clock (rospy.sleep raises when the clock jumps back).
         pub = rospy.Publisher("/camera/strict/objects", ObjectArray, queue_size=1, latch=True)
-        deadline = rospy.Time.now() + rospy.Duration(10)
-        while pub.get_num_connections() == 0 and rospy.Time.now() < deadline:
-            rospy.sleep(0.05)
+        deadline = time.time() + 10.0
+        while pub.get_num_connections() == 0 and time.time() < deadline:
+            time.sleep(0.05)
         self.assertGreater(pub.get_num_connections(), 0, "strict_grasps never subscribed")
 
-        def publish_and_rank(stamp):
-            scene = copy.deepcopy(self.scene)
-            scene.header.stamp = stamp
-            pub.publish(scene)
-            rospy.sleep(0.2)  # simulated time: the bag's clock, which starts at 1 s
-            return self.strict(request(candidates=4))
+        def rank_until(stamp_of, done):
+            """Publishes the scene stamped stamp_of() and asks again until done(answer)."""
+            answer = None
+            deadline = time.time() + 20.0
+            while time.time() < deadline:
+                scene = copy.deepcopy(self.scene)
+                scene.header.stamp = stamp_of()
+                pub.publish(scene)
+                time.sleep(0.1)
+                answer = self.strict(request(candidates=4))
+                if done(answer):
+                    break
+            return answer
 
-        # The bag's clock starts at 1 s, so a scene stamped near 0 is at least 1 s old.
-        stale = publish_and_rank(rospy.Time(0, 1000))
+        # The bag's clock never reads below 1 s, so a scene stamped near 0 is over 0.8 s old.
+        stale = rank_until(lambda: rospy.Time(0, 1000), lambda a: "s old" in a.message)
         self.assertFalse(stale.success, "a stale scene was ranked")
         self.assertIn("s old (max_scene_age_s 0.8)", stale.message)
-        fresh = publish_and_rank(rospy.Time.now())
+        fresh = rank_until(rospy.Time.now, lambda a: a.success)
         self.assertTrue(fresh.success, fresh.message)
         self.assertGreater(len(fresh.grasps), 0)
         # A scene brought by the request is ranked whatever its stamp.
         carried = copy.deepcopy(self.scene)
         carried.header.stamp = rospy.Time(0, 1000)
         self.assertTrue(self.strict(request(scene=carried, candidates=4)).success)
-
 
 if __name__ == "__main__":
     rostest.rosrun("simstack", "grasp_service", GraspService)
