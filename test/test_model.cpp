@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -1157,6 +1158,24 @@ TrainConfig tinyTraining(int steps) {
   return tc;
 }
 
+/// A tiny dataset of 3 scenes, three absent run directories `prefix`_a, _b and _c (all removed
+/// when the test ends), and a training of 4 steps with a checkpoint every 2.
+struct TrainingScratch {
+  explicit TrainingScratch(const std::string& prefix) : data(tinyDataset(3)), tc(tinyTraining(4)) {
+    tc.checkpoint_every = 2;
+    cleanup.paths.push_back(data);
+    for (size_t k = 0; k < dirs.size(); ++k) {
+      dirs[k] = tempPath(prefix + "_" + static_cast<char>('a' + k));
+      fs::remove_all(dirs[k]);
+      cleanup.paths.push_back(dirs[k]);
+    }
+  }
+  std::string data;
+  std::array<std::string, 3> dirs;
+  TrainConfig tc;
+  RemoveAtExit cleanup;
+};
+
 std::vector<std::string> lines(const std::string& path) {
   std::ifstream f(path);
   std::vector<std::string> out;
@@ -1209,13 +1228,10 @@ TEST(CvaeTrainer, ValidatesAModelFileAsARunDoes) {
 }
 
 TEST(CvaeTrainer, DeterministicResumableAndLogged) {
-  const std::string data = tinyDataset(3);
-  TrainConfig tc = tinyTraining(4);
-  tc.checkpoint_every = 2;
-  const std::string a = tempPath("simstack_train_a"), b = tempPath("simstack_train_b"),
-                    c = tempPath("simstack_train_c");
-  const RemoveAtExit cleanup{{a, b, c, data}};
-  for (const auto& d : {a, b, c}) fs::remove_all(d);
+  const TrainingScratch scratch("simstack_train");
+  const auto& [a, b, c] = scratch.dirs;
+  const std::string& data = scratch.data;
+  TrainConfig tc = scratch.tc;
   // Two fresh runs with one seed give the same weights.
   const TrainingReport ra = CvaeTrainer(data, tiny(), tc, a, "test").run(false);
   CvaeTrainer(data, tiny(), tc, b, "test").run(false);
@@ -1329,6 +1345,31 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("no checkpoint"), std::string::npos) << e.what();
   }
+}
+
+TEST(CvaeTrainer, ACheckpointIsOneFileThatOutlivesStaleSideFiles) {
+  // A kill while a checkpoint was saved used to be able to leave the network of one
+  // checkpoint with the optimizer and step of the one before. The checkpoint now holds all
+  // three: stale side files (state.yaml and optimizer.pt of step 2 beside step 4's network)
+  // change nothing.
+  const TrainingScratch scratch("simstack_ckpt");
+  const auto& [x, y, z] = scratch.dirs;
+  const std::string& data = scratch.data;
+  const TrainConfig& tc = scratch.tc;
+  TrainConfig half = tc;
+  half.steps = 2;
+  CvaeTrainer(data, tiny(), half, y, "test").run(false);
+  for (const auto& d : {x, z}) CvaeTrainer(data, tiny(), tc, d, "test").run(false);
+  EXPECT_FALSE(fs::exists(x + "/optimizer.pt"));
+  fs::copy_file(y + "/state.yaml", x + "/state.yaml", fs::copy_options::overwrite_existing);
+  torch::optim::Adam stale(Cvae(tiny())->parameters());
+  torch::save(stale, x + "/optimizer.pt");
+  TrainConfig longer = tc;
+  longer.steps = 6;
+  for (const auto& d : {x, z}) CvaeTrainer(data, tiny(), longer, d, "test").run(true);
+  EXPECT_TRUE(torch::equal(probe(x + "/model.pt"), probe(z + "/model.pt")));
+  EXPECT_EQ(lines(x + "/state.yaml").at(0), "step: 6");
+  EXPECT_FALSE(fs::exists(x + "/optimizer.pt")) << "the stale optimizer file stayed";
 }
 
 // A dataset that goes bad between two runs: the resumed run stops on its first training batch

@@ -128,7 +128,8 @@ int main(int argc, char** argv) {
       return 0;
     }
     // A forgotten --resume must not start over in a run's directory (its checkpoint lost).
-    if (!resume && std::filesystem::exists(std::filesystem::path(output) / "state.yaml"))
+    if (!resume && (std::filesystem::exists(std::filesystem::path(output) / "state.yaml") ||
+                    std::filesystem::exists(std::filesystem::path(output) / "checkpoint.pt")))
       throw std::runtime_error(output +
                                " holds a training run: --resume continues it; another --output "
                                "(or removing it) starts afresh");

@@ -208,8 +208,11 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
                          const torch::Tensor& tsdf, const torch::Tensor& votes,
                          const CvaeConfig& config, const torch::Tensor& vote_weight = {});
 
-/// Saves weights, buffers and the config (YAML) in one archive, plus `metadata` YAML text.
-void saveCvae(const std::string& path, Cvae& model, const std::string& metadata = "");
+/// Saves weights, buffers and the config (YAML) in one archive, plus `metadata` YAML text and
+/// whatever `extra` writes into the same archive (the trainer's checkpoint: optimizer and step).
+/// Written beside `path` and renamed into it: the file is whole or absent.
+void saveCvae(const std::string& path, Cvae& model, const std::string& metadata = "",
+              const std::function<void(torch::serialize::OutputArchive&)>& extra = {});
 /// Rebuilds a model from a file written by saveCvae. Throws std::runtime_error naming the file
 /// and the problem (missing, not a simstack model, config invalid or not matching `expect`).
 Cvae loadCvae(const std::string& path, const CvaeConfig* expect = nullptr,

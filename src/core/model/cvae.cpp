@@ -606,9 +606,11 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
   return l;
 }
 
-void saveCvae(const std::string& path, Cvae& model, const std::string& metadata) {
+void saveCvae(const std::string& path, Cvae& model, const std::string& metadata,
+              const std::function<void(torch::serialize::OutputArchive&)>& extra) {
   torch::serialize::OutputArchive archive;
   model->save(archive);
+  if (extra) extra(archive);
   archive.write("simstack_format", torch::IValue(kFormatVersion));
   archive.write("simstack_config", torch::IValue(model->config().toYaml()));
   archive.write("simstack_metadata", torch::IValue(metadata));

@@ -392,8 +392,23 @@ int64_t CvaeTrainer::Impl::restore(Cvae& model, torch::optim::Adam& optimizer,
                              "\nagainst\n" + mc.toYaml());
   }
   if (!same) std::cerr << "the checkpoint's loss settings are replaced by the config's\n";
-  if (fs::exists(optim_file)) torch::load(optimizer, optim_file.string());
-  const int64_t start = YAML::LoadFile((out / "state.yaml").string())["step"].as<int64_t>();
+  // The checkpoint holds its step and the optimizer's state; a run's checkpoint from before
+  // 2026-11-28 has them in state.yaml and optimizer.pt (absent: a fresh Adam state).
+  torch::serialize::InputArchive archive;
+  archive.load_from(checkpoint.string());
+  torch::IValue step;
+  torch::serialize::InputArchive adam;
+  int64_t start = 0;
+  if (archive.try_read("simstack_step", step) && archive.try_read("simstack_optimizer", adam)) {
+    optimizer.load(adam);
+    start = step.toInt();
+  } else {
+    if (!fs::exists(out / "state.yaml"))
+      throw std::runtime_error("checkpoint " + checkpoint.string() +
+                               " holds no step and there is no state.yaml beside it");
+    if (fs::exists(optim_file)) torch::load(optimizer, optim_file.string());
+    start = YAML::LoadFile((out / "state.yaml").string())["step"].as<int64_t>();
+  }
   torch::manual_seed(mix(config.seed, static_cast<uint64_t>(start)));
   std::cerr << "resuming from step " << start << " (" << checkpoint.string() << ")\n";
   return start;
@@ -569,10 +584,10 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   torch::set_num_threads(tc.threads);
   torch::manual_seed(tc.seed);
   const fs::path checkpoint = out / "checkpoint.pt";
-  const bool resuming = resume && fs::exists(checkpoint) && fs::exists(out / "state.yaml");
+  const bool resuming = resume && fs::exists(checkpoint);
   if (resume && !resuming)
     throw std::runtime_error("--resume: no checkpoint to resume in " + out.string() +
-                             " (checkpoint.pt and state.yaml); start without --resume");
+                             " (checkpoint.pt); start without --resume");
   Cvae model = impl_->loadOrCreate(resuming, checkpoint);
   torch::optim::Adam optimizer(model->parameters(), torch::optim::AdamOptions(tc.learning_rate));
   const int64_t start = resuming ? impl_->restore(model, optimizer, out) : 0;
@@ -580,21 +595,26 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   const TrainingSampleBuilder builder(mc, scaledKinect(tc.image_width, tc.image_height),
                                       tc.sensor_noise, tc.overhead_share);
   TrainingLog log(out / "train_log.csv", resume && start > 0, start);
-  // Each file is written beside its place and renamed into it, state.yaml last: a run stopped
-  // by an error or a kill leaves the previous checkpoint whole, never half of a new one.
+  // One file holds the network, the optimizer's state and the step, written beside its place
+  // and renamed into it: a run stopped by an error or a kill resumes from the previous
+  // checkpoint or from this one, never from parts of both. state.yaml repeats the step for
+  // people and scripts.
   auto save_checkpoint = [&](int64_t step) {
-    const fs::path model_tmp = out / "checkpoint.pt.tmp", optim_tmp = out / "optimizer.pt.tmp",
-                   state_tmp = out / "state.yaml.tmp";
-    saveCvae(model_tmp.string(), model);
-    torch::save(optimizer, optim_tmp.string());
+    log.flush();
+    saveCvae(checkpoint.string(), model, "", [&](torch::serialize::OutputArchive& archive) {
+      torch::serialize::OutputArchive adam;
+      optimizer.save(adam);
+      archive.write("simstack_optimizer", adam);
+      archive.write("simstack_step", torch::IValue(step));
+    });
+    std::error_code ignored;
+    fs::remove(out / "optimizer.pt", ignored);  // a run's from before 2026-11-28, now stale
+    const fs::path state_tmp = out / "state.yaml.tmp";
     {
       std::ofstream state(state_tmp.string());
       state << "step: " << step << "\n";
       if (!state.flush()) throw std::runtime_error("cannot write " + state_tmp.string());
     }
-    log.flush();
-    fs::rename(model_tmp, checkpoint);
-    fs::rename(optim_tmp, out / "optimizer.pt");
     fs::rename(state_tmp, out / "state.yaml");
   };
 
