@@ -1372,6 +1372,19 @@ TEST(CvaeTrainer, ACheckpointIsOneFileThatOutlivesStaleSideFiles) {
   EXPECT_FALSE(fs::exists(x + "/optimizer.pt")) << "the stale optimizer file stayed";
 }
 
+TEST(CvaeTrainer, HowOftenARunValidatesDoesNotChangeWhatItTrains) {
+  // Validation draws the posterior's noise from torch's global stream; it leaves the stream
+  // as it found it.
+  const TrainingScratch scratch("simstack_validate_every");
+  const auto& [often, rarely, unused] = scratch.dirs;
+  TrainConfig tc = scratch.tc;
+  tc.steps = 6;
+  CvaeTrainer(scratch.data, tiny(), tc, often, "test").run(false);  // validates at 2, 4, 6
+  tc.validate_every = 3;
+  CvaeTrainer(scratch.data, tiny(), tc, rarely, "test").run(false);  // at 3, 6
+  EXPECT_TRUE(torch::equal(probe(often + "/model.pt"), probe(rarely + "/model.pt")));
+}
+
 // A dataset that goes bad between two runs: the resumed run stops on its first training batch
 // with the file's name in the message, and the checkpoint it started from stays whole.
 TEST(CvaeTrainer, AFailedReadKeepsTheLastCheckpoint) {

@@ -475,8 +475,33 @@ double scoreValidationView(Cvae& model, const CvaeConfig& mc, const TrainingSamp
 
 // Validation set: `validation_views` fixed views per held-out scene, `validation_samples` codes
 // each. Besides IoU and BCE it measures whether the latent space is used (scoreValidationView).
+namespace {
+
+/// Keeps torch's global generator as it was for the guard's lifetime: validation draws the
+/// posterior's noise from it, and training must not depend on how often a run validates.
+class GlobalGeneratorGuard {
+ public:
+  GlobalGeneratorGuard() : generator_(at::detail::getDefaultCPUGenerator()) {
+    std::lock_guard<std::mutex> lock(generator_.mutex());
+    state_ = generator_.get_state();
+  }
+  ~GlobalGeneratorGuard() {
+    std::lock_guard<std::mutex> lock(generator_.mutex());
+    generator_.set_state(state_);
+  }
+  GlobalGeneratorGuard(const GlobalGeneratorGuard&) = delete;
+  GlobalGeneratorGuard& operator=(const GlobalGeneratorGuard&) = delete;
+
+ private:
+  at::Generator generator_;
+  at::Tensor state_;
+};
+
+}  // namespace
+
 void CvaeTrainer::Impl::validate(Cvae& model, const TrainingSampleBuilder& builder,
                                  TrainingReport* report) const {
+  const GlobalGeneratorGuard keep_training_stream;
   model->eval();
   torch::NoGradGuard no_grad;
   const int n = reader->size();
