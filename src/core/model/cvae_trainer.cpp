@@ -471,12 +471,6 @@ double scoreValidationView(Cvae& model, const CvaeConfig& mc, const TrainingSamp
   return sc.iou;
 }
 
-}  // namespace
-
-// Validation set: `validation_views` fixed views per held-out scene, `validation_samples` codes
-// each. Besides IoU and BCE it measures whether the latent space is used (scoreValidationView).
-namespace {
-
 /// Keeps torch's global generator as it was for the guard's lifetime: validation draws the
 /// posterior's noise from it, and training must not depend on how often a run validates.
 class GlobalGeneratorGuard {
@@ -499,6 +493,8 @@ class GlobalGeneratorGuard {
 
 }  // namespace
 
+// Validation set: `validation_views` fixed views per held-out scene, `validation_samples` codes
+// each. Besides IoU and BCE it measures whether the latent space is used (scoreValidationView).
 void CvaeTrainer::Impl::validate(Cvae& model, const TrainingSampleBuilder& builder,
                                  TrainingReport* report) const {
   const GlobalGeneratorGuard keep_training_stream;
