@@ -127,6 +127,10 @@ class CvaeImpl : public torch::nn::Module {
   CvaeOutput generate(const torch::Tensor& partial, const torch::Tensor& z);
   /// Decodes exactly the codes z (no prior applied): a posterior code, or an optimised one.
   CvaeOutput decodeCodes(const torch::Tensor& partial, const torch::Tensor& z);
+  /// The posterior's mean code [B, latent] for the truth (tsdf, votes) seen as `partial`; draws
+  /// nothing. A model with a code only.
+  torch::Tensor posteriorMean(const torch::Tensor& partial, const torch::Tensor& tsdf,
+                              const torch::Tensor& votes);
   /// The condition's feature maps, finest first: encode once, then generateFrom() any codes.
   std::vector<torch::Tensor> encodeCondition(const torch::Tensor& partial);
   /// generate() with the condition already encoded.
@@ -138,6 +142,10 @@ class CvaeImpl : public torch::nn::Module {
 
  private:
   torch::Tensor decodeCondition(const torch::Tensor& features);
+  /// The posterior N(mu, exp(logvar)) of (tsdf, votes) given the condition's maps.
+  std::pair<torch::Tensor, torch::Tensor> encodePosterior(const std::vector<torch::Tensor>& cond,
+                                                          const torch::Tensor& tsdf,
+                                                          const torch::Tensor& votes);
   /// `z` is undefined for the FC baseline; with latent_injection "every_scale" it is added, as
   /// projected per-channel offsets, before each joint block.
   CvaeOutput decode(const torch::Tensor& bottleneck, const std::vector<torch::Tensor>& cond,

@@ -375,6 +375,23 @@ CvaeOutput CvaeImpl::decode(const torch::Tensor& bottleneck, const std::vector<t
   return out;
 }
 
+std::pair<torch::Tensor, torch::Tensor> CvaeImpl::encodePosterior(
+    const std::vector<torch::Tensor>& cond, const torch::Tensor& tsdf, const torch::Tensor& votes) {
+  torch::Tensor x =
+      torch::cat({enc_tsdf2(enc_tsdf1(tsdf)), enc_votes2(enc_votes1(votes)), cond[0]}, 1);
+  for (int i = 0; i < 5; ++i) {
+    x = enc_joint_[i](x);
+    if (i < 4) x = torch::cat({x, cond[i + 1]}, 1);
+  }
+  return {enc_mu(x.flatten(1)), enc_logvar(x.flatten(1)).clamp(-10.0, 10.0)};
+}
+
+torch::Tensor CvaeImpl::posteriorMean(const torch::Tensor& partial, const torch::Tensor& tsdf,
+                                      const torch::Tensor& votes) {
+  if (!config_.hasLatentCode()) throw std::invalid_argument("posteriorMean: the model has no code");
+  return encodePosterior(encodeCondition(partial), tsdf, votes).first;
+}
+
 CvaeOutput CvaeImpl::forward(const torch::Tensor& partial, const torch::Tensor& tsdf,
                              const torch::Tensor& votes) {
   const std::vector<torch::Tensor> cond = encodeCondition(partial);
@@ -384,14 +401,7 @@ CvaeOutput CvaeImpl::forward(const torch::Tensor& partial, const torch::Tensor& 
     out.partial_recon = partial_recon;
     return out;
   }
-  torch::Tensor x =
-      torch::cat({enc_tsdf2(enc_tsdf1(tsdf)), enc_votes2(enc_votes1(votes)), cond[0]}, 1);
-  for (int i = 0; i < 5; ++i) {
-    x = enc_joint_[i](x);
-    if (i < 4) x = torch::cat({x, cond[i + 1]}, 1);
-  }
-  const torch::Tensor mu = enc_mu(x.flatten(1));
-  const torch::Tensor logvar = enc_logvar(x.flatten(1)).clamp(-10.0, 10.0);
+  const auto [mu, logvar] = encodePosterior(cond, tsdf, votes);
   // best_of codes per scene, scene-major (scene i's are rows i k ... i k + k - 1).
   const int64_t k = is_training() ? config_.best_of : 1;
   std::vector<torch::Tensor> decode_cond = cond;
@@ -606,6 +616,18 @@ CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
   return l;
 }
 
+namespace {
+
+/// Every parameter and buffer of the model by name (handles to the model's own tensors).
+std::map<std::string, torch::Tensor> namedTensors(Cvae& model) {
+  std::map<std::string, torch::Tensor> out;
+  for (const auto& p : model->named_parameters()) out[p.key()] = p.value();
+  for (const auto& b : model->named_buffers()) out[b.key()] = b.value();
+  return out;
+}
+
+}  // namespace
+
 void saveCvae(const std::string& path, Cvae& model, const std::string& metadata,
               const std::function<void(torch::serialize::OutputArchive&)>& extra) {
   torch::serialize::OutputArchive archive;
@@ -664,40 +686,33 @@ Cvae loadCvae(const std::string& path, const CvaeConfig* expect, std::string* me
   // Module::load takes each stored tensor as it is, whatever its shape: compare with the shapes
   // the config builds, so that a mismatched file fails here and not in the first forward pass.
   std::map<std::string, std::vector<int64_t>> built;
-  for (const auto& p : model->named_parameters()) built[p.key()] = p.value().sizes().vec();
-  for (const auto& b : model->named_buffers()) built[b.key()] = b.value().sizes().vec();
+  for (const auto& [name, t] : namedTensors(model)) built[name] = t.sizes().vec();
   try {
     model->load(archive);
   } catch (const c10::Error& e) {
     throw std::runtime_error("model file " + path +
                              ": weights do not match its config: " + e.what_without_backtrace());
   }
-  auto check = [&](const std::string& name, const torch::Tensor& t) {
-    if (t.sizes().vec() != built.at(name)) {
+  for (const auto& [name, t] : namedTensors(model))
+    if (t.sizes().vec() != built.at(name))
       throw std::runtime_error("model file " + path + ": tensor " + name + " has shape " +
                                c10::str(t.sizes()) + " but its config builds " +
                                c10::str(c10::IntArrayRef(built.at(name))));
-    }
-  };
-  for (const auto& p : model->named_parameters()) check(p.key(), p.value());
-  for (const auto& b : model->named_buffers()) check(b.key(), b.value());
   if (metadata && archive.try_read("simstack_metadata", meta)) *metadata = meta.toStringRef();
   return model;
 }
 
 std::vector<std::string> warmStartCvae(Cvae& model, const std::string& path) {
   Cvae source = loadCvae(path);
-  std::map<std::string, torch::Tensor> from;
-  for (const auto& p : source->named_parameters()) from[p.key()] = p.value();
-  for (const auto& b : source->named_buffers()) from[b.key()] = b.value();
+  const std::map<std::string, torch::Tensor> from = namedTensors(source);
   std::vector<std::string> fresh;
   size_t copied = 0;
   torch::NoGradGuard no_grad;
-  auto take = [&](const std::string& name, torch::Tensor& to) {
+  for (auto& [name, to] : namedTensors(model)) {
     const auto it = from.find(name);
     if (it == from.end()) {
       fresh.push_back(name);
-      return;
+      continue;
     }
     if (it->second.sizes() != to.sizes()) {
       throw std::runtime_error("warm start from " + path + ": tensor " + name + " has shape " +
@@ -706,9 +721,7 @@ std::vector<std::string> warmStartCvae(Cvae& model, const std::string& path) {
     }
     to.copy_(it->second);
     ++copied;
-  };
-  for (auto& p : model->named_parameters()) take(p.key(), p.value());
-  for (auto& b : model->named_buffers()) take(b.key(), b.value());
+  }
   if (copied == 0)
     throw std::runtime_error("warm start from " + path +
                              ": the file shares no tensor with this network");

@@ -454,8 +454,9 @@ double scoreValidationView(Cvae& model, const CvaeConfig& mc, const TrainingSamp
   sums->best += best;
   if (mc.hasLatentCode()) {
     // The code the encoder gives when it sees the ground truth (posterior mean): better than
-    // prior codes only when the code carries what the view does not show.
-    const torch::Tensor mu = model->forward(b.partial, b.tsdf, b.votes).mu;
+    // prior codes only when the code carries what the view does not show. Drawn from no
+    // stream: how often a run validates must not change what it trains.
+    const torch::Tensor mu = model->posteriorMean(b.partial, b.tsdf, b.votes);
     sums->posterior +=
         scoreOccupancy(s.tsdf, {values(model->decodeCodes(b.partial, mu).tsdf[0])}).iou;
   }
@@ -471,33 +472,12 @@ double scoreValidationView(Cvae& model, const CvaeConfig& mc, const TrainingSamp
   return sc.iou;
 }
 
-/// Keeps torch's global generator as it was for the guard's lifetime: validation draws the
-/// posterior's noise from it, and training must not depend on how often a run validates.
-class GlobalGeneratorGuard {
- public:
-  GlobalGeneratorGuard() : generator_(at::detail::getDefaultCPUGenerator()) {
-    std::lock_guard<std::mutex> lock(generator_.mutex());
-    state_ = generator_.get_state();
-  }
-  ~GlobalGeneratorGuard() {
-    std::lock_guard<std::mutex> lock(generator_.mutex());
-    generator_.set_state(state_);
-  }
-  GlobalGeneratorGuard(const GlobalGeneratorGuard&) = delete;
-  GlobalGeneratorGuard& operator=(const GlobalGeneratorGuard&) = delete;
-
- private:
-  at::Generator generator_;
-  at::Tensor state_;
-};
-
 }  // namespace
 
 // Validation set: `validation_views` fixed views per held-out scene, `validation_samples` codes
 // each. Besides IoU and BCE it measures whether the latent space is used (scoreValidationView).
 void CvaeTrainer::Impl::validate(Cvae& model, const TrainingSampleBuilder& builder,
                                  TrainingReport* report) const {
-  const GlobalGeneratorGuard keep_training_stream;
   model->eval();
   torch::NoGradGuard no_grad;
   const int n = reader->size();
