@@ -74,6 +74,35 @@ TEST(SurfaceDistance, IsTheRaysDeepInsideABoxLikeShape) {
   }
 }
 
+// The fitter's root search on the ray (a few steps from the point itself) must land on the
+// surface that SuperquadricShape::surfacePointAlong finds by its own search, for exponents that
+// differ by up to a hundredfold and points from near the centre to far outside.
+TEST(SurfaceDistance, IsTheRaysForMixedExponentsNearAndFar) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  std::normal_distribution<double> normal;
+  int checked = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    Vec3 scale, exponents, direction;
+    for (int i = 0; i < 3; ++i) {
+      scale[i] = 0.005 * std::pow(40.0, unit(rng));  // 5 mm to 20 cm
+      exponents[i] = std::pow(100.0, unit(rng));     // 1 to 100
+      direction[i] = normal(rng);
+    }
+    const SuperquadricShape sq = makeShape(scale, exponents, Vec3(0.1, -0.2, 0.3),
+                                           Vec3(normal(rng), normal(rng), normal(rng)), 2.0);
+    const Vec3 surface = sq.surfacePointAlong(direction.normalized());
+    for (double share : {0.02, 0.5, 0.95, 1.05, 2.0, 20.0}) {
+      const Vec3 p = sq.T_table_object * (share * surface);
+      ASSERT_NEAR(surfaceDistance(sq, p), (share - 1.0) * surface.norm(), 1e-9)
+          << "scale " << scale.transpose() << ", exponents " << exponents.transpose() << ", "
+          << share << " of the way out";
+      ++checked;
+    }
+  }
+  EXPECT_EQ(checked, 1800);
+}
+
 TEST(SurfaceDistance, StaysFiniteForExtremeExponentsAndScales) {
   // Exponents 1 and 100 with a 5 mm axis: |q/a|^e spans 1e-200..1e178 (a NaN in the evaluation
   // runs before the distance was computed in logs).

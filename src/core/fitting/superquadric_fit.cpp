@@ -76,9 +76,9 @@ T logSumExp(const T* log_w, const T* e, const T& mu, T* slope, T* shares = nullp
 }
 
 /// The ray's root on plain numbers: mu = log(lambda) where h(mu) = log sum_i |q_i/a_i|^e_i
-/// exp(mu e_i) = 0, by Newton on the convex log-sum-exp from the equal-exponent solution until
-/// |h| < 1e-13 (at once for equal exponents) or 8 steps; with h, its slope and the terms' shares
-/// at the last mu.
+/// exp(mu e_i) = 0, by Halley's method on the convex log-sum-exp from mu = 0 (the point itself:
+/// the fit's points lie near the surface) until |h| < 1e-13 (one step for equal exponents) or 8
+/// steps; with h, its slope and the terms' shares at the last mu.
 struct RayRoot {
   double mu, value, slope, shares[3];
 };
@@ -88,13 +88,34 @@ struct RayRoot {
 /// log f is hundreds below zero; everything stays in logs, so that is no limit.
 std::optional<RayRoot> rayRoot(const double* log_w, const double* e, double norm) {
   if (norm < 1e-7) return std::nullopt;
-  const double log_f = logSumExp(log_w, e, 0.0, static_cast<double*>(nullptr));
   RayRoot r;
-  r.mu = -log_f / ((e[0] + e[1] + e[2]) / 3.0);
+  r.mu = 0.0;
   for (int it = 0;; ++it) {
-    r.value = logSumExp(log_w, e, r.mu, &r.slope, r.shares);
+    // The three terms, the largest exactly 1 (no exponential for it).
+    double terms[3];
+    int top = 0;
+    for (int i = 0; i < 3; ++i) {
+      terms[i] = log_w[i] + r.mu * e[i];
+      if (terms[i] > terms[top]) top = i;
+    }
+    double sum = 0.0, m1 = 0.0, m2 = 0.0;
+    for (int i = 0; i < 3; ++i) {
+      const double w = i == top ? 1.0 : std::exp(terms[i] - terms[top]);
+      r.shares[i] = w;
+      sum += w;
+      m1 += e[i] * w;
+      m2 += e[i] * e[i] * w;
+    }
+    for (double& share : r.shares) share /= sum;
+    r.value = terms[top] + std::log(sum);
+    r.slope = m1 / sum;
     if (std::abs(r.value) < 1e-13 || it == 8) return r;
-    r.mu -= r.value / r.slope;
+    // Halley's step (h'' is the terms' variance of e), or Newton's where Halley's would be
+    // more than twice as long (far outside, where h is nearly linear but h h'' is large).
+    const double curvature = std::max(0.0, m2 / sum - r.slope * r.slope);
+    const double denominator = 2.0 * r.slope * r.slope - r.value * curvature;
+    r.mu -=
+        denominator > r.slope * r.slope ? 2.0 * r.value * r.slope / denominator : r.value / r.slope;
   }
 }
 
