@@ -55,6 +55,8 @@ class PerceptionServer {
   /// The frame as a DepthView with its table pose (std::nullopt pose with estimate_table);
   /// false, with the reason, when the frame must be skipped.
   bool toView(const Frame& frame, DepthView* view, std::string* why);
+  /// Whether the destructor has asked the worker to end (takes mutex_).
+  bool stopRequested();
   void publish(const Frame& frame, const DepthView& view, const SceneEstimate& estimate, int views);
   void skip(const Frame& frame, const std::string& why);
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);

@@ -15,7 +15,9 @@ int main(int argc, char** argv) {
     ROS_FATAL("simstack grasp_server: %s", e.what());
     return 1;
   }
-  ros::AsyncSpinner spinner(2);  // scenes keep arriving while a ranking runs
+  // The service's: a second request waits for the ranking in progress, not behind it in the
+  // queue. Scenes come on a thread of the server's own.
+  ros::AsyncSpinner spinner(2);
   spinner.start();
   ros::waitForShutdown();
   return 0;

@@ -40,12 +40,25 @@ std::string badIds(const ObjectArray& scene) {
 
 GraspServer::GraspServer(ros::NodeHandle nh, ros::NodeHandle pnh)
     : nh_(nh), pnh_(pnh), config_(graspServerConfigFromParams(pnh)) {
-  objects_sub_ = nh_.subscribe(config_.objects_topic, 1, &GraspServer::onObjects, this);
+  // Scenes on a queue and thread of their own: a request waiting for the ranking in progress
+  // holds one of the service's threads, and with the scenes on that queue, the newest scene
+  // would wait behind it and the request rank the one from before the ranking it waited for.
+  ros::SubscribeOptions scenes = ros::SubscribeOptions::create<ObjectArray>(
+      config_.objects_topic, 1, [this](const ObjectArray::ConstPtr& msg) { onObjects(msg); },
+      ros::VoidPtr(), &scene_queue_);
+  objects_sub_ = nh_.subscribe(scenes);
+  scene_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &scene_queue_);
+  scene_spinner_->start();
   markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("grasps", 1, true);
   rank_srv_ = pnh_.advertiseService("rank_grasps", &GraspServer::rank, this);
   ROS_INFO("simstack grasp_server: scenes from %s, ~rank_grasps ready (%d candidates, %d threads)",
            nh_.resolveName(config_.objects_topic).c_str(), config_.max_candidates,
            config_.ranking.threads);
+}
+
+GraspServer::~GraspServer() {
+  scene_spinner_->stop();  // joins its thread: no scene callback runs past this line
+  objects_sub_.shutdown();
 }
 
 void GraspServer::onObjects(const ObjectArray::ConstPtr& msg) {

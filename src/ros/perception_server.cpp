@@ -62,6 +62,11 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
       // one manager must not report under one name); ~diagnostic_period is read from pnh.
       diagnostics_(nh, pnh, pnh.getNamespace()),
       rate_since_(ros::WallTime::now()) {
+  // Read by diagnostic_updater (default 1 s, once, at start); checked before anything is
+  // advertised, so that a refused node offers no service that could call into it.
+  const double period = diagnostics_.getPeriod();
+  if (!(period >= 0.01 && period <= 3600.0))
+    throw std::runtime_error(pnh_.resolveName("diagnostic_period") + " must lie in [0.01, 3600] s");
   // Latched: a grasp client or rviz that starts later still gets the last scene.
   objects_pub_ = pnh_.advertise<ObjectArray>("objects", 1, true);
   instances_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("instances", 1);
@@ -74,10 +79,6 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   diagnostics_.setHardwareID("simstack_perception " + pnh_.getNamespace());
   diagnostics_.add("perception", this, &PerceptionServer::diagnose);
   started_ = ros::WallTime::now();
-  // Read by diagnostic_updater (default 1 s, once, at start).
-  const double period = diagnostics_.getPeriod();
-  if (!(period >= 0.01 && period <= 3600.0))
-    throw std::runtime_error(pnh_.resolveName("diagnostic_period") + " must lie in [0.01, 3600] s");
   decompose_samples_ = perception_->config().decompose_samples;
   LiveSettingsConfig live = liveSettings(perception_->config());
   live.occupancy_min = node_.occupancy_min;
@@ -217,16 +218,33 @@ bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* 
   }
   if (node_.estimate_table) return true;  // the pipeline fits the plane
   const std::string camera_frame = frame.image->header.frame_id;
+  const ros::Time stamp = frame.image->header.stamp;
+  // Waited for on the wall clock: tf2's own timeout counts ros::Time, which stands still while
+  // a replayed bag is paused or before its /clock starts, and the worker (and a nodelet's
+  // unload, which joins it) would wait for the bag. The wait also ends when the node stops.
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(node_.tf_timeout_s);
+  std::string error;
+  while (!tf_buffer_.canTransform(node_.table_frame, camera_frame, stamp, &error)) {
+    if (ros::WallTime::now() >= deadline || stopRequested()) {
+      *why = "no transform " + node_.table_frame + " <- '" + camera_frame + "' within " +
+             std::to_string(node_.tf_timeout_s) + " s (wall clock): " + error;
+      return false;
+    }
+    ros::WallDuration(0.005).sleep();
+  }
   try {
-    const geometry_msgs::TransformStamped t =
-        tf_buffer_.lookupTransform(node_.table_frame, camera_frame, frame.image->header.stamp,
-                                   ros::Duration(node_.tf_timeout_s));
-    view->T_table_camera = tf2::transformToEigen(t);
+    view->T_table_camera =
+        tf2::transformToEigen(tf_buffer_.lookupTransform(node_.table_frame, camera_frame, stamp));
   } catch (const tf2::TransformException& e) {
     *why = "no transform " + node_.table_frame + " <- '" + camera_frame + "': " + e.what();
     return false;
   }
   return true;
+}
+
+bool PerceptionServer::stopRequested() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return stop_;
 }
 
 void PerceptionServer::onSettings(LiveSettingsConfig& settings, uint32_t) {
@@ -261,6 +279,14 @@ void PerceptionServer::applySettings() {
   // What is in effect (a refused value, or an FC model's single sample) shown back.
   LiveSettingsConfig shown = liveSettings(perception_->config());
   shown.occupancy_min = s->occupancy_min;
+  // Not over a change that came in meanwhile (it is applied, and shown, at the next frame).
+  // The reconfigure server's lock, then mutex_ (the order of its callback, onSettings), keeps
+  // a change from landing between the check and the update.
+  boost::recursive_mutex::scoped_lock shown_lock(reconfigure_mutex_);
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (pending_settings_) return;
+  }
   reconfigure_->updateConfig(shown);
 }
 

@@ -2,6 +2,7 @@
 """rostest node of test/ros/grasps.test: the grasp service on the replayed example bag."""
 import copy
 import math
+import threading
 import time
 import unittest
 
@@ -182,6 +183,49 @@ class GraspService(unittest.TestCase):
         carried = copy.deepcopy(self.scene)
         carried.header.stamp = rospy.Time(0, 1000)
         self.assertTrue(self.strict(request(scene=carried, candidates=4)).success)
+    def test_7_a_scene_that_comes_during_a_ranking_is_the_next_requests(self):
+        # A request that waits for the ranking in progress ranks the newest scene, also one that
+        # came while it waited (the server's scenes do not queue behind its service threads).
+        busy = rospy.ServiceProxy("/camera/busy_grasps/rank_grasps", RankGrasps)
+        rospy.wait_for_service("/camera/busy_grasps/rank_grasps", timeout=60)
+        pub = rospy.Publisher("/camera/busy/objects", ObjectArray, queue_size=1, latch=True)
+        deadline = time.time() + 10.0
+        while pub.get_num_connections() == 0 and time.time() < deadline:
+            time.sleep(0.05)
+        self.assertGreater(pub.get_num_connections(), 0, "busy_grasps never subscribed")
+        first = copy.deepcopy(self.scene)
+        pub.publish(first)
+        deadline = time.time() + 10.0
+        while not busy(request(candidates=4)).success and time.time() < deadline:
+            time.sleep(0.1)
+        later = copy.deepcopy(self.scene)
+        for o in later.objects:
+            o.id += 1000
+        answers = {}
+
+        def ask(name, req):
+            answers[name] = busy(req)
+
+        # Slow pulls (30 s simulated each: several seconds in all), on a scene carried in the
+        # request.
+        slow = threading.Thread(target=ask, args=("slow", request(
+            scene=first, candidates=256, pull_distance_m=0.3, pull_speed_mps=0.01)))
+        slow.start()
+        time.sleep(0.5)
+        waiting = threading.Thread(target=ask, args=("waiting", request(
+            target_id=later.objects[0].id, candidates=4)))
+        waiting.start()
+        time.sleep(0.5)
+        pub.publish(later)
+        time.sleep(1.0)
+        still_ranking = slow.is_alive()
+        slow.join(240)
+        waiting.join(240)
+        self.assertTrue(still_ranking, "the slow ranking ended before the new scene came (%.1f s)"
+                        % answers["slow"].time_s)
+        self.assertTrue(answers["slow"].success, answers["slow"].message)
+        self.assertTrue(answers["waiting"].success, answers["waiting"].message)
+        self.assertGreater(len(answers["waiting"].grasps), 0)
 
 if __name__ == "__main__":
     rostest.rosrun("simstack", "grasp_service", GraspService)

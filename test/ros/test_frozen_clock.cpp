@@ -1,0 +1,121 @@
+// rostest (test/ros/frozen_clock.test): perception nodelets on simulated time whose /clock
+// stands still, as while a replayed bag is paused. tf2's own lookup timeout counts simulated
+// time, so a wait for a missing transform never ended there, and unloading the nodelet (which
+// joins its worker) hung with it.
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <gtest/gtest.h>
+#include <nodelet/NodeletUnload.h>
+#include <ros/ros.h>
+#include <rosgraph_msgs/Clock.h>
+
+#include <functional>
+#include <future>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+
+#include "simstack_ros/conversions.h"
+
+namespace simstack {
+namespace {
+
+/// Polls `done` on the wall clock (simulated time stands still here) for up to `seconds`.
+bool waitWall(const std::function<bool()>& done, double seconds) {
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(seconds);
+  while (!done()) {
+    if (ros::WallTime::now() > end) return false;
+    ros::WallDuration(0.02).sleep();
+  }
+  return true;
+}
+
+TEST(FrozenClock, AMissingTransformIsReportedAndAWaitingNodeletUnloads) {
+  ros::NodeHandle nh;
+  ros::Publisher clock = nh.advertise<rosgraph_msgs::Clock>("/clock", 1, true);
+  rosgraph_msgs::Clock now;
+  now.clock = ros::Time(100.0);
+  clock.publish(now);
+
+  std::mutex mutex;
+  std::string quick_status;
+  ros::Subscriber diagnostics = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 50, [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& msg) {
+        for (const auto& s : msg->status)
+          if (s.name.rfind("quick/perception:", 0) == 0) {  // named without the leading slash
+            std::lock_guard<std::mutex> lock(mutex);
+            quick_status = s.message;
+          }
+      });
+
+  // A 1 m flat view from a camera frame that tf has never heard of.
+  PinholeCamera camera;
+  camera.width = 160;
+  camera.height = 120;
+  camera.fx = camera.fy = 130.0;
+  camera.cx = 79.5;
+  camera.cy = 59.5;
+  DepthImage depth(camera.width, camera.height, 1.0f);
+  std_msgs::Header header;
+  header.stamp = now.clock;
+  header.frame_id = "lost_camera";
+  std::vector<ros::Publisher> publishers;
+  for (const char* ns : {"/quick", "/patient"}) {
+    publishers.push_back(
+        nh.advertise<sensor_msgs::Image>(std::string(ns) + "/depth/image_rect", 1, true));
+    publishers.push_back(
+        nh.advertise<sensor_msgs::CameraInfo>(std::string(ns) + "/depth/camera_info", 1, true));
+  }
+  ASSERT_TRUE(waitWall(
+      [&] {
+        for (const ros::Publisher& p : publishers)
+          if (p.getNumSubscribers() == 0) return false;
+        return true;
+      },
+      60.0))
+      << "the nodelets never subscribed";
+  for (size_t i = 0; i < publishers.size(); i += 2) {
+    publishers[i].publish(depthImageMsg(header, depth));
+    publishers[i + 1].publish(cameraInfoMsg(header, camera));
+  }
+
+  // tf_timeout_s 0.5 counted on the wall clock: the skip is reported (diagnostics come on a wall
+  // timer, once a second).
+  std::string last_status;
+  const bool reported = waitWall(
+      [&] {
+        std::lock_guard<std::mutex> lock(mutex);
+        last_status = quick_status;
+        return last_status.find("no transform") != std::string::npos;
+      },
+      15.0);
+  EXPECT_TRUE(reported) << "the missing transform was never reported; last status: '" << last_status
+                        << "'";
+
+  // The other nodelet (tf_timeout_s 10) is still waiting for its transform: unloading it must
+  // end the wait instead of waiting for the clock. A thread of its own, left behind if it hangs.
+  auto answered = std::make_shared<std::promise<bool>>();
+  std::future<bool> answer = answered->get_future();
+  std::thread([answered] {
+    nodelet::NodeletUnload unload;
+    unload.request.name = "/patient/perception";
+    const bool called = ros::service::call("/manager/unload_nodelet", unload);
+    answered->set_value(called && unload.response.success);
+  }).detach();
+  ASSERT_EQ(answer.wait_for(std::chrono::seconds(5)), std::future_status::ready)
+      << "unloading a nodelet that waits for tf hangs while /clock stands still";
+  EXPECT_TRUE(answer.get());
+}
+
+}  // namespace
+}  // namespace simstack
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_frozen_clock");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  const int failed = RUN_ALL_TESTS();
+  ros::shutdown();
+  return failed;
+}
