@@ -82,7 +82,7 @@ TEST(SurfaceDistance, IsTheRaysForMixedExponentsNearAndFar) {
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   std::normal_distribution<double> normal;
   int checked = 0;
-  for (int trial = 0; trial < 300; ++trial) {
+  for (int trial = 0; trial < 3000; ++trial) {
     Vec3 scale, exponents, direction;
     for (int i = 0; i < 3; ++i) {
       scale[i] = 0.005 * std::pow(40.0, unit(rng));  // 5 mm to 20 cm
@@ -100,7 +100,13 @@ TEST(SurfaceDistance, IsTheRaysForMixedExponentsNearAndFar) {
       ++checked;
     }
   }
-  EXPECT_EQ(checked, 1800);
+  EXPECT_EQ(checked, 18000);
+  // A point inside a shape of very unequal exponents from which Halley's steps alone cycle
+  // between two iterates (the search then ended 0.17 m off).
+  const SuperquadricShape sq =
+      makeShape(Vec3(0.0122, 0.102, 0.0076), Vec3(76, 2.15, 86), Vec3::Zero(), Vec3::UnitZ(), 0.0);
+  const Vec3 p(0.004, -0.003, -0.0019);
+  EXPECT_NEAR(surfaceDistance(sq, p), p.norm() - sq.surfacePointAlong(p.normalized()).norm(), 1e-9);
 }
 
 TEST(SurfaceDistance, StaysFiniteForExtremeExponentsAndScales) {

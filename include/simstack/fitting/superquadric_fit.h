@@ -6,7 +6,7 @@
 ///
 /// Distance: the paper's d = |OP| (f - 1) / f saturates for box-like shapes (f grows like
 /// distance^exponent), so a point 10 % outside a box of exponent 20 reads as 85 % of |OP|.
-/// `surfaceDistance` solves f(lambda P) = 1 along the same ray instead (a few Newton steps on
+/// `surfaceDistance` solves f(lambda P) = 1 along the same ray instead (a few Halley steps on
 /// log f, differentiable), giving d = |OP| (1 - lambda): the same sign and zero set, and metres
 /// along the ray for every exponent. The per-instance cost stays eq. 5:
 ///   L_dist = 1/N sum sqrt(a1 a2 a3) d^2,

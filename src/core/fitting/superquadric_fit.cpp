@@ -90,6 +90,7 @@ std::optional<RayRoot> rayRoot(const double* log_w, const double* e, double norm
   if (norm < 1e-7) return std::nullopt;
   RayRoot r;
   r.mu = 0.0;
+  bool been_inside = false;
   for (int it = 0;; ++it) {
     // The three terms, the largest exactly 1 (no exponential for it).
     double terms[3];
@@ -111,11 +112,14 @@ std::optional<RayRoot> rayRoot(const double* log_w, const double* e, double norm
     r.slope = m1 / sum;
     if (std::abs(r.value) < 1e-13 || it == 8) return r;
     // Halley's step (h'' is the terms' variance of e), or Newton's where Halley's would be
-    // more than twice as long (far outside, where h is nearly linear but h h'' is large).
+    // more than twice as long, and outside (h > 0) once an iterate has been inside: from
+    // outside, Newton's steps on the convex h stay outside and descend onto the root, while
+    // Halley's longer ones could jump back in and cycle.
+    been_inside = been_inside || r.value < 0.0;
     const double curvature = std::max(0.0, m2 / sum - r.slope * r.slope);
     const double denominator = 2.0 * r.slope * r.slope - r.value * curvature;
-    r.mu -=
-        denominator > r.slope * r.slope ? 2.0 * r.value * r.slope / denominator : r.value / r.slope;
+    const bool halley = denominator > r.slope * r.slope && !(been_inside && r.value > 0.0);
+    r.mu -= halley ? 2.0 * r.value * r.slope / denominator : r.value / r.slope;
   }
 }
 
