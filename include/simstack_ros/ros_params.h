@@ -18,7 +18,7 @@ namespace simstack {
 struct NodeConfig {
   std::string table_frame = "table";  ///< tf frame of the table (z up, plane z = 0); output frame
   bool estimate_table = false;        ///< RANSAC plane per frame instead of tf, broadcast on tf
-  double tf_timeout_s = 0.2;          ///< wait for table_frame <- camera at the image's stamp
+  double tf_timeout_s = 0.2;     ///< wait for table_frame <- camera (stamp's clock and wall clock)
   double input_timeout_s = 5.0;  ///< no frame for this long (wall time): warn, diagnostics WARN
   std::string image_transport = "raw";
   double occupancy_min = 0.5;     ///< voxels at least this probably occupied go to ~occupancy

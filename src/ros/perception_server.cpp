@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <sstream>
 
 #include "simstack/io/octomap_io.h"
 #include "simstack_ros/conversions.h"
@@ -219,25 +220,48 @@ bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* 
   if (node_.estimate_table) return true;  // the pipeline fits the plane
   const std::string camera_frame = frame.image->header.frame_id;
   const ros::Time stamp = frame.image->header.stamp;
-  // Waited for on the wall clock: tf2's own timeout counts ros::Time, which stands still while
-  // a replayed bag is paused or before its /clock starts, and the worker (and a nodelet's
-  // unload, which joins it) would wait for the bag. The wait also ends when the node stops.
-  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(node_.tf_timeout_s);
-  std::string error;
-  while (!tf_buffer_.canTransform(node_.table_frame, camera_frame, stamp, &error)) {
-    if (ros::WallTime::now() >= deadline || stopRequested()) {
-      *why = "no transform " + node_.table_frame + " <- '" + camera_frame + "' within " +
-             std::to_string(node_.tf_timeout_s) + " s (wall clock): " + error;
-      return false;
-    }
-    ros::WallDuration(0.005).sleep();
-  }
+  if (!waitForTransform(camera_frame, stamp, why)) return false;
   try {
     view->T_table_camera =
         tf2::transformToEigen(tf_buffer_.lookupTransform(node_.table_frame, camera_frame, stamp));
   } catch (const tf2::TransformException& e) {
     *why = "no transform " + node_.table_frame + " <- '" + camera_frame + "': " + e.what();
     return false;
+  }
+  return true;
+}
+
+bool PerceptionServer::waitForTransform(const std::string& camera_frame, const ros::Time& stamp,
+                                        std::string* why) {
+  // tf2's own timeout counts ros::Time alone: under a paused bag's clock it never ended, and
+  // the worker (and a nodelet's unload, which joins it) waited for the bag to play on.
+  const double timeout = node_.tf_timeout_s;
+  const ros::WallTime wall_deadline = ros::WallTime::now() + ros::WallDuration(timeout);
+  const ros::Time start = ros::Time::now();
+  ros::Time last = start;
+  ros::WallTime last_moved = ros::WallTime::now();
+  std::string error;
+  while (!tf_buffer_.canTransform(node_.table_frame, camera_frame, stamp, &error)) {
+    const ros::WallTime wall = ros::WallTime::now();
+    const ros::Time now = ros::Time::now();
+    if (now != last) {
+      last = now;
+      last_moved = wall;
+    }
+    const bool waited = wall >= wall_deadline && (now < start || (now - start).toSec() >= timeout ||
+                                                  (wall - last_moved).toSec() >= timeout);
+    if (waited || stopRequested()) {
+      std::ostringstream out;
+      out << "no transform " << node_.table_frame << " <- '" << camera_frame << "' ";
+      if (waited)
+        out << "within " << timeout << " s";
+      else
+        out << "(the node stopped while waiting)";
+      out << ": " << error;
+      *why = out.str();
+      return false;
+    }
+    ros::WallDuration(0.005).sleep();
   }
   return true;
 }

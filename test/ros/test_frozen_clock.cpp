@@ -1,7 +1,7 @@
 // rostest (test/ros/frozen_clock.test): perception nodelets on simulated time whose /clock
-// stands still, as while a replayed bag is paused. tf2's own lookup timeout counts simulated
-// time, so a wait for a missing transform never ended there, and unloading the nodelet (which
-// joins its worker) hung with it.
+// stands still, as while a replayed bag is paused. A frame whose table transform is missing is
+// skipped after tf_timeout_s of wall time, and a nodelet that is waiting for one unloads at
+// once.
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <nodelet/NodeletUnload.h>
@@ -79,8 +79,8 @@ TEST(FrozenClock, AMissingTransformIsReportedAndAWaitingNodeletUnloads) {
     publishers[i + 1].publish(cameraInfoMsg(header, camera));
   }
 
-  // tf_timeout_s 0.5 counted on the wall clock: the skip is reported (diagnostics come on a wall
-  // timer, once a second).
+  // The simulated clock stands still for tf_timeout_s (0.5 s) of wall time: the skip is
+  // reported (diagnostics come on a wall timer, once a second).
   std::string last_status;
   const bool reported = waitWall(
       [&] {

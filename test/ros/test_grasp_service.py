@@ -206,12 +206,12 @@ class GraspService(unittest.TestCase):
         def ask(name, req):
             answers[name] = busy(req)
 
-        # Slow pulls (30 s simulated each: several seconds in all), on a scene carried in the
-        # request.
+        # Slow pulls (50 s simulated each: several seconds in all), on a scene carried in the
+        # request; the waiting request comes well after it has started.
         slow = threading.Thread(target=ask, args=("slow", request(
-            scene=first, candidates=256, pull_distance_m=0.3, pull_speed_mps=0.01)))
+            scene=first, candidates=256, pull_distance_m=0.5, pull_speed_mps=0.01)))
         slow.start()
-        time.sleep(0.5)
+        time.sleep(1.5)
         waiting = threading.Thread(target=ask, args=("waiting", request(
             target_id=later.objects[0].id, candidates=4)))
         waiting.start()
