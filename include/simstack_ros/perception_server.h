@@ -55,7 +55,7 @@ class PerceptionServer {
   /// The frame as a DepthView with its table pose (std::nullopt pose with estimate_table);
   /// false, with the reason, when the frame must be skipped.
   bool toView(const Frame& frame, DepthView* view, std::string* why);
-  /// Waits up to tf_timeout_s for table_frame <- camera_frame at `stamp`, on the clock of the
+  /// Waits for table_frame <- camera_frame at `stamp` for tf_timeout_s of the clock of the
   /// stamps (simulated time under /use_sim_time: a bag played slowly gets as long in its own
   /// time) and at least as long on the wall clock; a simulated clock that stands still that
   /// long (a paused bag, or none started) ends it, as does the node stopping. False, with the
