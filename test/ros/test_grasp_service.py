@@ -183,6 +183,7 @@ class GraspService(unittest.TestCase):
         carried = copy.deepcopy(self.scene)
         carried.header.stamp = rospy.Time(0, 1000)
         self.assertTrue(self.strict(request(scene=carried, candidates=4)).success)
+
     def test_7_a_scene_that_comes_during_a_ranking_is_the_next_requests(self):
         # A request that waits for the ranking in progress ranks the newest scene, also one that
         # came while it waited (the server's scenes do not queue behind its service threads).

@@ -54,24 +54,33 @@ double valueOf(const ceres::Jet<S, N>& v) {
 }
 
 /// log sum_i exp(log_w_i + mu e_i), and its slope in mu (the terms' mean exponent); `shares`,
-/// when given, receives each term's share of the sum.
+/// when given, receives each term's share of the sum, `curvature` the second derivative in mu
+/// (the variance of the exponents under those shares).
 template <typename T>
-T logSumExp(const T* log_w, const T* e, const T& mu, T* slope, T* shares = nullptr) {
+T logSumExp(const T* log_w, const T* e, const T& mu, T* slope, T* shares = nullptr,
+            T* curvature = nullptr) {
   T terms[3];
-  T top = log_w[0] + mu * e[0];
+  int k = 0;
   for (int i = 0; i < 3; ++i) {
     terms[i] = log_w[i] + mu * e[i];
-    if (terms[i] > top) top = terms[i];
+    if (terms[i] > terms[k]) k = i;
   }
-  T sum(0.0), weighted(0.0), w[3];
+  const T top = terms[k];
+  T sum(0.0), weighted(0.0), squared(0.0), w[3];
   for (int i = 0; i < 3; ++i) {
-    w[i] = exp(terms[i] - top);
+    w[i] = i == k ? T(1.0) : exp(terms[i] - top);  // the largest term is exactly 1
     sum += w[i];
     weighted += e[i] * w[i];
+    if (curvature) squared += e[i] * e[i] * w[i];
   }
   if (slope) *slope = weighted / sum;
   if (shares)
     for (int i = 0; i < 3; ++i) shares[i] = w[i] / sum;
+  if (curvature) {
+    const T mean = weighted / sum;
+    *curvature = squared / sum - mean * mean;
+    if (*curvature < T(0.0)) *curvature = T(0.0);  // rounding
+  }
   return top + log(sum);
 }
 
@@ -92,31 +101,14 @@ std::optional<RayRoot> rayRoot(const double* log_w, const double* e, double norm
   r.mu = 0.0;
   bool been_inside = false;
   for (int it = 0;; ++it) {
-    // The three terms, the largest exactly 1 (no exponential for it).
-    double terms[3];
-    int top = 0;
-    for (int i = 0; i < 3; ++i) {
-      terms[i] = log_w[i] + r.mu * e[i];
-      if (terms[i] > terms[top]) top = i;
-    }
-    double sum = 0.0, m1 = 0.0, m2 = 0.0;
-    for (int i = 0; i < 3; ++i) {
-      const double w = i == top ? 1.0 : std::exp(terms[i] - terms[top]);
-      r.shares[i] = w;
-      sum += w;
-      m1 += e[i] * w;
-      m2 += e[i] * e[i] * w;
-    }
-    for (double& share : r.shares) share /= sum;
-    r.value = terms[top] + std::log(sum);
-    r.slope = m1 / sum;
+    double curvature = 0.0;
+    r.value = logSumExp(log_w, e, r.mu, &r.slope, r.shares, &curvature);
     if (std::abs(r.value) < 1e-13 || it == 8) return r;
     // Halley's step (h'' is the terms' variance of e), or Newton's where Halley's would be
     // more than twice as long, and outside (h > 0) once an iterate has been inside: from
     // outside, Newton's steps on the convex h stay outside and descend onto the root, while
     // Halley's longer ones could jump back in and cycle.
     been_inside = been_inside || r.value < 0.0;
-    const double curvature = std::max(0.0, m2 / sum - r.slope * r.slope);
     const double denominator = 2.0 * r.slope * r.slope - r.value * curvature;
     const bool halley = denominator > r.slope * r.slope && !(been_inside && r.value > 0.0);
     r.mu -= halley ? 2.0 * r.value * r.slope / denominator : r.value / r.slope;
