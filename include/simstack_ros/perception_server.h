@@ -69,11 +69,11 @@ class PerceptionServer {
   bool saveOctomap(SaveOctomap::Request& req, SaveOctomap::Response& res);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
   /// Once a second (wall time): a warning when no frame has come for node/input_timeout_s.
-  void onWallTimer();
+  void onSilenceCheck();
   /// Seconds since the last frame came (since the start before any), mutex_ held.
-  double secondsWithoutFrame(const ros::WallTime& now) const;
+  double secondsWithoutFrame(const ros::SteadyTime& now) const;
   /// The same, or 0 while frames come within input_timeout_s (mutex_ held).
-  double silenceSeconds(const ros::WallTime& now) const;
+  double silenceSeconds(const ros::SteadyTime& now) const;
   void onSettings(LiveSettingsConfig& settings, uint32_t level);
   /// Applies settings changed by dynamic_reconfigure (worker thread, between frames).
   void applySettings();
@@ -94,7 +94,7 @@ class PerceptionServer {
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<LiveSettingsConfig>> reconfigure_;
   /// Wall time: simulated time stops with a bag and jumps back when it loops.
-  ros::WallTimer silence_timer_, diagnostics_timer_;
+  ros::SteadyTimer silence_timer_, diagnostics_timer_;
 
   std::mutex mutex_;  ///< guards the mailbox, the counters, the last scene and the views
   std::condition_variable wake_;
@@ -103,12 +103,12 @@ class PerceptionServer {
   long received_ = 0, dropped_ = 0, processed_ = 0, skipped_ = 0;
   std::string last_error_, last_kind_;
   bool failing_ = false;  ///< the last frame was skipped
-  ros::WallTime last_warning_;
-  ros::WallTime started_, last_arrival_;  ///< when the node started; when the last frame came
-  ros::WallTime last_silence_warning_;    ///< zero while frames arrive
-  ros::Time last_stamp_;                  ///< stamp of the last frame taken by the worker
+  ros::SteadyTime last_warning_;
+  ros::SteadyTime started_, last_arrival_;  ///< when the node started; when the last frame came
+  ros::SteadyTime last_silence_warning_;    ///< zero while frames arrive
+  ros::Time last_stamp_;                    ///< stamp of the last frame taken by the worker
   long processed_before_ = 0;
-  ros::WallTime rate_since_;
+  ros::SteadyTime rate_since_;
   int decompose_samples_ = 1;  ///< as configured at start (samples may change live)
   std::mutex save_mutex_;
   StageTimings last_timings_;

@@ -62,7 +62,7 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
       // Named after the nodelet, not the manager it is loaded into (two perception nodelets in
       // one manager must not report under one name); ~diagnostic_period is read from pnh.
       diagnostics_(nh, pnh, pnh.getNamespace()),
-      rate_since_(ros::WallTime::now()) {
+      rate_since_(ros::SteadyTime::now()) {
   // Read by diagnostic_updater (default 1 s, once, at start); checked before anything is
   // advertised, so that a refused node offers no service that could call into it.
   const double period = diagnostics_.getPeriod();
@@ -79,7 +79,7 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   save_srv_ = pnh_.advertiseService("save_octomap", &PerceptionServer::saveOctomap, this);
   diagnostics_.setHardwareID("simstack_perception " + pnh_.getNamespace());
   diagnostics_.add("perception", this, &PerceptionServer::diagnose);
-  started_ = ros::WallTime::now();
+  started_ = ros::SteadyTime::now();
   decompose_samples_ = perception_->config().decompose_samples;
   LiveSettingsConfig live = liveSettings(perception_->config());
   live.occupancy_min = node_.occupancy_min;
@@ -114,14 +114,14 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
            perception_->config().model_path.c_str(), perception_->config().samples,
            node_.estimate_table ? "estimated and broadcast as" : "from tf frame",
            node_.table_frame.c_str(), depth_sub_.getTopic().c_str());
-  // Both on the wall clock, so also while a bag is paused: the silence check once a second,
-  // /diagnostics once a period. Made after everything that may throw, so that no tick reaches
-  // an object whose construction failed.
-  silence_timer_ = nh_.createWallTimer(ros::WallDuration(1.0),
-                                       [this](const ros::WallTimerEvent&) { onWallTimer(); });
+  // Both on the monotonic wall clock, so also while a bag is paused: the silence check once a
+  // second, /diagnostics once a period. Made after everything that may throw, so that no tick
+  // reaches an object whose construction failed.
+  silence_timer_ = nh_.createSteadyTimer(
+      ros::WallDuration(1.0), [this](const ros::SteadyTimerEvent&) { onSilenceCheck(); });
   diagnostics_timer_ =
-      nh_.createWallTimer(ros::WallDuration(period),
-                          [this](const ros::WallTimerEvent&) { diagnostics_.force_update(); });
+      nh_.createSteadyTimer(ros::WallDuration(period),
+                            [this](const ros::SteadyTimerEvent&) { diagnostics_.force_update(); });
   // Last: from here the worker owns the pipeline (settings change between its frames), and
   // onFrame only fills the mailbox.
   worker_ = std::thread(&PerceptionServer::work, this);
@@ -152,7 +152,7 @@ void PerceptionServer::onFrame(const sensor_msgs::ImageConstPtr& image,
   {
     std::lock_guard<std::mutex> lock(mutex_);
     ++received_;
-    last_arrival_ = ros::WallTime::now();
+    last_arrival_ = ros::SteadyTime::now();
     if (mailbox_) ++dropped_;
     mailbox_ = Frame{image, info};
   }
@@ -185,7 +185,7 @@ void PerceptionServer::skip(const Frame& frame, const std::string& why) {
     // One warning per kind of problem (the reason up to its first ':', without the details
     // that change from frame to frame), then at most one every 5 s while it lasts.
     const std::string kind = why.substr(0, why.find(':'));
-    const ros::WallTime now = ros::WallTime::now();
+    const ros::SteadyTime now = ros::SteadyTime::now();
     warn = kind != last_kind_ || (now - last_warning_).toSec() > 5.0;
     if (warn) last_warning_ = now;
     last_kind_ = kind;
@@ -236,13 +236,13 @@ bool PerceptionServer::waitForTransform(const std::string& camera_frame, const r
   // tf2's own timeout counts ros::Time alone: under a paused bag's clock it never ended, and
   // the worker (and a nodelet's unload, which joins it) waited for the bag to play on.
   const double timeout = node_.tf_timeout_s;
-  const ros::WallTime wall_deadline = ros::WallTime::now() + ros::WallDuration(timeout);
+  const ros::SteadyTime wall_deadline = ros::SteadyTime::now() + ros::WallDuration(timeout);
   const ros::Time start = ros::Time::now();
   ros::Time last = start;
-  ros::WallTime last_moved = ros::WallTime::now();
+  ros::SteadyTime last_moved = ros::SteadyTime::now();
   std::string error;
   while (!tf_buffer_.canTransform(node_.table_frame, camera_frame, stamp, &error)) {
-    const ros::WallTime wall = ros::WallTime::now();
+    const ros::SteadyTime wall = ros::SteadyTime::now();
     const ros::Time now = ros::Time::now();
     if (now != last) {
       last = now;
@@ -434,17 +434,17 @@ bool PerceptionServer::saveOctomap(SaveOctomap::Request& req, SaveOctomap::Respo
   return true;
 }
 
-double PerceptionServer::secondsWithoutFrame(const ros::WallTime& now) const {
+double PerceptionServer::secondsWithoutFrame(const ros::SteadyTime& now) const {
   return (now - (received_ > 0 ? last_arrival_ : started_)).toSec();
 }
 
-double PerceptionServer::silenceSeconds(const ros::WallTime& now) const {
+double PerceptionServer::silenceSeconds(const ros::SteadyTime& now) const {
   const double silent = secondsWithoutFrame(now);
   return silent >= node_.input_timeout_s ? silent : 0.0;
 }
 
-void PerceptionServer::onWallTimer() {
-  const ros::WallTime now = ros::WallTime::now();
+void PerceptionServer::onSilenceCheck() {
+  const ros::SteadyTime now = ros::SteadyTime::now();
   double silent = 0.0;
   bool warn = false, resumed = false;
   {
@@ -457,7 +457,7 @@ void PerceptionServer::onWallTimer() {
       last_silence_warning_ = now;
     } else if (silent == 0.0 && !last_silence_warning_.isZero()) {
       resumed = true;
-      last_silence_warning_ = ros::WallTime();
+      last_silence_warning_ = ros::SteadyTime();
     }
   }
   const std::string topics = depth_sub_.getTopic() + " and " + depth_sub_.getInfoTopic();
@@ -471,7 +471,7 @@ void PerceptionServer::onWallTimer() {
 
 void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   std::lock_guard<std::mutex> lock(mutex_);
-  const ros::WallTime now = ros::WallTime::now();
+  const ros::SteadyTime now = ros::SteadyTime::now();
   const double seconds = std::max(1e-3, (now - rate_since_).toSec());
   const double rate = (processed_ - processed_before_) / seconds;
   rate_since_ = now;
