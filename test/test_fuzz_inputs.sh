@@ -186,6 +186,8 @@ succeed "train 2 steps" "$bin/simstack_train" --dataset "$dir/two.h5" --config "
   --output "$dir/run_done" --steps 2 --threads 1
 expect "train again into a run without --resume" "holds a training run" "$bin/simstack_train" \
   --dataset "$dir/two.h5" --config "$train_config" --output "$dir/run_done" --steps 2
+expect "train with --ycb" "--ycb is for --validate-only" "$bin/simstack_train" --dataset "$dir/two.h5" \
+  --config "$train_config" --output "$dir/run_ycb" --ycb "$dir"
 head -c 3000 "$dir/d.h5" > "$dir/cut.h5"
 expect "train on a truncated dataset" "cut.h5" "$bin/simstack_train" --dataset "$dir/cut.h5" \
   --config "$train_config" --output "$dir/run2"

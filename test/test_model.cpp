@@ -21,6 +21,7 @@
 #include "simstack/model/cvae_trainer.h"
 #include "simstack/model/training_sample.h"
 #include "simstack/render/depth_renderer.h"
+#include "simstack/scene/mesh_catalogue.h"
 #include "simstack/scene/pile_generator.h"
 #include "simstack/tsdf/ground_truth.h"
 #include "simstack/tsdf/network_input.h"
@@ -1225,6 +1226,51 @@ TEST(CvaeTrainer, ValidatesAModelFileAsARunDoes) {
   EXPECT_THROW(CvaeTrainer::validateModel(data, a + "/missing.pt", v), std::runtime_error);
   v.validation_views = 0;
   EXPECT_THROW(CvaeTrainer::validateModel(data, a + "/model.pt", v), std::invalid_argument);
+}
+
+TEST(CvaeTrainer, ValidatesOnYcbPilesGivenTheirMeshes) {
+  const std::string dir = std::string(SIMSTACK_SHARED_DATA) + "/ycb";
+  if (!fs::exists(dir + "/003_cracker_box/nontextured.stl"))
+    GTEST_SKIP() << "YCB meshes not found in " << dir << " (see ../shared/data/README.md)";
+  const std::string data = tinyDataset(3);
+  const std::string ycb = tempPath("simstack_test_validate_ycb.h5");
+  const std::string a = tempPath("simstack_train_validate_ycb");
+  const RemoveAtExit cleanup{{a, data, ycb}};
+  fs::remove_all(a);
+  {
+    DatasetInfo info;
+    info.num_scenes = 2;
+    info.resolution = 16;
+    info.extent_m = 0.64;
+    info.truncation_m = tiny().truncation_m();
+    info.mesh_names = ycbObjectNames();
+    DatasetWriter writer(ycb, info);
+    const PileGenerator gen(PileConfig(), loadMeshCatalogue(dir));
+    for (int i = 0; i < info.num_scenes; ++i) {
+      const Scene s = gen.generate(40 + i).scene;
+      const GridSpec g = GridSpec::sceneGrid(s.surfaceCentroid().head<2>(), info.extent_m, 16);
+      writer.write(i, s, computeGroundTruth(s, g, info.truncation_m));
+    }
+  }
+  const TrainConfig tc = tinyTraining(2);
+  CvaeTrainer(data, tiny(), tc, a, "test").run(false);
+  TrainConfig v = tc;
+  v.validation_scenes = 2;
+  v.validation_views = 1;
+  // Without the meshes the file cannot be read, and the error says which option reads it.
+  try {
+    CvaeTrainer::validateModel(ycb, a + "/model.pt", v);
+    ADD_FAILURE() << "a YCB dataset was validated without its meshes";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("--validate-only take (--ycb DIR)"), std::string::npos)
+        << e.what();
+  }
+  const TrainingReport r = CvaeTrainer::validateModel(ycb, a + "/model.pt", v, dir);
+  EXPECT_GE(r.validation_iou, 0.0);
+  EXPECT_LE(r.validation_iou, 1.0);
+  EXPECT_GT(r.validation_bce, 0.0);
+  // The mesh piles are other piles than the superquadric ones: another score.
+  EXPECT_NE(CvaeTrainer::validateModel(data, a + "/model.pt", v).validation_bce, r.validation_bce);
 }
 
 TEST(CvaeTrainer, DeterministicResumableAndLogged) {

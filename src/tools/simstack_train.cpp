@@ -55,58 +55,76 @@ void printTrained(const std::string& architecture, const std::string& output,
   std::cout << "\n  model: " << output << "/model.pt (provenance in model.yaml)\n";
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+/// The command line; zero and empty mean "as the config says".
+struct Options {
   std::string dataset, config_path, output;
   bool resume = false;
   int threads = 0;
   std::string architecture;
   int64_t steps = 0;
   int validation_scenes = 0, validation_views = 0, validation_samples = 0;
-  std::string init_from, validate_only;
+  std::string init_from, validate_only, mesh_dir;
+};
+
+void addOptions(CLI::App& app, Options& o) {
+  app.add_option("--dataset", o.dataset, "HDF5 dataset from simstack_generate")
+      ->required()
+      ->check(CLI::ExistingFile);
+  app.add_option("--config", o.config_path,
+                 "YAML with `model:` and `training:` sections (see config/train_r32.yaml)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  app.add_option("--output", o.output,
+                 "output directory (model.pt, model.yaml, checkpoints, train_log.csv); required "
+                 "unless --validate-only");
+  app.add_flag("--resume", o.resume, "continue from OUTPUT/checkpoint.pt");
+  app.add_option("--threads", o.threads, "torch threads (overrides training.threads)")
+      ->check(CLI::Range(1, 256));
+  app.add_option("--architecture", o.architecture,
+                 "cvae, fc or fc_plain (overrides model.architecture)")
+      ->check(CLI::IsMember({"cvae", "fc", "fc_plain"}));
+  app.add_option("--steps", o.steps, "optimiser steps (overrides training.steps)")
+      ->check(FinitePositive);
+  app.add_option("--init-from", o.init_from,
+                 "warm start from this model file: its tensors of the same name and shape "
+                 "(overrides training.init_from; not read with --resume from a checkpoint)")
+      ->check(CLI::ExistingFile);
+  app.add_option("--validation-scenes", o.validation_scenes,
+                 "held-out scenes at the end of the dataset (overrides training.validation_scenes)")
+      ->check(FinitePositive);
+  app.add_option("--validation-views", o.validation_views,
+                 "viewpoints per validation scene (overrides training.validation_views)")
+      ->check(FinitePositive);
+  app.add_option("--validation-samples", o.validation_samples,
+                 "latent codes per validation view (overrides training.validation_samples)")
+      ->check(CLI::Range(2, 256));
+  app.add_option("--validate-only", o.validate_only,
+                 "score this model file on the dataset's validation scenes as a run's validation "
+                 "does (training.validation_scenes x validation_views) and exit; no training")
+      ->check(CLI::ExistingFile);
+  app.add_option("--ycb", o.mesh_dir,
+                 "with --validate-only: the mesh directory of a YCB dataset (training takes "
+                 "superquadric piles only)")
+      ->check(CLI::ExistingDirectory);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
   CLI::App app{
       "Train the depth-conditioned VAE of SIMstack (or its FC ablation) on a generated dataset. "
       "Views and "
       "partial TSDFs are rendered on the fly; checkpoints in OUTPUT resume with --resume."};
-  app.add_option("--dataset", dataset, "HDF5 dataset from simstack_generate")
-      ->required()
-      ->check(CLI::ExistingFile);
-  app.add_option("--config", config_path,
-                 "YAML with `model:` and `training:` sections (see config/train_r32.yaml)")
-      ->required()
-      ->check(CLI::ExistingFile);
-  app.add_option("--output", output,
-                 "output directory (model.pt, model.yaml, checkpoints, train_log.csv); required "
-                 "unless --validate-only");
-  app.add_flag("--resume", resume, "continue from OUTPUT/checkpoint.pt");
-  app.add_option("--threads", threads, "torch threads (overrides training.threads)")
-      ->check(CLI::Range(1, 256));
-  app.add_option("--architecture", architecture,
-                 "cvae, fc or fc_plain (overrides model.architecture)")
-      ->check(CLI::IsMember({"cvae", "fc", "fc_plain"}));
-  app.add_option("--steps", steps, "optimiser steps (overrides training.steps)")
-      ->check(FinitePositive);
-  app.add_option("--init-from", init_from,
-                 "warm start from this model file: its tensors of the same name and shape "
-                 "(overrides training.init_from; not read with --resume from a checkpoint)")
-      ->check(CLI::ExistingFile);
-  app.add_option("--validation-scenes", validation_scenes,
-                 "held-out scenes at the end of the dataset (overrides training.validation_scenes)")
-      ->check(FinitePositive);
-  app.add_option("--validation-views", validation_views,
-                 "viewpoints per validation scene (overrides training.validation_views)")
-      ->check(FinitePositive);
-  app.add_option("--validation-samples", validation_samples,
-                 "latent codes per validation view (overrides training.validation_samples)")
-      ->check(CLI::Range(2, 256));
-  app.add_option("--validate-only", validate_only,
-                 "score this model file on the dataset's validation scenes as a run's validation "
-                 "does (training.validation_scenes x validation_views) and exit; no training")
-      ->check(CLI::ExistingFile);
+  addOptions(app, o);
   CLI11_PARSE(app, argc, argv);
-  if (output.empty() && validate_only.empty()) {
+  if (o.output.empty() && o.validate_only.empty()) {
     std::cerr << "simstack_train: error: --output is required (unless --validate-only)\n";
+    return 2;
+  }
+  if (!o.mesh_dir.empty() && o.validate_only.empty()) {
+    std::cerr << "simstack_train: error: --ycb is for --validate-only (training takes "
+                 "superquadric piles only)\n";
     return 2;
   }
 
@@ -114,30 +132,30 @@ int main(int argc, char** argv) {
   try {
     CvaeConfig model;
     TrainConfig training;
-    loadTrainingYaml(config_path, &model, &training);
-    if (threads > 0) training.threads = threads;
-    if (!architecture.empty()) model.architecture = architecture;
-    if (steps > 0) training.steps = steps;
-    if (!init_from.empty()) training.init_from = init_from;
-    if (validation_scenes > 0) training.validation_scenes = validation_scenes;
-    if (validation_views > 0) training.validation_views = validation_views;
-    if (validation_samples > 0) training.validation_samples = validation_samples;
-    if (!validate_only.empty()) {
-      printValidation(validate_only, dataset, training,
-                      CvaeTrainer::validateModel(dataset, validate_only, training));
+    loadTrainingYaml(o.config_path, &model, &training);
+    if (o.threads > 0) training.threads = o.threads;
+    if (!o.architecture.empty()) model.architecture = o.architecture;
+    if (o.steps > 0) training.steps = o.steps;
+    if (!o.init_from.empty()) training.init_from = o.init_from;
+    if (o.validation_scenes > 0) training.validation_scenes = o.validation_scenes;
+    if (o.validation_views > 0) training.validation_views = o.validation_views;
+    if (o.validation_samples > 0) training.validation_samples = o.validation_samples;
+    if (!o.validate_only.empty()) {
+      printValidation(o.validate_only, o.dataset, training,
+                      CvaeTrainer::validateModel(o.dataset, o.validate_only, training, o.mesh_dir));
       return 0;
     }
     // A forgotten --resume must not start over in a run's directory (its checkpoint lost).
-    if (!resume && (std::filesystem::exists(std::filesystem::path(output) / "state.yaml") ||
-                    std::filesystem::exists(std::filesystem::path(output) / "checkpoint.pt")))
-      throw std::runtime_error(output +
+    if (!o.resume && (std::filesystem::exists(std::filesystem::path(o.output) / "state.yaml") ||
+                      std::filesystem::exists(std::filesystem::path(o.output) / "checkpoint.pt")))
+      throw std::runtime_error(o.output +
                                " holds a training run: --resume continues it; another --output "
                                "(or removing it) starts afresh");
     std::string command;
     for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
-    CvaeTrainer trainer(dataset, model, training, output, command);
+    CvaeTrainer trainer(o.dataset, model, training, o.output, command);
     std::unique_ptr<ProgressBar> bar;
-    const TrainingReport r = trainer.run(resume, [&](const TrainingProgress& p) {
+    const TrainingReport r = trainer.run(o.resume, [&](const TrainingProgress& p) {
       if (!bar)
         bar =
             std::make_unique<ProgressBar>("training " + model.architecture, p.steps, p.first_step);
@@ -148,7 +166,7 @@ int main(int argc, char** argv) {
       bar->update(p.step, suffix);
     });
     if (bar) bar->finish();
-    printTrained(model.architecture, output, r);
+    printTrained(model.architecture, o.output, r);
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_train: error: " << e.what() << "\n";

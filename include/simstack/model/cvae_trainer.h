@@ -76,10 +76,12 @@ class CvaeTrainer {
 
   /// The validation of a run (the last `training.validation_scenes` scenes of the dataset, each
   /// from `training.validation_views` viewpoints) for a trained model file, without training:
-  /// the validation_* fields of the report. Throws std::runtime_error naming the file that is
+  /// the validation_* fields of the report. `mesh_dir` holds the meshes of a dataset of mesh
+  /// piles (YCB; "" for superquadric piles). Throws std::runtime_error naming the file that is
   /// unusable or does not match the other.
   static TrainingReport validateModel(const std::string& dataset_path,
-                                      const std::string& model_path, const TrainConfig& training);
+                                      const std::string& model_path, const TrainConfig& training,
+                                      const std::string& mesh_dir = "");
 
  private:
   struct Impl;

@@ -341,13 +341,14 @@ CvaeTrainer::~CvaeTrainer() = default;
 
 TrainingReport CvaeTrainer::validateModel(const std::string& dataset_path,
                                           const std::string& model_path,
-                                          const TrainConfig& training) {
+                                          const TrainConfig& training,
+                                          const std::string& mesh_dir) {
   training.validate();
   Cvae model = loadCvae(model_path);
   Impl impl;
   impl.model_config = model->config();
   impl.config = training;
-  impl.reader = std::make_unique<DatasetReader>(dataset_path);
+  impl.reader = std::make_unique<DatasetReader>(dataset_path, mesh_dir);
   const DatasetInfo& info = impl.reader->info();
   const CvaeConfig& mc = impl.model_config;
   checkDatasetFitsModel(info, mc, dataset_path, "model " + model_path);
