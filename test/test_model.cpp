@@ -1228,7 +1228,7 @@ TEST(CvaeTrainer, ValidatesAModelFileAsARunDoes) {
   EXPECT_THROW(CvaeTrainer::validateModel(data, a + "/model.pt", v), std::invalid_argument);
 }
 
-TEST(CvaeTrainer, ValidatesOnYcbPilesGivenTheirMeshes) {
+TEST(CvaeTrainerYcb, ValidatesYcbPilesGivenTheirMeshes) {
   const std::string dir = std::string(SIMSTACK_SHARED_DATA) + "/ycb";
   if (!fs::exists(dir + "/003_cracker_box/nontextured.stl"))
     GTEST_SKIP() << "YCB meshes not found in " << dir << " (see ../shared/data/README.md)";
