@@ -414,5 +414,51 @@ TEST(Evaluator, MultiViewCirclesThePileFromTheSingleView) {
   std::filesystem::remove(path);
 }
 
+// Another camera's intrinsics: the views are rendered with it (the same viewpoints), and the
+// scaled Kinect given explicitly renders what the default does.
+TEST(Evaluator, RendersWithTheGivenCamera) {
+  const std::filesystem::path path = twoPileDataset("simstack_evaluator_camera.h5");
+  const DatasetReader reader(path.string());
+  EvaluationOptions options;
+  options.views = 1;
+  options.stability = false;
+  options.width = 160;
+  options.height = 120;
+  ViewRecorder kinect(reader.info());
+  evaluateDataset(reader, {&kinect}, options);
+  options.camera = scaledKinect(160, 120);
+  ViewRecorder explicit_kinect(reader.info());
+  evaluateDataset(reader, {&explicit_kinect}, options);
+  PinholeCamera wide;  // a 90 degree horizontal field of view on 212 x 120 pixels
+  wide.width = 212;
+  wide.height = 120;
+  wide.fx = wide.fy = 106.0;
+  wide.cx = 105.5;
+  wide.cy = 59.5;
+  options.camera = wide;
+  ViewRecorder realsense(reader.info());
+  const EvaluationResults r = evaluateDataset(reader, {&realsense}, options);
+  ASSERT_EQ(realsense.seen.size(), 2u);
+  for (size_t i = 0; i < 2; ++i) {
+    const DepthView& a = kinect.seen[i].front();
+    const DepthView& w = realsense.seen[i].front();
+    EXPECT_EQ(explicit_kinect.seen[i].front().depth.pixels, a.depth.pixels);
+    EXPECT_EQ(w.depth.width, 212);
+    EXPECT_DOUBLE_EQ(w.camera.fx, 106.0);
+    EXPECT_TRUE(w.T_table_camera->isApprox(*a.T_table_camera));  // the same viewpoint
+    // Exactly what that camera sees from there (no noise in these views).
+    const DepthRenderer renderer(reader.read(static_cast<int>(i)).scene);
+    EXPECT_EQ(renderer.render(wide, *w.T_table_camera, SensorNoiseConfig()).depth.pixels,
+              w.depth.pixels);
+  }
+  const nlohmann::json j = resultsJson(r, false);
+  EXPECT_EQ(j["image"], "212x120");
+  EXPECT_DOUBLE_EQ(j["intrinsics"][0].get<double>(), 106.0);
+  options.camera->fx = 0.5;  // a focal length in metres, not pixels
+  ViewRecorder refused(reader.info());
+  EXPECT_THROW(evaluateDataset(reader, {&refused}, options), std::invalid_argument);
+  std::filesystem::remove(path);
+}
+
 }  // namespace
 }  // namespace simstack

@@ -197,6 +197,10 @@ dd if=/dev/urandom of="$dir/scrambled.h5" bs=1 seek=20000 count=20000 conv=notru
 expect "train on a scrambled dataset" "scrambled.h5" "$bin/simstack_train" --dataset "$dir/scrambled.h5" \
   --config "$train_config" --output "$dir/run3"
 
+expect "evaluate with intrinsics in metres" "invalid camera intrinsics" "$bin/simstack_evaluate" \
+  --dataset "$dir/two.h5" --scenes 1 --views 1 --intrinsics 0.5,0.5,320,240 \
+  --output "$dir/intrinsics.json" --no-classical --no-stability
+
 # Grasp evaluation: more hypotheses than the model has distinct samples.
 expect "grasps --hypotheses 3 with fc" "no latent code" "$bin/simstack_evaluate_grasps" \
   --dataset "$dir/two.h5" --scenes 1 --hypotheses 3 --no-classical --output "$dir/grasps.json"

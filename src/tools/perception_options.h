@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "cli_checks.h"
+#include "simstack/geometry/pinhole_camera.h"
 #include "simstack/pipeline/perception_config.h"
 
 namespace simstack {
@@ -21,6 +22,10 @@ std::string packageDir();
 /// A file shipped with the package (e.g. "config/perception.yaml"): from the source tree, or
 /// where `make install` put it.
 std::string packageFile(const std::string& relative);
+
+/// --intrinsics "fx,fy,cx,cy" (pixels) for an image of width x height; std::invalid_argument
+/// naming the option for anything else, or for intrinsics PinholeCamera::validate refuses.
+PinholeCamera parseIntrinsics(const std::string& text, int width, int height);
 
 class PerceptionOptions {
  public:

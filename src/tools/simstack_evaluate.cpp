@@ -91,7 +91,7 @@ void runRealScenes(const PerceptionConfig& config, const std::string& real_dir,
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string dataset, output, summary, mesh_dir, real_dir;
+  std::string dataset, output, summary, mesh_dir, real_dir, intrinsics;
   EvaluationOptions o;
   bool no_classical = false, no_stability = false;
   int refine_iterations = 0;
@@ -116,6 +116,9 @@ int main(int argc, char** argv) {
   app.add_option("--height", o.height, "rendered view height (the protocol's 480)")
       ->capture_default_str()
       ->check(CLI::Range(16, 4096));
+  app.add_option("--intrinsics", intrinsics,
+                 "fx,fy,cx,cy (pixels) of another camera for the --width x --height views, "
+                 "instead of the scaled Kinect: its field of view (the noise stays Kinect-like)");
   app.add_option("--views", o.views, "viewpoints per scene")
       ->capture_default_str()
       ->check(FinitePositive);
@@ -157,11 +160,13 @@ int main(int argc, char** argv) {
     std::cerr << "simstack_evaluate: --refine needs --multi-view 2 or more\n";
     return 2;
   }
-  if (!real_dir.empty() && o.views_per_estimate > 1) {
-    std::cerr << "simstack_evaluate: --multi-view needs --dataset (a real scene is one view)\n";
+  if (!real_dir.empty() && (o.views_per_estimate > 1 || !intrinsics.empty())) {
+    std::cerr << "simstack_evaluate: --multi-view and --intrinsics need --dataset (a real scene "
+                 "is one view of its own camera)\n";
     return 2;
   }
   try {
+    if (!intrinsics.empty()) o.camera = parseIntrinsics(intrinsics, o.width, o.height);
     std::vector<std::string> inputs = perception.inputFiles();
     inputs.push_back(dataset);
     ResultFiles files(output, summary, inputs);

@@ -21,33 +21,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-PinholeCamera parseIntrinsics(const std::string& text, int width, int height) {
-  if (!text.empty() && text.back() == ',')  // getline would drop the empty last item
-    throw std::invalid_argument("--intrinsics: '" + text + "' ends in a comma");
-  std::stringstream ss(text);
-  std::vector<double> v;
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    try {
-      size_t used = 0;
-      v.push_back(std::stod(item, &used));
-      if (used != item.size()) throw std::invalid_argument(item);
-    } catch (const std::exception&) {
-      throw std::invalid_argument("--intrinsics: '" + item + "' is not a number");
-    }
-  }
-  if (v.size() != 4) throw std::invalid_argument("--intrinsics needs fx,fy,cx,cy (4 numbers)");
-  PinholeCamera c;
-  c.width = width;
-  c.height = height;
-  c.fx = v[0];
-  c.fy = v[1];
-  c.cx = v[2];
-  c.cy = v[3];
-  c.validate();
-  return c;
-}
-
 DepthView readView(const std::string& depth_path, double depth_scale, const std::string& intrinsics,
                    const std::string& pose_path, const std::string& mask_path) {
   DepthView view;

@@ -12,6 +12,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -71,10 +72,13 @@ struct EvaluationOptions {
   int scenes = 0;                 ///< the first N scenes (0 = all)
   uint64_t seed = 7;              ///< viewpoints and Chamfer samples
   int width = 640, height = 480;  ///< rendered image (a scaled Kinect)
-  bool noise = false;             ///< Kinect-like sensor noise
-  bool stability = true;          ///< the physics stability test
-  int chamfer_points = 1000;      ///< surface samples per Chamfer set
-  bool overhead = false;          ///< views from above (ViewpointRange::overhead())
+  /// The rendered camera instead of a Kinect scaled to width x height (another sensor's
+  /// intrinsics; the sensor noise stays Kinect-like).
+  std::optional<PinholeCamera> camera;
+  bool noise = false;         ///< Kinect-like sensor noise
+  bool stability = true;      ///< the physics stability test
+  int chamfer_points = 1000;  ///< surface samples per Chamfer set
+  bool overhead = false;      ///< views from above (ViewpointRange::overhead())
   /// Posed views per estimate (the paper's multi-view experiment): the first drawn as in the
   /// single-view protocol (the same view and noise), the others that viewpoint turned about
   /// the vertical through the pile's centre by 360 / views_per_estimate degrees each. Visible

@@ -180,7 +180,9 @@ EvaluationResults evaluateDataset(const DatasetReader& reader,
     throw std::invalid_argument("views_per_estimate must be >= 1, not " +
                                 std::to_string(options.views_per_estimate));
   for (EvaluatedMethod* m : methods) out.methods.push_back({m->name(), m->info(), {}});
-  const PinholeCamera camera = scaledKinect(options.width, options.height);
+  const PinholeCamera camera =
+      options.camera ? *options.camera : scaledKinect(options.width, options.height);
+  camera.validate();
   for (int k = 0; k < out.scenes; ++k) {
     const SceneRecord rec = reader.read(k);
     if (options.stability) {
@@ -234,7 +236,12 @@ json resultsJson(const EvaluationResults& r, bool with_views) {
   out["scenes"] = r.scenes;
   out["views"] = o.views;
   out["seed"] = o.seed;
-  out["image"] = std::to_string(o.width) + "x" + std::to_string(o.height);
+  if (o.camera) {
+    out["image"] = std::to_string(o.camera->width) + "x" + std::to_string(o.camera->height);
+    out["intrinsics"] = {o.camera->fx, o.camera->fy, o.camera->cx, o.camera->cy};
+  } else {
+    out["image"] = std::to_string(o.width) + "x" + std::to_string(o.height);
+  }
   out["noise"] = o.noise;
   out["overhead"] = o.overhead;
   out["views_per_estimate"] = o.views_per_estimate;
