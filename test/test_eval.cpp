@@ -356,18 +356,24 @@ class ViewRecorder : public EvaluatedMethod {
   std::string name_ = "recorder";
 };
 
+/// One 160 x 120 view per scene, no stability test: the protocol's mechanics, quickly.
+EvaluationOptions oneSmallView() {
+  EvaluationOptions options;
+  options.views = 1;
+  options.stability = false;
+  options.width = 160;
+  options.height = 120;
+  return options;
+}
+
 // The multi-view protocol: its first view is the single-view protocol's, the others circle the
 // pile at the same distance and height; TSDF fusion scores higher with more views; a method
 // that takes one view is refused.
 TEST(Evaluator, MultiViewCirclesThePileFromTheSingleView) {
   const std::filesystem::path path = twoPileDataset("simstack_evaluator_multiview.h5");
   const DatasetReader reader(path.string());
-  EvaluationOptions options;
-  options.views = 1;
-  options.stability = false;
+  EvaluationOptions options = oneSmallView();
   options.noise = true;
-  options.width = 160;
-  options.height = 120;
   std::map<int, std::vector<double>> fusion_iou, visible;
   std::map<int, std::vector<std::vector<DepthView>>> seen;
   for (const int k : {1, 3, 6}) {
@@ -419,11 +425,7 @@ TEST(Evaluator, MultiViewCirclesThePileFromTheSingleView) {
 TEST(Evaluator, RendersWithTheGivenCamera) {
   const std::filesystem::path path = twoPileDataset("simstack_evaluator_camera.h5");
   const DatasetReader reader(path.string());
-  EvaluationOptions options;
-  options.views = 1;
-  options.stability = false;
-  options.width = 160;
-  options.height = 120;
+  EvaluationOptions options = oneSmallView();
   ViewRecorder kinect(reader.info());
   evaluateDataset(reader, {&kinect}, options);
   options.camera = scaledKinect(160, 120);
