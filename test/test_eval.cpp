@@ -17,6 +17,7 @@
 #include "simstack/scene/pile_generator.h"
 #include "simstack/scene/scene.h"
 #include "simstack/tsdf/ground_truth.h"
+#include "test_scenes.h"
 
 namespace simstack {
 namespace {
@@ -431,12 +432,7 @@ TEST(Evaluator, RendersWithTheGivenCamera) {
   options.camera = scaledKinect(160, 120);
   ViewRecorder explicit_kinect(reader.info());
   evaluateDataset(reader, {&explicit_kinect}, options);
-  PinholeCamera wide;  // a 90 degree horizontal field of view on 212 x 120 pixels
-  wide.width = 212;
-  wide.height = 120;
-  wide.fx = wide.fy = 106.0;
-  wide.cx = 105.5;
-  wide.cy = 59.5;
+  const PinholeCamera wide = test::centredCamera(212, 120, 106.0);  // 90 degrees across
   options.camera = wide;
   ViewRecorder realsense(reader.info());
   const EvaluationResults r = evaluateDataset(reader, {&realsense}, options);

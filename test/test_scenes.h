@@ -37,16 +37,20 @@ inline Scene fourObjectPile() {
                 object({0.07, 0.07, 0.07}, {4, 4, 4}, {-0.04, -0.203, 0.07}, 0.3)}};
 }
 
-/// A 1280x720 camera with a 90-degree horizontal field of view, as on an overhead pick station.
-inline PinholeCamera wideCamera() {
+/// A width x height camera with square pixels of focal length `focal_px` and the principal point
+/// at the image centre.
+inline PinholeCamera centredCamera(int width, int height, double focal_px) {
   PinholeCamera c;
-  c.width = 1280;
-  c.height = 720;
-  c.fx = c.fy = 640.0;
-  c.cx = 639.5;
-  c.cy = 359.5;
+  c.width = width;
+  c.height = height;
+  c.fx = c.fy = focal_px;
+  c.cx = 0.5 * (width - 1);
+  c.cy = 0.5 * (height - 1);
   return c;
 }
+
+/// A 1280x720 camera with a 90-degree horizontal field of view, as on an overhead pick station.
+inline PinholeCamera wideCamera() { return centredCamera(1280, 720, 640.0); }
 
 }  // namespace test
 }  // namespace simstack

@@ -236,10 +236,11 @@ bool PerceptionServer::waitForTransform(const std::string& camera_frame, const r
   // tf2's own timeout counts ros::Time alone: under a paused bag's clock it never ended, and
   // the worker (and a nodelet's unload, which joins it) waited for the bag to play on.
   const double timeout = node_.tf_timeout_s;
-  const ros::SteadyTime wall_deadline = ros::SteadyTime::now() + ros::WallDuration(timeout);
+  const ros::SteadyTime begun = ros::SteadyTime::now();
+  const ros::SteadyTime wall_deadline = begun + ros::WallDuration(timeout);
   const ros::Time start = ros::Time::now();
   ros::Time last = start;
-  ros::SteadyTime last_moved = ros::SteadyTime::now();
+  ros::SteadyTime last_moved = begun;
   std::string error;
   while (!tf_buffer_.canTransform(node_.table_frame, camera_frame, stamp, &error)) {
     const ros::SteadyTime wall = ros::SteadyTime::now();

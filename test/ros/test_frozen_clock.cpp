@@ -15,6 +15,7 @@
 #include <string>
 #include <thread>
 
+#include "../test_scenes.h"
 #include "simstack_ros/conversions.h"
 
 namespace simstack {
@@ -49,12 +50,7 @@ TEST(FrozenClock, AMissingTransformIsReportedAndAWaitingNodeletUnloads) {
       });
 
   // A 1 m flat view from a camera frame that tf has never heard of.
-  PinholeCamera camera;
-  camera.width = 160;
-  camera.height = 120;
-  camera.fx = camera.fy = 130.0;
-  camera.cx = 79.5;
-  camera.cy = 59.5;
+  const PinholeCamera camera = test::centredCamera(160, 120, 130.0);
   DepthImage depth(camera.width, camera.height, 1.0f);
   std_msgs::Header header;
   header.stamp = now.clock;
