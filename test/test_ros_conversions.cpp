@@ -86,6 +86,48 @@ TEST(Conversions, CameraInfo) {
   EXPECT_THROW(cameraFromInfo(info), std::invalid_argument);
 }
 
+TEST(Conversions, CameraInfoWithRoiAndBinningDescribesThePublishedImage) {
+  PinholeCamera full;  // 640x480, fx 525
+  std_msgs::Header header;
+  sensor_msgs::CameraInfo info = cameraInfoMsg(header, full);
+  info.roi.x_offset = 100;
+  info.roi.y_offset = 40;
+  info.roi.width = 400;
+  info.roi.height = 300;
+  info.binning_x = info.binning_y = 2;
+  const PinholeCamera c = cameraFromInfo(info);
+  EXPECT_EQ(c.width, 200);
+  EXPECT_EQ(c.height, 150);
+  // A point seen at full-resolution pixel (u, v) lies at ((u - x0) / 2, (v - y0) / 2) in the
+  // cropped, binned image: the top-left pixel of each bin is the one kept.
+  for (const Vec3& p : {Vec3(0.05, -0.02, 0.7), Vec3(-0.1, 0.08, 1.1), Vec3(0.0, 0.0, 0.5)}) {
+    const double u = full.fx * p.x() / p.z() + full.cx, v = full.fy * p.y() / p.z() + full.cy;
+    EXPECT_NEAR(c.fx * p.x() / p.z() + c.cx, (u - 100) / 2, 1e-9);
+    EXPECT_NEAR(c.fy * p.y() / p.z() + c.cy, (v - 40) / 2, 1e-9);
+  }
+  info.binning_x = info.binning_y = 0;  // 0 and 1 both mean none
+  EXPECT_EQ(cameraFromInfo(info).width, 400);
+  EXPECT_DOUBLE_EQ(cameraFromInfo(info).cx, full.cx - 100);
+
+  auto refused = [&](sensor_msgs::RegionOfInterest roi) {
+    sensor_msgs::CameraInfo bad = info;
+    bad.roi = roi;
+    try {
+      cameraFromInfo(bad);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what()).find("ROI") != std::string::npos;
+    }
+    return false;
+  };
+  sensor_msgs::RegionOfInterest outside = info.roi;
+  outside.x_offset = 300;  // 300 + 400 > 640
+  EXPECT_TRUE(refused(outside));
+  sensor_msgs::RegionOfInterest half = info.roi;
+  half.height = 0;
+  EXPECT_TRUE(refused(half));
+  EXPECT_FALSE(refused(info.roi));
+}
+
 TEST(Conversions, DepthAndCameraInfoRoundTrip) {
   DepthImage depth(3, 2, 0.0f);
   depth.at(0, 0) = 0.5f;

@@ -28,8 +28,10 @@ DepthImage depthFromImage(const sensor_msgs::Image& msg);
 /// another encoding, an empty image or one whose data is shorter than its step says.
 Image<uint8_t> maskFromImage(const sensor_msgs::Image& msg);
 
-/// Pinhole intrinsics from a CameraInfo (the rectified P matrix, K when P is zero).
-/// Rejects zero focal lengths and empty sizes.
+/// Pinhole intrinsics of the image a CameraInfo describes: the rectified P matrix (K when P is
+/// zero), with its ROI cut out and its binning applied (image_geometry's reduced resolution,
+/// as image_proc's crop_decimate publishes). Rejects an ROI outside the full image, zero focal
+/// lengths and empty sizes.
 PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg);
 
 /// The inverses, as a depth camera publishes: 16UC1 in mm (missing = 0) and its CameraInfo

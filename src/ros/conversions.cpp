@@ -1,9 +1,11 @@
 #include "simstack_ros/conversions.h"
 
+#include <image_geometry/pinhole_camera_model.h>
 #include <sensor_msgs/image_encodings.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -70,14 +72,33 @@ DepthImage depthFromImage(const sensor_msgs::Image& msg) {
 }
 
 PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg) {
+  sensor_msgs::CameraInfo info = msg;
+  if (info.P[0] == 0.0 || info.P[5] == 0.0)  // a driver that fills K alone
+    info.P = {info.K[0], info.K[1], info.K[2], 0.0,       info.K[3], info.K[4],
+              info.K[5], 0.0,       info.K[6], info.K[7], info.K[8], 0.0};
+  // image_geometry reads any ROI whose width or height is set and does not check it against
+  // the full image: one past its edge would describe pixels the camera does not have.
+  const sensor_msgs::RegionOfInterest& roi = info.roi;
+  const bool has_roi = roi.width != 0 || roi.height != 0;
+  if (has_roi &&
+      (roi.width == 0 || roi.height == 0 || uint64_t{roi.x_offset} + roi.width > info.width ||
+       uint64_t{roi.y_offset} + roi.height > info.height))
+    throw std::invalid_argument("camera_info's ROI " + std::to_string(roi.width) + "x" +
+                                std::to_string(roi.height) + " at (" +
+                                std::to_string(roi.x_offset) + ", " + std::to_string(roi.y_offset) +
+                                ") does not lie within its " + std::to_string(info.width) + "x" +
+                                std::to_string(info.height) + " image");
+  // The intrinsics of the image as published: the ROI cut out, then the binning applied.
+  image_geometry::PinholeCameraModel model;
+  model.fromCameraInfo(info);
+  const cv::Size size = model.reducedResolution();
   PinholeCamera c;
-  c.width = static_cast<int>(msg.width);
-  c.height = static_cast<int>(msg.height);
-  const bool has_p = msg.P[0] != 0.0 && msg.P[5] != 0.0;
-  c.fx = has_p ? msg.P[0] : msg.K[0];
-  c.fy = has_p ? msg.P[5] : msg.K[4];
-  c.cx = has_p ? msg.P[2] : msg.K[2];
-  c.cy = has_p ? msg.P[6] : msg.K[5];
+  c.width = size.width;
+  c.height = size.height;
+  c.fx = model.fx();
+  c.fy = model.fy();
+  c.cx = model.cx();
+  c.cy = model.cy();
   c.validate();
   return c;
 }

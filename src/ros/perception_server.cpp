@@ -206,9 +206,15 @@ bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* 
     return false;
   }
   if (view->depth.width != view->camera.width || view->depth.height != view->camera.height) {
+    const sensor_msgs::CameraInfo& info = *frame.info;
+    const bool reduced = info.binning_x > 1 || info.binning_y > 1 || info.roi.width != 0;
     *why = "the depth image is " + std::to_string(view->depth.width) + "x" +
            std::to_string(view->depth.height) + " but its camera_info " +
-           std::to_string(view->camera.width) + "x" + std::to_string(view->camera.height);
+           std::to_string(view->camera.width) + "x" + std::to_string(view->camera.height) +
+           (reduced ? " (" + std::to_string(info.width) + "x" + std::to_string(info.height) +
+                          " with its ROI and binning " + std::to_string(info.binning_x) + "x" +
+                          std::to_string(info.binning_y) + ")"
+                    : std::string());
     return false;
   }
   size_t valid = 0;

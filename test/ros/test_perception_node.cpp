@@ -50,6 +50,19 @@ std::vector<SuperquadricShape> knownPile() {
           box(Vec3(0.05, 0.05, 0.04), Vec3(0.0, 0.09, 0.04), -0.2)};
 }
 
+/// Each object of `truth` has an object of `out` whose centre is within 2 cm of its own.
+void expectEachFound(const ObjectArray& out, const std::vector<SuperquadricShape>& truth) {
+  for (const SuperquadricShape& t : truth) {
+    double nearest = 1e9;
+    for (const Object& o : out.objects) {
+      const auto& p = o.superquadric.pose.position;
+      nearest = std::min(nearest, (Vec3(p.x, p.y, p.z) - t.T_table_object.translation()).norm());
+    }
+    EXPECT_LT(nearest, 0.02) << "no object centre within 2 cm of "
+                             << t.T_table_object.translation().transpose();
+  }
+}
+
 /// The test's topics and tf, advertised and subscribed once for the whole program: a topic
 /// unadvertised at the end of one test and advertised again by the next leaves the nodes to
 /// reconnect to it, and a node whose old connection has not dropped when the new
@@ -184,19 +197,41 @@ TEST_F(PerceptionNodeTest, AKnownPileGivesItsObjects) {
   EXPECT_EQ(out->symmetries, 4u);  // config/perception.yaml's
   EXPECT_GT(out->total_ms, 0.0f);
   ASSERT_EQ(out->objects.size(), truth.size());
-  for (const SuperquadricShape& t : truth) {
-    double nearest = 1e9;
-    for (const Object& o : out->objects) {
-      const auto& p = o.superquadric.pose.position;
-      nearest = std::min(nearest, (Vec3(p.x, p.y, p.z) - t.T_table_object.translation()).norm());
-      EXPECT_GT(o.surface.width, 0u);
-      EXPECT_GT(o.voxels, 0u);
-      EXPECT_GT(o.visible_fraction, 0.05f);
-      EXPECT_LT(o.visible_fraction, 0.95f);
-    }
-    EXPECT_LT(nearest, 0.02) << "no object centre within 2 cm of "
-                             << t.T_table_object.translation().transpose();
+  expectEachFound(*out, truth);
+  for (const Object& o : out->objects) {
+    EXPECT_GT(o.surface.width, 0u);
+    EXPECT_GT(o.voxels, 0u);
+    EXPECT_GT(o.visible_fraction, 0.05f);
+    EXPECT_LT(o.visible_fraction, 0.95f);
   }
+}
+
+TEST_F(PerceptionNodeTest, ACroppedBinnedImageIsReadThroughItsCameraInfo) {
+  // What image_proc's crop_decimate publishes: the pile's part of the image, every second
+  // pixel of every second row, and the full camera's info with its ROI and binning.
+  const std::vector<SuperquadricShape> truth = knownPile();
+  const DepthImage full = render(truth), table = render({});
+  int u0 = full.width, v0 = full.height, u1 = 0, v1 = 0;
+  for (int v = 0; v < full.height; ++v)
+    for (int u = 0; u < full.width; ++u)
+      if (full.at(u, v) != table.at(u, v))
+        u0 = std::min(u0, u), v0 = std::min(v0, v), u1 = std::max(u1, u), v1 = std::max(v1, v);
+  ASSERT_LT(u0, u1) << "the pile is not in view";
+  u0 = std::max(0, u0 - 40) & ~1, v0 = std::max(0, v0 - 40) & ~1;
+  u1 = std::min(full.width, u1 + 40) & ~1, v1 = std::min(full.height, v1 + 40) & ~1;
+  DepthImage binned((u1 - u0) / 2, (v1 - v0) / 2, 0.0f);
+  for (int v = 0; v < binned.height; ++v)
+    for (int u = 0; u < binned.width; ++u) binned.at(u, v) = full.at(u0 + 2 * u, v0 + 2 * v);
+  sensor_msgs::CameraInfo info = infoMsg(ros::Time(0));
+  info.binning_x = info.binning_y = 2;
+  info.roi.x_offset = u0, info.roi.y_offset = v0;
+  info.roi.width = u1 - u0, info.roi.height = v1 - v0;
+  ASSERT_LT(binned.width * binned.height, full.width * full.height / 5);
+
+  const std::optional<ObjectArray> out = send(imageMsg(binned, ros::Time(0)), info, 60.0);
+  ASSERT_TRUE(out) << "no objects within 60 s";
+  ASSERT_EQ(out->objects.size(), truth.size());
+  expectEachFound(*out, truth);
 }
 
 TEST_F(PerceptionNodeTest, BadInputIsSkippedAndTheNodeKeepsPublishing) {
@@ -223,6 +258,10 @@ TEST_F(PerceptionNodeTest, BadInputIsSkippedAndTheNodeKeepsPublishing) {
              const float nan = std::nanf("");
              for (size_t k = 0; k < size_t(i->width) * i->height; ++k)
                std::memcpy(i->data.data() + 4 * k, &nan, 4);
+           }},
+          {"ROI outside the full image",
+           [](sensor_msgs::Image*, sensor_msgs::CameraInfo* c) {
+             c->roi.x_offset = 600, c->roi.width = 100, c->roi.height = 100;
            }},
           {"zero focal length",
            [](sensor_msgs::Image*, sensor_msgs::CameraInfo* c) { c->K[0] = c->P[0] = 0; }},
