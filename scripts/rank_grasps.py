@@ -7,7 +7,8 @@ them best first (README, "Grasps").
     scripts/rank_grasps.py --target 1 --candidates 32 --hypotheses 3 --json grasps.json
 
 The scene is the latest ObjectArray the grasp server received (launch/grasps.launch); with
---target top it is read here first to choose the object, and sent with the request.
+--target top it is read here first to choose the object (refused when older than --max-age),
+and sent with the request, so that the id names the object chosen.
 """
 import argparse
 import json
@@ -37,6 +38,20 @@ def table(res, rows):
     return "\n".join(lines)
 
 
+def scene_age(scene):
+    """Seconds since the scene's stamp, or None when there is nothing to judge it by (a stamp of
+    0, or a simulated clock that has not ticked yet). A latched scene comes at once however old
+    it is: the camera or the perception may have stopped since."""
+    if scene.header.stamp.is_zero():
+        return None
+    deadline = time.time() + 1.0  # the first /clock message under simulated time
+    now = rospy.Time.now()
+    while now.is_zero() and time.time() < deadline:
+        time.sleep(0.05)
+        now = rospy.Time.now()
+    return None if now.is_zero() else (now - scene.header.stamp).to_sec()
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--target", required=True, help="object id, or 'top' for the highest")
@@ -48,6 +63,9 @@ def main():
     parser.add_argument("--camera", default="camera", help="namespace of the perception and grasp nodes")
     parser.add_argument("--rows", type=int, default=10, help="grasps printed")
     parser.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the service")
+    parser.add_argument("--max-age", type=float, default=10.0,
+                        help="with --target top: refuse a scene older than this (s; 0: any age), "
+                             "as the server does with a request that carries none")
     parser.add_argument("--json", help="also write the response to this file")
     args = parser.parse_args(rospy.myargv()[1:])
     # The request's counts are uint32: one outside is an argument error, not a traceback.
@@ -56,6 +74,8 @@ def main():
             parser.error("--%s must lie in [0, 4294967295], not %d" % (name, getattr(args, name)))
     if not args.timeout > 0:
         parser.error("--timeout must be > 0 s")
+    if not args.max_age >= 0:
+        parser.error("--max-age must be >= 0 s")
     if args.json:  # fail before the ranking, not after it
         if os.path.isdir(args.json):
             parser.error("--json %s is a directory: name a file" % args.json)
@@ -86,6 +106,10 @@ def main():
             scene = rospy.wait_for_message(topic, ObjectArray, timeout=args.timeout)
         except rospy.ROSException as e:
             sys.exit("rank_grasps: no scene on %s: %s" % (topic, e))
+        age = scene_age(scene)
+        if args.max_age > 0 and age is not None and age > args.max_age:
+            sys.exit("rank_grasps: the latest scene on %s is %.1f s old (--max-age %g): is the "
+                     "perception still running?" % (topic, age, args.max_age))
         if not scene.objects:
             sys.exit("rank_grasps: the latest scene has no objects")
         req.scene = scene

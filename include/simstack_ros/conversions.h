@@ -28,6 +28,10 @@ DepthImage depthFromImage(const sensor_msgs::Image& msg);
 /// another encoding, an empty image or one whose data is shorter than its step says.
 Image<uint8_t> maskFromImage(const sensor_msgs::Image& msg);
 
+/// A frame name as tf2 takes it: without the leading '/' of tf1's names (older drivers and bags
+/// still send "/camera_depth_optical_frame"; tf2 refuses it and warns on every lookup).
+std::string tf2Frame(const std::string& frame);
+
 /// Pinhole intrinsics of the image a CameraInfo describes: the rectified P matrix (K when P is
 /// zero), with its ROI cut out and its binning applied (image_geometry's reduced resolution,
 /// as image_proc's crop_decimate publishes). Rejects an ROI outside the full image, zero focal

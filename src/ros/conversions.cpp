@@ -71,6 +71,10 @@ DepthImage depthFromImage(const sensor_msgs::Image& msg) {
   return depth;
 }
 
+std::string tf2Frame(const std::string& frame) {
+  return !frame.empty() && frame.front() == '/' ? frame.substr(1) : frame;
+}
+
 PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg) {
   sensor_msgs::CameraInfo info = msg;
   if (info.P[0] == 0.0 || info.P[5] == 0.0)  // a driver that fills K alone

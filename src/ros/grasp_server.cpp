@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "simstack_ros/conversions.h"
 #include "simstack_ros/grasp_conversions.h"
 
 namespace simstack {
@@ -78,7 +79,8 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   }
   const std::string topic = nh_.resolveName(config_.objects_topic);
   if (!scene) {
-    res.message = "the request has no objects and no scene has arrived on " + topic + " yet";
+    res.message = "the request has no objects and no scene has arrived on " + topic +
+                  " yet (is the perception running? its log says why not)";
     return false;
   }
   if (req.scene.objects.empty() && config_.max_scene_age_s > 0.0 && !scene->header.stamp.isZero()) {
@@ -107,6 +109,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
     return false;
   }
   res.header = scene->header;
+  res.header.frame_id = tf2Frame(res.header.frame_id);  // markers in rviz
   *target = -1;
   std::string ids;
   for (size_t k = 0; k < scene->objects.size(); ++k) {
@@ -142,6 +145,10 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
       return false;
     }
   std::string notes;
+  if (req.hypotheses == 0 && scene->hypotheses.empty())
+    notes +=
+        "ranked in the objects alone: the scene carries no hypotheses (the perception's "
+        "decompose_samples is 1; grasps.launch publishes 3 by default); ";
   if (static_cast<int>(scenes->size()) < wanted)
     notes += std::to_string(wanted) + " hypotheses asked for, the scene has " +
              std::to_string(scenes->size()) + "; ";

@@ -89,8 +89,11 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   reconfigure_->setCallback(
       [this](LiveSettingsConfig& settings, uint32_t level) { onSettings(settings, level); });
   try {
-    depth_sub_ = it_.subscribeCamera("depth/image_rect", 1, &PerceptionServer::onFrame, this,
-                                     image_transport::TransportHints(node_.image_transport));
+    // The hints read ~image_transport (image_transport's convention, `_image_transport:=...`)
+    // from the node's own namespace: a nodelet's "~" would be its manager's.
+    depth_sub_ = it_.subscribeCamera(
+        "depth/image_rect", 1, &PerceptionServer::onFrame, this,
+        image_transport::TransportHints(node_.image_transport, ros::TransportHints(), pnh_));
   } catch (const image_transport::TransportLoadException& e) {
     throw std::runtime_error("node/image_transport '" + node_.image_transport +
                              "' cannot be loaded: " + e.what());
@@ -223,8 +226,12 @@ bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* 
     *why = "the depth image holds no valid depth (all zero or NaN)";
     return false;
   }
+  const std::string camera_frame = tf2Frame(frame.image->header.frame_id);
+  if (camera_frame.empty()) {
+    *why = "the depth image's header has no frame_id (the camera's optical frame)";
+    return false;
+  }
   if (node_.estimate_table) return true;  // the pipeline fits the plane
-  const std::string camera_frame = frame.image->header.frame_id;
   const ros::Time stamp = frame.image->header.stamp;
   if (!waitForTransform(camera_frame, stamp, why)) return false;
   try {
@@ -377,7 +384,7 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
   if (estimate.table_estimated) {
     geometry_msgs::TransformStamped t = tf2::eigenToTransform(estimate.T_table_camera.inverse());
     t.header.stamp = header.stamp;
-    t.header.frame_id = frame.image->header.frame_id;
+    t.header.frame_id = tf2Frame(frame.image->header.frame_id);
     t.child_frame_id = node_.table_frame;
     tf_broadcaster_.sendTransform(t);
   }

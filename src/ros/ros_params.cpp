@@ -11,6 +11,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "simstack_ros/conversions.h"
+
 namespace simstack {
 namespace {
 
@@ -145,6 +147,7 @@ NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh) {
   // A value of the wrong type (1 for true, "0.5" for 0.5) stops the node rather than being
   // replaced by the default unnoticed.
   read(pnh, "node/table_frame", &c.table_frame);
+  c.table_frame = tf2Frame(c.table_frame);
   read(pnh, "node/estimate_table", &c.estimate_table);
   read(pnh, "node/tf_timeout_s", &c.tf_timeout_s);
   read(pnh, "node/input_timeout_s", &c.input_timeout_s);

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # roslaunch-check on every launch file of the package (and the rostests): arguments,
-# substitutions, packages and node types resolve.
+# substitutions, packages and node types resolve. Then what the launch files hand the nodes:
+# the model each hypotheses setting picks, the arguments grasps.launch passes on, and
+# clear_params on every node that loads a config.
 set -e
 build=$1
 source_dir=$2
@@ -17,4 +19,44 @@ for f in "$source_dir"/launch/*.launch "$source_dir"/test/ros/*.test; do
     echo "FAILED: $f"; echo "$out"; status=1
   fi
 done
+
+# expect LABEL PATTERN COMMAND...: COMMAND's output holds a line matching PATTERN.
+expect() {
+  local label=$1 pattern=$2
+  shift 2
+  if "$@" 2>&1 | grep -Eq "$pattern"; then
+    echo "ok: $label"
+  else
+    echo "FAILED: $label: no line matching '$pattern' in the output of: $*"; status=1
+  fi
+}
+launch=$source_dir/launch
+dump() { roslaunch --dump-params "$@"; }
+expect "perception.launch: the config's model" 'perception/model: models/simstack_r32_fc.pt$' \
+  dump "$launch/perception.launch"
+expect "perception.launch decompose_samples:=3: the C-VAE" 'perception/model: .*/simstack_r32.pt$' \
+  dump "$launch/perception.launch" decompose_samples:=3
+expect "perception.launch decompose_samples:=3 model:=M: M" 'perception/model: /tmp/m.pt$' \
+  dump "$launch/perception.launch" decompose_samples:=3 model:=/tmp/m.pt
+expect "grasps.launch: 3 hypotheses from the C-VAE" 'perception/model: .*/simstack_r32.pt$' \
+  dump "$launch/grasps.launch"
+expect "grasps.launch hypotheses:=1: the config's model" 'perception/model: models/simstack_r32_fc.pt$' \
+  dump "$launch/grasps.launch" hypotheses:=1
+expect "replay.launch decompose_samples:=3: the C-VAE" 'perception/model: .*/simstack_r32.pt$' \
+  dump "$launch/replay.launch" decompose_samples:=3
+expect "grasps.launch image_transport:=compressedDepth reaches the node" \
+  'node/image_transport: compressedDepth$' dump "$launch/grasps.launch" image_transport:=compressedDepth
+expect "grasps.launch accumulate_views:=true reaches the node" 'node/accumulate_views: true$' \
+  dump "$launch/grasps.launch" accumulate_views:=true
+expect "grasps.launch manager:=driver loads into it" 'PerceptionNodelet driver ' \
+  roslaunch --args /camera/perception "$launch/grasps.launch" manager:=driver
+# A node that loads a config clears what an earlier launch left in its namespace.
+if ! /usr/bin/python3 - "$launch"/*.launch <<'PY'
+import sys, xml.etree.ElementTree as ET
+bad = [f"{f}: node {n.get('name')}" for f in sys.argv[1:] for n in ET.parse(f).iter("node")
+       if any(r.get("command") == "load" for r in n.iter("rosparam")) and n.get("clear_params") != "true"]
+print("\n".join(f"FAILED: {b} loads a config without clear_params=\"true\"" for b in bad) or "ok: clear_params")
+sys.exit(1 if bad else 0)
+PY
+then status=1; fi
 exit $status

@@ -2,10 +2,13 @@
 """rostest node of test/ros/grasps.test: the grasp service on the replayed example bag."""
 import copy
 import math
+import os
+import subprocess
 import threading
 import time
 import unittest
 
+import rospkg
 import rospy
 import rostest
 from simstack.msg import ObjectArray, Object, SceneSample
@@ -45,6 +48,7 @@ class GraspService(unittest.TestCase):
         self.assertGreater(len(res.grasps), 0, res.message)
         self.assertLessEqual(len(res.grasps), 12)
         self.assertEqual(res.hypotheses_used, 1)
+        self.assertIn("carries no hypotheses", res.message)  # replay.launch: `fc`, one scene
         self.assertEqual(len(res.baseline_displacement_m), 1)
         self.assertEqual(res.pulls, len(res.grasps))
         for better, worse in zip(res.grasps, res.grasps[1:]):
@@ -143,6 +147,7 @@ class GraspService(unittest.TestCase):
         res = self.rank(request(scene=scene, candidates=4))
         self.assertTrue(res.success, res.message)
         self.assertEqual(res.hypotheses_used, 3)
+        self.assertNotIn("carries no hypotheses", res.message)
         self.assertEqual(len(res.baseline_displacement_m), 3)
         self.assertEqual(self.rank(request(scene=scene, candidates=4, hypotheses=1)).hypotheses_used, 1)
         more = self.rank(request(scene=scene, candidates=4, hypotheses=5))
@@ -227,6 +232,33 @@ class GraspService(unittest.TestCase):
         self.assertTrue(answers["slow"].success, answers["slow"].message)
         self.assertTrue(answers["waiting"].success, answers["waiting"].message)
         self.assertGreater(len(answers["waiting"].grasps), 0)
+
+    def script(self, *args):
+        """scripts/rank_grasps.py run as a user runs it: (exit code, stdout + stderr)."""
+        path = os.path.join(rospkg.RosPack().get_path("simstack"), "scripts", "rank_grasps.py")
+        done = subprocess.run([path] + list(args), capture_output=True, text=True, timeout=120)
+        return done.returncode, done.stdout + done.stderr
+
+    def test_8_the_script_ranks_the_top_object(self):
+        code, out = self.script("--target", "top", "--candidates", "4")
+        self.assertEqual(code, 0, out)
+        self.assertRegex(out, r"object \d+: .*grasps ranked")
+        self.assertIn("rank  contact (m)", out)
+
+    def test_9_the_script_refuses_a_stale_latched_scene(self):
+        # A latched scene arrives at once however old it is; the bag's clock reads 1 s or more.
+        pub = rospy.Publisher("/stale/perception/objects", ObjectArray, queue_size=1, latch=True)
+        stale = copy.deepcopy(self.scene)
+        stale.header.stamp = rospy.Time(0, 1000)
+        pub.publish(stale)
+        code, out = self.script("--target", "top", "--camera", "stale", "--max-age", "0.5",
+                                "--timeout", "5")
+        self.assertNotEqual(code, 0, out)
+        self.assertIn("s old (--max-age 0.5)", out)
+        code, out = self.script("--target", "top", "--camera", "stale", "--max-age", "0",
+                                "--timeout", "5")
+        self.assertIn("/stale/grasps/rank_grasps", out)  # past the check, no server there
+
 
 if __name__ == "__main__":
     rostest.rosrun("simstack", "grasp_service", GraspService)

@@ -234,6 +234,17 @@ TEST_F(PerceptionNodeTest, ACroppedBinnedImageIsReadThroughItsCameraInfo) {
   expectEachFound(*out, truth);
 }
 
+TEST_F(PerceptionNodeTest, ATf1FrameNameIsTf2s) {
+  // Older drivers and bags name frames with a leading '/', which tf2 refuses.
+  sensor_msgs::Image image = imageMsg(render(knownPile()), ros::Time(0));
+  sensor_msgs::CameraInfo info = infoMsg(ros::Time(0));
+  image.header.frame_id = info.header.frame_id = std::string("/") + kCameraFrame;
+  const std::optional<ObjectArray> out = send(image, info, 60.0);
+  ASSERT_TRUE(out) << "no objects within 60 s";
+  EXPECT_EQ(out->header.frame_id, "table");
+  EXPECT_EQ(out->objects.size(), knownPile().size());
+}
+
 TEST_F(PerceptionNodeTest, BadInputIsSkippedAndTheNodeKeepsPublishing) {
   const DepthImage depth = render(knownPile());
   const sensor_msgs::CameraInfo info = infoMsg(ros::Time(0));
@@ -280,6 +291,10 @@ TEST_F(PerceptionNodeTest, BadInputIsSkippedAndTheNodeKeepsPublishing) {
              const float far = 1e30f;
              for (size_t k = 0; k < size_t(i->width) * i->height; ++k)
                std::memcpy(i->data.data() + 4 * k, &far, 4);
+           }},
+          {"no frame_id",
+           [](sensor_msgs::Image* i, sensor_msgs::CameraInfo* c) {
+             i->header.frame_id = c->header.frame_id = "";
            }},
           {"no tf for the frame",
            [](sensor_msgs::Image* i, sensor_msgs::CameraInfo* c) {
