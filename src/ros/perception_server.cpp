@@ -88,15 +88,16 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   reconfigure_->updateConfig(live);  // the node's parameters, not the .cfg's defaults
   reconfigure_->setCallback(
       [this](LiveSettingsConfig& settings, uint32_t level) { onSettings(settings, level); });
+  // The hints read ~image_transport (image_transport's convention, `_image_transport:=...`)
+  // from the node's own namespace: a nodelet's "~" would be its manager's.
+  const image_transport::TransportHints hints(node_.image_transport, ros::TransportHints(), pnh_);
   try {
-    // The hints read ~image_transport (image_transport's convention, `_image_transport:=...`)
-    // from the node's own namespace: a nodelet's "~" would be its manager's.
-    depth_sub_ = it_.subscribeCamera(
-        "depth/image_rect", 1, &PerceptionServer::onFrame, this,
-        image_transport::TransportHints(node_.image_transport, ros::TransportHints(), pnh_));
+    depth_sub_ =
+        it_.subscribeCamera("depth/image_rect", 1, &PerceptionServer::onFrame, this, hints);
   } catch (const image_transport::TransportLoadException& e) {
-    throw std::runtime_error("node/image_transport '" + node_.image_transport +
-                             "' cannot be loaded: " + e.what());
+    const bool overridden = hints.getTransport() != node_.image_transport;
+    throw std::runtime_error((overridden ? "~image_transport '" : "node/image_transport '") +
+                             hints.getTransport() + "' cannot be loaded: " + e.what());
   }
   // A latched publisher's mask arrives once; a bad one is reported and the previous one kept.
   const std::string mask_topic = pnh_.resolveName("mask");

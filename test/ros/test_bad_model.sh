@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# A missing or corrupt model at start: perception_node exits non-zero with a ROS_FATAL that names
-# the file (no crash); the nodelet reports it and its manager keeps running.
+# A missing or corrupt model, or a ~image_transport no plugin provides, at start: perception_node
+# exits non-zero with a ROS_FATAL that names it (no crash); the nodelet reports it and its manager
+# keeps running.
 # Usage: test_bad_model.sh BUILD_DIR SOURCE_DIR
 set -e
 build=$1
@@ -23,6 +24,14 @@ for model in "$ROS_HOME/missing.pt" "$ROS_HOME/corrupt.pt"; do
   grep -q "FATAL.*$(basename "$model")" "$ROS_HOME/node.log" ||
     { echo "no FATAL naming $model:"; cat "$ROS_HOME/node.log"; exit 1; }
 done
+# image_transport's own parameter, ~image_transport, names a transport that no plugin provides.
+set +e
+timeout 60 "$node" __ns:=bad _perception/model:="$2/models/simstack_r32_fc.pt" \
+  _image_transport:=nosuch > "$ROS_HOME/node.log" 2>&1
+status=$?
+set -e
+[ "$status" -eq 1 ] && grep -q "FATAL.*~image_transport 'nosuch' cannot be loaded" "$ROS_HOME/node.log" ||
+  { echo "perception_node with ~image_transport nosuch exited with $status:"; cat "$ROS_HOME/node.log"; exit 1; }
 ros_session_spawn "$ROS_HOME/manager.log" rosrun nodelet nodelet manager __name:=manager
 timeout 30 bash -c 'until rosnode list 2>/dev/null | grep -q /manager; do sleep 0.3; done'
 rosparam set /perception/perception/model "$ROS_HOME/corrupt.pt"
@@ -31,5 +40,13 @@ ros_session_spawn "$ROS_HOME/load.log" rosrun nodelet nodelet load simstack/Perc
 for _ in $(seq 120); do grep -q "FATAL.*corrupt.pt" "$ROS_HOME/manager.log" && break; sleep 0.5; done
 grep -q "FATAL.*corrupt.pt" "$ROS_HOME/manager.log" ||
   { echo "the manager did not report the model:"; cat "$ROS_HOME/manager.log"; exit 1; }
+# The nodelet reads it from its own namespace (a nodelet's "~" handle is its manager's).
+rosparam set /transport/perception/model "$2/models/simstack_r32_fc.pt"
+rosparam set /transport/image_transport nosuch
+ros_session_spawn "$ROS_HOME/load2.log" rosrun nodelet nodelet load simstack/PerceptionNodelet \
+  manager __name:=transport --no-bond
+for _ in $(seq 120); do grep -q "FATAL.*~image_transport 'nosuch'" "$ROS_HOME/manager.log" && break; sleep 0.5; done
+grep -q "FATAL.*~image_transport 'nosuch' cannot be loaded" "$ROS_HOME/manager.log" ||
+  { echo "the nodelet did not read its ~image_transport:"; cat "$ROS_HOME/manager.log"; exit 1; }
 rosnode ping -c 1 /manager > /dev/null || { echo "the manager died"; cat "$ROS_HOME/manager.log"; exit 1; }
-echo "bad models refused: node exits 1, nodelet reports and its manager lives"
+echo "bad models and transports refused: node exits 1, nodelet reports and its manager lives"
