@@ -381,6 +381,39 @@ TEST(ScenePerception, PerceivesARenderedPile) {
   }
 }
 
+TEST(ScenePerception, TheThreadCountDoesNotChangeTheHypotheses) {
+  // Hough voting, the fits and the joint solve split their work over `threads`: every
+  // decomposed hypothesis must come out the same, to the bit, on one thread or two.
+  ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
+  const RenderedPile p = renderPile(12);
+  const DepthView view{p.view.depth, p.camera, p.T_table_camera};
+  std::vector<SceneEstimate> runs;
+  for (int threads : {1, 2}) {
+    PerceptionConfig config;
+    config.model_path = kModel;
+    config.decompose_samples = 3;
+    config.threads = threads;
+    runs.push_back(ScenePerception(config).perceive(view));
+  }
+  for (size_t h = 0; h < 3; ++h) {
+    const auto& one = runs[0].hypotheses[h].instances;
+    const auto& two = runs[1].hypotheses[h].instances;
+    EXPECT_TRUE(runs[1].hypotheses[h].decomposed);
+    ASSERT_EQ(one.size(), two.size()) << "hypothesis " << h;
+    ASSERT_FALSE(one.empty());
+    for (size_t k = 0; k < one.size(); ++k) {
+      EXPECT_EQ(one[k].superquadric.scale_m, two[k].superquadric.scale_m) << h << ", " << k;
+      EXPECT_EQ(one[k].superquadric.exponents, two[k].superquadric.exponents) << h << ", " << k;
+      EXPECT_TRUE(
+          one[k].superquadric.T_table_object.isApprox(two[k].superquadric.T_table_object, 0.0))
+          << h << ", " << k;
+    }
+    EXPECT_EQ(runs[0].hypotheses[h].labels.data, runs[1].hypotheses[h].labels.data);
+  }
+  const StageTimings& t = runs[1].timings;
+  EXPECT_LE(t.instances_ms + t.mesh_ms + t.fitting_ms, t.total_ms);
+}
+
 TEST(ScenePerception, BadInputGetsClearErrors) {
   ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
   PerceptionConfig config;
