@@ -123,8 +123,9 @@ def main():
         sys.exit("rank_grasps: %s: %s" % (service, e))
     if not res.success:
         sys.exit("rank_grasps: %s" % res.message)
-    print("object %d: %s (%d pulls in %d hypotheses, %.2f s)" % (
-        req.target_id, res.message, res.pulls, res.hypotheses_used, res.time_s))
+    print("object %d: %s (%d pulls in %d %s, %.2f s)" % (
+        req.target_id, res.message, res.pulls, res.hypotheses_used,
+        "hypothesis" if res.hypotheses_used == 1 else "hypotheses", res.time_s))
     print(table(res, args.rows))
     if args.json:
         with open(args.json, "w") as f:  # checked above; a disk that fills still raises
