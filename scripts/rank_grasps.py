@@ -40,11 +40,11 @@ def table(res, rows):
 
 def scene_age(scene):
     """Seconds since the scene's stamp, or None when there is nothing to judge it by (a stamp of
-    0, or a simulated clock that has not ticked yet). A latched scene comes at once however old
-    it is: the camera or the perception may have stopped since."""
+    0, or a simulated clock that has not ticked within 3 s: a bag that has ended). A latched
+    scene comes at once however old it is: the camera or the perception may have stopped since."""
     if scene.header.stamp.is_zero():
         return None
-    deadline = time.time() + 1.0  # the first /clock message under simulated time
+    deadline = time.time() + 3.0  # the first /clock message under simulated time
     now = rospy.Time.now()
     while now.is_zero() and time.time() < deadline:
         time.sleep(0.05)
@@ -63,9 +63,10 @@ def main():
     parser.add_argument("--camera", default="camera", help="namespace of the perception and grasp nodes")
     parser.add_argument("--rows", type=int, default=10, help="grasps printed")
     parser.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the service")
-    parser.add_argument("--max-age", type=float, default=10.0,
-                        help="with --target top: refuse a scene older than this (s; 0: any age), "
-                             "as the server does with a request that carries none")
+    parser.add_argument("--max-age", type=float, default=None,
+                        help="with --target top: refuse a scene older than this (s; 0: any age; "
+                             "default: the server's ~max_scene_age_s, which it applies to "
+                             "requests that carry no scene)")
     parser.add_argument("--json", help="also write the response to this file")
     args = parser.parse_args(rospy.myargv()[1:])
     # The request's counts are uint32: one outside is an argument error, not a traceback.
@@ -74,7 +75,7 @@ def main():
             parser.error("--%s must lie in [0, 4294967295], not %d" % (name, getattr(args, name)))
     if not args.timeout > 0:
         parser.error("--timeout must be > 0 s")
-    if not args.max_age >= 0:
+    if args.max_age is not None and not args.max_age >= 0:
         parser.error("--max-age must be >= 0 s")
     if args.json:  # fail before the ranking, not after it
         if os.path.isdir(args.json):
@@ -106,10 +107,16 @@ def main():
             scene = rospy.wait_for_message(topic, ObjectArray, timeout=args.timeout)
         except rospy.ROSException as e:
             sys.exit("rank_grasps: no scene on %s: %s" % (topic, e))
+        max_age = args.max_age
+        if max_age is None:
+            max_age = float(rospy.get_param("/%s/grasps/max_scene_age_s" % args.camera, 10.0))
         age = scene_age(scene)
-        if args.max_age > 0 and age is not None and age > args.max_age:
-            sys.exit("rank_grasps: the latest scene on %s is %.1f s old (--max-age %g): is the "
-                     "perception still running?" % (topic, age, args.max_age))
+        if max_age > 0 and age is not None and age > max_age:
+            sys.exit("rank_grasps: the latest scene on %s is %.1f s old (max age %g s): %s" % (
+                topic, age, max_age,
+                "a day or more apart: is one of this client and the perception on simulated time "
+                "(/use_sim_time) and the other not?" if age > 86400 else
+                "is the perception still running?"))
         if not scene.objects:
             sys.exit("rank_grasps: the latest scene has no objects")
         req.scene = scene

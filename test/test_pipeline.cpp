@@ -9,6 +9,7 @@
 #include <fstream>
 #include <limits>
 #include <optional>
+#include <thread>
 
 #include "simstack/instances/instance_finder.h"
 #include "simstack/pipeline/evaluated_methods.h"
@@ -385,6 +386,8 @@ TEST(ScenePerception, TheThreadCountDoesNotChangeTheHypotheses) {
   // Hough voting, the fits and the joint solve split their work over `threads`: every
   // decomposed hypothesis must come out the same, to the bit, on one thread or two.
   ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
+  if (std::thread::hardware_concurrency() < 2)
+    GTEST_SKIP() << "one core: the pipeline caps its threads at the cores, so both runs use one";
   const RenderedPile p = renderPile(12);
   const DepthView view{p.view.depth, p.camera, p.T_table_camera};
   std::vector<SceneEstimate> runs;
@@ -395,6 +398,8 @@ TEST(ScenePerception, TheThreadCountDoesNotChangeTheHypotheses) {
     config.threads = threads;
     runs.push_back(ScenePerception(config).perceive(view));
   }
+  ASSERT_EQ(runs[0].hypotheses.size(), 3u);
+  ASSERT_EQ(runs[1].hypotheses.size(), 3u);
   for (size_t h = 0; h < 3; ++h) {
     const auto& one = runs[0].hypotheses[h].instances;
     const auto& two = runs[1].hypotheses[h].instances;
@@ -410,8 +415,6 @@ TEST(ScenePerception, TheThreadCountDoesNotChangeTheHypotheses) {
     }
     EXPECT_EQ(runs[0].hypotheses[h].labels.data, runs[1].hypotheses[h].labels.data);
   }
-  const StageTimings& t = runs[1].timings;
-  EXPECT_LE(t.instances_ms + t.mesh_ms + t.fitting_ms, t.total_ms);
 }
 
 TEST(ScenePerception, BadInputGetsClearErrors) {

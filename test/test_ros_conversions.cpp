@@ -105,17 +105,27 @@ TEST(Conversions, CameraInfoWithRoiAndBinningDescribesThePublishedImage) {
     EXPECT_NEAR(c.fx * p.x() / p.z() + c.cx, (u - 100) / 2, 1e-9);
     EXPECT_NEAR(c.fy * p.y() / p.z() + c.cy, (v - 40) / 2, 1e-9);
   }
+  // As image_proc's crop_decimate publishes a crop: do_rectify set, here with a distortion
+  // model. The image is rectified already; the window is the same.
+  sensor_msgs::CameraInfo flagged = info;
+  flagged.roi.do_rectify = true;
+  flagged.distortion_model = "plumb_bob";
+  flagged.D = {0.1, -0.05, 0.001, 0.002, 0.0};
+  const PinholeCamera f = cameraFromInfo(flagged);
+  EXPECT_EQ(f.width, c.width);
+  EXPECT_EQ(f.height, c.height);
+  EXPECT_DOUBLE_EQ(f.cx, c.cx);
   info.binning_x = info.binning_y = 0;  // 0 and 1 both mean none
   EXPECT_EQ(cameraFromInfo(info).width, 400);
   EXPECT_DOUBLE_EQ(cameraFromInfo(info).cx, full.cx - 100);
 
-  auto refused = [&](sensor_msgs::RegionOfInterest roi) {
+  auto refused = [&](sensor_msgs::RegionOfInterest roi, const std::string& words = "ROI") {
     sensor_msgs::CameraInfo bad = info;
     bad.roi = roi;
     try {
       cameraFromInfo(bad);
     } catch (const std::invalid_argument& e) {
-      return std::string(e.what()).find("ROI") != std::string::npos;
+      return std::string(e.what()).find(words) != std::string::npos;
     }
     return false;
   };
@@ -126,6 +136,13 @@ TEST(Conversions, CameraInfoWithRoiAndBinningDescribesThePublishedImage) {
   half.height = 0;
   EXPECT_TRUE(refused(half));
   EXPECT_FALSE(refused(info.roi));
+  sensor_msgs::RegionOfInterest offsets_only;
+  offsets_only.x_offset = 100;
+  EXPECT_TRUE(refused(offsets_only));
+  sensor_msgs::RegionOfInterest corner;  // the top-left corner, without the principal point
+  corner.width = 200;
+  corner.height = 150;
+  EXPECT_TRUE(refused(corner, "principal point"));
 }
 
 TEST(Conversions, DepthAndCameraInfoRoundTrip) {

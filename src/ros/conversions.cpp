@@ -82,8 +82,8 @@ PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg) {
               info.K[5], 0.0,       info.K[6], info.K[7], info.K[8], 0.0};
   // image_geometry reads any ROI whose width or height is set and does not check it against
   // the full image: one past its edge would describe pixels the camera does not have.
-  const sensor_msgs::RegionOfInterest& roi = info.roi;
-  const bool has_roi = roi.width != 0 || roi.height != 0;
+  sensor_msgs::RegionOfInterest& roi = info.roi;
+  const bool has_roi = roi.width != 0 || roi.height != 0 || roi.x_offset != 0 || roi.y_offset != 0;
   if (has_roi &&
       (roi.width == 0 || roi.height == 0 || uint64_t{roi.x_offset} + roi.width > info.width ||
        uint64_t{roi.y_offset} + roi.height > info.height))
@@ -92,9 +92,17 @@ PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg) {
                                 std::to_string(roi.x_offset) + ", " + std::to_string(roi.y_offset) +
                                 ") does not lie within its " + std::to_string(info.width) + "x" +
                                 std::to_string(info.height) + " image");
+  // The image is rectified already (depth/image_rect): its ROI is a window of it, not one of
+  // the raw image to be carried through the distortion model (image_proc's crop_decimate sets
+  // do_rectify when it crops).
+  roi.do_rectify = false;
   // The intrinsics of the image as published: the ROI cut out, then the binning applied.
   image_geometry::PinholeCameraModel model;
-  model.fromCameraInfo(info);
+  try {
+    model.fromCameraInfo(info);
+  } catch (const image_geometry::Exception& e) {
+    throw std::invalid_argument(std::string("camera_info: ") + e.what());
+  }
   const cv::Size size = model.reducedResolution();
   PinholeCamera c;
   c.width = size.width;
@@ -103,6 +111,11 @@ PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg) {
   c.fy = model.fy();
   c.cx = model.cx();
   c.cy = model.cy();
+  if (has_roi && (c.cx < 0.0 || c.cx > c.width || c.cy < 0.0 || c.cy > c.height))
+    throw std::invalid_argument(
+        "camera_info's ROI " + std::to_string(roi.width) + "x" + std::to_string(roi.height) +
+        " at (" + std::to_string(roi.x_offset) + ", " + std::to_string(roi.y_offset) +
+        ") leaves out the principal point: crops must hold it (centre the crop on it)");
   c.validate();
   return c;
 }

@@ -147,8 +147,9 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   std::string notes;
   if (req.hypotheses == 0 && scene->hypotheses.empty())
     notes +=
-        "ranked in the objects alone: the scene carries no hypotheses (the perception's "
-        "decompose_samples is 1; grasps.launch publishes 3 by default); ";
+        "ranked in the objects alone: the scene carries no hypotheses (the perception "
+        "publishes them with a model that has a latent code and decompose_samples above 1, as "
+        "grasps.launch does by default); ";
   if (static_cast<int>(scenes->size()) < wanted)
     notes += std::to_string(wanted) + " hypotheses asked for, the scene has " +
              std::to_string(scenes->size()) + "; ";

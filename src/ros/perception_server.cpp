@@ -382,10 +382,12 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
   std_msgs::Header header;
   header.stamp = frame.image->header.stamp;
   header.frame_id = node_.table_frame;
+  std_msgs::Header camera_header = frame.image->header;  // of the labels image and the table's tf
+  camera_header.frame_id = tf2Frame(camera_header.frame_id);
   if (estimate.table_estimated) {
     geometry_msgs::TransformStamped t = tf2::eigenToTransform(estimate.T_table_camera.inverse());
     t.header.stamp = header.stamp;
-    t.header.frame_id = tf2Frame(frame.image->header.frame_id);
+    t.header.frame_id = camera_header.frame_id;
     t.child_frame_id = node_.table_frame;
     tf_broadcaster_.sendTransform(t);
   }
@@ -403,7 +405,7 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
   if (labels_pub_.getNumSubscribers() > 0) {
     DepthView posed = view;
     posed.T_table_camera = view.T_table_camera.value_or(estimate.T_table_camera);
-    labels_pub_.publish(labelImage(frame.image->header, pixelInstances(posed, estimate)));
+    labels_pub_.publish(labelImage(camera_header, pixelInstances(posed, estimate)));
   }
 }
 

@@ -38,6 +38,11 @@ expect "perception.launch decompose_samples:=3: the C-VAE" 'perception/model: .*
   dump "$launch/perception.launch" decompose_samples:=3
 expect "perception.launch decompose_samples:=3 model:=M: M" 'perception/model: /tmp/m.pt$' \
   dump "$launch/perception.launch" decompose_samples:=3 model:=/tmp/m.pt
+sed 's#^  model: .*#  model: models/simstack_r32_fc_plain.pt#' "$source_dir/config/perception.yaml" \
+  > "$ROS_HOME/own.yaml"
+expect "perception.launch decompose_samples:=3 config:=C: C's model" \
+  'perception/model: models/simstack_r32_fc_plain.pt$' \
+  dump "$launch/perception.launch" decompose_samples:=3 config:="$ROS_HOME/own.yaml"
 expect "grasps.launch: 3 hypotheses from the C-VAE" 'perception/model: .*/simstack_r32.pt$' \
   dump "$launch/grasps.launch"
 expect "grasps.launch hypotheses:=1: the config's model" 'perception/model: models/simstack_r32_fc.pt$' \

@@ -251,10 +251,11 @@ class GraspService(unittest.TestCase):
         stale = copy.deepcopy(self.scene)
         stale.header.stamp = rospy.Time(0, 1000)
         pub.publish(stale)
-        code, out = self.script("--target", "top", "--camera", "stale", "--max-age", "0.5",
-                                "--timeout", "5")
+        # The default is the server's own limit, read from its parameter.
+        rospy.set_param("/stale/grasps/max_scene_age_s", 0.5)
+        code, out = self.script("--target", "top", "--camera", "stale", "--timeout", "5")
         self.assertNotEqual(code, 0, out)
-        self.assertIn("s old (--max-age 0.5)", out)
+        self.assertIn("s old (max age 0.5 s)", out)
         code, out = self.script("--target", "top", "--camera", "stale", "--max-age", "0",
                                 "--timeout", "5")
         self.assertIn("/stale/grasps/rank_grasps", out)  # past the check, no server there
