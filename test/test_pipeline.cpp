@@ -417,6 +417,55 @@ TEST(ScenePerception, TheThreadCountDoesNotChangeTheHypotheses) {
   }
 }
 
+TEST(ScenePerception, AWindowWithoutItsPrincipalPointIsPerceivedAsTheWholeView) {
+  // A cropped camera image (a camera_info's ROI) need not hold the principal point: the pile
+  // seen off the optical axis, and the window of the image around it alone, perceived as the
+  // whole image with nothing measured outside the window.
+  ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
+  const Scene scene = PileGenerator(PileConfig()).generate(12).scene;
+  const Vec3 centre = scene.surfaceCentroid();
+  const Vec3 eye = centre + Vec3(0.55, -0.35, 0.55);
+  const Vec3 right = lookAt(eye, centre).linear().col(0);
+  const Transform T = lookAt(eye, Vec3(centre.x(), centre.y(), 0.05) - 0.25 * right);
+  const PinholeCamera camera;
+  const DepthImage full = DepthRenderer(scene).render(camera, T).depth;
+  const DepthImage table = DepthRenderer(Scene()).render(camera, T).depth;
+  int u0 = full.width, v0 = full.height, u1 = 0, v1 = 0;
+  for (int v = 0; v < full.height; ++v)
+    for (int u = 0; u < full.width; ++u)
+      if (full.at(u, v) != table.at(u, v))
+        u0 = std::min(u0, u), v0 = std::min(v0, v), u1 = std::max(u1, u), v1 = std::max(v1, v);
+  u0 = std::max(0, u0 - 20), v0 = std::max(0, v0 - 20);
+  u1 = std::min(full.width - 1, u1 + 20), v1 = std::min(full.height - 1, v1 + 20);
+  ASSERT_GT(u0, camera.cx) << "the pile is not off the optical axis";
+  DepthImage cut(u1 - u0 + 1, v1 - v0 + 1, 0.0f), outside_missing(full.width, full.height, 0.0f);
+  for (int v = 0; v < cut.height; ++v)
+    for (int u = 0; u < cut.width; ++u)
+      cut.at(u, v) = outside_missing.at(u0 + u, v0 + v) = full.at(u0 + u, v0 + v);
+  PinholeCamera window = camera;
+  window.width = cut.width;
+  window.height = cut.height;
+  window.cx -= u0;
+  window.cy -= v0;
+  PinholeCamera plain = window;  // the same intrinsics, not marked as a window: refused
+  EXPECT_THROW(plain.validate(), std::invalid_argument);
+  window.window = true;
+  PerceptionConfig config;
+  config.model_path = kModel;
+  const ScenePerception perception(config);
+  const SceneEstimate whole = perception.perceive(DepthView{outside_missing, camera, T});
+  const SceneEstimate part = perception.perceive(DepthView{cut, window, T});
+  EXPECT_EQ(part.grid, whole.grid);
+  EXPECT_EQ(part.partial_tsdf_m.data, whole.partial_tsdf_m.data);
+  ASSERT_EQ(part.instances().size(), whole.instances().size());
+  ASSERT_FALSE(whole.instances().empty());
+  for (size_t k = 0; k < whole.instances().size(); ++k)
+    EXPECT_LT((whole.instances()[k].superquadric.T_table_object.translation() -
+               part.instances()[k].superquadric.T_table_object.translation())
+                  .norm(),
+              0.005);
+}
+
 TEST(ScenePerception, BadInputGetsClearErrors) {
   ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
   PerceptionConfig config;

@@ -139,10 +139,25 @@ TEST(Conversions, CameraInfoWithRoiAndBinningDescribesThePublishedImage) {
   sensor_msgs::RegionOfInterest offsets_only;
   offsets_only.x_offset = 100;
   EXPECT_TRUE(refused(offsets_only));
-  sensor_msgs::RegionOfInterest corner;  // the top-left corner, without the principal point
-  corner.width = 200;
-  corner.height = 150;
-  EXPECT_TRUE(refused(corner, "principal point"));
+  // The top-left corner, without the principal point: a window, its own camera unchecked but
+  // for its full image's.
+  sensor_msgs::CameraInfo corner = info;
+  corner.roi = sensor_msgs::RegionOfInterest();
+  corner.roi.width = 200;
+  corner.roi.height = 150;
+  const PinholeCamera w = cameraFromInfo(corner);
+  EXPECT_TRUE(w.window);
+  EXPECT_EQ(w.width, 200);
+  EXPECT_DOUBLE_EQ(w.cx, full.cx);
+  corner.K[0] = corner.P[0] = 0.82;  // normalized intrinsics of the full image
+  corner.K[4] = corner.P[5] = 1.09;
+  try {
+    cameraFromInfo(corner);
+    ADD_FAILURE() << "normalized intrinsics accepted through a window";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("field of view"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(cameraFromInfo(cameraInfoMsg(header, full)).window);
 }
 
 TEST(Conversions, DepthAndCameraInfoRoundTrip) {

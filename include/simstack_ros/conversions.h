@@ -34,8 +34,9 @@ std::string tf2Frame(const std::string& frame);
 
 /// Pinhole intrinsics of the image a CameraInfo describes: the rectified P matrix (K when P is
 /// zero), with its ROI cut out and its binning applied (image_geometry's reduced resolution,
-/// as image_proc's crop_decimate publishes). Rejects an ROI outside the full image, zero focal
-/// lengths and empty sizes.
+/// as image_proc's crop_decimate publishes; the result is then a `window`, whose principal
+/// point may lie outside it). Rejects an ROI outside the full image, a full image whose
+/// intrinsics PinholeCamera::validate refuses, zero focal lengths and empty sizes.
 PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg);
 
 /// The inverses, as a depth camera publishes: 16UC1 in mm (missing = 0) and its CameraInfo

@@ -103,6 +103,16 @@ PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg) {
   } catch (const image_geometry::Exception& e) {
     throw std::invalid_argument(std::string("camera_info: ") + e.what());
   }
+  // The full image's camera catches unit mistakes (normalized intrinsics, a principal point
+  // off the image); a window of it may leave out the principal point.
+  PinholeCamera full;
+  full.width = static_cast<int>(info.width);
+  full.height = static_cast<int>(info.height);
+  full.fx = info.P[0];
+  full.fy = info.P[5];
+  full.cx = info.P[2];
+  full.cy = info.P[6];
+  if (has_roi) full.validate();
   const cv::Size size = model.reducedResolution();
   PinholeCamera c;
   c.width = size.width;
@@ -111,11 +121,7 @@ PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg) {
   c.fy = model.fy();
   c.cx = model.cx();
   c.cy = model.cy();
-  if (has_roi && (c.cx < 0.0 || c.cx > c.width || c.cy < 0.0 || c.cy > c.height))
-    throw std::invalid_argument(
-        "camera_info's ROI " + std::to_string(roi.width) + "x" + std::to_string(roi.height) +
-        " at (" + std::to_string(roi.x_offset) + ", " + std::to_string(roi.y_offset) +
-        ") leaves out the principal point: crops must hold it (centre the crop on it)");
+  c.window = has_roi;
   c.validate();
   return c;
 }

@@ -15,10 +15,14 @@ struct PinholeCamera {
   double fy = 525.0;
   double cx = 319.5;
   double cy = 239.5;
+  /// A window (ROI) of a larger image whose own camera was checked: its principal point may lie
+  /// outside the window and its field of view may be narrow.
+  bool window = false;
 
   /// Throws std::invalid_argument naming the bad value: zero/negative focal length or size,
-  /// non-finite parameters, a principal point outside the image, or a focal length whose field
-  /// of view is outside 2-175 degrees (normalized intrinsics, or another image size's).
+  /// non-finite parameters, and (but for a window) a principal point outside the image or a
+  /// focal length whose field of view is outside 2-175 degrees (normalized intrinsics, or
+  /// another image size's).
   void validate() const;
   /// Camera-frame point of pixel (u, v) at depth z (z along the optical axis, metres).
   Vec3 backproject(double u, double v, double depth_m) const {

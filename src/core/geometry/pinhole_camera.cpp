@@ -12,23 +12,25 @@ void PinholeCamera::validate() const {
   if (!(std::isfinite(fx) && fx > 0.0)) err << "fx = " << fx << " must be > 0; ";
   if (!(std::isfinite(fy) && fy > 0.0)) err << "fy = " << fy << " must be > 0; ";
   if (!std::isfinite(cx) || !std::isfinite(cy)) err << "principal point is not finite; ";
-  if (std::isfinite(cx) && (cx < 0.0 || cx > width))
-    err << "cx = " << cx << " is outside the " << width << "-pixel-wide image; ";
-  if (std::isfinite(cy) && (cy < 0.0 || cy > height))
-    err << "cy = " << cy << " is outside the " << height << "-pixel-high image; ";
-  // A focal length that gives a field of view outside 2-175 degrees is a unit mistake (e.g.
-  // normalized intrinsics, or intrinsics of another image size).
-  const auto fov_deg = [](double side, double f) {
-    return 2.0 * std::atan(side / (2.0 * f)) * 180.0 / M_PI;
-  };
-  if (std::isfinite(fx) && fx > 0.0 && width > 0 &&
-      (fov_deg(width, fx) < 2.0 || fov_deg(width, fx) > 175.0))
-    err << "fx = " << fx << " gives a " << fov_deg(width, fx) << " degree field of view on "
-        << width << " pixels (2-175 expected); ";
-  if (std::isfinite(fy) && fy > 0.0 && height > 0 &&
-      (fov_deg(height, fy) < 2.0 || fov_deg(height, fy) > 175.0))
-    err << "fy = " << fy << " gives a " << fov_deg(height, fy) << " degree field of view on "
-        << height << " pixels (2-175 expected); ";
+  if (!window) {
+    if (std::isfinite(cx) && (cx < 0.0 || cx > width))
+      err << "cx = " << cx << " is outside the " << width << "-pixel-wide image; ";
+    if (std::isfinite(cy) && (cy < 0.0 || cy > height))
+      err << "cy = " << cy << " is outside the " << height << "-pixel-high image; ";
+    // A focal length that gives a field of view outside 2-175 degrees is a unit mistake (e.g.
+    // normalized intrinsics, or intrinsics of another image size).
+    const auto fov_deg = [](double side, double f) {
+      return 2.0 * std::atan(side / (2.0 * f)) * 180.0 / M_PI;
+    };
+    if (std::isfinite(fx) && fx > 0.0 && width > 0 &&
+        (fov_deg(width, fx) < 2.0 || fov_deg(width, fx) > 175.0))
+      err << "fx = " << fx << " gives a " << fov_deg(width, fx) << " degree field of view on "
+          << width << " pixels (2-175 expected); ";
+    if (std::isfinite(fy) && fy > 0.0 && height > 0 &&
+        (fov_deg(height, fy) < 2.0 || fov_deg(height, fy) > 175.0))
+      err << "fy = " << fy << " gives a " << fov_deg(height, fy) << " degree field of view on "
+          << height << " pixels (2-175 expected); ";
+  }
   const std::string s = err.str();
   if (!s.empty())
     throw std::invalid_argument("invalid camera intrinsics: " + s.substr(0, s.size() - 2));
