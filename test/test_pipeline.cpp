@@ -17,6 +17,7 @@
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/pile_generator.h"
 #include "simstack/tsdf/ground_truth.h"
+#include "test_scenes.h"
 
 namespace simstack {
 namespace {
@@ -430,13 +431,8 @@ TEST(ScenePerception, AWindowWithoutItsPrincipalPointIsPerceivedAsTheWholeView) 
   const PinholeCamera camera;
   const DepthImage full = DepthRenderer(scene).render(camera, T).depth;
   const DepthImage table = DepthRenderer(Scene()).render(camera, T).depth;
-  int u0 = full.width, v0 = full.height, u1 = 0, v1 = 0;
-  for (int v = 0; v < full.height; ++v)
-    for (int u = 0; u < full.width; ++u)
-      if (full.at(u, v) != table.at(u, v))
-        u0 = std::min(u0, u), v0 = std::min(v0, v), u1 = std::max(u1, u), v1 = std::max(v1, v);
-  u0 = std::max(0, u0 - 20), v0 = std::max(0, v0 - 20);
-  u1 = std::min(full.width - 1, u1 + 20), v1 = std::min(full.height - 1, v1 + 20);
+  const auto [u0, v0, u1, v1] = test::pilePixels(full, table, 20);
+  ASSERT_LE(u0, u1) << "the pile is not in view";
   ASSERT_GT(u0, camera.cx) << "the pile is not off the optical axis";
   DepthImage cut(u1 - u0 + 1, v1 - v0 + 1, 0.0f), outside_missing(full.width, full.height, 0.0f);
   for (int v = 0; v < cut.height; ++v)

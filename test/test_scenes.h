@@ -1,11 +1,30 @@
 #pragma once
 // Small analytic scenes shared by the unit tests.
 
+#include <algorithm>
+
+#include "simstack/geometry/image.h"
 #include "simstack/geometry/pinhole_camera.h"
 #include "simstack/scene/scene.h"
 
 namespace simstack {
 namespace test {
+
+/// The pixels where `pile` differs from `table` (the same view without the pile), widened by
+/// `margin` and kept inside the image: [u0, u1] x [v0, v1]; u0 > u1 when none differ.
+struct PixelBox {
+  int u0, v0, u1, v1;
+};
+inline PixelBox pilePixels(const DepthImage& pile, const DepthImage& table, int margin) {
+  PixelBox b{pile.width, pile.height, -1, -1};
+  for (int v = 0; v < pile.height; ++v)
+    for (int u = 0; u < pile.width; ++u)
+      if (pile.at(u, v) != table.at(u, v))
+        b = {std::min(b.u0, u), std::min(b.v0, v), std::max(b.u1, u), std::max(b.v1, v)};
+  if (b.u0 > b.u1) return b;
+  return {std::max(0, b.u0 - margin), std::max(0, b.v0 - margin),
+          std::min(pile.width - 1, b.u1 + margin), std::min(pile.height - 1, b.v1 + margin)};
+}
 
 /// One sphere (a superquadric with r = s = t = 2) of `radius` centred at `centre`.
 inline Scene sphereScene(double radius, const Vec3& centre) {

@@ -211,7 +211,7 @@ bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* 
   }
   if (view->depth.width != view->camera.width || view->depth.height != view->camera.height) {
     const sensor_msgs::CameraInfo& info = *frame.info;
-    const bool reduced = info.binning_x > 1 || info.binning_y > 1 || info.roi.width != 0;
+    const bool reduced = view->camera.window || info.binning_x > 1 || info.binning_y > 1;
     *why = "the depth image is " + std::to_string(view->depth.width) + "x" +
            std::to_string(view->depth.height) + " but its camera_info " +
            std::to_string(view->camera.width) + "x" + std::to_string(view->camera.height) +

@@ -25,6 +25,7 @@
 #include <optional>
 #include <random>
 
+#include "../test_scenes.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/scene.h"
 #include "simstack_ros/conversions.h"
@@ -211,14 +212,10 @@ TEST_F(PerceptionNodeTest, ACroppedBinnedImageIsReadThroughItsCameraInfo) {
   // pixel of every second row, and the full camera's info with its ROI and binning.
   const std::vector<SuperquadricShape> truth = knownPile();
   const DepthImage full = render(truth), table = render({});
-  int u0 = full.width, v0 = full.height, u1 = 0, v1 = 0;
-  for (int v = 0; v < full.height; ++v)
-    for (int u = 0; u < full.width; ++u)
-      if (full.at(u, v) != table.at(u, v))
-        u0 = std::min(u0, u), v0 = std::min(v0, v), u1 = std::max(u1, u), v1 = std::max(v1, v);
-  ASSERT_LT(u0, u1) << "the pile is not in view";
-  u0 = std::max(0, u0 - 40) & ~1, v0 = std::max(0, v0 - 40) & ~1;
-  u1 = std::min(full.width, u1 + 40) & ~1, v1 = std::min(full.height, v1 + 40) & ~1;
+  const test::PixelBox box = test::pilePixels(full, table, 40);
+  ASSERT_LE(box.u0, box.u1) << "the pile is not in view";
+  // Even offsets and an even size (the bins' pixels), the last row and column excluded.
+  const int u0 = box.u0 & ~1, v0 = box.v0 & ~1, u1 = (box.u1 + 1) & ~1, v1 = (box.v1 + 1) & ~1;
   DepthImage binned((u1 - u0) / 2, (v1 - v0) / 2, 0.0f);
   for (int v = 0; v < binned.height; ++v)
     for (int u = 0; u < binned.width; ++u) binned.at(u, v) = full.at(u0 + 2 * u, v0 + 2 * v);
