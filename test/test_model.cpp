@@ -1431,6 +1431,69 @@ TEST(CvaeTrainer, HowOftenARunValidatesDoesNotChangeWhatItTrains) {
   EXPECT_TRUE(torch::equal(probe(often + "/model.pt"), probe(rarely + "/model.pt")));
 }
 
+// A resume that would rewind a run, mix two datasets or change its network is refused by name,
+// and leaves the run as it was; a Hough setting put into the run's card survives a resume.
+TEST(CvaeTrainer, AResumeThatWouldRewindOrMixARunIsRefused) {
+  const TrainingScratch scratch("simstack_resume_refused");
+  const std::string& run = scratch.dirs[0];
+  CvaeTrainer(scratch.data, tiny(), scratch.tc, run, "test").run(false);  // 4 steps
+  const torch::Tensor trained = probe(run + "/checkpoint.pt");
+  auto refused = [&](const std::string& data, const CvaeConfig& model, int steps) {
+    TrainConfig tc = scratch.tc;
+    tc.steps = steps;
+    try {
+      CvaeTrainer(data, model, tc, run, "test").run(true);
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("(not refused)");
+  };
+  EXPECT_NE(refused(scratch.data, tiny(), 2).find("is at step 4, past steps = 2"),
+            std::string::npos);
+  CvaeConfig wider = tiny();
+  wider.base_channels = 8;
+  EXPECT_NE(refused(scratch.data, wider, 6)
+                .find("base_channels: 4 (checkpoint) against "
+                      "base_channels: 8 (config)"),
+            std::string::npos);
+  const std::string other = tinyDataset(4);  // the same file, now with a fourth scene
+  EXPECT_NE(refused(other, tiny(), 6)
+                .find("was trained on a dataset of dataset_seed: 5, "
+                      "dataset_scenes: 3"),
+            std::string::npos);
+  EXPECT_EQ(lines(run + "/state.yaml").at(0), "step: 4");
+  EXPECT_TRUE(torch::equal(probe(run + "/checkpoint.pt"), trained));
+  // A validation of more scenes than the dataset holds names the count it can take.
+  TrainConfig v = scratch.tc;
+  v.validation_scenes = 5;
+  try {
+    CvaeTrainer::validateModel(other, run + "/model.pt", v);
+    ADD_FAILURE() << "5 validation scenes of 4 were accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("give --validation-scenes 4 or fewer"), std::string::npos)
+        << e.what();
+  }
+}
+
+TEST(CvaeTrainer, AResumeKeepsTheHoughSettingOfTheRunsCard) {
+  const TrainingScratch scratch("simstack_resume_card");
+  const std::string& run = scratch.dirs[0];
+  CvaeTrainer(scratch.data, tiny(), scratch.tc, run, "test").run(false);
+  {  // as a user pastes simstack_tune_hough's output over the card's perception: section
+    std::ofstream card(run + "/model.yaml", std::ios::app);
+    card << "  hough:\n    refinement: 5\n    bandwidth_m: 0.05\n";
+  }
+  auto card = [&] { return loadYamlFile(run + "/model.yaml", "card")["perception"]; };
+  ASSERT_EQ(card()["hough"]["refinement"].as<int>(), 5);
+  TrainConfig tc = scratch.tc;
+  tc.steps = 6;
+  CvaeTrainer(scratch.data, tiny(), tc, run, "test").run(true);
+  EXPECT_EQ(lines(run + "/state.yaml").at(0), "step: 6");
+  EXPECT_EQ(card()["hough"]["refinement"].as<int>(), 5);
+  EXPECT_DOUBLE_EQ(card()["hough"]["bandwidth_m"].as<double>(), 0.05);
+  EXPECT_EQ(card()["samples"].as<int>(), 3);
+}
+
 // A dataset that goes bad between two runs: the resumed run stops on its first training batch
 // with the file's name in the message, and the checkpoint it started from stays whole.
 TEST(CvaeTrainer, AFailedReadKeepsTheLastCheckpoint) {

@@ -15,6 +15,8 @@ for f in superquadrics.yaml surface.ply instances.pcd grids.h5 depth.png instanc
   test -s "$dir/out/$f" || { echo "missing $f"; cat "$dir/log.txt"; exit 1; }
 done
 grep -q "objects in 1 tile; timings" "$dir/log.txt"
+grep -q "^model .*simstack_r32_fc.pt (card .*simstack_r32_fc.yaml)$" "$dir/log.txt" ||
+  { echo "the model and its card not named"; cat "$dir/log.txt"; exit 1; }
 # Without a pose the table comes from RANSAC.
 "$reconstruct" --depth "${view}_depth.png" --intrinsics 525,525,319.5,239.5 --output "$dir/out2" \
   > "$dir/log2.txt"

@@ -33,6 +33,31 @@ own = key(h) == key(o)
 assert tried or own, h
 assert p["samples"] == 1, p  # the default model, `fc`, has no latent code
 PY
+# --apply puts the chosen section into the model's card in place of its own, every other
+# section kept; a model without a card gets one holding only that section.
+models=$(dirname "$0")/../models
+cp "$models/simstack_r32_fc.pt" "$dir/m.pt"
+cp "$models/simstack_r32_fc.yaml" "$dir/m.yaml"
+cp "$models/simstack_r32_fc.pt" "$dir/bare.pt"
+for m in m bare; do
+  "$tune" --model "$dir/$m.pt" --dataset "$dir/val.h5" --views 1 --threads 1 --refinement 5 \
+    --min-traversals 2 --bandwidth 0.04 --min-instance-voxels 10 --min-vote-norm 0 --apply \
+    --output "$dir/$m.tuned.yaml" > "$dir/$m.log" 2> "$dir/err.txt" ||
+    { echo "simstack_tune_hough --apply failed:"; cat "$dir/err.txt"; exit 1; }
+  grep -q "and put into the card $dir/$m.yaml" "$dir/$m.log" || { cat "$dir/$m.log"; exit 1; }
+done
+/usr/bin/python3 - "$dir" "$models/simstack_r32_fc.yaml" <<'PY'
+import sys, yaml
+d, shipped = sys.argv[1], yaml.safe_load(open(sys.argv[2]))
+for m in ("m", "bare"):
+    card = yaml.safe_load(open(f"{d}/{m}.yaml"))
+    tuned = yaml.safe_load(open(f"{d}/{m}.tuned.yaml"))
+    assert card["perception"] == tuned["perception"], (card["perception"], tuned["perception"])
+    assert card["perception"]["hough"]["refinement"] in (5, shipped["perception"]["hough"]["refinement"])
+    others = {k: v for k, v in card.items() if k != "perception"}
+    expected = {k: v for k, v in shipped.items() if k != "perception"} if m == "m" else {}
+    assert others == expected, (m, sorted(others), sorted(expected))
+PY
 # Several validation sets pool their views and each is scored on its own.
 "$generate" --scenes 2 --seed 10 --objects 5:6 --sizes 0.05:0.15 --output "$dir/val58.h5" > /dev/null
 "$tune" --dataset "$dir/val.h5" --dataset "$dir/val58.h5" --views 1 --threads 1 --refinement 5 \

@@ -106,6 +106,11 @@ int main(int argc, char** argv) {
     staged.commit();  // replaces an earlier run's directory whole
 
     const StageTimings& t = est.timings;
+    std::cout << "model " << config.model_path
+              << (config.model_card_path.empty()
+                      ? " (no card beside it: the config's samples and Hough setting)"
+                      : " (card " + config.model_card_path + ")")
+              << "\n";
     std::cout << views.size() << (views.size() == 1 ? " view" : " views") << "; table "
               << (est.table_estimated ? "estimated by RANSAC" : "from " + pose_path) << "\n"
               << est.instances().size() << " objects in " << est.tiles

@@ -8,12 +8,14 @@
 #include <iostream>
 #include <iterator>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include "perception_options.h"
 #include "progress.h"
 #include "simstack/io/staged_output.h"
+#include "simstack/io/yaml_file.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/pipeline/hough_tuning.h"
 
@@ -62,6 +64,73 @@ void reportPerDataset(const std::vector<std::string>& datasets,
   }
 }
 
+/// The best `top` settings, then the model's own.
+void printScores(size_t views, const PerceptionConfig& pc, const std::vector<HoughScore>& scores,
+                 const HoughScore& own, int top) {
+  std::cout << "\n"
+            << views << " views, model " << pc.model_path << "\n\n"
+            << houghScoreHeader() << "\n";
+  for (int i = 0; i < std::min<int>(top, scores.size()); ++i)
+    std::cout << houghScoreRow(scores[i]) << "\n";
+  std::cout << "\nthe model's setting ("
+            << (pc.model_card_path.empty() ? "defaults: no model card" : pc.model_card_path)
+            << "):\n"
+            << houghScoreRow(own) << "\n";
+}
+
+/// The chosen setting as a model card's perception: section, under a comment saying where it
+/// was chosen and how it scored.
+std::string chosenSection(const std::vector<std::string>& datasets, size_t views,
+                          const HoughScore& best, int samples) {
+  std::string sets;
+  for (const std::string& d : datasets) sets += (sets.empty() ? "" : " + ") + d;
+  std::ostringstream out;
+  out << "# chosen by simstack_tune_hough on " << sets << " (" << views << " views): count exact "
+      << std::fixed << std::setprecision(3) << best.exact << ", voxel agreement " << best.agreement
+      << "\n"
+      << modelCardPerceptionYaml(samples, best.hough) << "\n";
+  return out.str();
+}
+
+/// A model card's text with its perception: section (the top-level key, its indented lines and
+/// the comment lines just above it) replaced by `section`, every other line kept as it was;
+/// `section` is appended when the card has none.
+std::string withPerceptionSection(const std::string& card, const std::string& section) {
+  std::vector<std::string> lines;
+  std::istringstream in(card);
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  size_t begin = lines.size(), end = lines.size();
+  for (size_t i = 0; i < lines.size(); ++i) {
+    if (lines[i].rfind("perception:", 0) != 0) continue;
+    begin = i;
+    end = i + 1;
+    while (end < lines.size() && (lines[end].empty() || lines[end][0] == ' ')) ++end;
+    while (begin > 0 && lines[begin - 1].rfind('#', 0) == 0) --begin;
+    break;
+  }
+  std::string out;
+  for (size_t i = 0; i < begin; ++i) out += lines[i] + "\n";
+  out += section;
+  for (size_t i = end; i < lines.size(); ++i) out += lines[i] + "\n";
+  return out;
+}
+
+/// --apply: the chosen section written into the model's card in place of its own (a card
+/// holding only it when the model has none); the result must read as a card before it
+/// replaces the old one.
+void applyToCard(const std::string& card_path, const std::string& section) {
+  std::string card;
+  if (std::ifstream in{card_path}) card.assign(std::istreambuf_iterator<char>(in), {});
+  const std::string text = withPerceptionSection(card, section);
+  parseYamlText(text, "model card", card_path);  // throws, naming the card, on a bad result
+  StagedFile staged(card_path);
+  std::ofstream f(staged.path());
+  f << text;
+  f.close();
+  if (!f) throw std::runtime_error("cannot write " + card_path);
+  staged.commit();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -69,20 +138,24 @@ int main(int argc, char** argv) {
   std::string output;
   int views_per_scene = 2, scenes = 0, top = 10;
   uint64_t seed = 7;
-  bool noise = false;
+  bool noise = false, apply = false;
   HoughSweep sweep;
   CLI::App app{
       "Choose the Hough-voting setting of a model on validation piles (a seed used neither for "
       "training nor for testing): the network runs once per rendered view, every combination "
       "of the listed values is scored by the share of views whose instance count is exact "
-      "(then by voxel segmentation agreement), and the best is written as the perception: "
-      "section of the model's card (models/<name>.yaml). Several --dataset files pool their "
+      "(then by voxel segmentation agreement), and the best is written to --output as a model "
+      "card's perception: section; --apply also puts it into the model's card "
+      "(models/<name>.yaml) in place of the card's own. Several --dataset files pool their "
       "views (piles of 3-4 objects and of 5-8, say), so that one setting serves both."};
   const PerceptionOptions perception(app, {false, false, false});
   app.add_option("--dataset", datasets, "validation piles (simstack_generate); repeatable")
       ->required()
       ->check(CLI::ExistingFile);
   app.add_option("--output", output, "YAML with the model card's perception: section")->required();
+  app.add_flag("--apply", apply,
+               "also replace the perception: section of the model's card with the chosen one "
+               "(the card's other lines kept; a card made when the model has none)");
   app.add_option("--views", views_per_scene, "random viewpoints per scene")
       ->capture_default_str()
       ->check(FinitePositive);
@@ -136,28 +209,19 @@ int main(int argc, char** argv) {
     const HoughScore before = scores.front();
     std::stable_sort(scores.begin(), scores.end(), betterHoughScore);
 
-    std::cout << "\n"
-              << views.size() << " views, model " << pc.model_path << "\n\n"
-              << houghScoreHeader() << "\n";
-    for (int i = 0; i < std::min<int>(top, scores.size()); ++i)
-      std::cout << houghScoreRow(scores[i]) << "\n";
-    std::cout << "\nthe model's setting ("
-              << (pc.model_card_path.empty() ? "defaults: no model card" : pc.model_card_path)
-              << "):\n"
-              << houghScoreRow(before) << "\n";
+    printScores(views.size(), pc, scores, before, top);
     if (datasets.size() > 1) reportPerDataset(datasets, views, ends, scores.front(), before, pc);
-    std::string sets;
-    for (const std::string& d : datasets) sets += (sets.empty() ? "" : " + ") + d;
+    const std::string chosen = chosenSection(datasets, views.size(), scores.front(), pc.samples);
     std::ofstream f(written.path());
-    f << "# simstack_tune_hough on " << sets << " (" << views.size() << " views): count exact "
-      << std::fixed << std::setprecision(3) << scores.front().exact << ", voxel agreement "
-      << scores.front().agreement << "\n# the perception: section of "
-      << modelCardPath(pc.model_path) << "\n"
-      << modelCardPerceptionYaml(pc.samples, scores.front().hough) << "\n";
+    f << "# for the card " << modelCardPath(pc.model_path) << "\n" << chosen;
     f.close();  // a failed flush shows only here
     if (!f) throw std::runtime_error("cannot write " + output);
     written.commit();
     std::cout << "\nchosen setting written to " << output << "\n";
+    if (apply) {
+      applyToCard(modelCardPath(pc.model_path), chosen);
+      std::cout << "and put into the card " << modelCardPath(pc.model_path) << "\n";
+    }
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_tune_hough: error: " << e.what() << "\n";

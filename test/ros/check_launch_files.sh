@@ -38,6 +38,9 @@ expect "perception.launch decompose_samples:=3: the C-VAE" 'perception/model: .*
   dump "$launch/perception.launch" decompose_samples:=3
 expect "perception.launch decompose_samples:=3 model:=M: M" 'perception/model: /tmp/m.pt$' \
   dump "$launch/perception.launch" decompose_samples:=3 model:=/tmp/m.pt
+expect "perception.launch model:=relative: from roslaunch's directory" \
+  'perception/model: /tmp/runs/m.pt$' \
+  bash -c 'cd /tmp && roslaunch --dump-params "$1" model:=runs/m.pt' _ "$(cd "$launch" && pwd)/perception.launch"
 sed 's#^  model: .*#  model: models/simstack_r32_fc_plain.pt#' "$source_dir/config/perception.yaml" \
   > "$ROS_HOME/own.yaml"
 expect "perception.launch decompose_samples:=3 config:=C: C's model" \

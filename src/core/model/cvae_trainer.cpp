@@ -287,6 +287,40 @@ std::string cardPerceptionSection(const std::string& init_from, bool latent) {
   return "# read with the model; " + note + "\n" + e.c_str() + "\n";
 }
 
+/// The perception: section of a run's own card (model.yaml in its directory) when it holds a
+/// Hough setting, which a resume keeps: one put there by hand (simstack_tune_hough's output)
+/// must survive more steps. Empty when the run has no card or its card no hough: map.
+std::string runCardPerceptionSection(const fs::path& card) {
+  if (!fs::exists(card)) return "";
+  const YAML::Node root = loadYamlFile(card.string(), "the run's model card");
+  const YAML::Node section = root.IsMap() ? root["perception"] : YAML::Node();
+  if (!section || !section.IsMap() || !section["hough"]) return "";
+  YAML::Emitter e;
+  e << YAML::BeginMap << YAML::Key << "perception" << YAML::Value << section << YAML::EndMap;
+  return "# read with the model; kept from this run's card (" + card.string() +
+         ") when it was resumed\n" + e.c_str() + "\n";
+}
+
+/// The lines of two YAML texts from the same emitter that differ ("  key: a" against
+/// "  key: b"), as "key: a (checkpoint) against key: b (config)" clauses.
+std::string differingLines(const std::string& checkpoint, const std::string& config) {
+  std::istringstream a(checkpoint), b(config);
+  std::string out, la, lb;
+  while (std::getline(a, la) && std::getline(b, lb)) {
+    if (la == lb) continue;
+    auto trim = [](const std::string& s) { return s.substr(s.find_first_not_of(' ')); };
+    out += (out.empty() ? "" : "; ") + trim(la) + " (checkpoint) against " + trim(lb) + " (config)";
+  }
+  return out.empty() ? "their YAML differs in length" : out;
+}
+
+/// What a checkpoint records of the data it was trained on, so that a resume on other data is
+/// refused (a resumed run sees the data an uninterrupted one would have).
+std::string checkpointDataTag(const DatasetInfo& info) {
+  return "dataset_seed: " + std::to_string(info.seed) +
+         "\ndataset_scenes: " + std::to_string(info.num_scenes) + "\n";
+}
+
 }  // namespace
 
 double learningRate(const TrainConfig& tc, int64_t step) {
@@ -303,7 +337,8 @@ struct CvaeTrainer::Impl {
   int train_scenes = 0;
   std::string card_perception;  // the card's perception: section, read before training
 
-  Cvae loadOrCreate(bool resuming, const fs::path& checkpoint) const;
+  /// `trained_on` receives a resumed checkpoint's record of its data (checkpointDataTag).
+  Cvae loadOrCreate(bool resuming, const fs::path& checkpoint, std::string* trained_on) const;
   int64_t restore(Cvae& model, torch::optim::Adam& optimizer, const fs::path& out) const;
   void validate(Cvae& model, const TrainingSampleBuilder& builder, TrainingReport* report) const;
   void writeModelFiles(const fs::path& out, Cvae& model, const TrainingReport& report,
@@ -327,9 +362,10 @@ CvaeTrainer::CvaeTrainer(const std::string& dataset_path, const CvaeConfig& mode
   checkDatasetFitsModel(info, model, dataset_path, "the model config");
   impl_->train_scenes = info.num_scenes - training.validation_scenes;
   if (impl_->train_scenes < 1) {
-    throw std::runtime_error("dataset " + dataset_path + " has " + std::to_string(info.num_scenes) +
-                             " scenes; more than validation_scenes = " +
-                             std::to_string(training.validation_scenes) + " are needed");
+    throw std::runtime_error(
+        "dataset " + dataset_path + " has " + std::to_string(info.num_scenes) +
+        " scenes; more than validation_scenes = " + std::to_string(training.validation_scenes) +
+        " are needed (lower --validation-scenes, or generate more scenes)");
   }
   std::error_code ec;
   fs::create_directories(output_dir, ec);
@@ -352,7 +388,12 @@ TrainingReport CvaeTrainer::validateModel(const std::string& dataset_path,
   const DatasetInfo& info = impl.reader->info();
   const CvaeConfig& mc = impl.model_config;
   checkDatasetFitsModel(info, mc, dataset_path, "model " + model_path);
-  impl.train_scenes = std::max(0, info.num_scenes - training.validation_scenes);
+  if (training.validation_scenes > info.num_scenes)
+    throw std::runtime_error(
+        "dataset " + dataset_path + " has " + std::to_string(info.num_scenes) +
+        " scenes, fewer than validation_scenes = " + std::to_string(training.validation_scenes) +
+        ": give --validation-scenes " + std::to_string(info.num_scenes) + " or fewer");
+  impl.train_scenes = info.num_scenes - training.validation_scenes;
   torch::set_num_threads(training.threads);
   torch::manual_seed(training.seed);
   const TrainingSampleBuilder builder(mc, scaledKinect(training.image_width, training.image_height),
@@ -362,9 +403,10 @@ TrainingReport CvaeTrainer::validateModel(const std::string& dataset_path,
   return report;
 }
 
-Cvae CvaeTrainer::Impl::loadOrCreate(bool resuming, const fs::path& checkpoint) const {
+Cvae CvaeTrainer::Impl::loadOrCreate(bool resuming, const fs::path& checkpoint,
+                                     std::string* trained_on) const {
   const CvaeConfig& mc = model_config;
-  Cvae model = resuming ? loadCvae(checkpoint.string(), &mc) : Cvae(mc);
+  Cvae model = resuming ? loadCvae(checkpoint.string(), &mc, trained_on) : Cvae(mc);
   if (!resuming && !config.init_from.empty()) {
     const std::vector<std::string> fresh = warmStartCvae(model, config.init_from);
     std::cerr << "warm start from " << config.init_from << ": ";
@@ -388,9 +430,12 @@ int64_t CvaeTrainer::Impl::restore(Cvae& model, torch::optim::Adam& optimizer,
   try {
     model->setConfig(mc);
   } catch (const std::invalid_argument&) {
-    throw std::runtime_error("checkpoint " + checkpoint.string() +
-                             " has another network than the config:\n" + model->config().toYaml() +
-                             "\nagainst\n" + mc.toYaml());
+    CvaeConfig network = model->config();  // the checkpoint's network with this config's losses
+    network.copyLossSettings(mc);
+    throw std::runtime_error(
+        "checkpoint " + checkpoint.string() +
+        " has another network than the config: " + differingLines(network.toYaml(), mc.toYaml()) +
+        " (a resume needs the same network; --init-from warm-starts another)");
   }
   if (!same) std::cerr << "the checkpoint's loss settings are replaced by the config's\n";
   // The checkpoint holds its step and the optimizer's state; a run's checkpoint from before
@@ -590,9 +635,31 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   if (resume && !resuming)
     throw std::runtime_error("--resume: no checkpoint to resume in " + out.string() +
                              " (checkpoint.pt); start without --resume");
-  Cvae model = impl_->loadOrCreate(resuming, checkpoint);
+  std::string trained_on;  // empty in checkpoints written before 2026-11-29
+  Cvae model = impl_->loadOrCreate(resuming, checkpoint, &trained_on);
+  const std::string data_tag = checkpointDataTag(impl_->reader->info());
+  auto one_line = [](std::string s) {
+    while (!s.empty() && s.back() == '\n') s.pop_back();
+    for (size_t i; (i = s.find('\n')) != std::string::npos;) s.replace(i, 1, ", ");
+    return s;
+  };
+  if (resuming && !trained_on.empty() && trained_on != data_tag)
+    throw std::runtime_error("checkpoint " + checkpoint.string() + " was trained on a dataset of " +
+                             one_line(trained_on) + ", " + impl_->dataset_path + " has " +
+                             one_line(data_tag) +
+                             ": resume on the run's own dataset, or warm-start a new run from "
+                             "the checkpoint (--init-from) to train on this one");
   torch::optim::Adam optimizer(model->parameters(), torch::optim::AdamOptions(tc.learning_rate));
   const int64_t start = resuming ? impl_->restore(model, optimizer, out) : 0;
+  if (start > tc.steps)
+    throw std::runtime_error("the checkpoint in " + out.string() + " is at step " +
+                             std::to_string(start) + ", past steps = " + std::to_string(tc.steps) +
+                             ": --steps " + std::to_string(start) +
+                             " or more continues the run (fewer would rewind it)");
+  if (resuming) {
+    const std::string kept = runCardPerceptionSection(out / "model.yaml");
+    if (!kept.empty()) impl_->card_perception = kept;
+  }
 
   const TrainingSampleBuilder builder(mc, scaledKinect(tc.image_width, tc.image_height),
                                       tc.sensor_noise, tc.overhead_share);
@@ -603,7 +670,7 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   // people and scripts.
   auto save_checkpoint = [&](int64_t step) {
     log.flush();
-    saveCvae(checkpoint.string(), model, "", [&](torch::serialize::OutputArchive& archive) {
+    saveCvae(checkpoint.string(), model, data_tag, [&](torch::serialize::OutputArchive& archive) {
       torch::serialize::OutputArchive adam;
       optimizer.save(adam);
       archive.write("simstack_optimizer", adam);
