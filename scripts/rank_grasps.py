@@ -8,7 +8,8 @@ them best first (README, "Grasps").
 
 The scene is the latest ObjectArray the grasp server received (launch/grasps.launch); with
 --target top it is read here first to choose the object (refused when older than --max-age),
-and sent with the request, so that the id names the object chosen.
+and sent with the request, so that the id names the object chosen. Task code calls the same
+functions: `from simstack import grasp_client` (src/python/grasp_client.py).
 """
 import argparse
 import json
@@ -18,8 +19,7 @@ import time
 
 import rosgraph
 import rospy
-from simstack.msg import ObjectArray
-from simstack.srv import RankGrasps, RankGraspsRequest
+from simstack import grasp_client
 
 
 def table(res, rows):
@@ -36,20 +36,6 @@ def table(res, rows):
     for h, d in enumerate(res.baseline_displacement_m):
         lines.append("baseline (hypothesis %d left alone): objects moved %.1f mm at most" % (h, 1e3 * d))
     return "\n".join(lines)
-
-
-def scene_age(scene):
-    """Seconds since the scene's stamp, or None when there is nothing to judge it by (a stamp of
-    0, or a simulated clock that has not ticked within 3 s: a bag that has ended). A latched
-    scene comes at once however old it is: the camera or the perception may have stopped since."""
-    if scene.header.stamp.is_zero():
-        return None
-    deadline = time.time() + 3.0  # the first /clock message under simulated time
-    now = rospy.Time.now()
-    while now.is_zero() and time.time() < deadline:
-        time.sleep(0.05)
-        now = rospy.Time.now()
-    return None if now.is_zero() else (now - scene.header.stamp).to_sec()
 
 
 def main():
@@ -98,45 +84,23 @@ def main():
             sys.exit("rank_grasps: no ROS master at %s within %g s" % (rosgraph.get_master_uri(), args.timeout))
         time.sleep(0.2)
     rospy.init_node("rank_grasps_client", anonymous=True)
-    service = "/%s/grasps/rank_grasps" % args.camera
-    req = RankGraspsRequest(candidates=args.candidates, pull_distance_m=args.pull_distance,
-                            pull_speed_mps=args.pull_speed, hypotheses=args.hypotheses)
-    if args.target == "top":
-        topic = "/%s/perception/objects" % args.camera
-        try:
-            scene = rospy.wait_for_message(topic, ObjectArray, timeout=args.timeout)
-        except rospy.ROSException as e:
-            sys.exit("rank_grasps: no scene on %s: %s" % (topic, e))
-        max_age = args.max_age
-        if max_age is None:
-            max_age = float(rospy.get_param("/%s/grasps/max_scene_age_s" % args.camera, 10.0))
-        age = scene_age(scene)
-        if max_age > 0 and age is not None and age > max_age:
-            sys.exit("rank_grasps: the latest scene on %s is %.1f s old (max age %g s): %s" % (
-                topic, age, max_age,
-                "a day or more apart: is one of this client and the perception on simulated time "
-                "(/use_sim_time) and the other not?" if age > 86400 else
-                "is the perception still running?"))
-        if not scene.objects:
-            sys.exit("rank_grasps: the latest scene has no objects")
-        req.scene = scene
-        req.target_id = max(scene.objects, key=lambda o: o.superquadric.pose.position.z).id
-    else:
-        req.target_id = target
+    scene = None  # the server's latest
     try:
-        rospy.wait_for_service(service, timeout=args.timeout)
-        res = rospy.ServiceProxy(service, RankGrasps)(req)
-    except (rospy.ROSException, rospy.ServiceException) as e:
-        sys.exit("rank_grasps: %s: %s" % (service, e))
-    if not res.success:
-        sys.exit("rank_grasps: %s" % res.message)
+        if args.target == "top":
+            scene = grasp_client.latest_scene(args.camera, args.timeout, args.max_age)
+            target = grasp_client.top_object(scene)
+        res = grasp_client.rank_grasps(scene, target, args.camera, args.candidates,
+                                       args.pull_distance, args.pull_speed, args.hypotheses,
+                                       args.timeout)
+    except grasp_client.GraspServiceError as e:
+        sys.exit("rank_grasps: %s" % e)
     print("object %d: %s (%d pulls in %d %s, %.2f s)" % (
-        req.target_id, res.message, res.pulls, res.hypotheses_used,
+        target, res.message, res.pulls, res.hypotheses_used,
         "hypothesis" if res.hypotheses_used == 1 else "hypotheses", res.time_s))
     print(table(res, args.rows))
     if args.json:
         with open(args.json, "w") as f:  # checked above; a disk that fills still raises
-            json.dump({"target_id": req.target_id, "frame": res.header.frame_id,
+            json.dump({"target_id": target, "frame": res.header.frame_id,
                        "message": res.message,
                        "baseline_displacement_m": list(res.baseline_displacement_m),
                        "grasps": [{"contact": [g.contact.position.x, g.contact.position.y, g.contact.position.z],

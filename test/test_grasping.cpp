@@ -169,6 +169,32 @@ TEST(GraspRanking, AHypothesisWithoutTheTargetIsLeftOutAndSaidSo) {
   EXPECT_EQ(r.baseline.size(), 1u);
 }
 
+TEST(GraspRanking, ATargetTooHeavyForTheCupSaysThatNoGraspHeld) {
+  // A 60 cm cube of the simulation's density is far beyond a 30 N cup: a list ranked best first
+  // must not read as if its first grasp were a good one.
+  GraspRankingConfig config;
+  config.candidates.max_candidates = 4;
+  const std::vector<SuperquadricShape> crate{box({0.3, 0.3, 0.3}, {0, 0, 0.3})};
+  const GraspRanking r = rankGrasps({crate}, 0, {}, config);
+  ASSERT_EQ(r.grasps.size(), 4u);
+  for (const RankedGrasp& g : r.grasps) EXPECT_EQ(g.failed_share, 1.0);
+  EXPECT_NE(r.message.find("none of the 4 grasps held"), std::string::npos) << r.message;
+  // A light box on its own comes free: nothing to say.
+  const std::vector<SuperquadricShape> light{box({0.04, 0.03, 0.02}, {0, 0, 0.02})};
+  const GraspRanking ok = rankGrasps({light}, 0, {}, config);
+  ASSERT_FALSE(ok.grasps.empty());
+  EXPECT_GT(ok.grasps.front().freed_share, 0.0);
+  EXPECT_EQ(ok.message, "");
+}
+
+TEST(GraspRanking, TheSceneBottomIsItsLowestSurface) {
+  std::vector<SuperquadricShape> pile = fourObjects();
+  EXPECT_NEAR(sceneBottom(pile), 0.0, 1e-3);
+  for (SuperquadricShape& sq : pile) sq.T_table_object.translation().z() += 0.7;
+  EXPECT_NEAR(sceneBottom(pile), 0.7, 1e-3);
+  EXPECT_EQ(sceneBottom({}), std::numeric_limits<double>::infinity());
+}
+
 TEST(GraspRanking, ATargetWithNoSealableSurfaceGivesNoGraspsAndSaysWhy) {
   const std::vector<SuperquadricShape> ball{box({0.02, 0.02, 0.02}, {0, 0, 0.02}, 2.0)};
   const GraspRanking r = rankGrasps({ball}, 0, {}, GraspRankingConfig());

@@ -37,6 +37,25 @@ std::string badIds(const ObjectArray& scene) {
   return "";
 }
 
+/// How far a scene's lowest surface may be from z = 0, where the simulation puts the table,
+/// for the scene to be taken as resting on it (metres).
+constexpr double kTableGapM = 0.05;
+
+/// A scene's lowest surface against the simulation's table at z = 0: below it by more than
+/// kTableGapM is refused (`*refuse`), as a scene in another frame than the table's; above it
+/// is said, as its objects fall before any pull. Empty when the scene rests on the table.
+std::string tableNote(const std::vector<SuperquadricShape>& scene, const std::string& frame,
+                      bool* refuse) {
+  const double bottom = sceneBottom(scene);
+  *refuse = bottom < -kTableGapM;
+  if (std::abs(bottom) <= kTableGapM) return {};
+  return "the scene's lowest surface is at z = " + number(bottom) + " m in '" + frame +
+         "', where the simulation's table is at z = 0: " +
+         (*refuse ? std::string("its objects would stand in the table")
+                  : std::string("its objects fall before any pull")) +
+         " (a scene is in the table frame: z up, the table at z = 0)";
+}
+
 }  // namespace
 
 GraspServer::GraspServer(ros::NodeHandle nh, ros::NodeHandle pnh)
@@ -144,7 +163,13 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
           why;
       return false;
     }
-  std::string notes;
+  bool below = false;
+  std::string notes = tableNote((*scenes)[0], res.header.frame_id, &below);
+  if (below) {
+    res.message = notes;
+    return false;
+  }
+  if (!notes.empty()) notes += "; ";
   if (req.hypotheses == 0 && scene->hypotheses.empty())
     notes +=
         "ranked in the objects alone: the scene carries no hypotheses (the perception "
@@ -165,8 +190,15 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   config->pull.pull_distance_m = req.pull_distance_m;
   config->pull.pull_speed_mps = req.pull_speed_mps;
   cameras->clear();
-  if (req.use_camera_pose)
-    cameras->push_back(rigidFromPose(req.camera_pose, "camera_pose").translation());
+  if (req.use_camera_pose) {  // its position only: candidates are what is in sight from it
+    const geometry_msgs::Point& p = req.camera_pose.position;
+    const Vec3 eye(p.x, p.y, p.z);
+    if (!eye.allFinite()) {
+      res.message = "camera_pose.position is not finite";
+      return false;
+    }
+    cameras->push_back(eye);
+  }
   res.message = notes;
   return true;
 }
@@ -192,9 +224,8 @@ bool GraspServer::rank(RankGrasps::Request& req, RankGrasps::Response& res) {
     res.candidates_sealable = static_cast<uint32_t>(ranking.candidates.sealable);
     res.hypotheses_used = static_cast<uint32_t>(ranking.hypotheses.size());
     res.pulls = static_cast<uint32_t>(ranking.pulls);
-    res.message += ranking.message.empty()
-                       ? std::to_string(ranking.grasps.size()) + " grasps ranked"
-                       : ranking.message;
+    res.message += std::to_string(ranking.grasps.size()) + " grasps ranked" +
+                   (ranking.message.empty() ? "" : "; " + ranking.message);
     res.success = true;
     markers_pub_.publish(graspMarkers(res.header, ranking.grasps));
     ROS_INFO("simstack grasp_server: object %u: %zu grasps ranked, %d pulls in %zu hypotheses",

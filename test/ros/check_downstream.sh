@@ -10,7 +10,7 @@ source_dir=$(cd "$2" && pwd)
 ws=$(mktemp -d)
 trap 'rm -rf "$ws"' EXIT
 mkdir -p "$ws/src/simstack_downstream_check"
-cp "$source_dir"/test/downstream/{package.xml,CMakeLists.txt,task_code.cpp} \
+cp "$source_dir"/test/downstream/{package.xml,CMakeLists.txt,task_code.cpp,service_client.cpp} \
   "$ws/src/simstack_downstream_check/"
 (cd "$source_dir/include" && find simstack simstack_ros -name '*.h' | sort |
   sed 's|.*|#include <&>|') >"$ws/src/simstack_downstream_check/all_headers.cpp"

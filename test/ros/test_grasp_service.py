@@ -101,7 +101,9 @@ class GraspService(unittest.TestCase):
                               (infinite_exponent, "exponents"), (long_quaternion, "quaternion"),
                               (nan_position, "not finite")):
             self.expect_rejected(request(scene=self.scene_with(change)), words)
-        self.expect_rejected(request(use_camera_pose=True), "camera_pose")  # all-zero quaternion
+        eye = request(use_camera_pose=True)
+        eye.camera_pose.position.x = float("nan")
+        self.expect_rejected(eye, "camera_pose.position is not finite")
         self.expect_rejected(request(), "no scene has arrived", self.lonely)
         twice = copy.deepcopy(self.scene)
         self.assertGreater(len(twice.objects), 1)
@@ -113,6 +115,30 @@ class GraspService(unittest.TestCase):
         res = self.rank(request())
         self.assertTrue(res.success, res.message)
         self.assertGreater(len(res.grasps), 0)
+
+    def test_2b_a_scene_off_the_table_plane_is_said_or_refused(self):
+        # The camera's orientation is not used (candidates are what is in sight of its
+        # position), so an all-zero quaternion is no error.
+        eye = request(scene=self.scene, use_camera_pose=True)
+        eye.camera_pose.position.z = 1.0
+        res = self.rank(eye)
+        self.assertTrue(res.success, res.message)
+        self.assertGreater(res.candidates_seen, 0)
+
+        def moved(dz):
+            scene = copy.deepcopy(self.scene)
+            scene.header.frame_id = "base_link"
+            for o in scene.objects:
+                o.superquadric.pose.position.z += dz
+            del scene.hypotheses[:]
+            return scene
+
+        raised = self.rank(request(scene=moved(0.7)))
+        self.assertTrue(raised.success, raised.message)
+        self.assertIn("lowest surface is at z = 0.", raised.message)
+        self.assertIn("fall before any pull", raised.message)
+        self.expect_rejected(request(scene=moved(-0.3)), "would stand in the table")
+        self.assertNotIn("lowest surface", self.rank(request(scene=self.scene)).message)
 
     def test_3_too_many_candidates_are_clamped_and_said(self):
         res = self.lonely(request(scene=self.scene, candidates=1000))
@@ -260,6 +286,21 @@ class GraspService(unittest.TestCase):
                                 "--timeout", "5")
         self.assertIn("/stale/grasps/rank_grasps", out)  # past the check, no server there
 
+
+    def test_9b_task_code_imports_the_client_module(self):
+        from simstack import grasp_client
+        scene = grasp_client.latest_scene(max_age=0)
+        target = grasp_client.top_object(scene)
+        self.assertIn(target, [o.id for o in scene.objects])
+        res = grasp_client.rank_grasps(scene, target, candidates=8)
+        self.assertTrue(res.success, res.message)
+        held = grasp_client.held_grasps(res)
+        self.assertTrue(all(g.failed_share == 0.0 for g in held))
+        self.assertEqual(held, [g for g in res.grasps if g.failed_share == 0.0])
+        with self.assertRaisesRegex(grasp_client.GraspServiceError, "unknown target id 99"):
+            grasp_client.rank_grasps(scene, 99)
+        with self.assertRaisesRegex(grasp_client.GraspServiceError, "no scene on /nowhere"):
+            grasp_client.latest_scene("nowhere", timeout=1.0)
 
 if __name__ == "__main__":
     rostest.rosrun("simstack", "grasp_service", GraspService)

@@ -48,7 +48,9 @@ struct GraspRanking {
   std::vector<SceneDrift> baseline;  ///< per hypothesis used: the scene left alone
   std::vector<int> hypotheses;       ///< indices of the hypotheses used (0 first)
   int pulls = 0;                     ///< pulls simulated
-  std::string message;               ///< what the caller should know (empty when all is well)
+  /// What the caller should know, notes joined by "; " (empty when all is well): hypotheses
+  /// left out, no sealable surface, no grasp that held, no grasp that freed the target.
+  std::string message;
 };
 
 /// The index of the object of `scene` that matches `reference` (nearest centre within the
@@ -77,6 +79,11 @@ PullOutcome executeGrasp(const PullSimulator& simulator,
 GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypotheses, int target,
                         const std::vector<Vec3>& camera_positions,
                         const GraspRankingConfig& config);
+
+/// The lowest point of the scene's surfaces: z in the table frame, metres (infinity for an
+/// empty scene). A pile resting on the table has it near 0; the simulation's table is at z = 0,
+/// so a scene far above it falls before any pull, and one below it stands in the table.
+double sceneBottom(const std::vector<SuperquadricShape>& scene);
 
 /// Objects in a scene the grasp simulation accepts at most (a pile's labels are 8-bit).
 constexpr size_t kMaxGraspSceneObjects = 255;

@@ -4,6 +4,7 @@
 #include <atomic>
 #include <cmath>
 #include <exception>
+#include <limits>
 #include <mutex>
 #include <numeric>
 #include <stdexcept>
@@ -11,6 +12,29 @@
 
 namespace simstack {
 namespace {
+
+/// Notes in a ranking's message are joined by "; ".
+void addNote(std::string* message, const std::string& note) {
+  *message += (message->empty() ? "" : "; ") + note;
+}
+
+/// What the caller should know of the ranked grasps as a whole: that none held, or that none
+/// freed the target (each grasp's shares say it too, but a list ranked best first reads as if
+/// its first grasp were a good one).
+std::string outcomeNote(const std::vector<RankedGrasp>& grasps) {
+  if (grasps.empty()) return {};
+  const bool any_held = std::any_of(grasps.begin(), grasps.end(),
+                                    [](const RankedGrasp& g) { return g.failed_share < 1.0; });
+  if (!any_held)
+    return "none of the " + std::to_string(grasps.size()) +
+           " grasps held: every pull broke the seal in every hypothesis (the target too heavy "
+           "for the cup, or pulled too fast)";
+  const bool any_freed = std::any_of(grasps.begin(), grasps.end(),
+                                     [](const RankedGrasp& g) { return g.freed_share > 0.0; });
+  return any_freed ? std::string()
+                   : "no grasp freed the target in any hypothesis (it stayed against another "
+                     "object)";
+}
 
 // Runs job(i) for i in [0, count) on `threads` threads. Each job writes only its own result,
 // so the outcome does not depend on the thread count. The first exception is rethrown.
@@ -135,14 +159,15 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
     targets.push_back(t);
   }
   if (out.hypotheses.size() < hypotheses.size())
-    out.message = std::to_string(hypotheses.size() - out.hypotheses.size()) +
-                  " hypotheses without a match for the target were left out";
+    addNote(&out.message, std::to_string(hypotheses.size() - out.hypotheses.size()) +
+                              " hypotheses without a match for the target were left out");
   if (out.candidates.candidates.empty()) {
-    out.message = "no sealable surface on the target: " + std::to_string(out.candidates.visible) +
-                  " of " + std::to_string(out.candidates.surface_samples) + " samples seen, " +
-                  std::to_string(out.candidates.reachable) + " reachable, none where a " +
-                  std::to_string(std::lround(config.candidates.cup_radius_m * 1000.0)) +
-                  " mm cup seals";
+    addNote(&out.message,
+            "no sealable surface on the target: " + std::to_string(out.candidates.visible) +
+                " of " + std::to_string(out.candidates.surface_samples) + " samples seen, " +
+                std::to_string(out.candidates.reachable) + " reachable, none where a " +
+                std::to_string(std::lround(config.candidates.cup_radius_m * 1000.0)) +
+                " mm cup seals");
     return out;
   }
   const int H = static_cast<int>(out.hypotheses.size());
@@ -179,7 +204,16 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
         if (da != db) return da < db;
         return a.peak_load < b.peak_load;
       });
+  if (const std::string note = outcomeNote(out.grasps); !note.empty()) addNote(&out.message, note);
   return out;
+}
+
+double sceneBottom(const std::vector<SuperquadricShape>& scene) {
+  double bottom = std::numeric_limits<double>::infinity();
+  for (const SuperquadricShape& sq : scene)
+    for (const Vec3& v : sq.meshObject(16).vertices)
+      bottom = std::min(bottom, (sq.T_table_object * v).z());
+  return bottom;
 }
 
 }  // namespace simstack

@@ -1,0 +1,23 @@
+/// The C++ client of docs/reference.md ("Grasp service"), compiled here so that the snippet
+/// there stays true to the messages (check_downstream.sh builds it; nothing runs it).
+
+#include <ros/ros.h>
+#include <simstack/ObjectArray.h>
+#include <simstack/RankGrasps.h>
+
+bool firstHeldGrasp(ros::NodeHandle& nh, const simstack::ObjectArray& scene, uint32_t target,
+                    simstack::Grasp* grasp) {
+  ros::ServiceClient client = nh.serviceClient<simstack::RankGrasps>("/camera/grasps/rank_grasps");
+  simstack::RankGrasps srv;
+  srv.request.scene = scene;  // the simstack::ObjectArray the target was chosen from
+  srv.request.target_id = target;
+  srv.request.pull_distance_m = 0.10;
+  srv.request.pull_speed_mps = 0.20;
+  if (client.waitForExistence(ros::Duration(30.0)) && client.call(srv) && srv.response.success)
+    for (const simstack::Grasp& g : srv.response.grasps)
+      if (g.failed_share == 0.0f) {
+        *grasp = g;  // g.contact, in srv.response.header.frame_id
+        return true;
+      }
+  return false;
+}
