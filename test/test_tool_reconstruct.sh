@@ -17,6 +17,19 @@ done
 grep -q "objects in 1 tile; timings" "$dir/log.txt"
 grep -q "^model .*simstack_r32_fc.pt (card .*simstack_r32_fc.yaml)$" "$dir/log.txt" ||
   { echo "the model and its card not named"; cat "$dir/log.txt"; exit 1; }
+# The view file holds the intrinsics: --intrinsics may be left out, and ones that differ are
+# refused, naming the file; without either the depth is named.
+"$reconstruct" --depth "${view}_depth.png" --table-pose "$view.yaml" --output "$dir/out_vi" \
+  > "$dir/log_vi.txt"
+cmp -s <(grep -o "[0-9]* objects in" "$dir/log.txt") <(grep -o "[0-9]* objects in" "$dir/log_vi.txt") ||
+  { echo "the view file's intrinsics gave another result"; cat "$dir/log_vi.txt"; exit 1; }
+if "$reconstruct" --depth "${view}_depth.png" --intrinsics 600,600,319.5,239.5 \
+  --table-pose "$view.yaml" --output "$dir/out_x" > /dev/null 2> "$dir/e_vi"; then
+  echo "accepted intrinsics that differ from the view file's"; exit 1; fi
+grep -q "differ from those of .*view_0.yaml" "$dir/e_vi" || { cat "$dir/e_vi"; exit 1; }
+if "$reconstruct" --depth "${view}_depth.png" --output "$dir/out_x" > /dev/null 2> "$dir/e_ni"; then
+  echo "accepted a depth without intrinsics"; exit 1; fi
+grep -q "intrinsics is needed for .*depth.png" "$dir/e_ni" || { cat "$dir/e_ni"; exit 1; }
 # Without a pose the table comes from RANSAC.
 "$reconstruct" --depth "${view}_depth.png" --intrinsics 525,525,319.5,239.5 --output "$dir/out2" \
   > "$dir/log2.txt"

@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <iostream>
 #include <sstream>
@@ -27,7 +28,11 @@ DepthView readView(const std::string& depth_path, double depth_scale, const std:
   std::string ext = fs::path(depth_path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
   view.depth = ext == ".pcd" ? readDepthPcd(depth_path) : readDepthImage(depth_path, depth_scale);
-  view.camera = parseIntrinsics(intrinsics, view.depth.width, view.depth.height);
+  if (!intrinsics.empty())
+    view.camera = parseIntrinsics(intrinsics, view.depth.width, view.depth.height);
+  else if (pose_path.empty())
+    throw std::invalid_argument("--intrinsics is needed for " + depth_path +
+                                " (or a --table-pose view file, which holds them)");
   if (!pose_path.empty()) {
     const ViewDescription pose = readViewYaml(pose_path);
     if (pose.camera.width != view.depth.width || pose.camera.height != view.depth.height)
@@ -35,6 +40,15 @@ DepthView readView(const std::string& depth_path, double depth_scale, const std:
                                   "x" + std::to_string(pose.camera.height) + " view, but " +
                                   depth_path + " is " + std::to_string(view.depth.width) + "x" +
                                   std::to_string(view.depth.height));
+    const PinholeCamera& c = pose.camera;
+    if (intrinsics.empty())
+      view.camera = c;
+    else if (std::abs(c.fx - view.camera.fx) > 1e-6 || std::abs(c.fy - view.camera.fy) > 1e-6 ||
+             std::abs(c.cx - view.camera.cx) > 1e-6 || std::abs(c.cy - view.camera.cy) > 1e-6)
+      throw std::invalid_argument("--intrinsics " + intrinsics + " differ from those of " +
+                                  pose_path + " (" + std::to_string(c.fx) + "," +
+                                  std::to_string(c.fy) + "," + std::to_string(c.cx) + "," +
+                                  std::to_string(c.cy) + "): give one of them");
     view.T_table_camera = pose.T_table_camera;
   }
   if (!mask_path.empty()) {
@@ -64,7 +78,9 @@ int main(int argc, char** argv) {
                  "--table-pose (the outputs are drawn over the first)")
       ->required()
       ->check(CLI::ExistingFile);
-  app.add_option("--intrinsics", intrinsics, "fx,fy,cx,cy in pixels")->required();
+  app.add_option("--intrinsics", intrinsics,
+                 "fx,fy,cx,cy in pixels; may be left out when every --depth has its --table-pose "
+                 "view file, which holds them");
   app.add_option("--depth-scale", depth_scale, "metres per unit of a 16-bit PNG")
       ->capture_default_str()
       ->check(FinitePositive);
