@@ -76,7 +76,8 @@ def rank_grasps(scene, target_id, camera="camera", candidates=0, pull_distance_m
     """Calls /<camera>/grasps/rank_grasps on `target_id` of `scene` (an ObjectArray; None: the
     server's latest, which it refuses when older than its ~max_scene_age_s) and returns the
     response. `timeout` bounds the wait for the service, not the ranking: a request simulates
-    candidates x hypotheses pulls (64 x 3 by default, a second or two). Raises GraspServiceError
+    candidates x hypotheses pulls (64 x 3 by default: about 0.5 s on a 4-object pile,
+    docs/benchmarks.md; slower or longer pulls take longer in proportion). Raises GraspServiceError
     with the server's message when it refuses the request."""
     service = "/%s/grasps/rank_grasps" % camera
     req = RankGraspsRequest(target_id=target_id, candidates=candidates,

@@ -155,14 +155,18 @@ int main(int argc, char** argv) {
     for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
     CvaeTrainer trainer(o.dataset, model, training, o.output, command);
     std::unique_ptr<ProgressBar> bar;
+    bool validated = false;  // in this process: until then there is no IoU to show
     const TrainingReport r = trainer.run(o.resume, [&](const TrainingProgress& p) {
       if (!bar)
         bar =
             std::make_unique<ProgressBar>("training " + model.architecture, p.steps, p.first_step);
+      validated = validated || p.step % training.validate_every == 0 || p.step == p.steps;
+      char iou[16] = " -";
+      if (validated) std::snprintf(iou, sizeof(iou), " %.3f", p.validation_iou);
       char suffix[160];
       std::snprintf(suffix, sizeof(suffix),
-                    " loss %.0f (tsdf %.0f votes %.0f mmd %.2g) val IoU %.3f  %.1f samples/s",
-                    p.loss, p.tsdf, p.votes, p.mmd, p.validation_iou, p.samples_per_second);
+                    " loss %.0f (tsdf %.0f votes %.0f mmd %.2g) val IoU%s  %.1f samples/s", p.loss,
+                    p.tsdf, p.votes, p.mmd, iou, p.samples_per_second);
       bar->update(p.step, suffix);
     });
     if (bar) bar->finish();
