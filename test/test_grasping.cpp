@@ -179,6 +179,17 @@ TEST(GraspRanking, ATargetTooHeavyForTheCupSaysThatNoGraspHeld) {
   ASSERT_EQ(r.grasps.size(), 4u);
   for (const RankedGrasp& g : r.grasps) EXPECT_EQ(g.failed_share, 1.0);
   EXPECT_NE(r.message.find("none of the 4 grasps held"), std::string::npos) << r.message;
+  // The same light box in one hypothesis and a slab of 7 kg of the same height in another: pulls
+  // that hold in the first break in the second, and no grasp held in every hypothesis.
+  const std::vector<SuperquadricShape> slab{box({0.3, 0.3, 0.02}, {0, 0, 0.02})};
+  const std::vector<SuperquadricShape> small{box({0.04, 0.03, 0.02}, {0, 0, 0.02})};
+  const GraspRanking mixed = rankGrasps({small, slab}, 0, {}, config);
+  ASSERT_FALSE(mixed.grasps.empty());
+  EXPECT_LT(mixed.grasps.front().failed_share, 1.0);
+  for (const RankedGrasp& g : mixed.grasps) EXPECT_GT(g.failed_share, 0.0);
+  EXPECT_NE(mixed.message.find("no grasp held in every hypothesis"), std::string::npos)
+      << mixed.message;
+  EXPECT_EQ(mixed.message.find("none of the"), std::string::npos) << mixed.message;
   // A light box on its own comes free: nothing to say.
   const std::vector<SuperquadricShape> light{box({0.04, 0.03, 0.02}, {0, 0, 0.02})};
   const GraspRanking ok = rankGrasps({light}, 0, {}, config);

@@ -1128,10 +1128,11 @@ TEST(ShippedModel, LoadsAndPredictsThreeSamplesInOnePass) {
 
 namespace {
 // A small dataset of generated piles at R = 16 (the tiny config's grid).
-std::string tinyDataset(int scenes) {
+std::string tinyDataset(int scenes, int min_objects = 3) {
   const std::string path = tempPath("simstack_test_train.h5");
   DatasetInfo info;
   info.num_scenes = scenes;
+  info.min_objects = min_objects;
   info.resolution = 16;
   info.extent_m = 0.64;
   info.truncation_m = tiny().truncation_m();
@@ -1456,10 +1457,12 @@ TEST(CvaeTrainer, AResumeThatWouldRewindOrMixARunIsRefused) {
                 .find("base_channels: 4 (checkpoint) against "
                       "base_channels: 8 (config)"),
             std::string::npos);
-  const std::string other = tinyDataset(4);  // the same file, now with a fourth scene
-  EXPECT_NE(refused(other, tiny(), 6)
-                .find("was trained on a dataset of dataset_seed: 5, "
-                      "dataset_scenes: 3"),
+  // The same file written again: with other object counts, then with a fourth scene.
+  EXPECT_NE(refused(tinyDataset(3, 2), tiny(), 6)
+                .find("was trained on a dataset of seed 5, 3 scenes of 3-4 objects"),
+            std::string::npos);
+  const std::string other = tinyDataset(4);
+  EXPECT_NE(refused(other, tiny(), 6).find("holds seed 5, 4 scenes of 3-4 objects"),
             std::string::npos);
   EXPECT_EQ(lines(run + "/state.yaml").at(0), "step: 4");
   EXPECT_TRUE(torch::equal(probe(run + "/checkpoint.pt"), trained));
@@ -1492,6 +1495,27 @@ TEST(CvaeTrainer, AResumeKeepsTheHoughSettingOfTheRunsCard) {
   EXPECT_EQ(card()["hough"]["refinement"].as<int>(), 5);
   EXPECT_DOUBLE_EQ(card()["hough"]["bandwidth_m"].as<double>(), 0.05);
   EXPECT_EQ(card()["samples"].as<int>(), 3);
+}
+
+// A warm-started run stopped before its end has no card yet; its resume (which does not read
+// --init-from) still gives the card its parent's Hough setting.
+TEST(CvaeTrainer, AResumedWarmStartKeepsItsParentsHoughSetting) {
+  const TrainingScratch scratch("simstack_resume_parent");
+  const auto& [parent, child, unused] = scratch.dirs;
+  CvaeTrainer(scratch.data, tiny(), scratch.tc, parent, "test").run(false);
+  std::ofstream(parent + "/model.yaml", std::ios::app) << "  hough:\n    refinement: 5\n";
+  TrainConfig tc = scratch.tc;
+  tc.steps = 2;
+  tc.init_from = parent + "/model.pt";
+  CvaeTrainer(scratch.data, tiny(), tc, child, "test").run(false);
+  fs::remove(child + "/model.yaml");  // as if stopped before the end: only the checkpoint
+  fs::remove(child + "/model.pt");
+  tc.steps = 4;
+  tc.init_from.clear();
+  CvaeTrainer(scratch.data, tiny(), tc, child, "test").run(true);
+  EXPECT_EQ(
+      loadYamlFile(child + "/model.yaml", "card")["perception"]["hough"]["refinement"].as<int>(),
+      5);
 }
 
 // A dataset that goes bad between two runs: the resumed run stops on its first training batch

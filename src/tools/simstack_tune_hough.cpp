@@ -92,19 +92,25 @@ std::string chosenSection(const std::vector<std::string>& datasets, size_t views
   return out.str();
 }
 
-/// A model card's text with its perception: section (the top-level key, its indented lines and
-/// the comment lines just above it) replaced by `section`, every other line kept as it was;
-/// `section` is appended when the card has none.
+/// A model card's text with its perception: section (the top-level key down to the next
+/// one, less the comments and blank lines just above that, plus the comments just above the
+/// section) replaced by `section`, every other line kept; `section` is appended when the card
+/// has none. Line ends are written as \n.
 std::string withPerceptionSection(const std::string& card, const std::string& section) {
   std::vector<std::string> lines;
   std::istringstream in(card);
-  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  for (std::string line; std::getline(in, line);) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    lines.push_back(line);
+  }
+  auto comment_or_blank = [&](size_t i) { return lines[i].empty() || lines[i][0] == '#'; };
   size_t begin = lines.size(), end = lines.size();
   for (size_t i = 0; i < lines.size(); ++i) {
     if (lines[i].rfind("perception:", 0) != 0) continue;
     begin = i;
     end = i + 1;
-    while (end < lines.size() && (lines[end].empty() || lines[end][0] == ' ')) ++end;
+    while (end < lines.size() && (comment_or_blank(end) || lines[end][0] == ' ')) ++end;
+    while (end < lines.size() && end > begin + 1 && comment_or_blank(end - 1)) --end;
     while (begin > 0 && lines[begin - 1].rfind('#', 0) == 0) --begin;
     break;
   }
@@ -116,13 +122,32 @@ std::string withPerceptionSection(const std::string& card, const std::string& se
 }
 
 /// --apply: the chosen section written into the model's card in place of its own (a card
-/// holding only it when the model has none); the result must read as a card before it
-/// replaces the old one.
-void applyToCard(const std::string& card_path, const std::string& section) {
+/// holding only it when the model has none). The result is read back first: its perception:
+/// must be the chosen one and every other top-level entry the card's own, or the card is left
+/// as it was.
+void applyToCard(const std::string& card_path, const std::string& section,
+                 const std::string& output) {
   std::string card;
   if (std::ifstream in{card_path}) card.assign(std::istreambuf_iterator<char>(in), {});
   const std::string text = withPerceptionSection(card, section);
-  parseYamlText(text, "model card", card_path);  // throws, naming the card, on a bad result
+  const YAML::Node before =
+      card.empty() ? YAML::Node(YAML::NodeType::Map) : parseYamlText(card, "model card", card_path);
+  const YAML::Node after = parseYamlText(text, "model card", card_path);
+  const YAML::Node chosen = parseYamlText(section, "chosen section", output);
+  auto same = [](const YAML::Node& a, const YAML::Node& b) {
+    return YAML::Dump(a) == YAML::Dump(b);
+  };
+  bool ok =
+      before.IsMap() && after.IsMap() && after.size() == before.size() + !before["perception"];
+  ok = ok && same(after["perception"], chosen["perception"]);
+  for (auto it = before.begin(); ok && it != before.end(); ++it) {
+    const std::string key = it->first.as<std::string>();
+    ok = key == "perception" || same(after[key], it->second);
+  }
+  if (!ok)
+    throw std::runtime_error("cannot put the chosen section into " + card_path +
+                             " without changing the rest of it; copy it from " + output +
+                             " by hand");
   StagedFile staged(card_path);
   std::ofstream f(staged.path());
   f << text;
@@ -186,6 +211,11 @@ int main(int argc, char** argv) {
          FinitePositive & CLI::Range(0.01, 1.0));
   app.add_option("--top", top, "rows of the table")->capture_default_str()->check(FinitePositive);
   CLI11_PARSE(app, argc, argv);
+  if (apply && app.count("--model") == 0) {
+    std::cerr << "simstack_tune_hough: error: --apply needs --model (the card it would rewrite "
+                 "is otherwise the shipped model's)\n";
+    return 2;
+  }
   keepFreedMemoryForReuse();  // the network runs in this process
   try {
     std::vector<std::string> inputs = perception.inputFiles();
@@ -219,7 +249,7 @@ int main(int argc, char** argv) {
     written.commit();
     std::cout << "\nchosen setting written to " << output << "\n";
     if (apply) {
-      applyToCard(modelCardPath(pc.model_path), chosen);
+      applyToCard(modelCardPath(pc.model_path), chosen, output);
       std::cout << "and put into the card " << modelCardPath(pc.model_path) << "\n";
     }
     return 0;

@@ -18,8 +18,11 @@ cp "$source_dir"/test/downstream/{package.xml,CMakeLists.txt,task_code.cpp,servi
 source "$build/devel/setup.bash"
 cd "$ws"
 # The system interpreter: Debian's ROS Python modules are not in a pyenv one on PATH.
+# libtorch where this build found it (a system path here; elsewhere on other machines).
+torch_dir=$(sed -n 's/^Torch_DIR:PATH=//p' "$build/CMakeCache.txt")
 if ! catkin_make -DCMAKE_BUILD_TYPE=Release -DPYTHON_EXECUTABLE=/usr/bin/python3 \
-  -DPython3_EXECUTABLE=/usr/bin/python3 >"$ws/build.log" 2>&1; then
+  -DPython3_EXECUTABLE=/usr/bin/python3 ${torch_dir:+-DTorch_DIR="$torch_dir"} \
+  >"$ws/build.log" 2>&1; then
   tail -40 "$ws/build.log"
   echo "FAILED: a package depending on simstack does not build"
   exit 1

@@ -38,11 +38,13 @@ expect "perception.launch decompose_samples:=3: the C-VAE" 'perception/model: .*
   dump "$launch/perception.launch" decompose_samples:=3
 expect "perception.launch decompose_samples:=3 model:=M: M" 'perception/model: /tmp/m.pt$' \
   dump "$launch/perception.launch" decompose_samples:=3 model:=/tmp/m.pt
-expect "perception.launch model:=relative: from roslaunch's directory" \
-  'perception/model: /tmp/runs/m.pt$' \
-  bash -c 'cd /tmp && roslaunch --dump-params "$1" model:=runs/m.pt' _ "$(cd "$launch" && pwd)/perception.launch"
+expect "perception.launch model:=relative: left to the node (the package directory)" \
+  'perception/model: models/simstack_r32.pt$' \
+  bash -c 'cd /tmp && roslaunch --dump-params "$1" model:=models/simstack_r32.pt' _ "$(cd "$launch" && pwd)/perception.launch"
 expect "replay.launch bag:=relative: from roslaunch's directory" ' /tmp/runs/my.bag __name' \
   bash -c 'cd /tmp && roslaunch --args /player "$1" bag:=runs/my.bag' _ "$(cd "$launch" && pwd)/replay.launch"
+expect "replay.launch bag:=~/b.bag: from HOME" " $HOME/b.bag __name" \
+  roslaunch --args /player "$launch/replay.launch" 'bag:=~/b.bag'
 sed 's#^  model: .*#  model: models/simstack_r32_fc_plain.pt#' "$source_dir/config/perception.yaml" \
   > "$ROS_HOME/own.yaml"
 expect "perception.launch decompose_samples:=3 config:=C: C's model" \

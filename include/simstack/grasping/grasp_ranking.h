@@ -49,7 +49,8 @@ struct GraspRanking {
   std::vector<int> hypotheses;       ///< indices of the hypotheses used (0 first)
   int pulls = 0;                     ///< pulls simulated
   /// What the caller should know, notes joined by "; " (empty when all is well): hypotheses
-  /// left out, no sealable surface, no grasp that held, no grasp that freed the target.
+  /// left out, no sealable surface, no grasp that held (in any hypothesis, or in every one), no
+  /// grasp that freed the target.
   std::string message;
 };
 

@@ -18,22 +18,23 @@ void addNote(std::string* message, const std::string& note) {
   *message += (message->empty() ? "" : "; ") + note;
 }
 
-/// What the caller should know of the ranked grasps as a whole: that none held, or that none
-/// freed the target (each grasp's shares say it too, but a list ranked best first reads as if
-/// its first grasp were a good one).
+/// What the caller should know of the ranked grasps as a whole: that none held (in any
+/// hypothesis, or in all of them), that none freed the target. Each grasp's shares say it too,
+/// but a list ranked best first reads as if its first grasp were a good one.
 std::string outcomeNote(const std::vector<RankedGrasp>& grasps) {
   if (grasps.empty()) return {};
-  const bool any_held = std::any_of(grasps.begin(), grasps.end(),
-                                    [](const RankedGrasp& g) { return g.failed_share < 1.0; });
-  if (!any_held)
+  auto any = [&](auto pred) { return std::any_of(grasps.begin(), grasps.end(), pred); };
+  if (!any([](const RankedGrasp& g) { return g.failed_share < 1.0; }))
     return "none of the " + std::to_string(grasps.size()) +
            " grasps held: every pull broke the seal in every hypothesis (the target too heavy "
            "for the cup, or pulled too fast)";
-  const bool any_freed = std::any_of(grasps.begin(), grasps.end(),
-                                     [](const RankedGrasp& g) { return g.freed_share > 0.0; });
-  return any_freed ? std::string()
-                   : "no grasp freed the target in any hypothesis (it stayed against another "
-                     "object)";
+  std::string note;
+  if (!any([](const RankedGrasp& g) { return g.failed_share == 0.0; }))
+    note = "no grasp held in every hypothesis (each broke its seal in one at least)";
+  if (!any([](const RankedGrasp& g) { return g.freed_share > 0.0; }))
+    addNote(&note,
+            "no grasp freed the target in any hypothesis (it stayed against another object)");
+  return note;
 }
 
 // Runs job(i) for i in [0, count) on `threads` threads. Each job writes only its own result,

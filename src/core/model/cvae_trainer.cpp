@@ -314,11 +314,33 @@ std::string differingLines(const std::string& checkpoint, const std::string& con
   return out.empty() ? "their YAML differs in length" : out;
 }
 
-/// What a checkpoint records of the data it was trained on, so that a resume on other data is
-/// refused (a resumed run sees the data an uninterrupted one would have).
-std::string checkpointDataTag(const DatasetInfo& info) {
-  return "dataset_seed: " + std::to_string(info.seed) +
-         "\ndataset_scenes: " + std::to_string(info.num_scenes) + "\n";
+/// The data a run trains on as a checkpoint records it (one line): a resume on other data is
+/// refused, since a resumed run sees the data an uninterrupted one would have. The generator's
+/// size range is not in a dataset's attributes, so it cannot be compared.
+std::string datasetTag(const DatasetInfo& info) {
+  return "seed " + std::to_string(info.seed) + ", " + std::to_string(info.num_scenes) +
+         " scenes of " + std::to_string(info.min_objects) + "-" + std::to_string(info.max_objects) +
+         " objects, generator " +
+         (info.generator_version.empty() ? "unknown" : info.generator_version);
+}
+
+/// A checkpoint's metadata: its dataset tag and the model the run was warm-started from.
+std::string checkpointMetadata(const DatasetInfo& info, const std::string& init_from) {
+  YAML::Emitter e;
+  e << YAML::BeginMap << YAML::Key << "dataset" << YAML::Value << datasetTag(info) << YAML::Key
+    << "init_from" << YAML::Value << init_from << YAML::EndMap;
+  return e.c_str();
+}
+
+/// A field of a checkpoint's metadata; empty when absent (a checkpoint from before
+/// 2026-11-29) or unreadable.
+std::string metadataField(const std::string& metadata, const char* key) {
+  try {
+    const YAML::Node n = YAML::Load(metadata);
+    return n.IsMap() && n[key] && n[key].IsScalar() ? n[key].as<std::string>() : "";
+  } catch (const YAML::Exception&) {
+    return "";
+  }
 }
 
 }  // namespace
@@ -337,8 +359,12 @@ struct CvaeTrainer::Impl {
   int train_scenes = 0;
   std::string card_perception;  // the card's perception: section, read before training
 
-  /// `trained_on` receives a resumed checkpoint's record of its data (checkpointDataTag).
+  /// `trained_on` receives a resumed checkpoint's metadata (checkpointMetadata).
   Cvae loadOrCreate(bool resuming, const fs::path& checkpoint, std::string* trained_on) const;
+  /// A resumed checkpoint's metadata against this run: another dataset is refused; the model
+  /// the run was warm-started from (returned) gives the card its Hough setting again when the
+  /// config does not name it (--init-from is not read with --resume).
+  std::string resumeFrom(const std::string& metadata, const fs::path& checkpoint);
   int64_t restore(Cvae& model, torch::optim::Adam& optimizer, const fs::path& out) const;
   void validate(Cvae& model, const TrainingSampleBuilder& builder, TrainingReport* report) const;
   void writeModelFiles(const fs::path& out, Cvae& model, const TrainingReport& report,
@@ -624,6 +650,21 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
   card.commit();
 }
 
+std::string CvaeTrainer::Impl::resumeFrom(const std::string& metadata, const fs::path& checkpoint) {
+  const std::string now = datasetTag(reader->info());
+  const std::string was = metadataField(metadata, "dataset");  // empty before 2026-11-29
+  if (!was.empty() && was != now)
+    throw std::runtime_error("checkpoint " + checkpoint.string() + " was trained on a dataset of " +
+                             was + "; " + dataset_path + " holds " + now +
+                             ": resume on the run's own dataset, or warm-start a new run from "
+                             "the checkpoint (--init-from) to train on this one");
+  if (!config.init_from.empty()) return config.init_from;
+  const std::string parent = metadataField(metadata, "init_from");
+  if (!parent.empty())
+    card_perception = cardPerceptionSection(parent, model_config.hasLatentCode());
+  return parent;
+}
+
 TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& progress) {
   const TrainConfig& tc = impl_->config;
   const CvaeConfig& mc = impl_->model_config;
@@ -635,20 +676,9 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   if (resume && !resuming)
     throw std::runtime_error("--resume: no checkpoint to resume in " + out.string() +
                              " (checkpoint.pt); start without --resume");
-  std::string trained_on;  // empty in checkpoints written before 2026-11-29
+  std::string trained_on;  // its metadata: empty in checkpoints written before 2026-11-29
   Cvae model = impl_->loadOrCreate(resuming, checkpoint, &trained_on);
-  const std::string data_tag = checkpointDataTag(impl_->reader->info());
-  auto one_line = [](std::string s) {
-    while (!s.empty() && s.back() == '\n') s.pop_back();
-    for (size_t i; (i = s.find('\n')) != std::string::npos;) s.replace(i, 1, ", ");
-    return s;
-  };
-  if (resuming && !trained_on.empty() && trained_on != data_tag)
-    throw std::runtime_error("checkpoint " + checkpoint.string() + " was trained on a dataset of " +
-                             one_line(trained_on) + ", " + impl_->dataset_path + " has " +
-                             one_line(data_tag) +
-                             ": resume on the run's own dataset, or warm-start a new run from "
-                             "the checkpoint (--init-from) to train on this one");
+  const std::string init_from = resuming ? impl_->resumeFrom(trained_on, checkpoint) : tc.init_from;
   torch::optim::Adam optimizer(model->parameters(), torch::optim::AdamOptions(tc.learning_rate));
   const int64_t start = resuming ? impl_->restore(model, optimizer, out) : 0;
   if (start > tc.steps)
@@ -670,12 +700,13 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   // people and scripts.
   auto save_checkpoint = [&](int64_t step) {
     log.flush();
-    saveCvae(checkpoint.string(), model, data_tag, [&](torch::serialize::OutputArchive& archive) {
-      torch::serialize::OutputArchive adam;
-      optimizer.save(adam);
-      archive.write("simstack_optimizer", adam);
-      archive.write("simstack_step", torch::IValue(step));
-    });
+    saveCvae(checkpoint.string(), model, checkpointMetadata(impl_->reader->info(), init_from),
+             [&](torch::serialize::OutputArchive& archive) {
+               torch::serialize::OutputArchive adam;
+               optimizer.save(adam);
+               archive.write("simstack_optimizer", adam);
+               archive.write("simstack_step", torch::IValue(step));
+             });
     std::error_code ignored;
     fs::remove(out / "optimizer.pt", ignored);  // a run's from before 2026-11-28, now stale
     const fs::path state_tmp = out / "state.yaml.tmp";
