@@ -81,6 +81,8 @@ assert card == {"model": {"note": 1}, "perception": tuned["perception"], "evalua
 PY
 if tune_apply quoted; then echo "--apply spliced a card it could not splice safely"; exit 1; fi
 grep -q "without changing the rest of it" "$dir/quoted.log" || { cat "$dir/quoted.log"; exit 1; }
+grep -q "the model's setting (defaults: .*quoted.yaml has no hough:)" "$dir/quoted.log" ||
+  { echo "a card without hough: was taken for the model's setting"; cat "$dir/quoted.log"; exit 1; }
 cmp -s "$dir/quoted.yaml" "$dir/quoted.orig" || { echo "the refused card was changed"; exit 1; }
 if "$tune" --dataset "$dir/val.h5" --apply --output "$dir/x.yaml" 2> "$dir/e0"; then
   echo "--apply without --model was accepted"; exit 1; fi

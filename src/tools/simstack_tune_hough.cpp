@@ -72,10 +72,13 @@ void printScores(size_t views, const PerceptionConfig& pc, const std::vector<Hou
             << houghScoreHeader() << "\n";
   for (int i = 0; i < std::min<int>(top, scores.size()); ++i)
     std::cout << houghScoreRow(scores[i]) << "\n";
-  std::cout << "\nthe model's setting ("
-            << (pc.model_card_path.empty() ? "defaults: no model card" : pc.model_card_path)
-            << "):\n"
-            << houghScoreRow(own) << "\n";
+  std::string source = "defaults: no model card";
+  if (!pc.model_card_path.empty()) {
+    const YAML::Node card = loadYamlFile(pc.model_card_path, "model card");
+    source = card["perception"]["hough"] ? pc.model_card_path
+                                         : "defaults: " + pc.model_card_path + " has no hough:";
+  }
+  std::cout << "\nthe model's setting (" << source << "):\n" << houghScoreRow(own) << "\n";
 }
 
 /// The chosen setting as a model card's perception: section, under a comment saying where it
