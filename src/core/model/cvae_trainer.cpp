@@ -308,7 +308,10 @@ std::string differingLines(const std::string& checkpoint, const std::string& con
   std::string out, la, lb;
   while (std::getline(a, la) && std::getline(b, lb)) {
     if (la == lb) continue;
-    auto trim = [](const std::string& s) { return s.substr(s.find_first_not_of(' ')); };
+    auto trim = [](const std::string& s) {
+      const size_t first = s.find_first_not_of(' ');
+      return first == std::string::npos ? std::string() : s.substr(first);
+    };
     out += (out.empty() ? "" : "; ") + trim(la) + " (checkpoint) against " + trim(lb) + " (config)";
   }
   return out.empty() ? "their YAML differs in length" : out;
@@ -361,10 +364,10 @@ struct CvaeTrainer::Impl {
 
   /// `trained_on` receives a resumed checkpoint's metadata (checkpointMetadata).
   Cvae loadOrCreate(bool resuming, const fs::path& checkpoint, std::string* trained_on) const;
-  /// A resumed checkpoint's metadata against this run: another dataset is refused; the model
-  /// the run was warm-started from (returned) gives the card its Hough setting again when the
-  /// config does not name it (--init-from is not read with --resume).
-  std::string resumeFrom(const std::string& metadata, const fs::path& checkpoint);
+  /// A resumed checkpoint's metadata against this run: another dataset is refused. The card's
+  /// perception: section is the run card's own when it holds a Hough setting, else that of the
+  /// model the run was warm-started from (returned; --init-from is not read with --resume).
+  std::string resumeFrom(const std::string& metadata, const fs::path& out);
   int64_t restore(Cvae& model, torch::optim::Adam& optimizer, const fs::path& out) const;
   void validate(Cvae& model, const TrainingSampleBuilder& builder, TrainingReport* report) const;
   void writeModelFiles(const fs::path& out, Cvae& model, const TrainingReport& report,
@@ -650,7 +653,8 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
   card.commit();
 }
 
-std::string CvaeTrainer::Impl::resumeFrom(const std::string& metadata, const fs::path& checkpoint) {
+std::string CvaeTrainer::Impl::resumeFrom(const std::string& metadata, const fs::path& out) {
+  const fs::path checkpoint = out / "checkpoint.pt";
   const std::string now = datasetTag(reader->info());
   const std::string was = metadataField(metadata, "dataset");  // empty before 2026-11-29
   if (!was.empty() && was != now)
@@ -658,10 +662,12 @@ std::string CvaeTrainer::Impl::resumeFrom(const std::string& metadata, const fs:
                              was + "; " + dataset_path + " holds " + now +
                              ": resume on the run's own dataset, or warm-start a new run from "
                              "the checkpoint (--init-from) to train on this one");
-  if (!config.init_from.empty()) return config.init_from;
-  const std::string parent = metadataField(metadata, "init_from");
-  if (!parent.empty())
+  const std::string parent =
+      config.init_from.empty() ? metadataField(metadata, "init_from") : config.init_from;
+  if (config.init_from.empty() && !parent.empty())
     card_perception = cardPerceptionSection(parent, model_config.hasLatentCode());
+  if (const std::string kept = runCardPerceptionSection(out / "model.yaml"); !kept.empty())
+    card_perception = kept;
   return parent;
 }
 
@@ -678,7 +684,7 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
                              " (checkpoint.pt); start without --resume");
   std::string trained_on;  // its metadata: empty in checkpoints written before 2026-11-29
   Cvae model = impl_->loadOrCreate(resuming, checkpoint, &trained_on);
-  const std::string init_from = resuming ? impl_->resumeFrom(trained_on, checkpoint) : tc.init_from;
+  const std::string init_from = resuming ? impl_->resumeFrom(trained_on, out) : tc.init_from;
   torch::optim::Adam optimizer(model->parameters(), torch::optim::AdamOptions(tc.learning_rate));
   const int64_t start = resuming ? impl_->restore(model, optimizer, out) : 0;
   if (start > tc.steps)
@@ -686,10 +692,6 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
                              std::to_string(start) + ", past steps = " + std::to_string(tc.steps) +
                              ": --steps " + std::to_string(start) +
                              " or more continues the run (fewer would rewind it)");
-  if (resuming) {
-    const std::string kept = runCardPerceptionSection(out / "model.yaml");
-    if (!kept.empty()) impl_->card_perception = kept;
-  }
 
   const TrainingSampleBuilder builder(mc, scaledKinect(tc.image_width, tc.image_height),
                                       tc.sensor_noise, tc.overhead_share);
