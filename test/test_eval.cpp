@@ -5,9 +5,14 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <numeric>
+#include <random>
+#include <set>
+#include <tuple>
 
 #include "simstack/eval/evaluator.h"
 #include "simstack/eval/grasp_evaluation.h"
+#include "simstack/eval/real_scenes.h"
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/eval/segmentation.h"
 #include "simstack/io/scene_io.h"
@@ -143,6 +148,255 @@ TEST(Segmentation, OneToOneMatchingByLargestOverlap) {
   EXPECT_NEAR(segmentationAgreement(truth, std::vector<int>(12, -1)).agreement, 0.0, 1e-12);
   EXPECT_NEAR(segmentationAgreement(truth, truth).agreement, 1.0, 1e-12);
   EXPECT_THROW(segmentationAgreement(truth, std::vector<int>(3, 0)), std::invalid_argument);
+}
+
+TEST(Segmentation, TheAssignmentHasTheLargestTotalWeightOfAnyShape) {
+  // Against every one-to-one assignment (a brute force over permutations of the padded square).
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> weight(0.0, 1.0);
+  for (const auto& [rows, columns] : std::vector<std::pair<int, int>>{{4, 6}, {6, 4}, {5, 5}}) {
+    for (int trial = 0; trial < 20; ++trial) {
+      std::vector<std::vector<double>> w(rows, std::vector<double>(columns));
+      for (auto& row : w)
+        for (double& x : row) x = weight(rng);
+      const std::vector<int> match = maximumWeightAssignment(w);
+      ASSERT_EQ(match.size(), static_cast<size_t>(rows));
+      double total = 0;
+      std::vector<bool> used(columns, false);
+      int assigned = 0;
+      for (int i = 0; i < rows; ++i) {
+        if (match[i] < 0) continue;
+        ASSERT_LT(match[i], columns);
+        EXPECT_FALSE(used[match[i]]) << "column " << match[i] << " used twice";
+        used[match[i]] = true;
+        total += w[i][match[i]];
+        ++assigned;
+      }
+      EXPECT_EQ(assigned, std::min(rows, columns));
+      const int n = std::max(rows, columns);
+      std::vector<int> perm(n);
+      std::iota(perm.begin(), perm.end(), 0);
+      double best = 0;
+      do {
+        double t = 0;
+        for (int i = 0; i < rows; ++i)
+          if (perm[i] < columns) t += w[i][perm[i]];
+        best = std::max(best, t);
+      } while (std::next_permutation(perm.begin(), perm.end()));
+      EXPECT_NEAR(total, best, 1e-9);
+    }
+  }
+  EXPECT_TRUE(maximumWeightAssignment({}).empty());
+  EXPECT_THROW(maximumWeightAssignment({{1, 2}, {3}}), std::invalid_argument);
+}
+
+TEST(Segmentation, OverlapScoresPairObjectsAndInstancesByTheirFMeasure) {
+  // Object 0 (10 elements) and object 1 (2). Instance 5 covers 6 of object 0 and all of
+  // object 1, instance 6 the other 4 of object 0; two table elements are left unlabelled.
+  // F(0,5) = 0.667, F(0,6) = 0.571, F(1,5) = 0.4: the largest sum pairs 0 with 6 and 1 with 5
+  // (0.971 against 0.667), where the largest overlap would pair 0 with 5.
+  std::vector<int> truth(14, -1), found(14, -1);
+  for (int i = 0; i < 10; ++i) truth[i] = 0;
+  truth[10] = truth[11] = 1;
+  for (int i = 0; i < 6; ++i) found[i] = 5;
+  for (int i = 6; i < 10; ++i) found[i] = 6;
+  found[10] = found[11] = 5;
+  OverlapScores s = overlapScores(truth, found);
+  EXPECT_EQ(s.objects, 2);
+  EXPECT_EQ(s.instances, 2);
+  EXPECT_NEAR(s.precision, 6.0 / 12.0, 1e-12);  // 4 + 2 matched of 12 found
+  EXPECT_NEAR(s.recall, 6.0 / 12.0, 1e-12);
+  EXPECT_NEAR(s.f_measure, 0.5, 1e-12);
+  EXPECT_NEAR(s.detected_075, 0.0, 1e-12);
+  // The truth itself, under other names: every score 1.
+  std::vector<int> renamed = truth;
+  for (int& t : renamed) t = t < 0 ? -1 : 40 - t;
+  s = overlapScores(truth, renamed);
+  EXPECT_NEAR(s.f_measure, 1.0, 1e-12);
+  EXPECT_NEAR(s.detected_075, 1.0, 1e-12);
+  // An instance that spills onto the table loses precision only; above 0.75 it is detected.
+  renamed[12] = renamed[13] = renamed[11];
+  s = overlapScores(truth, renamed);
+  EXPECT_NEAR(s.precision, 12.0 / 14.0, 1e-12);
+  EXPECT_NEAR(s.recall, 1.0, 1e-12);
+  EXPECT_NEAR(s.detected_075, 0.5, 1e-12);  // object 1: F = 2 x 0.5 x 1 / 1.5 = 0.667
+  // Nothing found, nothing there, or both (UOIS-Net's conventions).
+  s = overlapScores(truth, std::vector<int>(14, -1));
+  EXPECT_EQ(std::make_tuple(s.precision, s.recall, s.f_measure), std::make_tuple(1.0, 0.0, 0.0));
+  s = overlapScores(std::vector<int>(14, -1), found);
+  EXPECT_EQ(std::make_tuple(s.precision, s.recall, s.f_measure), std::make_tuple(0.0, 1.0, 0.0));
+  s = overlapScores(std::vector<int>(3, -1), std::vector<int>(3, -1));
+  EXPECT_EQ(std::make_tuple(s.precision, s.recall, s.f_measure, s.detected_075),
+            std::make_tuple(1.0, 1.0, 1.0, 1.0));
+  EXPECT_THROW(overlapScores(truth, std::vector<int>(3, 0)), std::invalid_argument);
+}
+
+TEST(RealScenes, MosdFileNamesGiveTheirCategory) {
+  const std::vector<std::pair<std::string, std::string>> names = {
+      {"learn0.pcd", "boxes"},
+      {"learn16.pcd", "boxes"},
+      {"learn17.pcd", "stacked boxes"},
+      {"learn32.pcd", "occluded"},
+      {"learn33.pcd", "cylindrical"},
+      {"/a/b/learn44.pcd", "cylindrical"},
+      {"learn45.pcd", ""},
+      {"test15.pcd", "boxes"},
+      {"test16.pcd", "stacked boxes"},
+      {"test30.pcd", "occluded"},
+      {"test31.pcd", "cylindrical"},
+      {"test42.pcd", "cylindrical"},
+      {"test43.pcd", "mixed"},
+      {"test54.pcd", "mixed"},
+      {"test55.pcd", "complex"},
+      {"TEST64.PCD", "complex"},
+      {"test66.pcd", ""},
+      {"test.pcd", ""},
+      {"learn3x.pcd", ""},
+      {"scene_12.pcd", ""}};
+  for (const auto& [name, category] : names) EXPECT_EQ(mosdCategory(name), category) << name;
+}
+
+/// A labelled cloud as mOSD stores one, from a rendered view: the camera-frame points of the
+/// valid pixels, label 1 on the table and 10 (k + 1) + (v % 2) on object k (two parts each).
+void writeMosdLikeCloud(const std::string& path, const RenderResult& r, const PinholeCamera& camera,
+                        bool organized) {
+  Points3 points;
+  std::vector<int> labels;
+  for (int v = 0; v < r.depth.height; ++v)
+    for (int u = 0; u < r.depth.width; ++u) {
+      const float d = r.depth.at(u, v);
+      const int k = r.instances.at(u, v);
+      const bool valid = validDepth(d) && k != kNoSurface;
+      if (!valid && !organized) continue;
+      points.push_back(valid ? camera.backproject(u, v, d) : Vec3::Constant(std::nan("")));
+      labels.push_back(!valid ? 0 : k == 0 ? 1 : 10 * (k + 1) + v % 2);
+    }
+  writeLabelledCloudPcd(path, points, labels);
+  if (!organized) return;
+  // writeLabelledCloudPcd writes one row: make the header say width x height.
+  std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+  std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  const std::string width = "WIDTH " + std::to_string(points.size()) + "\nHEIGHT 1\n";
+  const size_t at = text.find(width);
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, width.size(),
+               "WIDTH " + std::to_string(r.depth.width) + "\nHEIGHT " +
+                   std::to_string(r.depth.height) + "\n");
+  f.close();
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << text;
+}
+
+TEST(RealScenes, AnUnorganizedCloudIsPlacedOnThePixelsOfTheCamera) {
+  const Scene scene =
+      Scene::fromSuperquadrics({box(Vec3(0.05, 0.05, 0.05), Vec3(-0.12, 0, 0.05)),
+                                box(Vec3(0.04, 0.06, 0.03), Vec3(0.12, 0.02, 0.03))});
+  const PinholeCamera camera;  // mOSD's Kinect
+  const RenderResult r =
+      DepthRenderer(scene).render(camera, lookAt(Vec3(0.5, -0.4, 0.6), Vec3(0, 0, 0.03)));
+  const auto dir = std::filesystem::temp_directory_path() / "simstack_test_unorganized";
+  std::filesystem::create_directories(dir);
+  const std::string loose = (dir / "loose.pcd").string(), grid = (dir / "grid.pcd").string();
+  writeMosdLikeCloud(loose, r, camera, false);
+  writeMosdLikeCloud(grid, r, camera, true);
+  Image<uint32_t> loose_labels, grid_labels;
+  const DepthImage a = readDepthPcd(loose, &camera, &loose_labels);
+  const DepthImage b = readDepthPcd(grid, nullptr, &grid_labels);
+  ASSERT_EQ(a.width, camera.width);
+  ASSERT_EQ(a.height, camera.height);
+  int valid = 0;
+  for (size_t i = 0; i < a.pixels.size(); ++i) {
+    ASSERT_EQ(validDepth(a.pixels[i]), validDepth(b.pixels[i])) << "pixel " << i;
+    if (!validDepth(a.pixels[i])) continue;
+    ++valid;
+    EXPECT_NEAR(a.pixels[i], b.pixels[i], 1e-6);
+    EXPECT_EQ(loose_labels.pixels[i], grid_labels.pixels[i]);
+  }
+  EXPECT_GT(valid, 100000);
+  // Without a camera, with another camera, or with two points on one pixel: refused by name.
+  const auto refused = [&](const std::string& path, const PinholeCamera* c, const char* why) {
+    try {
+      readDepthPcd(path, c);
+      ADD_FAILURE() << "accepted " << path << " (" << why << ")";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  };
+  refused(loose, nullptr, "not an organized cloud");
+  PinholeCamera other = camera;
+  other.fx = other.fy = 600;
+  refused(loose, &other, "does not fall on a pixel");
+  const Vec3 centre_pixel(0.5 / 525, 0.5 / 525, 1.0);  // on pixel (320, 240)
+  writeLabelledCloudPcd((dir / "twice.pcd").string(), {centre_pixel, centre_pixel}, {20, 30});
+  refused((dir / "twice.pcd").string(), &camera, "falls on the pixel of point 0");
+  std::filesystem::remove_all(dir);
+}
+
+/// Answers with the objects of labelled views it was given (or with nothing).
+class LabelledAnswer : public EvaluatedMethod {
+ public:
+  LabelledAnswer(std::string name, std::map<int, Image<int>> answers, bool nothing)
+      : name_(std::move(name)), answers_(std::move(answers)), nothing_(nothing) {}
+  const std::string& name() const override { return name_; }
+  MethodInfo info() const override { return {}; }
+  MethodEstimate estimate(const DepthView& view, const GridSpec*, const Vec2&) override {
+    MethodEstimate out;
+    out.pixel_instances = Image<int>(view.depth.width, view.depth.height, -1);
+    if (nothing_) return out;
+    const Image<int>& truth = answers_.at(view.depth.width);
+    std::set<int> objects;
+    for (size_t i = 0; i < truth.pixels.size(); ++i)
+      if (truth.pixels[i] >= 0) {
+        out.pixel_instances.pixels[i] = 100 - truth.pixels[i];
+        objects.insert(truth.pixels[i]);
+      }
+    out.superquadrics.resize(objects.size());
+    return out;
+  }
+
+ private:
+  std::string name_;
+  std::map<int, Image<int>> answers_;  ///< by image width: the views differ in size
+  bool nothing_;
+};
+
+TEST(RealScenes, TheTruthScoresOneAndNothingZeroByCategory) {
+  const auto dir = std::filesystem::temp_directory_path() / "simstack_test_real_scenes";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const Scene scene =
+      Scene::fromSuperquadrics({box(Vec3(0.05, 0.05, 0.05), Vec3(-0.12, 0, 0.05)),
+                                box(Vec3(0.04, 0.06, 0.03), Vec3(0.12, 0.02, 0.03))});
+  std::map<int, Image<int>> answers;
+  for (const auto& [name, width] :
+       std::vector<std::pair<std::string, int>>{{"learn3.pcd", 320}, {"test50.pcd", 330}}) {
+    const PinholeCamera camera = test::centredCamera(width, 240, 260.0);
+    const RenderResult r =
+        DepthRenderer(scene).render(camera, lookAt(Vec3(0.5, -0.4, 0.6), Vec3(0, 0, 0.03)));
+    writeMosdLikeCloud((dir / name).string(), r, camera, true);
+    answers[width] = readLabelledView((dir / name).string()).objects;
+  }
+  LabelledAnswer truth("truth", answers, false), nothing("nothing", answers, true);
+  const std::vector<RealMethodResults> results =
+      evaluateRealScenes(dir.string(), {&truth, &nothing});
+  ASSERT_EQ(results.size(), 2u);
+  ASSERT_EQ(results[0].scenes.size(), 2u);
+  EXPECT_EQ(results[0].scenes[0].scene, "learn3.pcd");
+  EXPECT_EQ(results[0].scenes[0].category, "boxes");
+  EXPECT_EQ(results[0].scenes[1].category, "mixed");
+  EXPECT_EQ(results[0].scenes[0].objects, 2);  // two parts each, label / 10 merges them
+  const nlohmann::json t = realSummary(results[0].scenes), n = realSummary(results[1].scenes);
+  EXPECT_DOUBLE_EQ(t["overlap_f"].get<double>(), 1.0);
+  EXPECT_DOUBLE_EQ(t["count_exact"].get<double>(), 1.0);
+  EXPECT_DOUBLE_EQ(n["overlap_f"].get<double>(), 0.0);
+  EXPECT_DOUBLE_EQ(n["count_error"].get<double>(), -2.0);
+  EXPECT_EQ(realSummary(results[0].scenes, "mixed")["scenes"].get<int>(), 1);
+  const std::string table = realScenesTable(results);
+  EXPECT_NE(table.find("| truth: boxes | 1 | 100.0 | 100.0 | 100.0 | 100.0 | 100 % |"),
+            std::string::npos)
+      << table;
+  EXPECT_NE(table.find("| nothing: mixed | 1 |"), std::string::npos) << table;
+  std::filesystem::remove_all(dir);
 }
 
 TEST(GraspSummary, PicksNeverPulledFreeNothingAndDoNotDiluteThePulls) {

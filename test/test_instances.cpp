@@ -10,6 +10,8 @@
 
 #include "simstack/instances/convex_split.h"
 #include "simstack/instances/hough_voting.h"
+#include "simstack/instances/surface_instances.h"
+#include "simstack/instances/surface_segments.h"
 
 namespace simstack {
 namespace {
@@ -346,6 +348,65 @@ TEST(ConvexSplit, CutsAnLAtItsSeamAndLeavesABoxWhole) {
   small = untouched;
   config.min_instance_voxels = 400;
   EXPECT_EQ(splitNonConvexInstances(&small, config), 0);
+}
+
+TEST(SurfaceInstances, DepthPointsNoInstanceExplainsBecomeObjects) {
+  const GridSpec g = GridSpec::sceneGrid(Vec2(0.0, 0.0), 0.64, 32);
+  InstanceSegmentation seg;
+  seg.labels = Grid3<int>(g, -1);
+  seg.voxel_counts = {0};
+  // One instance: a 10 cm box of voxels about (-0.15, 0), on the table.
+  for (int v = 0; v < g.voxelCount(); ++v) {
+    const Vec3i c = g.unravel(v);
+    const Vec3 p = g.voxelCentre(c.x(), c.y(), c.z());
+    if (std::abs(p.x() + 0.15) < 0.05 && std::abs(p.y()) < 0.05 && p.z() < 0.1) {
+      seg.labels.data[v] = 0;
+      ++seg.voxel_counts[0];
+    }
+  }
+  seg.centres_table = {Vec3(-0.15, 0, 0.05)};
+  const auto patch = [](const Vec3& centre, double half, double z, double step) {
+    Points3 pts;
+    for (double x = -half; x <= half + 1e-9; x += step)
+      for (double y = -half; y <= half + 1e-9; y += step)
+        pts.emplace_back(centre.x() + x, centre.y() + y, z);
+    return pts;
+  };
+  Points3 points = patch(Vec3(-0.15, 0, 0), 0.04, 0.1, 0.005);         // the box's top: explained
+  const Points3 flat = patch(Vec3(0.15, 0.1, 0), 0.04, 0.016, 0.005);  // a flat item: 1.6 cm
+  const Points3 low = patch(Vec3(0.0, -0.2, 0), 0.04, 0.008, 0.005);   // table noise: 8 mm
+  const Points3 rim = patch(Vec3(-0.07, 0.0, 0), 0.012, 0.05, 0.003);  // beside the box
+  const Points3 speck = patch(Vec3(0.2, -0.2, 0), 0.01, 0.03, 0.005);  // 25 points
+  // Surfaces that do not reach down to the table: part of the box 3 voxels off, or left out.
+  const Points3 wall = patch(Vec3(-0.03, 0.0, 0), 0.012, 0.06, 0.003);
+  const Points3 floating = patch(Vec3(-0.25, 0.25, 0), 0.02, 0.08, 0.004);
+  for (const Points3* p : {&flat, &low, &rim, &speck, &wall, &floating})
+    points.insert(points.end(), p->begin(), p->end());
+  SurfaceInstanceConfig config;
+  EXPECT_EQ(addSurfaceInstances(points, config, &seg), 1);
+  ASSERT_EQ(seg.size(), 2);
+  EXPECT_LT((seg.centres_table[1].head<2>() - Vec2(0.15, 0.1)).norm(), 0.02);
+  EXPECT_LT(seg.centres_table[1].z(), 0.02);  // its voxels reach down to the table
+  EXPECT_EQ(seg.labels.data[nearestLabelledVoxel(seg.labels, flat.front())], 1);
+  EXPECT_EQ(seg.labels.data[nearestLabelledVoxel(seg.labels, rim.back())], 0);  // attached
+  EXPECT_LT(nearestLabelledVoxel(seg.labels, low.front()), 0);
+  EXPECT_LT(nearestLabelledVoxel(seg.labels, speck.front()), 0);
+  EXPECT_EQ(seg.labels.data[nearestLabelledVoxel(seg.labels, wall.back())], 0);
+  EXPECT_LT(nearestLabelledVoxel(seg.labels, floating.front()), 0);
+  int counted = 0;
+  for (int l : seg.labels.data) counted += l == 1;
+  EXPECT_EQ(counted, seg.voxel_counts[1]);
+  // Off: nothing added; a bad field is named.
+  config.enabled = false;
+  EXPECT_EQ(addSurfaceInstances(points, config, &seg), 0);
+  config.enabled = true;
+  config.min_points = 0;
+  try {
+    addSurfaceInstances(points, config, &seg);
+    ADD_FAILURE() << "min_points 0 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("surface_instances.min_points"), std::string::npos);
+  }
 }
 
 }  // namespace simstack

@@ -10,10 +10,43 @@ trap 'rm -rf "$dir"' EXIT
 view="$dir/d_views/scene_000000_view_0"
 "$reconstruct" --depth "${view}_depth.png" --intrinsics 525,525,319.5,239.5 \
   --table-pose "$view.yaml" --output "$dir/out" > "$dir/log.txt"
-for f in superquadrics.yaml surface.ply instances.pcd grids.h5 depth.png instances.png \
+for f in superquadrics.yaml surface.ply instances.pcd labels.png grids.h5 depth.png instances.png \
          superquadrics_input_view.png superquadrics_second_view.png; do
   test -s "$dir/out/$f" || { echo "missing $f"; cat "$dir/log.txt"; exit 1; }
 done
+# labels.png: 16 bits, pixel for pixel with the depth, and label k + 1 on the pixels of the
+# object of id k in superquadrics.yaml (its pixels' points lie around that shape).
+raw16() { convert "$1" -depth 16 -endian MSB gray:- ; }
+raw16 "$dir/out/labels.png" > "$dir/labels.raw"
+raw16 "${view}_depth.png" > "$dir/depth.raw"
+/usr/bin/python3 - "$dir" "$view.yaml" <<'PY'
+import math, struct, sys, yaml
+d, view = sys.argv[1], yaml.safe_load(open(sys.argv[2]))
+w, h, k = view["width"], view["height"], view["intrinsics"]
+labels = struct.unpack(">%dH" % (w * h), open(d + "/labels.raw", "rb").read())
+depth = struct.unpack(">%dH" % (w * h), open(d + "/depth.raw", "rb").read())
+shapes = {o["id"]: o for o in yaml.safe_load(open(d + "/out/superquadrics.yaml"))["objects"]}
+t, (qx, qy, qz, qw) = view["T_table_camera"]["translation"], view["T_table_camera"]["rotation_xyzw"]
+R = [[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
+     [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
+     [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)]]
+near, total = {}, {}
+for i, label in enumerate(labels):
+    if label == 0:
+        continue
+    assert depth[i] > 0, "a label on missing depth"
+    assert label - 1 in shapes, "label %d has no object %d in superquadrics.yaml" % (label, label - 1)
+    z = depth[i] * 0.001
+    c = ((i % w - k["cx"]) * z / k["fx"], (i // w - k["cy"]) * z / k["fy"], z)
+    p = [sum(R[r][j] * c[j] for j in range(3)) + t[r] for r in range(3)]
+    s = shapes[label - 1]
+    total[label] = total.get(label, 0) + 1
+    if math.dist(p, s["position"]) <= 1.5 * max(s["scale"]) + 0.02:
+        near[label] = near.get(label, 0) + 1
+assert len(total) >= 2, total
+for label, n in total.items():
+    assert near.get(label, 0) >= 0.9 * n, "label %d: %d of %d pixels near object %d" % (label, near.get(label, 0), n, label - 1)
+PY
 grep -q "objects in 1 tile; timings" "$dir/log.txt"
 grep -q "^model .*simstack_r32_fc.pt (card .*simstack_r32_fc.yaml)$" "$dir/log.txt" ||
   { echo "the model and its card not named"; cat "$dir/log.txt"; exit 1; }
@@ -30,6 +63,27 @@ grep -q "differ from those of .*view_0.yaml" "$dir/e_vi" || { cat "$dir/e_vi"; e
 if "$reconstruct" --depth "${view}_depth.png" --output "$dir/out_x" > /dev/null 2> "$dir/e_ni"; then
   echo "accepted a depth without intrinsics"; exit 1; fi
 grep -q "intrinsics is needed for .*depth.png" "$dir/e_ni" || { cat "$dir/e_ni"; exit 1; }
+# An unorganized PCD of the same view (the valid pixels' points, one row) is placed on the
+# pixels of the intrinsics and perceived as the PNG; other intrinsics are refused, naming a point.
+/usr/bin/python3 - "$dir" 640 480 > "$dir/loose.pcd" <<'PY'
+import struct, sys
+d, w, h = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+depth = struct.unpack(">%dH" % (w * h), open(d + "/depth.raw", "rb").read())
+pts = [((i % w - 319.5) * z / 525, (i // w - 239.5) * z / 525, z)
+       for i, z in ((i, v * 0.001) for i, v in enumerate(depth) if v > 0)]
+print("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH %d\nHEIGHT 1\n"
+      "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS %d\nDATA ascii" % (len(pts), len(pts)))
+for p in pts:
+    print("%.9g %.9g %.9g" % p)
+PY
+"$reconstruct" --depth "$dir/loose.pcd" --intrinsics 525,525,319.5,239.5 --table-pose "$view.yaml" \
+  --output "$dir/out_pcd" > "$dir/log_pcd.txt"
+cmp -s <(grep -o "[0-9]* objects in" "$dir/log.txt") <(grep -o "[0-9]* objects in" "$dir/log_pcd.txt") ||
+  { echo "the unorganized PCD gave another result"; cat "$dir/log_pcd.txt"; exit 1; }
+if "$reconstruct" --depth "$dir/loose.pcd" --intrinsics 600,600,319.5,239.5 --output "$dir/x" \
+  2> "$dir/e_pcd"; then echo "accepted a cloud that does not fall on the pixels"; exit 1; fi
+grep -q "loose.pcd: point 0 .* does not fall on a pixel of the 640x480 camera" "$dir/e_pcd" ||
+  { cat "$dir/e_pcd"; exit 1; }
 # Without a pose the table comes from RANSAC.
 "$reconstruct" --depth "${view}_depth.png" --intrinsics 525,525,319.5,239.5 --output "$dir/out2" \
   > "$dir/log2.txt"

@@ -286,6 +286,7 @@ ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& 
     o.surface = pointCloud(header, instances[k].points);
     o.voxels = static_cast<uint32_t>(instances[k].voxels);
     o.visible_fraction = static_cast<float>(instances[k].visible_fraction);
+    o.truncated = instances[k].truncated;
     out.objects.push_back(std::move(o));
   }
   for (size_t h = 1; h < est.hypotheses.size() && est.hypotheses[h].decomposed; ++h) {

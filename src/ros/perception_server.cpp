@@ -405,7 +405,8 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
   if (labels_pub_.getNumSubscribers() > 0) {
     DepthView posed = view;
     posed.T_table_camera = view.T_table_camera.value_or(estimate.T_table_camera);
-    labels_pub_.publish(labelImage(camera_header, pixelInstances(posed, estimate)));
+    labels_pub_.publish(labelImage(
+        camera_header, pixelInstances(posed, estimate, 0, labelMinHeight(perception_->config()))));
   }
 }
 

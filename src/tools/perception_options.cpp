@@ -1,9 +1,12 @@
 #include "perception_options.h"
 
+#include <cmath>
 #include <filesystem>
 #include <sstream>
 #include <stdexcept>
+#include <vector>
 
+#include "simstack/io/image_io.h"
 #include "simstack/model/cvae_config.h"
 
 namespace simstack {
@@ -80,7 +83,10 @@ std::vector<PerceptionConfig> PerceptionOptions::configs() const {
   return out;
 }
 
-PinholeCamera parseIntrinsics(const std::string& text, int width, int height) {
+namespace {
+
+/// fx, fy, cx, cy of --intrinsics.
+std::vector<double> intrinsicValues(const std::string& text) {
   if (!text.empty() && text.back() == ',')  // getline would drop the empty last item
     throw std::invalid_argument("--intrinsics: '" + text + "' ends in a comma");
   std::stringstream ss(text);
@@ -96,6 +102,13 @@ PinholeCamera parseIntrinsics(const std::string& text, int width, int height) {
     }
   }
   if (v.size() != 4) throw std::invalid_argument("--intrinsics needs fx,fy,cx,cy (4 numbers)");
+  return v;
+}
+
+}  // namespace
+
+PinholeCamera parseIntrinsics(const std::string& text, int width, int height) {
+  const std::vector<double> v = intrinsicValues(text);
   PinholeCamera c;
   c.width = width;
   c.height = height;
@@ -105,6 +118,18 @@ PinholeCamera parseIntrinsics(const std::string& text, int width, int height) {
   c.cy = v[3];
   c.validate();
   return c;
+}
+
+PinholeCamera parseCentredIntrinsics(const std::string& text) {
+  const std::vector<double> v = intrinsicValues(text);
+  const auto side = [&](double centre, const char* what) {
+    if (!(centre >= 0 && 2 * centre + 1 <= kMaxDepthImageSide))
+      throw std::invalid_argument(std::string("--intrinsics: ") + what + " " +
+                                  std::to_string(centre) + " is not in [0, " +
+                                  std::to_string((kMaxDepthImageSide - 1) / 2) + "]");
+    return static_cast<int>(std::lround(2 * centre + 1));
+  };
+  return parseIntrinsics(text, side(v[2], "cx"), side(v[3], "cy"));
 }
 
 }  // namespace simstack

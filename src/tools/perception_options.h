@@ -26,6 +26,10 @@ std::string packageFile(const std::string& relative);
 /// --intrinsics "fx,fy,cx,cy" (pixels) for an image of width x height; std::invalid_argument
 /// naming the option for anything else, or for intrinsics PinholeCamera::validate refuses.
 PinholeCamera parseIntrinsics(const std::string& text, int width, int height);
+/// As parseIntrinsics, for the image whose centre is the principal point (width 2 cx + 1,
+/// height 2 cy + 1): the camera of a depth file that does not give its size (an unorganized
+/// cloud).
+PinholeCamera parseCentredIntrinsics(const std::string& text);
 
 class PerceptionOptions {
  public:

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -27,7 +28,18 @@ DepthView readView(const std::string& depth_path, double depth_scale, const std:
   DepthView view;
   std::string ext = fs::path(depth_path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
-  view.depth = ext == ".pcd" ? readDepthPcd(depth_path) : readDepthImage(depth_path, depth_scale);
+  if (ext == ".pcd") {
+    // An unorganized cloud is placed on the pixels of the view file's camera, else of the
+    // intrinsics over the image their principal point centres.
+    std::optional<PinholeCamera> organizer;
+    if (!pose_path.empty())
+      organizer = readViewYaml(pose_path).camera;
+    else if (!intrinsics.empty())
+      organizer = parseCentredIntrinsics(intrinsics);
+    view.depth = readDepthPcd(depth_path, organizer ? &*organizer : nullptr);
+  } else {
+    view.depth = readDepthImage(depth_path, depth_scale);
+  }
   if (!intrinsics.empty())
     view.camera = parseIntrinsics(intrinsics, view.depth.width, view.depth.height);
   else if (pose_path.empty())
@@ -72,10 +84,12 @@ int main(int argc, char** argv) {
       "Reconstruct a pile from one depth image (or several posed ones): superquadrics (YAML), "
       "instance meshes (PLY), a labelled instance cloud (PCD), the predicted grids (HDF5) and PNG "
       "pictures."};
-  app.add_option("--depth", depth_paths,
-                 "16-bit PNG (units of --depth-scale), 32-bit float TIFF in metres, or an "
-                 "organized PCD; repeat it for more views of the scene, each with its "
-                 "--table-pose (the outputs are drawn over the first)")
+  app.add_option(
+         "--depth", depth_paths,
+         "16-bit PNG (units of --depth-scale), 32-bit float TIFF in metres, or a PCD: "
+         "organized, or unorganized and placed on the pixels of --intrinsics (the image "
+         "they centre) or of the view file; repeat it for more views of the scene, each with its "
+         "--table-pose (the outputs are drawn over the first)")
       ->required()
       ->check(CLI::ExistingFile);
   app.add_option("--intrinsics", intrinsics,
@@ -118,7 +132,7 @@ int main(int argc, char** argv) {
     const ScenePerception pipeline(config);
     const SceneEstimate est = pipeline.perceive(views);
     const std::vector<std::string> files =
-        writeReconstruction(staged.path(), view, est, config.min_pile_height_m);
+        writeReconstruction(staged.path(), view, est, labelMinHeight(config));
     staged.commit();  // replaces an earlier run's directory whole
 
     const StageTimings& t = est.timings;

@@ -6,7 +6,7 @@
 /// viewpoints in the paper's ranges, every method on the same rendered views, scored by
 /// visible and full Chamfer distance, expected occupancy (BCE, IoU), stability of the fitted
 /// superquadrics under physics and object counts, binned by the visible share of the surface.
-/// And the real-data check: object counts and visible-point segmentation on labelled clouds.
+/// The labelled real scenes are evaluated in real_scenes.h.
 
 #include <functional>
 #include <limits>
@@ -115,19 +115,5 @@ nlohmann::json summarise(const std::vector<Row>& rows);
 nlohmann::json resultsJson(const EvaluationResults& results, bool with_views);
 /// The table the tool prints (GitHub markdown).
 std::string resultsTable(const EvaluationResults& results);
-
-struct RealSceneResult {
-  std::string scene;
-  int objects = 0, found = 0;
-  double agreement = 0;  ///< visible-point segmentation against the labels (segmentation.h)
-  bool table_estimated = false;
-  double perceive_ms = 0;
-};
-/// Labelled organized clouds (mOSD: label / 10 = object, labels < 20 = table or invalid; the
-/// mOSD intrinsics 525, 525, 319.5, 239.5) in `dir`, every .pcd in name order; `method` must
-/// give pixel instances. Throws std::runtime_error naming the directory or file.
-std::vector<RealSceneResult> evaluateRealScenes(const std::string& dir, EvaluatedMethod& method);
-nlohmann::json realScenesJson(const std::vector<RealSceneResult>& results);
-std::string realScenesTable(const std::vector<RealSceneResult>& results);
 
 }  // namespace simstack

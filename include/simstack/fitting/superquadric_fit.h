@@ -98,9 +98,25 @@ std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points_
                                              const std::vector<SuperquadricShape>& shapes,
                                              const FitConfig& config = FitConfig());
 
+/// Points spanning more than this (m) are an object no fit may shrink away (collapsedFit).
+constexpr double kCollapseSpanM = 0.02;
+/// A joint refinement that leaves a shape below this share of its per-instance fit's volume
+/// has pushed it out of its neighbours by shrinking it away: the per-instance fit stands.
+/// (Measured on the synthetic test set: such shapes end below 0.2 % of it, all others above
+/// 1.5 %; docs/experiments.md, "Fits that never collapse".)
+constexpr double kLeastJointVolumeShare = 0.01;
+
+/// True when `shape` is collapsed for `points_table`: the points span more than
+/// kCollapseSpanM, and the shape's largest semi-axis is under a quarter of their oriented
+/// box's (the degenerate basin of eq. 5, whose global minimum is a point).
+bool collapsedFit(const SuperquadricShape& shape, const Points3& points_table);
+
 /// Both stages for a scene: per-instance fits (in parallel over `threads`), then, when
 /// `joint`, the joint refinement of all fitted shapes. Sets with fewer than `min_points`
-/// points are skipped (std::nullopt).
+/// points are skipped (std::nullopt). No fit collapses: a per-instance fit that does
+/// (collapsedFit) is replaced by the points' oriented box (initialGuess), and a jointly refined
+/// shape that does, or that keeps less than kLeastJointVolumeShare of its per-instance fit's
+/// volume, by its per-instance fit.
 std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Points3>& points,
                                                            const FitConfig& config, bool joint,
                                                            int min_points = 30);

@@ -57,7 +57,11 @@ struct SurfaceSegmentConfig {
   /// Two groups of patches join when at most this share of their hull's samples is seen free.
   double max_free_share = 0.05;
   int hull_samples = 400;  ///< samples per pair test: points on segments between the groups
-  void validate() const;   ///< std::invalid_argument naming the field
+  /// Two groups sharing an instance join, even across a concave edge or a hull seen through,
+  /// when the network's votes of their visible voxels meet within this distance (m) of each
+  /// other: one object, concave or seen from inside (a bowl's rim and inside). 0 = off.
+  double same_centre_m = 0.015;
+  void validate() const;  ///< std::invalid_argument naming the field
 };
 
 /// The observed surface above the table, cut into convex patches, with the view it came from.

@@ -24,6 +24,9 @@ DepthImage readDepthImage(const std::string& path, double depth_scale_m = 0.001)
 /// 8-bit PNG of an instance mask.
 void writeMaskPng(const std::string& path, const InstanceImage& mask);
 InstanceImage readMaskPng(const std::string& path);
+/// 16-bit PNG of pixel labels: 0 none, k + 1 instance k (`instances` -1 none, k >= 0).
+/// std::invalid_argument for an instance above 65534.
+void writeLabelsPng(const std::string& path, const Image<int>& instances);
 /// Depth as a colour picture (near = warm, missing = black) for people to look at.
 void writeDepthPicture(const std::string& path, const DepthImage& depth);
 /// Shaded picture: one colour per instance, Lambertian light from the camera.

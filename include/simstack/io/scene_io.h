@@ -17,9 +17,11 @@
 namespace simstack {
 
 /// `objects:` list of {id, scale [a1,a2,a3], exponents [r,s,t], position [x,y,z],
-/// orientation [qw,qx,qy,qz]} in `frame` (the table frame).
+/// orientation [qw,qx,qy,qz]} in `frame` (the table frame); with `truncated` (one per shape)
+/// also each object's `truncated` flag (InstanceEstimate::truncated).
 void writeSuperquadricsYaml(const std::string& path, const std::vector<SuperquadricShape>& shapes,
-                            const std::string& frame = "table");
+                            const std::string& frame = "table",
+                            const std::vector<bool>& truncated = {});
 /// Reads what writeSuperquadricsYaml wrote; `ids` (when given) receives each object's `id`
 /// (its index when the file has none). Throws std::runtime_error naming the file and field.
 std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path,
@@ -38,11 +40,15 @@ void writeLabelledCloudPcd(const std::string& path, const Points3& points,
 /// binary data as long as the header promises. Throws std::runtime_error naming the file.
 void checkPcdHeader(const std::string& path);
 
-/// Depth (metres) from an organized PCD: z of each point, NaN where invalid. The size comes
-/// from the cloud, which must be organized.
-DepthImage readDepthPcd(const std::string& path);
-/// Depth (as readDepthPcd) and the label of every point (pcl::PointXYZL) of an organized PCD.
-DepthImage readDepthPcd(const std::string& path, Image<uint32_t>* labels);
+/// Depth (metres) from a PCD: z of each point, NaN where invalid. An organized cloud gives
+/// its own size. An unorganized one (HEIGHT 1, as some datasets store a view with its invalid
+/// points dropped) is organized with `camera`: each point goes to the pixel it projects to,
+/// which must lie within 0.05 px of a pixel centre of the camera's image, one point a pixel
+/// (std::runtime_error naming the file and the first point that does not; also without a
+/// camera). With `labels`, also the label of each pixel's point (pcl::PointXYZL; 0 where
+/// none).
+DepthImage readDepthPcd(const std::string& path, const PinholeCamera* camera = nullptr,
+                        Image<uint32_t>* labels = nullptr);
 
 /// Grids of one prediction, all on `grid`: datasets tsdf, occupancy_probability, labels,
 /// partial_tsdf, partial_weight ([z][y][x]), with attributes origin_table, voxel_size_m,

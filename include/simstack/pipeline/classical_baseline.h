@@ -24,16 +24,21 @@ struct ClassicalConfig {
 };
 
 /// Above-table points of the depth image within the x/y box of `crop` (if given), clustered.
+/// With `pixels`, also each cluster's pixel indices (v * width + u), point for point.
 std::vector<Points3> clusterVisiblePoints(const DepthImage& depth, const PinholeCamera& camera,
                                           const Transform& T_table_camera,
                                           const ClassicalConfig& config,
-                                          const GridSpec* crop = nullptr);
+                                          const GridSpec* crop = nullptr,
+                                          std::vector<std::vector<int>>* pixels = nullptr);
 
-/// One superquadric per cluster.
+/// One superquadric per cluster. With `pixel_instances`, also the cluster of every sampled
+/// pixel (-1 elsewhere), numbered as the superquadrics; a cluster whose fit fails is left out
+/// of both.
 std::vector<SuperquadricShape> classicalBaseline(const DepthImage& depth,
                                                  const PinholeCamera& camera,
                                                  const Transform& T_table_camera,
                                                  const ClassicalConfig& config,
-                                                 const GridSpec* crop = nullptr);
+                                                 const GridSpec* crop = nullptr,
+                                                 Image<int>* pixel_instances = nullptr);
 
 }  // namespace simstack

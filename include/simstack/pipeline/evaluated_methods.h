@@ -46,9 +46,12 @@ class NetworkMethod : public EvaluatedMethod {
 
 /// The classical baseline (classical_baseline.h) under the protocol. Without a grid from an
 /// earlier method it centres one of `resolution`^3 voxels over `extent_m` on the visible pile.
+/// A view without pose gets the RANSAC table (table_plane.h). With `label_pixels` it clusters
+/// every pixel and the estimates carry the cluster of each (real scenes).
 class ClassicalMethod : public EvaluatedMethod {
  public:
-  ClassicalMethod(const ClassicalConfig& config, double extent_m, int resolution);
+  ClassicalMethod(const ClassicalConfig& config, double extent_m, int resolution,
+                  bool label_pixels = false);
   const std::string& name() const override { return name_; }
   MethodInfo info() const override { return {}; }
   MethodEstimate estimate(const DepthView& view, const GridSpec* grid,
@@ -58,6 +61,7 @@ class ClassicalMethod : public EvaluatedMethod {
   ClassicalConfig config_;
   double extent_m_;
   int resolution_;
+  bool label_pixels_;
   std::string name_ = "classical";
 };
 

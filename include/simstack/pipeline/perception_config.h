@@ -9,6 +9,7 @@
 
 #include "simstack/fitting/superquadric_fit.h"
 #include "simstack/instances/hough_voting.h"
+#include "simstack/instances/surface_instances.h"
 #include "simstack/instances/surface_segments.h"
 #include "simstack/model/cvae_config.h"  // modelCardPath
 #include "simstack/pipeline/table_plane.h"
@@ -59,6 +60,7 @@ struct PerceptionConfig {
   std::string condition_views = "all";
   HoughConfig hough;              ///< the model's (model card)
   SurfaceSegmentConfig segments;  ///< the split along the observed surface's convex patches
+  SurfaceInstanceConfig surface_instances;  ///< objects found on the measured surface alone
   /// The fitter's settings, but without its one-sided solve: on the pipeline's instances
   /// (network surfaces cut where objects touch, the classical baseline's visible points) it
   /// measured neutral to slightly worse (docs/results.md).
@@ -71,14 +73,14 @@ struct PerceptionConfig {
   WorkspaceConfig workspace;  ///< where to look, and the tiles covering it
 };
 
-/// Reads a perception config: sections `perception:`, `segments:`, `fitting:`, `table:` and
-/// `workspace:`
-/// (absent fields keep their defaults; unknown fields are errors, so that a typo is not silently
-/// ignored); a `node:` section holds the ROS node's own parameters and is not read here.
-/// `model_path`, when given, replaces the file's `perception.model`. A relative model path is taken
-/// relative to `base_dir` when given. Then the model's card is read (applyModelCard), and last the
-/// file's own `perception.samples` and `hough:` section, which override the card's when present
-/// (normally they are absent). Throws std::runtime_error naming the file and the field.
+/// Reads a perception config: sections `perception:`, `segments:`, `surface_instances:`,
+/// `fitting:`, `table:` and `workspace:` (absent fields keep their defaults; unknown fields are
+/// errors, so that a typo is not silently ignored); a `node:` section holds the ROS node's own
+/// parameters and is not read here. `model_path`, when given, replaces the file's
+/// `perception.model`. A relative model path is taken relative to `base_dir` when given. Then the
+/// model's card is read (applyModelCard), and last the file's own `perception.samples` and `hough:`
+/// section, which override the card's when present (normally they are absent). Throws
+/// std::runtime_error naming the file and the field.
 PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& base_dir = "",
                                     const std::string& model_path = "");
 

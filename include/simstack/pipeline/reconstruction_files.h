@@ -2,8 +2,10 @@
 /// @file reconstruction_files.h
 /// The files of one reconstruction (simstack_reconstruct): superquadrics.yaml, instance_K.ply,
 /// surface.ply, instances.pcd (x y z label; 0 = table or unassigned, k + 1 = instance k),
-/// grids.h5 and PNG pictures (the input depth, the instances on it, the superquadrics from the
-/// input view and from a second view turned 90 degrees about the pile's vertical axis).
+/// labels.png (16-bit, aligned with the input depth: 0 none, k + 1 instance k, the id k of
+/// superquadrics.yaml), grids.h5 and PNG pictures (the input depth, the instances on it, the
+/// superquadrics from the input view and from a second view turned 90 degrees about the pile's
+/// vertical axis).
 
 #include <string>
 #include <vector>
@@ -13,10 +15,11 @@
 namespace simstack {
 
 /// Writes the files of hypothesis 0 of `estimate` (perceived from `view`) into `dir`, which
-/// must exist. Returns the names written. Throws std::runtime_error naming a file it cannot
-/// write.
+/// must exist; pixels lower than `label_min_height_m` above the table are no instance's
+/// (labelMinHeight). Returns the names written. Throws std::runtime_error naming a file it
+/// cannot write.
 std::vector<std::string> writeReconstruction(const std::string& dir, const DepthView& view,
                                              const SceneEstimate& estimate,
-                                             double min_pile_height_m);
+                                             double label_min_height_m);
 
 }  // namespace simstack

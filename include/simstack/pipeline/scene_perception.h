@@ -34,7 +34,14 @@ struct InstanceEstimate {
   int voxels = 0;
   /// Share of `mesh`'s area that the first view's camera sees (0..1): the rest was completed.
   double visible_fraction = 0.0;
+  /// Its visible part in the first view reaches the image border (kTruncationBorderPx) or
+  /// depth that was measured but left out (mask, workspace box, sensor range): the camera did
+  /// not see where it ends, and its shape there is the network's guess.
+  bool truncated = false;
 };
+
+/// Pixels from the image border within which a visible object counts as cut by it.
+constexpr int kTruncationBorderPx = 2;
 
 /// One generated scene: the network's grids and, when decomposed, its instances.
 struct SceneHypothesis {
@@ -92,9 +99,16 @@ MeasuredView measuredView(const DepthView& view, const Transform& T_table_camera
 /// first view's): the label of the labelled
 /// voxel nearest to its table-frame point among the voxel holding it and its 26 neighbours
 /// (observed points lie on the surface, which the prediction places up to a voxel off); -1 for
-/// table, free space or missing depth.
+/// table (points lower than `min_height_m`), free space or missing depth.
 Image<int> pixelInstances(const DepthView& view, const SceneEstimate& estimate, int hypothesis = 0,
-                          double min_height_m = 0.01);
+                          double min_height_m = 0.005);
+
+/// The height above the table from which pixelInstances labels a pixel: half the pile's
+/// threshold, so that the lowest centimetre of an object's side and a pot's floor are the
+/// object's while the table's noise, which sets the pile's threshold, stays out.
+inline double labelMinHeight(const PerceptionConfig& config) {
+  return 0.5 * config.min_pile_height_m;
+}
 
 class ScenePerception {
  public:

@@ -1,9 +1,7 @@
 #include "simstack/eval/evaluator.h"
 
 #include <algorithm>
-#include <cctype>
 #include <cmath>
-#include <filesystem>
 #include <iomanip>
 #include <random>
 #include <sstream>
@@ -11,8 +9,6 @@
 
 #include "simstack/eval/occupancy.h"
 #include "simstack/eval/scene_metrics.h"
-#include "simstack/eval/segmentation.h"
-#include "simstack/io/scene_io.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/tsdf/ground_truth.h"
 
@@ -283,67 +279,6 @@ std::string resultsTable(const EvaluationResults& r) {
     o << "\nthe true piles under the same stability test: " << fixed(100 * mean(r.truth_stable), 0)
       << " % stable, mean displacement " << fixed(1000 * mean(r.truth_displacement_m), 1)
       << " mm\n";
-  return o.str();
-}
-
-namespace {
-std::string lowercase(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
-  return s;
-}
-}  // namespace
-
-std::vector<RealSceneResult> evaluateRealScenes(const std::string& dir, EvaluatedMethod& method) {
-  std::vector<std::filesystem::path> files;
-  for (const auto& e : std::filesystem::directory_iterator(dir))
-    if (lowercase(e.path().extension().string()) == ".pcd") files.push_back(e.path());
-  std::sort(files.begin(), files.end());
-  if (files.empty()) throw std::runtime_error("no .pcd files in " + dir);
-  std::vector<RealSceneResult> out;
-  for (const auto& f : files) {
-    Image<uint32_t> labels;
-    DepthView view;
-    view.depth = readDepthPcd(f.string(), &labels);
-    view.camera.width = view.depth.width;  // mOSD intrinsics: the camera's defaults
-    view.camera.height = view.depth.height;
-    Image<int> truth(view.depth.width, view.depth.height, -1);
-    std::map<int, int> object_pixels;
-    for (size_t i = 0; i < truth.pixels.size(); ++i)
-      if (!std::isnan(view.depth.pixels[i]) && labels.pixels[i] >= 20) {
-        truth.pixels[i] = static_cast<int>(labels.pixels[i] / 10);
-        ++object_pixels[truth.pixels[i]];
-      }
-    const MethodEstimate est = method.estimate(view, nullptr, Vec2::Zero());
-    RealSceneResult r;
-    r.scene = f.filename().string();
-    r.objects = static_cast<int>(object_pixels.size());
-    r.found = static_cast<int>(est.superquadrics.size());
-    r.agreement = segmentationAgreement(truth.pixels, est.pixel_instances.pixels).agreement;
-    r.table_estimated = est.table_estimated;
-    r.perceive_ms = est.perceive_ms;
-    out.push_back(r);
-  }
-  return out;
-}
-
-json realScenesJson(const std::vector<RealSceneResult>& results) {
-  json out = json::array();
-  for (const RealSceneResult& r : results)
-    out.push_back({{"scene", r.scene},
-                   {"objects", r.objects},
-                   {"found", r.found},
-                   {"agreement", r.agreement},
-                   {"table_estimated", r.table_estimated},
-                   {"perceive_ms", r.perceive_ms}});
-  return out;
-}
-
-std::string realScenesTable(const std::vector<RealSceneResult>& results) {
-  std::ostringstream o;
-  o << "| scene | objects (labels) | objects found | segmentation agreement |\n|---|---|---|---|\n";
-  for (const RealSceneResult& r : results)
-    o << "| " << r.scene << " | " << r.objects << " | " << r.found << " | " << fixed(r.agreement, 3)
-      << " |\n";
   return o.str();
 }
 

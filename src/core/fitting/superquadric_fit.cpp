@@ -802,6 +802,8 @@ std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Poi
     if (static_cast<int>(points[i].size()) < std::max(4, min_points)) continue;
     try {
       fits[i] = fitSuperquadric(points[i], single);
+      // The points' oriented box rather than a shape that lost them.
+      if (collapsedFit(*fits[i], points[i])) fits[i] = initialGuess(points[i], c.initial_exponent);
     } catch (const std::invalid_argument&) {
       // Points that cannot be fitted (all at a few places, or not finite): no superquadric, as
       // for too few points; the config was checked above.
@@ -823,8 +825,18 @@ std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Poi
   }
   if (shapes.empty()) return fits;
   const std::vector<SuperquadricShape> refined = refineJointly(pts, shapes, c);
-  for (size_t k = 0; k < index.size(); ++k) fits[index[k]] = refined[k];
+  for (size_t k = 0; k < index.size(); ++k)
+    if (!collapsedFit(refined[k], pts[k]) &&
+        refined[k].volume() >= kLeastJointVolumeShare * shapes[k].volume())
+      fits[index[k]] = refined[k];  // else the per-instance fit stands
   return fits;
+}
+
+bool collapsedFit(const SuperquadricShape& shape, const Points3& points_table) {
+  if (points_table.size() < 4) return false;
+  const SuperquadricShape box = initialGuess(points_table);
+  return 2 * box.scale_m.maxCoeff() > kCollapseSpanM &&
+         shape.scale_m.maxCoeff() < 0.25 * box.scale_m.maxCoeff();
 }
 
 void distortionResiduals(const Points3& points, const FitConfig& c, double volume_exponent,

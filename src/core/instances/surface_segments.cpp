@@ -4,6 +4,7 @@
 #include <pcl/point_types.h>
 #include <pcl/segmentation/lccp_segmentation.h>
 #include <pcl/segmentation/supervoxel_clustering.h>
+#include <Eigen/Eigenvalues>
 
 #include <algorithm>
 #include <cmath>
@@ -11,6 +12,7 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <optional>
 #include <random>
 #include <set>
 #include <stdexcept>
@@ -38,6 +40,7 @@ void SurfaceSegmentConfig::validate() const {
   if (!(apart_vote_divergence >= -1.0 && apart_vote_divergence <= 1.0))
     fail("apart_vote_divergence must lie in [-1, 1]");
   if (min_boundary_faces < 1) fail("min_boundary_faces must be >= 1");
+  if (!(same_centre_m >= 0.0)) fail("same_centre_m must be >= 0");
 }
 
 namespace {
@@ -376,10 +379,38 @@ bool joinUnseen(const std::vector<int>& visible, int max_unseen, Grid3<int>* lab
   return true;
 }
 
-/// Two groups that share an instance and do not meet at a concave edge join when the hull of
-/// their points is not seen as free space, the least free pair first, until none does.
+/// The point the votes of a group's visible voxels point at: the least-squares meeting point
+/// of the lines through each voxel centre along its vote; nullopt when the lines are (near)
+/// parallel or no voxel has a vote.
+std::optional<Vec3> voteCentre(const PatchGroup& group, const std::vector<int>& voxel_of,
+                               const Grid3<Vec3f>& votes) {
+  const GridSpec& g = votes.spec;
+  Mat3 A = Mat3::Zero();
+  Vec3 b = Vec3::Zero();
+  std::set<int> voxels;
+  for (int i : group.points)
+    if (voxel_of[i] >= 0) voxels.insert(voxel_of[i]);
+  for (int v : voxels) {
+    const Vec3f d = votes.data[v];
+    if (!(d.norm() > 1e-6f)) continue;
+    const Vec3 u = d.cast<double>().normalized();
+    const Vec3i c = g.unravel(v);
+    const Mat3 P = Mat3::Identity() - u * u.transpose();  // distance across the line
+    A += P;
+    b += P * g.voxelCentre(c.x(), c.y(), c.z());
+  }
+  const Eigen::SelfAdjointEigenSolver<Mat3> eig(A);
+  if (voxels.empty() || !(eig.eigenvalues()(0) > 1e-3 * eig.eigenvalues()(2))) return std::nullopt;
+  return Vec3(A.ldlt().solve(b));
+}
+
+/// Two groups that share an instance join when the network's votes of their visible voxels meet
+/// at one point (`same_centre_m`, needs `votes`), or when they do not meet at a concave edge and
+/// the hull of their points is not seen as free space; the vote-sharing pairs first, then the
+/// least free, until none joins.
 void joinGroups(const SurfaceSegments& segments, const SurfaceSegmentConfig& config,
-                std::vector<PatchGroup>* groups_io) {
+                std::vector<PatchGroup>* groups_io, const std::vector<int>& voxel_of,
+                const Grid3<Vec3f>* votes) {
   std::vector<PatchGroup>& groups = *groups_io;
   const std::set<std::pair<int, int>> concave_edges(segments.concave_edges.begin(),
                                                     segments.concave_edges.end());
@@ -392,9 +423,19 @@ void joinGroups(const SurfaceSegments& segments, const SurfaceSegmentConfig& con
         for (int k : groups[a].instances) shared |= groups[b].instances.count(k) > 0;
         for (int pa : groups[a].patches)
           for (int pb : groups[b].patches) concave |= concave_edges.count(std::minmax(pa, pb)) > 0;
-        if (!shared || concave) continue;
-        const double share =
-            seenFreeShare(segments, groups[a].points, groups[b].points, config, 7919u * a + b);
+        if (!shared) continue;
+        bool same_centre = false;
+        if (votes && config.same_centre_m > 0) {
+          const auto ca = voteCentre(groups[a], voxel_of, *votes);
+          const auto cb = voteCentre(groups[b], voxel_of, *votes);
+          same_centre = ca && cb && (*ca - *cb).norm() <= config.same_centre_m;
+        }
+        if (concave && !same_centre) continue;
+        // Groups whose votes meet at one point are one object, whatever the hull: a bowl's
+        // inside and outside, seen through its opening, first.
+        const double share = same_centre ? -1.0
+                                         : seenFreeShare(segments, groups[a].points,
+                                                         groups[b].points, config, 7919u * a + b);
         if (share <= best) {
           best = share;
           best_a = static_cast<int>(a);
@@ -512,7 +553,7 @@ InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments
   JoinTest join_test(labels, votes, config);
   std::vector<PatchGroup> groups = initialGroups(segments, parts, config, &join_test);
   if (groups.empty() && !joined) return out;
-  joinGroups(segments, config, &groups);
+  joinGroups(segments, config, &groups, parts.voxel_of, votes);
   const std::vector<int> owner = growGroups(labels, groups, parts.voxel_of);
   relabel(labels, owner, static_cast<int>(groups.size()), instances, min_part_voxels, &out);
   return out;

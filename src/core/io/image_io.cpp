@@ -114,6 +114,19 @@ void writeMaskPng(const std::string& path, const InstanceImage& mask) {
   writeOrThrow(path, m);
 }
 
+void writeLabelsPng(const std::string& path, const Image<int>& instances) {
+  cv::Mat m(instances.height, instances.width, CV_16UC1, cv::Scalar(0));
+  for (int v = 0; v < instances.height; ++v)
+    for (int u = 0; u < instances.width; ++u) {
+      const int k = instances.at(u, v);
+      if (k > 65534)
+        throw std::invalid_argument(path + ": instance " + std::to_string(k) +
+                                    " does not fit a 16-bit label");
+      m.at<uint16_t>(v, u) = static_cast<uint16_t>(k < 0 ? 0 : k + 1);
+    }
+  writeOrThrow(path, m);
+}
+
 InstanceImage readMaskPng(const std::string& path) {
   const cv::Mat m = cv::imread(path, cv::IMREAD_UNCHANGED);
   if (m.empty() || m.type() != CV_8UC1)

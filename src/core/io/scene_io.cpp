@@ -9,8 +9,10 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <set>
 #include <sstream>
@@ -49,7 +51,9 @@ void requireKnownKeys(const YAML::Node& map, const std::set<std::string>& known,
 }  // namespace
 
 void writeSuperquadricsYaml(const std::string& path, const std::vector<SuperquadricShape>& shapes,
-                            const std::string& frame) {
+                            const std::string& frame, const std::vector<bool>& truncated) {
+  if (!truncated.empty() && truncated.size() != shapes.size())
+    throw std::invalid_argument("writeSuperquadricsYaml: one truncated flag per shape");
   YAML::Emitter out;
   out << YAML::BeginMap << YAML::Key << "frame" << YAML::Value << frame;
   out << YAML::Key << "objects" << YAML::Value << YAML::BeginSeq;
@@ -66,6 +70,7 @@ void writeSuperquadricsYaml(const std::string& path, const std::vector<Superquad
         << std::vector<double>{t.x(), t.y(), t.z()};
     out << YAML::Key << "orientation" << YAML::Value << YAML::Flow
         << std::vector<double>{q.w(), q.x(), q.y(), q.z()};
+    if (!truncated.empty()) out << YAML::Key << "truncated" << YAML::Value << truncated[i];
     out << YAML::EndMap;
   }
   out << YAML::EndSeq << YAML::EndMap;
@@ -88,7 +93,8 @@ std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path,
   for (const auto& o : root["objects"]) {
     const std::string which = "object " + std::to_string(out.size());
     if (!o.IsMap()) throw std::runtime_error(path + ": " + which + " is not a map");
-    requireKnownKeys(o, {"id", "scale", "exponents", "position", "orientation"}, which, path);
+    requireKnownKeys(o, {"id", "scale", "exponents", "position", "orientation", "truncated"}, which,
+                     path);
     const auto a = seq(o["scale"], 3, "scale", path), e = seq(o["exponents"], 3, "exponents", path),
                p = seq(o["position"], 3, "position", path),
                q = seq(o["orientation"], 4, "orientation", path);
@@ -246,8 +252,12 @@ void checkPcdHeader(const std::string& path) {
     point_bytes += size * number(counts[i], 1, 1024, "COUNT");
     values_per_point += number(counts[i], 1, 1024, "COUNT");
   }
-  const long long width = number(header["WIDTH"].at(0), 1, kMaxDepthImageSide, "WIDTH");
+  // An unorganized cloud (HEIGHT 1) may hold up to a largest image's points in one row.
   const long long height = number(header["HEIGHT"].at(0), 1, kMaxDepthImageSide, "HEIGHT");
+  const long long max_width = height == 1
+                                  ? static_cast<long long>(kMaxDepthImageSide) * kMaxDepthImageSide
+                                  : kMaxDepthImageSide;
+  const long long width = number(header["WIDTH"].at(0), 1, max_width, "WIDTH");
   if (header.count("POINTS") &&
       number(header["POINTS"].at(0), 0, width * height, "POINTS") != width * height)
     throw bad("POINTS differs from WIDTH x HEIGHT");
@@ -291,36 +301,82 @@ void checkPcdHeader(const std::string& path) {
 
 namespace {
 
+/// How far (pixels) a point of an unorganized cloud may project from a pixel centre.
+constexpr double kPixelTolerance = 0.05;
+
+/// The pixel `camera` projects `p` to, when it lands within kPixelTolerance of a pixel centre
+/// inside the image; -1 otherwise.
+long pixelOf(const PinholeCamera& camera, const Vec3& p) {
+  double u = 0, v = 0;
+  if (!camera.project(p, &u, &v)) return -1;
+  const double ur = std::round(u), vr = std::round(v);
+  if (std::abs(u - ur) > kPixelTolerance || std::abs(v - vr) > kPixelTolerance) return -1;
+  if (ur < 0 || vr < 0 || ur >= camera.width || vr >= camera.height) return -1;
+  return static_cast<long>(vr) * camera.width + static_cast<long>(ur);
+}
+
+/// The depth image of `cloud` and, for each of its pixels, the cloud point there (-1 none).
 template <class Point>
-DepthImage organizedDepth(const std::string& path, pcl::PointCloud<Point>* cloud) {
-  checkPcdHeader(path);
-  if (pcl::io::loadPCDFile(path, *cloud) != 0)
-    throw std::runtime_error("cannot read cloud " + path);
-  if (!cloud->isOrganized() || cloud->width < 2 || cloud->height < 2)
-    throw std::runtime_error(path + " is not an organized cloud (height " +
-                             std::to_string(cloud->height) + "); a depth image needs one");
-  DepthImage depth(cloud->width, cloud->height, std::numeric_limits<float>::quiet_NaN());
-  for (uint32_t v = 0; v < cloud->height; ++v)
-    for (uint32_t u = 0; u < cloud->width; ++u) {
-      const float z = cloud->at(u, v).z;
-      if (std::isfinite(z) && z > 0) depth.at(u, v) = z;
+DepthImage depthOf(const std::string& path, const pcl::PointCloud<Point>& cloud,
+                   const PinholeCamera* camera, std::vector<long>* point_of_pixel) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  if (cloud.isOrganized() && cloud.width >= 2 && cloud.height >= 2) {
+    DepthImage depth(cloud.width, cloud.height, nan);
+    point_of_pixel->resize(cloud.size());
+    for (size_t i = 0; i < cloud.size(); ++i) {
+      (*point_of_pixel)[i] = static_cast<long>(i);
+      const float z = cloud[i].z;
+      if (std::isfinite(z) && z > 0) depth.pixels[i] = z;
     }
+    return depth;
+  }
+  if (!camera)
+    throw std::runtime_error(path + " is not an organized cloud (height " +
+                             std::to_string(cloud.height) +
+                             "); a depth image needs one, or the intrinsics to organize it");
+  camera->validate();
+  DepthImage depth(camera->width, camera->height, nan);
+  point_of_pixel->assign(depth.pixels.size(), -1);
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    const Vec3 p(cloud[i].x, cloud[i].y, cloud[i].z);
+    if (!p.allFinite()) continue;
+    const long pixel = pixelOf(*camera, p);
+    const std::string where = path + ": point " + std::to_string(i) + " (" + std::to_string(p.x()) +
+                              ", " + std::to_string(p.y()) + ", " + std::to_string(p.z()) + ")";
+    if (pixel < 0)
+      throw std::runtime_error(
+          where + " does not fall on a pixel of the " + std::to_string(camera->width) + "x" +
+          std::to_string(camera->height) + " camera fx " + std::to_string(camera->fx) + ", fy " +
+          std::to_string(camera->fy) + ", cx " + std::to_string(camera->cx) + ", cy " +
+          std::to_string(camera->cy) + ": other intrinsics?");
+    if ((*point_of_pixel)[pixel] >= 0)
+      throw std::runtime_error(where + " falls on the pixel of point " +
+                               std::to_string((*point_of_pixel)[pixel]) +
+                               ": not the points of one depth image");
+    (*point_of_pixel)[pixel] = static_cast<long>(i);
+    if (p.z() > 0) depth.pixels[pixel] = static_cast<float>(p.z());
+  }
   return depth;
 }
 
 }  // namespace
 
-DepthImage readDepthPcd(const std::string& path) {
-  pcl::PointCloud<pcl::PointXYZ> cloud;
-  return organizedDepth(path, &cloud);
-}
-
-DepthImage readDepthPcd(const std::string& path, Image<uint32_t>* labels) {
+DepthImage readDepthPcd(const std::string& path, const PinholeCamera* camera,
+                        Image<uint32_t>* labels) {
+  checkPcdHeader(path);
+  std::vector<long> point_of_pixel;
+  if (!labels) {
+    pcl::PointCloud<pcl::PointXYZ> cloud;
+    if (pcl::io::loadPCDFile(path, cloud) != 0)
+      throw std::runtime_error("cannot read cloud " + path);
+    return depthOf(path, cloud, camera, &point_of_pixel);
+  }
   pcl::PointCloud<pcl::PointXYZL> cloud;
-  DepthImage depth = organizedDepth(path, &cloud);
-  *labels = Image<uint32_t>(cloud.width, cloud.height, 0);
-  for (uint32_t v = 0; v < cloud.height; ++v)
-    for (uint32_t u = 0; u < cloud.width; ++u) labels->at(u, v) = cloud.at(u, v).label;
+  if (pcl::io::loadPCDFile(path, cloud) != 0) throw std::runtime_error("cannot read cloud " + path);
+  DepthImage depth = depthOf(path, cloud, camera, &point_of_pixel);
+  *labels = Image<uint32_t>(depth.width, depth.height, 0);
+  for (size_t i = 0; i < point_of_pixel.size(); ++i)
+    if (point_of_pixel[i] >= 0) labels->pixels[i] = cloud[point_of_pixel[i]].label;
   return depth;
 }
 

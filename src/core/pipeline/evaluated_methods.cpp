@@ -1,11 +1,13 @@
 #include "simstack/pipeline/evaluated_methods.h"
 
 #include <algorithm>
+#include <chrono>
 #include <filesystem>
 
 #include "simstack/eval/scene_metrics.h"
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/pipeline/scene_perception.h"
+#include "simstack/pipeline/table_plane.h"
 #include "simstack/seeds.h"
 #include "simstack/tsdf/network_input.h"
 #include "simstack/tsdf/projective_tsdf.h"
@@ -72,28 +74,42 @@ MethodEstimate NetworkMethod::estimateViews(const std::vector<DepthView>& views,
     for (const InstanceEstimate& e : est.hypotheses[h].instances)
       out.further_superquadrics.back().push_back(e.superquadric);
   }
-  if (label_pixels_) out.pixel_instances = pixelInstances(views.front(), est);
+  if (label_pixels_)
+    out.pixel_instances =
+        pixelInstances(views.front(), est, 0, labelMinHeight(perception_->config()));
   out.table_estimated = est.table_estimated;
   out.perceive_ms = est.timings.total_ms;
   return out;
 }
 
-ClassicalMethod::ClassicalMethod(const ClassicalConfig& config, double extent_m, int resolution)
-    : config_(config), extent_m_(extent_m), resolution_(resolution) {}
+ClassicalMethod::ClassicalMethod(const ClassicalConfig& config, double extent_m, int resolution,
+                                 bool label_pixels)
+    : config_(config), extent_m_(extent_m), resolution_(resolution), label_pixels_(label_pixels) {
+  if (label_pixels_) config_.pixel_stride = 1;
+}
 
 MethodEstimate ClassicalMethod::estimate(const DepthView& view, const GridSpec* grid,
                                          const Vec2& pile_xy) {
-  const Transform T = view.T_table_camera.value();
+  const auto start = std::chrono::steady_clock::now();
   MethodEstimate out;
+  out.table_estimated = !view.T_table_camera;
+  const Transform T = view.T_table_camera
+                          ? *view.T_table_camera
+                          : estimateTablePlane(view.depth, view.camera).T_table_camera;
   if (grid) {
     out.grid = *grid;
   } else {  // the grid a network would use, for the occupancy scores
     const Vec2 c = visiblePileCentre(view.depth, view.camera, T, pile_xy, 0.5 * extent_m_);
     out.grid = GridSpec::sceneGrid(c, extent_m_, resolution_);
   }
-  out.superquadrics = classicalBaseline(view.depth, view.camera, T, config_, &out.grid);
+  // A real scene is taken whole (its pile may be wider than one grid).
+  out.superquadrics =
+      classicalBaseline(view.depth, view.camera, T, config_, label_pixels_ ? nullptr : &out.grid,
+                        label_pixels_ ? &out.pixel_instances : nullptr);
   out.hypotheses_tsdf.push_back(superquadricOccupancy(out.superquadrics, out.grid));
   out.surfaces.push_back(superquadricsMesh(out.superquadrics));
+  out.perceive_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   return out;
 }
 

@@ -67,6 +67,16 @@ void segmentFields(C& c, F&& f) {
   f("free_space_margin_m", c.free_space_margin_m);
   f("max_free_share", c.max_free_share);
   f("hull_samples", c.hull_samples);
+  f("same_centre_m", c.same_centre_m);
+}
+template <class C, class F>
+void surfaceInstanceFields(C& c, F&& f) {
+  f("enabled", c.enabled);
+  f("min_height_m", c.min_height_m);
+  f("max_base_height_m", c.max_base_height_m);
+  f("cluster_tolerance_m", c.cluster_tolerance_m);
+  f("min_points", c.min_points);
+  f("attach_share", c.attach_share);
 }
 template <class C, class F>
 void fitFields(C& c, F&& f) {
@@ -167,13 +177,17 @@ PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& p
   for (const auto& kv : root) {
     const std::string section = kv.first.as<std::string>();
     if (section != "perception" && section != "hough" && section != "segments" &&
-        section != "fitting" && section != "table" && section != "workspace" && section != "node")
+        section != "surface_instances" && section != "fitting" && section != "table" &&
+        section != "workspace" && section != "node")
       throw std::runtime_error(path + ": unknown section '" + section + "'");
   }
   readSection(
       root, "perception", &c, [](auto& x, auto&& f) { perceptionFields(x, f); }, path);
   readSection(
       root, "segments", &c.segments, [](auto& x, auto&& f) { segmentFields(x, f); }, path);
+  readSection(
+      root, "surface_instances", &c.surface_instances,
+      [](auto& x, auto&& f) { surfaceInstanceFields(x, f); }, path);
   readSection(
       root, "fitting", &c.fit, [](auto& x, auto&& f) { fitFields(x, f); }, path);
   readSection(
@@ -243,6 +257,8 @@ std::string perceptionYaml(const PerceptionConfig& config) {
   writeSection(e, "perception", c, [](auto& x, auto&& f) { perceptionFields(x, f); });
   writeSection(e, "hough", c.hough, [](auto& x, auto&& f) { houghFields(x, f); });
   writeSection(e, "segments", c.segments, [](auto& x, auto&& f) { segmentFields(x, f); });
+  writeSection(e, "surface_instances", c.surface_instances,
+               [](auto& x, auto&& f) { surfaceInstanceFields(x, f); });
   writeSection(e, "fitting", c.fit, [](auto& x, auto&& f) { fitFields(x, f); });
   writeSection(e, "table", c.table, [](auto& x, auto&& f) { tableFields(x, f); });
   writeSection(e, "workspace", c.workspace, [](auto& x, auto&& f) { workspaceFields(x, f); });

@@ -39,6 +39,7 @@ void writeVisibleInstances(const std::filesystem::path& out, const DepthView& vi
       mask.at(u, v) = static_cast<uint8_t>(std::min(labels.back(), 254));
     }
   writeLabelledCloudPcd((out / "instances.pcd").string(), pts, labels);
+  writeLabelsPng((out / "labels.png").string(), pixel_labels);
   writeDepthPicture((out / "depth.png").string(), view.depth);
   const Image<Vec3f> normals(view.depth.width, view.depth.height, Vec3f(0, 0, 1));
   writeShadedPicture((out / "instances.png").string(), mask, normals, est.T_table_camera);
@@ -65,13 +66,15 @@ std::vector<std::string> writeReconstruction(const std::string& dir, const Depth
   const SceneHypothesis& h = est.hypotheses.front();
   std::vector<std::string> written;
   std::vector<SuperquadricShape> shapes;
+  std::vector<bool> truncated;
   for (size_t k = 0; k < h.instances.size(); ++k) {
     shapes.push_back(h.instances[k].superquadric);
+    truncated.push_back(h.instances[k].truncated);
     const std::string name = "instance_" + std::to_string(k) + ".ply";
     writeMeshPly((out / name).string(), h.instances[k].mesh);
     written.push_back(name);
   }
-  writeSuperquadricsYaml((out / "superquadrics.yaml").string(), shapes);
+  writeSuperquadricsYaml((out / "superquadrics.yaml").string(), shapes, "table", truncated);
   writeMeshPly((out / "surface.ply").string(),
                h.surface.empty() ? extractSurface(h.tsdf_m) : h.surface);
   writeVisibleInstances(out, view, est, min_height_m);
@@ -87,9 +90,9 @@ std::vector<std::string> writeReconstruction(const std::string& dir, const Depth
   turn.translate(-centre);
   renderShapes((out / "superquadrics_second_view.png").string(), shapes, view.camera,
                turn * est.T_table_camera);
-  for (const char* name :
-       {"superquadrics.yaml", "surface.ply", "instances.pcd", "depth.png", "instances.png",
-        "grids.h5", "superquadrics_input_view.png", "superquadrics_second_view.png"})
+  for (const char* name : {"superquadrics.yaml", "surface.ply", "instances.pcd", "labels.png",
+                           "depth.png", "instances.png", "grids.h5", "superquadrics_input_view.png",
+                           "superquadrics_second_view.png"})
     written.push_back(name);
   return written;
 }

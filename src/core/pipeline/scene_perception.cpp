@@ -139,8 +139,13 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Gri
   }
   std::vector<Points3> points(parts.size());
   for (size_t k = 0; k < parts.size(); ++k) {
-    if (parts[k].empty()) continue;
     std::mt19937_64 rng(seed * 7919 + k);
+    if (parts[k].empty()) {  // found on the surface alone (surface_instances.h): what was seen
+      points[k] = measured[k];
+      std::shuffle(points[k].begin(), points[k].end(), rng);
+      if (static_cast<int>(points[k].size()) > n) points[k].resize(n);
+      continue;
+    }
     std::vector<bool> seen_k(seen.begin() + first[k], seen.begin() + first[k + 1]), unseen_k;
     double area = 0, seen_area = 0;
     for (size_t i = 0; i < seen_k.size(); ++i) {
@@ -170,8 +175,15 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   auto t = Clock::now();
   HoughConfig hough = config.hough;
   hough.threads = std::max(1, config.threads);
-  const InstanceSegmentation seg =
+  InstanceSegmentation seg =
       InstanceFinder(hough, config.segments).find(h->tsdf_m, h->votes, segments);
+  // The first view's depth points that no instance explains: objects of their own.
+  if (!measured_views.empty()) {
+    const Points3& points = measured_views.front().points_table;
+    const bool patched = segments && segments->points_table.size() == points.size();
+    addSurfaceInstances(points, config.surface_instances, &seg,
+                        patched ? &segments->patch : nullptr);
+  }
   h->labels = seg.labels;
   // An instance whose centre lies outside the workspace is not reported (its voxels are free).
   std::vector<bool> outside(seg.size(), false);
@@ -205,7 +217,8 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
     reported[k] = static_cast<int>(h->instances.size());
     InstanceEstimate e;
     e.superquadric = *fits[k];
-    e.mesh = parts[k];
+    // An instance the network did not predict (found on the surface) is its superquadric.
+    e.mesh = parts[k].empty() ? superquadricsMesh({*fits[k]}) : parts[k];
     e.points = points[k];
     e.vote_centre = seg.centres_table[k];
     e.voxels = seg.voxel_counts[k];
@@ -231,6 +244,47 @@ MeasuredView measuredView(const DepthView& view, const Transform& T_table_camera
                      std::numeric_limits<double>::infinity(),
                      std::max(1, config.segments.pixel_stride))};
 }
+
+namespace {
+
+/// Marks the instances of `h` whose pixels in the first view (`used`: masked and cropped) touch
+/// the image border or a pixel `given` measured that `used` left out.
+void markTruncated(SceneHypothesis* h, const DepthView& given, const DepthView& used,
+                   const Transform& T_table_camera, double min_height_m) {
+  const Grid3<int>& labels = h->labels;
+  if (h->instances.empty() || static_cast<int>(labels.data.size()) != labels.spec.voxelCount())
+    return;
+  const int w = used.depth.width, ht = used.depth.height, b = kTruncationBorderPx;
+  Image<uint8_t> left_out(w, ht, 0);
+  bool any_left_out = false;
+  for (size_t i = 0; i < left_out.pixels.size(); ++i)
+    if (validDepth(given.depth.pixels[i]) && !validDepth(used.depth.pixels[i])) {
+      left_out.pixels[i] = 1;
+      any_left_out = true;
+    }
+  const auto nextToLeftOut = [&](int u, int v) {
+    for (int dv = -1; dv <= 1; ++dv)
+      for (int du = -1; du <= 1; ++du) {
+        const int x = u + du, y = v + dv;
+        if (x >= 0 && y >= 0 && x < w && y < ht && left_out.at(x, y)) return true;
+      }
+    return false;
+  };
+  for (int v = 0; v < ht; ++v)
+    for (int u = 0; u < w; ++u) {
+      const float d = used.depth.at(u, v);
+      if (!validDepth(d)) continue;
+      const bool border = u < b || v < b || u >= w - b || v >= ht - b;
+      if (!border && !(any_left_out && nextToLeftOut(u, v))) continue;
+      const Vec3 p = T_table_camera * used.camera.backproject(u, v, d);
+      if (p.z() < min_height_m) continue;
+      const int i = nearestLabelledVoxel(labels, p);
+      if (i >= 0 && labels.data[i] < static_cast<int>(h->instances.size()))
+        h->instances[labels.data[i]].truncated = true;
+    }
+}
+
+}  // namespace
 
 Image<int> pixelInstances(const DepthView& view, const SceneEstimate& est, int hypothesis,
                           double min_height_m) {
@@ -299,6 +353,7 @@ void validate(const PerceptionConfig& config, bool latent) {
   config.fit.validate();
   config.workspace.validate();
   config.segments.validate();
+  config.surface_instances.validate();
   config.hough.validate();
   config.table.validate();
 }
@@ -518,18 +573,26 @@ SceneHypothesis joinGroups(const TilePlan& plan, std::vector<SceneHypothesis>& p
   }
   h.tsdf_m = blendGrids(plan.scene, tsdf, weight, truncation);
   h.votes = blendGrids(plan.scene, votes, weight, Vec3f(Vec3f::Zero()));
+  // Each voxel takes the label of the group holding it farthest in; where that group's
+  // instance there was left to another group (its centre lies in the other's part), the
+  // label of the next group that holds a kept instance there.
+  std::vector<std::pair<double, size_t>> by_weight;
   for (int i = 0; i < plan.scene.voxelCount(); ++i) {
     const Vec3i v = plan.scene.unravel(i);
     const Vec3 p = plan.scene.voxelCentre(v.x(), v.y(), v.z());
-    double best = 0.0;
-    for (size_t g = 0; g < parts.size(); ++g) {
-      const double w = weight(g, p);
-      if (w <= best) continue;
-      best = w;
+    by_weight.clear();
+    for (size_t g = 0; g < parts.size(); ++g)
+      if (const double w = weight(g, p); w > 0.0) by_weight.emplace_back(w, g);
+    std::sort(by_weight.begin(), by_weight.end(),
+              [](const auto& a, const auto& b) { return a.first > b.first; });
+    for (const auto& [w, g] : by_weight) {
       const Vec3i j = parts[g].labels.spec.voxelIndex(p);
       if (!parts[g].labels.spec.inside(j.x(), j.y(), j.z())) continue;
       const int l = parts[g].labels.at(j.x(), j.y(), j.z());
-      h.labels.data[i] = l >= 0 && l < static_cast<int>(joined[g].size()) ? joined[g][l] : -1;
+      if (l < 0 || l >= static_cast<int>(joined[g].size())) break;  // free space there
+      if (joined[g][l] < 0) continue;  // an instance kept by another group
+      h.labels.data[i] = joined[g][l];
+      break;
     }
   }
   if (h.decomposed) h.surface = extractSurface(h.tsdf_m);
@@ -609,8 +672,11 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
       if (h.tsdf_m.data[i] <= 0.0f)
         out.occupancy_probability.data[i] += 1.0f / out.hypotheses.size();
   t = Clock::now();
-  for (int k = 0; k < c.decompose_samples; ++k)
+  for (int k = 0; k < c.decompose_samples; ++k) {
     setVisibleFractions(&out.hypotheses[k], views[0].camera, out.T_table_camera);
+    markTruncated(&out.hypotheses[k], views_given[0], views[0], out.T_table_camera,
+                  c.min_pile_height_m);
+  }
   out.timings.mesh_ms += msSince(t);
   out.timings.total_ms = msSince(start);
   return out;

@@ -1,0 +1,48 @@
+#pragma once
+/// @file surface_instances.h
+/// Objects the network left out, found on the measured surface: depth points clearly above the
+/// table that no instance's voxels explain are clustered (PCL's Euclidean clustering), and each
+/// cluster becomes an instance of its own (its voxels and those below them down to the table),
+/// or part of the instance it lies against. Flat items lying on the table (a phone, a book) and
+/// small ones the network's 2 cm voxels do not resolve are found so.
+
+#include <vector>
+
+#include "simstack/geometry/voxel_grid.h"
+#include "simstack/instances/hough_voting.h"
+
+namespace simstack {
+
+struct SurfaceInstanceConfig {
+  bool enabled = true;
+  /// A cluster is an object when its highest points (its 90th percentile) rise this high above
+  /// the table: above the table's noise, which the pile's threshold already keeps out.
+  double min_height_m = 0.012;
+  /// An object stands on the table: a cluster whose lowest points (its 10th percentile) are
+  /// higher than this is part of the nearest instance within four voxels, else left out.
+  double max_base_height_m = 0.03;
+  double cluster_tolerance_m = 0.01;  ///< neighbour distance within a cluster
+  int min_points = 40;                ///< smaller clusters are noise (points as given)
+  /// A cluster with this share of its points lying against one instance is part of that
+  /// instance (a rim or wall its voxels missed), not an object of its own: points on a convex
+  /// patch (surface_segments.h) whose explained points are mostly the instance's, or, without
+  /// patches, within two voxels of its voxels.
+  double attach_share = 0.1;
+  void validate() const;  ///< std::invalid_argument naming the field
+};
+
+/// PCL's Euclidean clustering of `points`: clusters of at least `min_points` whose points
+/// lie within `tolerance_m` of another of theirs, each as indices into `points`.
+std::vector<std::vector<int>> euclideanClusters(const Points3& points, double tolerance_m,
+                                                int min_points);
+
+/// Adds to `seg` (labels on its grid, centres and voxel counts) the clusters of `points_table`
+/// (table frame; depth points above the pile's threshold) that no labelled voxel explains
+/// (nearestLabelledVoxel finds none): an attached cluster's unlabelled voxels take its
+/// instance's label, any other its own label, appended after the existing ones. `patch`, when
+/// given, holds each point's convex patch (SurfaceSegments::patch, -1 none). Returns the number
+/// of instances added. std::invalid_argument for a bad config or patch count.
+int addSurfaceInstances(const Points3& points_table, const SurfaceInstanceConfig& config,
+                        InstanceSegmentation* seg, const std::vector<int>* patch = nullptr);
+
+}  // namespace simstack
