@@ -447,6 +447,35 @@ TEST(ScenePerception, ObjectsCutByTheImageBorderOrTheMaskAreTruncated) {
   EXPECT_EQ(truncation(masked), std::make_pair(false, true));
 }
 
+TEST(PixelInstances, LabelsFollowTheDepthEdges) {
+  // A near surface (1 m, left of column 40) in front of a far one (1.5 m): instance 1 owns the
+  // far one and spills 3 columns over the near one, which is instance 0's.
+  DepthImage depth(80, 20, 1.5f);
+  Image<int> labels(80, 20, 1);
+  for (int v = 0; v < 20; ++v)
+    for (int u = 0; u < 40; ++u) {
+      depth.at(u, v) = 1.0f + 0.0005f * u;  // a slanted surface stays one region
+      labels.at(u, v) = u < 37 ? 0 : 1;
+    }
+  depth.at(5, 5) = std::numeric_limits<float>::quiet_NaN();
+  labels.at(5, 5) = -1;
+  followDepthEdges(depth, &labels);
+  for (int v = 0; v < 20; ++v)
+    for (int u = 0; u < 80; ++u)
+      if (u != 5 || v != 5) {
+        ASSERT_EQ(labels.at(u, v), u < 40 ? 0 : 1) << u << ", " << v;
+      }
+  EXPECT_EQ(labels.at(5, 5), -1);
+  // Two instances on one continuous surface (objects that touch) keep their pixels.
+  DepthImage flat(80, 20, 1.0f);
+  Image<int> halves(80, 20, 0);
+  for (int v = 0; v < 20; ++v)
+    for (int u = 50; u < 80; ++u) halves.at(u, v) = 1;
+  const Image<int> before = halves;
+  followDepthEdges(flat, &halves);
+  EXPECT_EQ(halves.pixels, before.pixels);
+}
+
 TEST(ScenePerception, TheThreadCountDoesNotChangeTheHypotheses) {
   // Hough voting, the fits and the joint solve split their work over `threads`: every
   // decomposed hypothesis must come out the same, to the bit, on one thread or two.
@@ -752,8 +781,9 @@ TEST(RealScenes, NoFitCollapsesOnRealOrSyntheticScenes) {
       ++objects;
       EXPECT_FALSE(collapsedFit(e.superquadric, e.points))
           << what << ": scales " << e.superquadric.scale_m.transpose();
-      if (2 * initialGuess(e.points).scale_m.maxCoeff() > kCollapseSpanM)
+      if (2 * initialGuess(e.points).scale_m.maxCoeff() > kCollapseSpanM) {
         EXPECT_GT(e.superquadric.scale_m.maxCoeff(), 2 * c.fit.min_scale_m) << what;
+      }
     }
   };
   for (int n = 33; n <= 44; ++n)  // the cylindrical scenes: bowls, pots, cups, cans

@@ -101,7 +101,8 @@ std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points_
 /// Points spanning more than this (m) are an object no fit may shrink away (collapsedFit).
 constexpr double kCollapseSpanM = 0.02;
 /// A joint refinement that leaves a shape below this share of its per-instance fit's volume
-/// has pushed it out of its neighbours by shrinking it away: the per-instance fit stands.
+/// has pushed it out of its neighbours by shrinking it away: the per-instance fit stands, made
+/// smaller until clear of them (fitInstances).
 /// (Measured on the synthetic test set: such shapes end below 0.2 % of it, all others above
 /// 1.5 %; docs/experiments.md, "Fits that never collapse".)
 constexpr double kLeastJointVolumeShare = 0.01;
@@ -116,7 +117,8 @@ bool collapsedFit(const SuperquadricShape& shape, const Points3& points_table);
 /// points are skipped (std::nullopt). No fit collapses: a per-instance fit that does
 /// (collapsedFit) is replaced by the points' oriented box (initialGuess), and a jointly refined
 /// shape that does, or that keeps less than kLeastJointVolumeShare of its per-instance fit's
-/// volume, by its per-instance fit.
+/// volume, by its per-instance fit scaled down about its centre until clear of the others, but
+/// not below 0.3 of its points' extent.
 std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Points3>& points,
                                                            const FitConfig& config, bool joint,
                                                            int min_points = 30);

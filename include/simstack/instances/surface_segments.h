@@ -57,10 +57,11 @@ struct SurfaceSegmentConfig {
   /// Two groups of patches join when at most this share of their hull's samples is seen free.
   double max_free_share = 0.05;
   int hull_samples = 400;  ///< samples per pair test: points on segments between the groups
-  /// Two groups sharing an instance join, even across a concave edge or a hull seen through,
-  /// when the network's votes of their visible voxels meet within this distance (m) of each
-  /// other: one object, concave or seen from inside (a bowl's rim and inside). 0 = off.
-  double same_centre_m = 0.015;
+  /// Two groups sharing an instance and meeting at a concave edge join, whatever their hull,
+  /// when their heights overlap over most of the shorter span and the network's votes of their
+  /// visible voxels meet within this distance (m): one object seen from inside (a cup's rim
+  /// and inside), not one object resting on another. 0 = off.
+  double same_centre_m = 0.01;
   void validate() const;  ///< std::invalid_argument naming the field
 };
 
@@ -105,8 +106,11 @@ double seenFreeShare(const SurfaceSegments& s, const std::vector<int>& a, const 
 ///   A patch that is part of several instances joins them unless their votes diverge where
 ///   they meet (`apart_vote_divergence`, with `votes`); the patch then stays with the ones
 ///   holding most of its points.
-/// - Patches start as groups; two groups that are part of a common instance join when at most
-///   `max_free_share` of their hull is seen free, the least free pair first.
+/// - Patches start as groups; two groups that are part of a common instance join when they do
+///   not meet at a concave edge and at most `max_free_share` of their hull is seen free, or,
+///   meeting at one, when their heights overlap and the votes of their visible voxels meet
+///   within `same_centre_m` (with `votes`: a cup's rim and inside); the latter pairs first, then
+///   the least free.
 /// - Each voxel of an instance goes to the group whose visible voxels it reaches first through
 ///   voxels of the same instance (6-connected); voxels no group reaches, and the voxels of a
 ///   group left with fewer than `min_part_voxels`, go to the group holding most of the

@@ -98,10 +98,21 @@ MeasuredView measuredView(const DepthView& view, const Transform& T_table_camera
 /// Instance of every pixel of `view` (posed by its own T_table_camera, else by the estimate's
 /// first view's): the label of the labelled
 /// voxel nearest to its table-frame point among the voxel holding it and its 26 neighbours
-/// (observed points lie on the surface, which the prediction places up to a voxel off); -1 for
-/// table (points lower than `min_height_m`), free space or missing depth.
+/// (observed points lie on the surface, which the prediction places up to a voxel off), then
+/// made to follow the depth edges (followDepthEdges); -1 for table (points lower than
+/// `min_height_m`), free space or missing depth.
 Image<int> pixelInstances(const DepthView& view, const SceneEstimate& estimate, int hypothesis = 0,
                           double min_height_m = 0.005);
+
+/// A spill: an instance's pixels in a depth-continuous region of the image (followDepthEdges)
+/// that hold less than this share of the region, while the instance's main region is another.
+constexpr double kSpillShare = 0.35;
+
+/// Pixel labels (-1 none) made to follow the depth edges: labelled pixels are grouped into
+/// depth-continuous regions (4-neighbours whose depths differ by at most 2 %), and an
+/// instance's spill into a region not its own (kSpillShare) goes to that region's main
+/// instance: the 2 cm voxels place an instance's edge up to a voxel across an occluding edge.
+void followDepthEdges(const DepthImage& depth, Image<int>* labels);
 
 /// The height above the table from which pixelInstances labels a pixel: half the pile's
 /// threshold, so that the lowest centimetre of an object's side and a pot's floor are the

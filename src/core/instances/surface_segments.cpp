@@ -379,6 +379,20 @@ bool joinUnseen(const std::vector<int>& visible, int max_unseen, Grid3<int>* lab
   return true;
 }
 
+/// Whether two groups' heights overlap over most of the shorter span (10th to 90th
+/// percentile): a cup's inside and outside do, one object resting on another does not.
+bool sideBySide(const SurfaceSegments& segments, const PatchGroup& a, const PatchGroup& b) {
+  const auto span = [&](const PatchGroup& g) {
+    std::vector<double> z;
+    for (int i : g.points) z.push_back(segments.points_table[i].z());
+    std::sort(z.begin(), z.end());
+    return std::make_pair(z[z.size() / 10], z[(z.size() * 9) / 10]);
+  };
+  const auto [a0, a1] = span(a);
+  const auto [b0, b1] = span(b);
+  return std::min(a1, b1) - std::max(a0, b0) > 0.5 * std::min(a1 - a0, b1 - b0);
+}
+
 /// The point the votes of a group's visible voxels point at: the least-squares meeting point
 /// of the lines through each voxel centre along its vote; nullopt when the lines are (near)
 /// parallel or no voxel has a vote.
@@ -404,10 +418,10 @@ std::optional<Vec3> voteCentre(const PatchGroup& group, const std::vector<int>& 
   return Vec3(A.ldlt().solve(b));
 }
 
-/// Two groups that share an instance join when the network's votes of their visible voxels meet
-/// at one point (`same_centre_m`, needs `votes`), or when they do not meet at a concave edge and
-/// the hull of their points is not seen as free space; the vote-sharing pairs first, then the
-/// least free, until none joins.
+/// Two groups that share an instance join when they do not meet at a concave edge and the hull
+/// of their points is not seen as free space, or, meeting at one, when they stand side by side
+/// and the network's votes of their visible voxels meet at one point (`same_centre_m`, needs
+/// `votes`); the vote-sharing pairs first, then the least free, until none joins.
 void joinGroups(const SurfaceSegments& segments, const SurfaceSegmentConfig& config,
                 std::vector<PatchGroup>* groups_io, const std::vector<int>& voxel_of,
                 const Grid3<Vec3f>* votes) {
@@ -425,13 +439,14 @@ void joinGroups(const SurfaceSegments& segments, const SurfaceSegmentConfig& con
           for (int pb : groups[b].patches) concave |= concave_edges.count(std::minmax(pa, pb)) > 0;
         if (!shared) continue;
         bool same_centre = false;
-        if (votes && config.same_centre_m > 0) {
+        if (concave && votes && config.same_centre_m > 0 &&
+            sideBySide(segments, groups[a], groups[b])) {
           const auto ca = voteCentre(groups[a], voxel_of, *votes);
           const auto cb = voteCentre(groups[b], voxel_of, *votes);
           same_centre = ca && cb && (*ca - *cb).norm() <= config.same_centre_m;
         }
         if (concave && !same_centre) continue;
-        // Groups whose votes meet at one point are one object, whatever the hull: a bowl's
+        // Groups whose votes meet at one point are one object, whatever the hull: a cup's
         // inside and outside, seen through its opening, first.
         const double share = same_centre ? -1.0
                                          : seenFreeShare(segments, groups[a].points,

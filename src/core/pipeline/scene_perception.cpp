@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <random>
 #include <stdexcept>
 #include <thread>
@@ -286,6 +287,76 @@ void markTruncated(SceneHypothesis* h, const DepthView& given, const DepthView& 
 
 }  // namespace
 
+namespace {
+
+/// Labelled pixels in depth-continuous regions (4-neighbours whose depths differ by at most 2 %):
+/// per pixel its region, -1 for unlabelled ones; `regions` receives their count.
+Image<int> continuousRegions(const DepthImage& depth, const Image<int>& labels, int* regions) {
+  Image<int> region(labels.width, labels.height, -1);
+  *regions = 0;
+  std::vector<int> stack;
+  const auto joins = [&](int a, int b) {
+    const float da = depth.pixels[a], db = depth.pixels[b];
+    return labels.pixels[b] >= 0 && region.pixels[b] < 0 && std::abs(da - db) <= 0.02f * da;
+  };
+  for (size_t start = 0; start < labels.pixels.size(); ++start) {
+    if (labels.pixels[start] < 0 || region.pixels[start] >= 0) continue;
+    region.pixels[start] = *regions;
+    stack.assign(1, static_cast<int>(start));
+    while (!stack.empty()) {
+      const int i = stack.back();
+      stack.pop_back();
+      const int u = i % labels.width, v = i / labels.width;
+      const int next[4][2] = {{u - 1, v}, {u + 1, v}, {u, v - 1}, {u, v + 1}};
+      for (const auto& n : next) {
+        if (n[0] < 0 || n[1] < 0 || n[0] >= labels.width || n[1] >= labels.height) continue;
+        const int j = n[1] * labels.width + n[0];
+        if (!joins(i, j)) continue;
+        region.pixels[j] = *regions;
+        stack.push_back(j);
+      }
+    }
+    ++*regions;
+  }
+  return region;
+}
+
+}  // namespace
+
+void followDepthEdges(const DepthImage& depth, Image<int>* labels) {
+  int regions = 0;
+  const Image<int> region = continuousRegions(depth, *labels, &regions);
+  // Pixels per (region, instance), and per instance its largest region.
+  std::vector<std::map<int, int>> count(regions);
+  std::map<int, std::pair<int, int>> home;  // instance -> (pixels, region)
+  for (size_t i = 0; i < region.pixels.size(); ++i)
+    if (region.pixels[i] >= 0) ++count[region.pixels[i]][labels->pixels[i]];
+  for (int r = 0; r < regions; ++r)
+    for (const auto& [k, n] : count[r])
+      if (n > home[k].first) home[k] = {n, r};
+  // In each region, an instance at home elsewhere and holding little of it is a spill across
+  // the depth edge: its pixels go to the region's main instance.
+  std::vector<int> main_instance(regions, -1);
+  std::vector<int> total(regions, 0);
+  for (int r = 0; r < regions; ++r) {
+    int most = 0;
+    for (const auto& [k, n] : count[r]) {
+      total[r] += n;
+      if (n > most) {
+        most = n;
+        main_instance[r] = k;
+      }
+    }
+  }
+  for (size_t i = 0; i < region.pixels.size(); ++i) {
+    const int r = region.pixels[i];
+    if (r < 0) continue;
+    const int k = labels->pixels[i];
+    if (k != main_instance[r] && home[k].second != r && count[r][k] < kSpillShare * total[r])
+      labels->pixels[i] = main_instance[r];
+  }
+}
+
 Image<int> pixelInstances(const DepthView& view, const SceneEstimate& est, int hypothesis,
                           double min_height_m) {
   Image<int> out(view.depth.width, view.depth.height, -1);
@@ -303,6 +374,7 @@ Image<int> pixelInstances(const DepthView& view, const SceneEstimate& est, int h
       const int i = nearestLabelledVoxel(labels, p);
       if (i >= 0) out.at(u, v) = labels.data[i];
     }
+  followDepthEdges(view.depth, &out);
   return out;
 }
 
