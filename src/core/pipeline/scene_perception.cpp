@@ -271,23 +271,28 @@ void markTruncated(SceneHypothesis* h, const DepthView& given, const DepthView& 
       }
     return false;
   };
-  for (int v = 0; v < ht; ++v)
-    for (int u = 0; u < w; ++u) {
-      const float d = used.depth.at(u, v);
-      if (!validDepth(d)) continue;
-      const bool border = u < b || v < b || u >= w - b || v >= ht - b;
-      if (!border && !(any_left_out && nextToLeftOut(u, v))) continue;
-      const Vec3 p = T_table_camera * used.camera.backproject(u, v, d);
-      if (p.z() < min_height_m) continue;
-      const int i = nearestLabelledVoxel(labels, p);
-      if (i >= 0 && labels.data[i] < static_cast<int>(h->instances.size()))
-        h->instances[labels.data[i]].truncated = true;
+  const auto mark = [&](int u, int v) {
+    const float d = used.depth.at(u, v);
+    if (!validDepth(d)) return;
+    const Vec3 p = T_table_camera * used.camera.backproject(u, v, d);
+    if (p.z() < min_height_m) return;
+    const int i = nearestLabelledVoxel(labels, p);
+    if (i >= 0 && labels.data[i] < static_cast<int>(h->instances.size()))
+      h->instances[labels.data[i]].truncated = true;
+  };
+  for (int v = 0; v < ht; ++v) {
+    const bool border_row = v < b || v >= ht - b;
+    if (border_row || any_left_out) {
+      for (int u = 0; u < w; ++u)
+        if (border_row || u < b || u >= w - b || nextToLeftOut(u, v)) mark(u, v);
+    } else {  // nothing left out: only the border columns can cut an object
+      for (int u = 0; u < std::min(b, w); ++u) {
+        mark(u, v);
+        mark(w - 1 - u, v);
+      }
     }
+  }
 }
-
-}  // namespace
-
-namespace {
 
 /// Labelled pixels in depth-continuous regions (4-neighbours whose depths differ by at most 2 %):
 /// per pixel its region, -1 for unlabelled ones; `regions` receives their count.
