@@ -17,6 +17,7 @@
 #include "simstack/pipeline/evaluated_methods.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
+#include "simstack/scene/mesh_catalogue.h"
 #include "simstack/scene/pile_generator.h"
 #include "simstack/tsdf/ground_truth.h"
 #include "test_scenes.h"
@@ -792,6 +793,23 @@ TEST(RealScenes, NoFitCollapsesOnRealOrSyntheticScenes) {
     const RenderedPile p = renderPile(seed);
     check(perception.perceive(DepthView{p.view.depth, p.camera, p.T_table_camera}),
           "pile " + std::to_string(seed));
+  }
+  const std::string ycb = std::string(SIMSTACK_SHARED_DATA) + "/ycb";
+  if (std::filesystem::exists(ycb + "/003_cracker_box/nontextured.stl")) {
+    // Five YCB objects side by side on the table, as their meshes rest (no physics).
+    const auto catalogue = loadMeshCatalogue(ycb);
+    Scene scene;
+    for (int k : {1, 2, 3, 5, 8}) {  // cracker box, sugar box, soup can, pudding box, wood block
+      SceneObject o{catalogue[k], Transform::Identity()};
+      double lowest = 0;
+      for (const Vec3& v : catalogue[k]->mesh().vertices) lowest = std::min(lowest, v.z());
+      o.T_table_object.translation() = Vec3(-0.24 + 0.12 * scene.objects.size(), 0.0, -lowest);
+      scene.objects.push_back(o);
+    }
+    const Transform T = lookAt(Vec3(0.1, -0.6, 0.6), Vec3(0.0, 0.0, 0.05));
+    const PinholeCamera camera;
+    check(perception.perceive(DepthView{DepthRenderer(scene).render(camera, T).depth, camera, T}),
+          "YCB objects");
   }
   EXPECT_GT(objects, 40);
 }
