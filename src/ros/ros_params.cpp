@@ -5,6 +5,7 @@
 #include <simstack/LiveSettingsConfig.h>
 #include <xmlrpcpp/XmlRpcValue.h>
 
+#include <algorithm>
 #include <cmath>
 #include <iomanip>
 #include <set>
@@ -66,9 +67,19 @@ void read(const ros::NodeHandle& pnh, const std::string& name, T* value) {
     throw std::runtime_error(pnh.resolveName(name) + " has the wrong type");
 }
 
-/// The sections of the node's private namespace that the config reads.
-const std::set<std::string> kSections{"perception", "hough",     "segments", "fitting",
-                                      "table",      "workspace", "node"};
+/// The sections of the node's private namespace: the perception config's and `node`.
+std::set<std::string> sections() {
+  std::set<std::string> out(perceptionConfigSections().begin(), perceptionConfigSections().end());
+  out.insert("node");
+  return out;
+}
+
+/// "perception, hough, ... or node", for messages.
+std::string sectionList() {
+  std::string out;
+  for (const std::string& s : perceptionConfigSections()) out += s + ", ";
+  return out.substr(0, out.size() - 2) + " or node";
+}
 
 /// Checks what else lies in the node's private namespace. A map there is a config section, and
 /// a misspelt one is an error, except under the node's image topic: image_transport's
@@ -82,12 +93,12 @@ void checkPrivateNamespace(const ros::NodeHandle& pnh) {
     return;
   std::set<std::string> scalars{"image_transport", "diagnostic_period"};
   for (const auto& d : LiveSettingsConfig::__getParamDescriptions__()) scalars.insert(d->name);
+  const std::set<std::string> known = sections();
   for (auto& kv : all) {
     if (kv.second.getType() == XmlRpc::XmlRpcValue::TypeStruct) {
-      if (!kSections.count(kv.first) && kv.first != "labels")
-        throw std::runtime_error("unknown parameter section " + pnh.resolveName(kv.first) +
-                                 " (perception, hough, segments, fitting, table, workspace or "
-                                 "node)");
+      if (!known.count(kv.first) && kv.first != "labels")
+        throw std::runtime_error("unknown parameter section " + pnh.resolveName(kv.first) + " (" +
+                                 sectionList() + ")");
     } else if (!scalars.count(kv.first)) {
       ROS_WARN(
           "simstack: parameter %s is not one the node reads and is ignored (the node's own "
@@ -114,12 +125,13 @@ void NodeConfig::validate() const {
 PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
                                             const std::string& package_dir) {
   checkPrivateNamespace(pnh);
+  const std::vector<std::string>& config_sections = perceptionConfigSections();
   // Nothing loaded (a node started by hand): the package's own config, as the tools do.
-  if (!pnh.hasParam("perception") && !pnh.hasParam("segments") && !pnh.hasParam("fitting") &&
-      !pnh.hasParam("table") && !pnh.hasParam("hough") && !pnh.hasParam("workspace"))
+  if (std::none_of(config_sections.begin(), config_sections.end(),
+                   [&](const std::string& s) { return pnh.hasParam(s); }))
     return loadPerceptionYaml(package_dir + "/config/perception.yaml", package_dir);
   std::ostringstream yaml;
-  for (const char* section : {"perception", "hough", "segments", "fitting", "table", "workspace"}) {
+  for (const std::string& section : config_sections) {
     XmlRpc::XmlRpcValue v;
     if (!pnh.getParam(section, v)) continue;
     if (v.getType() != XmlRpc::XmlRpcValue::TypeStruct)

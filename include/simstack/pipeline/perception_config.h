@@ -6,6 +6,7 @@
 /// models/<name>.pt, read with the model.
 
 #include <string>
+#include <vector>
 
 #include "simstack/fitting/superquadric_fit.h"
 #include "simstack/instances/hough_voting.h"
@@ -72,6 +73,10 @@ struct PerceptionConfig {
   TablePlaneConfig table;
   WorkspaceConfig workspace;  ///< where to look, and the tiles covering it
 };
+
+/// The sections of a perception config that loadPerceptionYaml reads, in file order (`node:`,
+/// the ROS node's own, is not among them).
+const std::vector<std::string>& perceptionConfigSections();
 
 /// Reads a perception config: sections `perception:`, `segments:`, `surface_instances:`,
 /// `fitting:`, `table:` and `workspace:` (absent fields keep their defaults; unknown fields are

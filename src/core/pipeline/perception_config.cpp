@@ -2,6 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <array>
 #include <filesystem>
 #include <set>
@@ -176,9 +177,8 @@ PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& p
   if (!root.IsMap()) throw std::runtime_error(path + ": expected a YAML map");
   for (const auto& kv : root) {
     const std::string section = kv.first.as<std::string>();
-    if (section != "perception" && section != "hough" && section != "segments" &&
-        section != "surface_instances" && section != "fitting" && section != "table" &&
-        section != "workspace" && section != "node")
+    const auto& known = perceptionConfigSections();
+    if (section != "node" && std::find(known.begin(), known.end(), section) == known.end())
       throw std::runtime_error(path + ": unknown section '" + section + "'");
   }
   readSection(
@@ -207,6 +207,12 @@ PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& p
 }
 
 }  // namespace
+
+const std::vector<std::string>& perceptionConfigSections() {
+  static const std::vector<std::string> sections{
+      "perception", "hough", "segments", "surface_instances", "fitting", "table", "workspace"};
+  return sections;
+}
 
 std::string applyModelCard(PerceptionConfig* config) {
   const std::string path = modelCardPath(config->model_path);
