@@ -86,9 +86,9 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
                                       const GridSpec* grid = nullptr);
 
 /// Linear index of the labelled voxel (label >= 0) nearest to a table-frame point among the
-/// point's voxel and the 26 around it, -1 if none: an observed point lies up to a voxel off the
-/// predicted surface.
-int nearestLabelledVoxel(const Grid3<int>& labels, const Vec3& p_table);
+/// point's voxel and those within `reach` voxels along each axis (by default the 26 around it),
+/// -1 if none: an observed point lies up to a voxel off the predicted surface.
+int nearestLabelledVoxel(const Grid3<int>& labels, const Vec3& p_table, int reach = 1);
 
 /// Share of `hull_samples` points on segments between point sets `a` and `b` (indices into
 /// `s.points_table`) that lie in space the view saw free; points off the image or on missing

@@ -28,25 +28,9 @@ void SurfaceInstanceConfig::validate() const {
 namespace {
 
 /// The label of the nearest labelled voxel within `reach` voxels of `p`, -1 none.
-int labelNear(const Grid3<int>& labels, const Vec3& p, int reach = 2) {
-  const GridSpec& g = labels.spec;
-  const Vec3i c = g.voxelIndex(p);
-  int best = -1;
-  double best_d = 1e18;
-  for (int dz = -reach; dz <= reach; ++dz)
-    for (int dy = -reach; dy <= reach; ++dy)
-      for (int dx = -reach; dx <= reach; ++dx) {
-        const int x = c.x() + dx, y = c.y() + dy, z = c.z() + dz;
-        if (!g.inside(x, y, z)) continue;
-        const int l = labels.at(x, y, z);
-        if (l < 0) continue;
-        const double d = (g.voxelCentre(x, y, z) - p).squaredNorm();
-        if (d < best_d) {
-          best_d = d;
-          best = l;
-        }
-      }
-  return best;
+int labelNear(const Grid3<int>& labels, const Vec3& p, int reach) {
+  const int v = nearestLabelledVoxel(labels, p, reach);
+  return v < 0 ? -1 : labels.data[v];
 }
 
 /// The `share` quantile of the points' heights.
@@ -103,15 +87,18 @@ int addSurfaceInstances(const Points3& points_table, const SurfaceInstanceConfig
   }
   // The instance a point lies against: the one holding most of its patch's explained points,
   // else (no patch, or one no instance explains) one within two voxels.
+  std::map<int, int> patch_owner;
+  for (const auto& [p, counts] : patch_instances)
+    patch_owner[p] =
+        std::max_element(counts.begin(), counts.end(), [](const auto& a, const auto& b) {
+          return a.second < b.second;
+        })->first;
   const auto against = [&](int i) {
     if (patch && (*patch)[i] >= 0) {
-      const auto it = patch_instances.find((*patch)[i]);
-      if (it != patch_instances.end())
-        return std::max_element(it->second.begin(), it->second.end(),
-                                [](const auto& a, const auto& b) { return a.second < b.second; })
-            ->first;
+      const auto it = patch_owner.find((*patch)[i]);
+      if (it != patch_owner.end()) return it->second;
     }
-    return labelNear(labels, points_table[i]);
+    return labelNear(labels, points_table[i], 2);
   };
   int added = 0;
   Points3 loose;

@@ -141,14 +141,14 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
   return out;
 }
 
-int nearestLabelledVoxel(const Grid3<int>& labels, const Vec3& p) {
+int nearestLabelledVoxel(const Grid3<int>& labels, const Vec3& p, int reach) {
   const GridSpec& g = labels.spec;
   const Vec3i c = g.voxelIndex(p);
   int best = -1;
   double best_d = std::numeric_limits<double>::infinity();
-  for (int dz = -1; dz <= 1; ++dz)
-    for (int dy = -1; dy <= 1; ++dy)
-      for (int dx = -1; dx <= 1; ++dx) {
+  for (int dz = -reach; dz <= reach; ++dz)
+    for (int dy = -reach; dy <= reach; ++dy)
+      for (int dx = -reach; dx <= reach; ++dx) {
         const int x = c.x() + dx, y = c.y() + dy, z = c.z() + dz;
         if (!g.inside(x, y, z)) continue;
         const int i = g.linear(x, y, z);
