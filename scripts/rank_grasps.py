@@ -6,7 +6,8 @@ them best first (README, "Grasps").
     scripts/rank_grasps.py --target top          # the object whose centre is highest
     scripts/rank_grasps.py --target 1 --candidates 32 --hypotheses 3 --json grasps.json
 
-The scene is the latest ObjectArray the grasp server received (launch/grasps.launch); with
+The ranking runs as the grasp server's action (feedback with --progress; Ctrl-C cancels it on
+the server). The scene is the latest ObjectArray the grasp server received (launch/grasps.launch); with
 --target top it is read here first to choose the object (refused when older than --max-age),
 and sent with the request, so that the id names the object chosen. Task code calls the same
 functions: `from simstack import grasp_client` (src/python/grasp_client.py).
@@ -24,10 +25,10 @@ from simstack import grasp_client
 
 def table(res, rows):
     lines = ["%4s  %-22s %-18s %5s %8s %8s %7s %6s %6s" % (
-        "rank", "contact (m)", "approach", "seal", "mean mm", "max mm", "toppled", "freed",
-        "failed")]
+        "rank", "contact (m, %s)" % (res.grasps[0].tool_pose.header.frame_id if res.grasps else ""),
+        "approach", "seal", "mean mm", "max mm", "toppled", "freed", "failed")]
     for i, g in enumerate(res.grasps[:rows]):
-        p, a = g.contact.position, g.approach
+        p, a = g.tool_pose.pose.position, g.approach
         lines.append("%4d  %+6.3f %+6.3f %+6.3f  %+5.2f %+5.2f %+5.2f %5.2f %8.1f %8.1f %7.2f %6.2f %6.2f" % (
             i + 1, p.x, p.y, p.z, a.x, a.y, a.z, g.seal_score, 1e3 * g.mean_displacement_m,
             1e3 * g.max_displacement_m, g.toppled, g.freed_share, g.failed_share))
@@ -36,6 +37,20 @@ def table(res, rows):
     for h, d in enumerate(res.baseline_displacement_m):
         lines.append("baseline (hypothesis %d left alone): objects moved %.1f mm at most" % (h, 1e3 * d))
     return "\n".join(lines)
+
+
+def pose_list(pose):
+    """[x, y, z, qw, qx, qy, qz] of a geometry_msgs/Pose."""
+    p, q = pose.position, pose.orientation
+    return [p.x, p.y, p.z, q.w, q.x, q.y, q.z]
+
+
+def progress(done, total, best):
+    """Feedback of the ranking action, one line per tenth of the pulls."""
+    if done == total or done % max(1, total // 10) == 0:
+        sys.stderr.write("pulls %d of %d%s\n" % (
+            done, total, "" if best is None else "; best so far: %s, freed %.0f %%" % (
+                "held" if best.held else "failed", 100 * best.freed_share)))
 
 
 def main():
@@ -53,6 +68,12 @@ def main():
                         help="with --target top: refuse a scene older than this (s; 0: any age; "
                              "default: the server's ~max_scene_age_s, which it applies to "
                              "requests that carry no scene)")
+    parser.add_argument("--frame", default="",
+                        help="tf frame of the printed and written poses (default: the scene's)")
+    parser.add_argument("--pregrasp", type=float, default=0.0,
+                        help="pre-grasp stand-off in metres (0: the server's ~pregrasp_distance_m)")
+    parser.add_argument("--progress", action="store_true",
+                        help="print the pulls done as they are simulated (on stderr)")
     parser.add_argument("--json", help="also write the response to this file")
     args = parser.parse_args(rospy.myargv()[1:])
     # The request's counts are uint32: one outside is an argument error, not a traceback.
@@ -91,19 +112,23 @@ def main():
             target = grasp_client.top_object(scene)
         res = grasp_client.rank_grasps(scene, target, args.camera, args.candidates,
                                        args.pull_distance, args.pull_speed, args.hypotheses,
-                                       args.timeout)
+                                       args.timeout, args.frame, args.pregrasp,
+                                       feedback=progress if args.progress else None)
     except grasp_client.GraspServiceError as e:
         sys.exit("rank_grasps: %s" % e)
     print("object %d: %s (%d pulls in %d %s, %.2f s)" % (
-        target, res.message, res.pulls, res.hypotheses_used,
+        res.target_id, res.message, res.pulls, res.hypotheses_used,
         "hypothesis" if res.hypotheses_used == 1 else "hypotheses", res.time_s))
     print(table(res, args.rows))
     if args.json:
         with open(args.json, "w") as f:  # checked above; a disk that fills still raises
-            json.dump({"target_id": target, "frame": res.header.frame_id,
+            json.dump({"target_id": res.target_id, "frame": res.header.frame_id,
                        "message": res.message,
                        "baseline_displacement_m": list(res.baseline_displacement_m),
-                       "grasps": [{"contact": [g.contact.position.x, g.contact.position.y, g.contact.position.z],
+                       "pose_frame": res.grasps[0].tool_pose.header.frame_id if res.grasps else "",
+                       "grasps": [{"tool_pose": pose_list(g.tool_pose.pose),
+                                   "pregrasp_pose": pose_list(g.pregrasp_pose.pose),
+                                   "held": g.held, "freed": g.freed,
                                    "approach": [g.approach.x, g.approach.y, g.approach.z],
                                    "seal_score": g.seal_score,
                                    "mean_displacement_m": g.mean_displacement_m,

@@ -10,6 +10,7 @@
 
 #include "simstack/dataset/dataset.h"
 #include "simstack/io/staged_output.h"
+#include "simstack/scene/household.h"
 #include "simstack/scene/pile_generator.h"
 
 using namespace simstack;
@@ -69,6 +70,37 @@ TEST(Dataset, WriteReadRoundTrip) {
       ASSERT_EQ(rec.ground_truth.votes.data[v], gt.votes.data[v]);
   }
   EXPECT_THROW(reader.read(3), std::out_of_range);
+  std::filesystem::remove(path);
+}
+
+TEST(Dataset, HouseholdPilesRebuildTheirContainersWithoutAMeshDirectory) {
+  const std::string path =
+      (std::filesystem::temp_directory_path() / "simstack_test_household.h5").string();
+  PileConfig config;
+  config.household_share = 1.0;
+  config.require_stack = false;
+  const PileGenerator gen{config};
+  DatasetInfo info = smallInfo(1);
+  for (const auto& c : containerCatalogue()) info.mesh_names.push_back(c->name());
+  Scene scene;
+  for (uint64_t seed = 1; scene.objects.empty() && seed < 40; ++seed) {
+    const Scene s = gen.generate(seed).scene;
+    for (const auto& o : s.objects)
+      if (o.shape->kind() == ObjectShape::Kind::kMesh) scene = s;
+  }
+  ASSERT_FALSE(scene.objects.empty()) << "no pile with a container in 40 seeds";
+  const GridSpec g =
+      GridSpec::sceneGrid(scene.surfaceCentroid().head<2>(), info.extent_m, info.resolution);
+  const GroundTruthGrids gt = computeGroundTruth(scene, g, info.truncation_m);
+  {
+    DatasetWriter writer(path, info);
+    writer.write(0, scene, gt);
+  }
+  const SceneRecord rec = DatasetReader(path).read(0);
+  ASSERT_EQ(rec.scene.objects.size(), scene.objects.size());
+  for (size_t k = 0; k < scene.objects.size(); ++k)
+    EXPECT_EQ(rec.scene.objects[k].shape->name(), scene.objects[k].shape->name());
+  EXPECT_EQ(computeGroundTruth(rec.scene, g, info.truncation_m).tsdf.data, gt.tsdf.data);
   std::filesystem::remove(path);
 }
 

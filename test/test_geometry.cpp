@@ -4,6 +4,7 @@
 #include <limits>
 #include <random>
 
+#include "simstack/geometry/container.h"
 #include "simstack/geometry/convex_hull.h"
 #include "simstack/geometry/pinhole_camera.h"
 #include "simstack/geometry/superquadric.h"
@@ -150,4 +151,47 @@ TEST(ConvexHull, CubeInsideTest) {
   EXPECT_FALSE(hull.contains(Vec3(1.1, 0, 0)));
   EXPECT_THROW(ConvexHull({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(1, 1, 0)}),
                std::invalid_argument);
+}
+
+TEST(Container, MeshEnclosesTheSolidItsInsideTestDescribes) {
+  ContainerSpec bowl;
+  bowl.radius_top_m = 0.08;
+  bowl.radius_bottom_m = 0.045;
+  bowl.height_m = 0.06;
+  bowl.wall_m = 0.006;
+  // Outer frustum less the cavity's frustum (from the floor up, radii one wall inside).
+  const auto frustum = [](double h, double r0, double r1) {
+    return M_PI * h / 3.0 * (r0 * r0 + r0 * r1 + r1 * r1);
+  };
+  const double inner_bottom = 0.045 + 0.035 * 0.006 / 0.06 - 0.006;
+  const double expected = frustum(0.06, 0.045, 0.08) - frustum(0.054, inner_bottom, 0.074);
+  const TriangleMesh fine = bowl.mesh(512);
+  EXPECT_NEAR(fine.volume(), expected, 1e-3 * expected);
+  // The cavity is free, the wall and floor are solid, the rim's outside is free.
+  EXPECT_FALSE(bowl.contains(Vec3(0.0, 0.0, 0.03)));
+  EXPECT_TRUE(bowl.contains(Vec3(0.0, 0.0, 0.003)));
+  const double wall_mid = 0.045 + 0.035 * 0.5 - 0.003;
+  EXPECT_TRUE(bowl.contains(Vec3(0.0, wall_mid, 0.03)));
+  EXPECT_FALSE(bowl.contains(Vec3(0.0, wall_mid + 0.006, 0.03)));
+  EXPECT_FALSE(bowl.contains(Vec3(0.0, 0.0, -0.001)));
+  // Monte Carlo volume of the inside test matches the mesh's.
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> xy(-0.08, 0.08), z(0.0, 0.06);
+  int inside = 0;
+  const int n = 200000;
+  for (int i = 0; i < n; ++i) inside += bowl.contains(Vec3(xy(rng), xy(rng), z(rng)));
+  const double box = 0.16 * 0.16 * 0.06;
+  EXPECT_NEAR(box * inside / n, expected, 0.03 * expected);
+  // The name rebuilds the sizes to 0.1 mm.
+  const auto parsed = parseContainerName(bowl.name());
+  ASSERT_TRUE(parsed.has_value());
+  EXPECT_NEAR(parsed->radius_top_m, 0.08, 1e-9);
+  EXPECT_NEAR(parsed->wall_m, 0.006, 1e-9);
+  EXPECT_FALSE(parseContainerName("container 0.08 0.045").has_value());
+  EXPECT_FALSE(parseContainerName("003_cracker_box").has_value());
+  EXPECT_FALSE(parseContainerName("container 0.08 0.045 0.06 0.006 extra").has_value());
+  bowl.wall_m = 0.07;  // thicker than the bowl is high: no cavity
+  EXPECT_THROW(bowl.mesh(), std::invalid_argument);
+  bowl.wall_m = std::nan("");
+  EXPECT_THROW(bowl.validate(), std::invalid_argument);
 }

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <string>
 
 #include "simstack/grasping/grasp_ranking.h"
@@ -158,6 +159,39 @@ TEST(GraspRanking, IdenticalAcrossRunsAndThreadCounts) {
     EXPECT_LE(one.grasps[i - 1].failed_share, one.grasps[i].failed_share);
 }
 
+TEST(GraspRanking, ProgressCountsEveryPullAndAStopEndsTheRankingWithinOnePullPerThread) {
+  GraspRankingConfig config;
+  config.candidates.max_candidates = 12;
+  config.threads = 2;
+  auto other = fourObjects();
+  other[2].T_table_object.translation() += Vec3(0.01, -0.005, 0.002);
+  const std::vector<std::vector<SuperquadricShape>> scenes{fourObjects(), other};
+  int calls = 0, last_done = 0, total = 0;
+  std::optional<RankedGrasp> last_best;
+  const GraspRanking full =
+      rankGrasps(scenes, 2, {}, config, [&](int done, int all, const RankedGrasp* best) {
+        ++calls;
+        EXPECT_GT(done, last_done);
+        last_done = done, total = all;
+        if (best) last_best = *best;
+        return true;
+      });
+  EXPECT_FALSE(full.stopped);
+  EXPECT_EQ(calls, 24);
+  EXPECT_EQ(total, 24);
+  ASSERT_TRUE(last_best.has_value());
+  EXPECT_TRUE(last_best->candidate.contact_table.isApprox(full.grasps[0].candidate.contact_table));
+  // Stopped at the fifth pull: at most one more pull per thread finishes, and only candidates
+  // whose every pull was done are ranked.
+  const GraspRanking cut =
+      rankGrasps(scenes, 2, {}, config, [](int done, int, const RankedGrasp*) { return done < 5; });
+  EXPECT_TRUE(cut.stopped);
+  EXPECT_GE(cut.pulls, 5);
+  EXPECT_LE(cut.pulls, 5 + config.threads);
+  EXPECT_LE(cut.grasps.size(), static_cast<size_t>(cut.pulls / 2));
+  EXPECT_NE(cut.message.find("stopped after"), std::string::npos) << cut.message;
+}
+
 TEST(GraspRanking, AHypothesisWithoutTheTargetIsLeftOutAndSaidSo) {
   GraspRankingConfig config;
   config.candidates.max_candidates = 4;
@@ -257,6 +291,30 @@ TEST(GraspRanking, RejectsBadScenesAndSettings) {
   c = config, c.pull.cup_stiffness_hz = 10.0;
   rejects(good, 0, c, "cup_stiffness_hz must be at most 9.5");
   EXPECT_THROW(rankGrasps({}, 0, {}, config), std::invalid_argument);
+}
+
+TEST(SuctionCandidates, ToolPoseLooksIntoTheSurfaceAndThePregraspStandsBackAlongTheApproach) {
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> n(0.0, 1.0);
+  for (int i = 0; i < 200; ++i) {
+    SuctionCandidate c;
+    c.contact_table = Vec3(n(rng), n(rng), n(rng));
+    c.approach_table = i == 0 ? Vec3::UnitX() : Vec3(n(rng), n(rng), n(rng)).normalized();
+    const Transform T = toolPose(c);
+    const Eigen::Matrix3d R = T.linear();
+    EXPECT_TRUE((R.transpose() * R).isIdentity(1e-9));
+    EXPECT_NEAR(R.determinant(), 1.0, 1e-9);
+    EXPECT_NEAR(R.col(2).dot(c.approach_table), -1.0, 1e-9);  // z into the surface
+    EXPECT_TRUE(T.translation().isApprox(c.contact_table));
+    const Transform P = pregraspPose(T, 0.07);
+    EXPECT_TRUE(P.linear().isApprox(R));
+    EXPECT_TRUE(P.translation().isApprox(c.contact_table + 0.07 * c.approach_table, 1e-9));
+  }
+  SuctionCandidate up;
+  up.approach_table = Vec3::UnitZ();
+  EXPECT_TRUE(toolPose(up).linear().col(0).isApprox(Vec3::UnitX()));  // x keeps the table's x
+  EXPECT_THROW(pregraspPose(Transform::Identity(), -0.01), std::invalid_argument);
+  EXPECT_THROW(pregraspPose(Transform::Identity(), std::nan("")), std::invalid_argument);
 }
 
 }  // namespace

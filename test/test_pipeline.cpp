@@ -15,6 +15,7 @@
 #include "simstack/eval/segmentation.h"
 #include "simstack/instances/instance_finder.h"
 #include "simstack/pipeline/evaluated_methods.h"
+#include "simstack/pipeline/object_tracker.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/mesh_catalogue.h"
@@ -812,6 +813,44 @@ TEST(RealScenes, NoFitCollapsesOnRealOrSyntheticScenes) {
           "YCB objects");
   }
   EXPECT_GT(objects, 40);
+}
+
+TEST(ObjectTracker, IdsStayWithTheirObjectsAndVanishedOnesAreRetired) {
+  const auto sq = [](double x, double y, double a) {
+    SuperquadricShape s;
+    s.scale_m = Vec3(a, 0.8 * a, 0.5 * a);
+    s.T_table_object.translation() = Vec3(x, y, 0.5 * a);
+    return s;
+  };
+  ObjectTracker tracker;
+  const std::vector<uint32_t> first =
+      tracker.assign({sq(0.0, 0.0, 0.05), sq(0.1, 0.0, 0.04), sq(0.0, 0.12, 0.03)});
+  EXPECT_EQ(first, (std::vector<uint32_t>{0, 1, 2}));
+  // The next frame: the fits moved by millimetres and come in another order.
+  std::vector<SuperquadricShape> second = {sq(0.003, 0.118, 0.031), sq(0.002, -0.004, 0.052),
+                                           sq(0.097, 0.002, 0.041)};
+  second[1].scale_m = Vec3(0.026, 0.052, 0.04);  // its axes numbered otherwise: same size
+  EXPECT_EQ(tracker.assign(second), (std::vector<uint32_t>{2, 0, 1}));
+  // Object 1 picked, a new one placed, object 2 grown beyond the size gate (another object).
+  SuperquadricShape grown = sq(0.0, 0.12, 0.031);
+  grown.scale_m *= 5.0;  // in place, five times the size
+  EXPECT_EQ(tracker.assign({sq(0.0, 0.0, 0.05), sq(-0.1, 0.0, 0.04), grown}),
+            (std::vector<uint32_t>{0, 3, 4}));
+  // Object 1 is back where it was: vanished ids are not given again.
+  EXPECT_EQ(tracker.assign({sq(0.0, 0.0, 0.05), sq(0.1, 0.0, 0.04)}),
+            (std::vector<uint32_t>{0, 5}));
+  // Two candidates for one track: the nearer one keeps the id.
+  EXPECT_EQ(tracker.assign({sq(0.03, 0.0, 0.05), sq(0.01, 0.0, 0.05)}),
+            (std::vector<uint32_t>{6, 0}));
+  tracker.reset();
+  EXPECT_EQ(tracker.assign({sq(0.01, 0.0, 0.05)}), (std::vector<uint32_t>{7}));
+  EXPECT_TRUE(tracker.assign({}).empty());
+  TrackerConfig bad;
+  bad.max_size_ratio = 0.9;
+  EXPECT_THROW(ObjectTracker{bad}, std::invalid_argument);
+  bad = TrackerConfig();
+  bad.max_centre_distance_m = std::nan("");
+  EXPECT_THROW(ObjectTracker{bad}, std::invalid_argument);
 }
 
 }  // namespace

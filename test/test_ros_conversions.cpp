@@ -208,17 +208,40 @@ TEST(GraspConversions, ScenesComeFromObjectsThenHypotheses) {
   EXPECT_THROW(graspScenes(msg, 1), std::invalid_argument);
 }
 
-TEST(GraspConversions, GraspPoseLooksAlongTheApproach) {
+TEST(GraspConversions, ToolPoseLooksIntoTheSurfaceInTheAskedFrameAndArrowsShowTheOutcome) {
   RankedGrasp g;
   g.candidate.contact_table = Vec3(0.1, 0.2, 0.3);
   g.candidate.approach_table = Vec3(1, 0, 0);
-  const Grasp m = graspMsg(g);
-  const Transform T = transformFromPose(m.contact);
-  EXPECT_TRUE((T.linear() * Vec3::UnitZ()).isApprox(Vec3::UnitX(), 1e-9));
-  EXPECT_TRUE(T.translation().isApprox(g.candidate.contact_table));
+  std_msgs::Header base;
+  base.frame_id = "base_link";
+  Transform T_base_table = Transform::Identity();
+  T_base_table.translation() = Vec3(0.5, 0.0, 0.7);
+  const Grasp m = graspMsg(g, base, T_base_table, 0.05);
+  EXPECT_EQ(m.tool_pose.header.frame_id, "base_link");
+  EXPECT_EQ(m.pregrasp_pose.header.frame_id, "base_link");
+  const Transform T = transformFromPose(m.tool_pose.pose);
+  EXPECT_TRUE((T.linear() * Vec3::UnitZ()).isApprox(-Vec3::UnitX(), 1e-9));  // into the surface
+  EXPECT_TRUE(T.translation().isApprox(Vec3(0.6, 0.2, 1.0)));
+  const Transform P = transformFromPose(m.pregrasp_pose.pose);
+  EXPECT_TRUE(P.translation().isApprox(Vec3(0.65, 0.2, 1.0), 1e-9));
+  EXPECT_FALSE(m.held);  // no pull simulated
+  PullOutcome ok;
+  g.outcomes = {ok};
+  g.freed_share = 1.0;
+  RankedGrasp held = g, failed = g;
+  held.freed_share = 0.5;
+  failed.failed_share = 0.5;
+  EXPECT_TRUE(graspMsg(g, base, T_base_table, 0.05).held);
+  EXPECT_TRUE(graspMsg(g, base, T_base_table, 0.05).freed);
+  EXPECT_FALSE(graspMsg(held, base, T_base_table, 0.05).freed);
   std_msgs::Header h;
-  const auto markers = graspMarkers(h, {g, g});
-  ASSERT_EQ(markers.markers.size(), 5u);        // clear, two arrows, two ranks
-  EXPECT_EQ(markers.markers[1].color.g, 1.0f);  // best: green
-  EXPECT_EQ(markers.markers[3].color.r, 1.0f);  // worst: red
+  const auto markers = graspMarkers(h, {g, held, failed, failed});
+  ASSERT_EQ(markers.markers.size(), 8u);  // clear, four arrows, three ranks
+  const auto colour = [&](int k) {
+    const auto& c = markers.markers[k].color;
+    return std::vector<float>{c.r, c.g, c.b};
+  };
+  EXPECT_EQ(colour(1), (std::vector<float>{0, 1, 0}));  // held and freed: green
+  EXPECT_EQ(colour(3), (std::vector<float>{1, 1, 0}));  // held, not freed: yellow
+  EXPECT_EQ(colour(5), (std::vector<float>{1, 0, 0}));  // failed: red
 }

@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "simstack/physics/physics_world.h"
+#include "simstack/scene/household.h"
 #include "simstack/scene/mesh_catalogue.h"
 #include "simstack/scene/pile_generator.h"
 
@@ -204,4 +205,53 @@ TEST(YcbPiles, LoadCatalogueAndGenerate) {
   for (const auto& o : pile.scene.objects) EXPECT_GT(lowestPoint(o), -0.01);
   EXPECT_LT(displacementAfter(pile.scene, 240), 0.01);
   EXPECT_THROW(loadMeshCatalogue("/nonexistent"), std::runtime_error);
+}
+
+TEST(HouseholdPiles, ContainersKeepTheirCavityAndPilesSettle) {
+  const auto containers = containerCatalogue();
+  ASSERT_EQ(containers.size(), 32u);
+  for (size_t i = 0; i < containers.size(); ++i) {
+    const ObjectShape& c = *containers[i];
+    EXPECT_EQ(c.catalogueIndex(), static_cast<int>(i));
+    const auto spec = parseContainerName(c.name());
+    ASSERT_TRUE(spec.has_value()) << c.name();
+    // The object frame is centred on the volume; the base is the mesh's lowest point.
+    Vec3 lo, hi;
+    ASSERT_TRUE(c.mesh().bounds(&lo, &hi));
+    EXPECT_NEAR(hi.z() - lo.z(), spec->height_m, 1e-9);
+    EXPECT_FALSE(c.containsObject(Vec3(0.0, 0.0, lo.z() + 0.6 * spec->height_m))) << c.name();
+    EXPECT_TRUE(c.containsObject(Vec3(0.0, 0.0, lo.z() + 0.5 * spec->wall_m))) << c.name();
+  }
+  EXPECT_EQ(containerCatalogue()[5]->name(), containers[5]->name());  // the same list each call
+  PileConfig config;
+  config.household_share = 1.0;
+  config.require_stack = false;
+  config.min_objects = 4;
+  config.max_objects = 6;
+  const PileGenerator generator(config);
+  int meshes = 0, small = 0, still = 0;
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
+    const Pile pile = generator.generate(seed);
+    for (const auto& o : pile.scene.objects) {
+      EXPECT_GT(lowestPoint(o), -0.01);
+      if (o.shape->kind() == ObjectShape::Kind::kMesh) {
+        ++meshes;
+        EXPECT_TRUE(parseContainerName(o.shape->name()).has_value());
+      } else {
+        small += o.shape->superquadric().scale_m.minCoeff() < 0.025;
+      }
+    }
+    // The generator's rest rule holds; a cup on its side may still creep on (as a real one
+    // rolls), so most piles, not all, stay within 1 cm over another 240 steps.
+    Scene copy = pile.scene;
+    EXPECT_TRUE(generator.verifyRest(&copy));
+    still += displacementAfter(pile.scene, 240) < 0.01;
+  }
+  EXPECT_GE(still, 3);
+  EXPECT_GT(meshes, 0);
+  EXPECT_GT(small, 0);
+  config.household_share = 1.5;
+  EXPECT_THROW(PileGenerator{config}, std::invalid_argument);
+  config.household_share = 0.5;
+  EXPECT_THROW(PileGenerator(config, containers), std::invalid_argument);
 }

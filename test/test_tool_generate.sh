@@ -52,4 +52,20 @@ grep -q "'0.1'" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
 # pile is drawn again and counted.
 "$tool" --scenes 3 --seed 4 --objects 6:7 --sizes 0.05:0.12 --output "$dir/big.h5" > "$dir/big.txt"
 grep -q "wrote 3 scenes" "$dir/big.txt" || { cat "$dir/big.txt"; exit 1; }
+# Household piles: containers named by their sizes, read back without a mesh directory.
+"$tool" --scenes 4 --seed 5 --resolution 16 --household 1 --loose --objects 3:4 --output "$dir/home.h5" \
+  > "$dir/home.txt"
+grep -q "household shapes" "$dir/home.txt" || { cat "$dir/home.txt"; exit 1; }
+/usr/bin/python3 - "$dir/home.h5" <<'PY'
+import sys, h5py
+f = h5py.File(sys.argv[1], "r")
+names = f.attrs["mesh_names"]
+names = names.decode() if isinstance(names, bytes) else str(names)
+assert names.startswith("container "), names[:80]
+kinds = f["objects"][:, :, 0]
+assert (kinds == 1).sum() > 0, "no container in four household piles"
+print("household layout ok")
+PY
+if "$tool" --scenes 1 --seed 1 --output "$dir/x.h5" --household 1.5 2> "$dir/err.txt"; then echo "accepted --household 1.5"; exit 1; fi
+grep -q "household" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
 echo "simstack_generate ok"

@@ -12,7 +12,7 @@ objects:
   - {id: 0, scale: [0.03, 0.03, 0.06], exponents: [20, 20, 20], position: [0, 0, 0.06], orientation: [1, 0, 0, 0]}
   - {id: 7, scale: [0.06, 0.06, 0.03], exponents: [20, 20, 20], position: [0, 0, 0.1505], orientation: [1, 0, 0, 0]}
 YAML
-"$rank" --scene "$dir/stack.yaml" --target 7 --candidates 16 --output "$dir/out" > "$dir/log.txt"
+"$rank" --scene "$dir/stack.yaml" --target 7 --candidates 16 --pregrasp-distance 0.08 --output "$dir/out" > "$dir/log.txt"
 cat "$dir/log.txt"
 grep -q "16 grasps ranked" "$dir/log.txt"
 test -s "$dir/out/grasps.png"
@@ -24,6 +24,16 @@ best = doc["grasps"][0]
 assert best["approach"][2] > 0.9, best["approach"]          # straight up
 assert best["failed_share"] == 0 and best["freed_share"] == 1, best
 assert all(g["failed_share"] >= best["failed_share"] for g in doc["grasps"])
+assert best["held"] and best["freed"], best
+# The tool pose: at the contact, z into the surface (the best lifts straight up: z down); the
+# pre-grasp 8 cm back along the approach.
+x, y, z, qw, qx, qy, qz = best["tool_pose"]
+assert [x, y, z] == best["contact_m"], best
+tool_z = (2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx * qx + qy * qy))
+assert sum(a * b for a, b in zip(tool_z, best["approach"])) < -0.999, tool_z
+pre = best["pregrasp_pose"]
+assert all(abs(pre[i] - (best["contact_m"][i] + 0.08 * best["approach"][i])) < 1e-9 for i in range(3)), pre
+assert pre[3:] == best["tool_pose"][3:], pre
 PY
 expect_error() {  # expect_error WORDS ARGS...: non-zero exit and WORDS in the message
   local words=$1; shift

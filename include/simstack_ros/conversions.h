@@ -7,9 +7,11 @@
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
+#include <shape_msgs/Mesh.h>
 #include <simstack/ObjectArray.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <cstdint>
 #include <vector>
 
 #include "simstack/geometry/image.h"
@@ -52,27 +54,40 @@ simstack::Superquadric superquadricMsg(const SuperquadricShape& sq);
 /// x y z (float32) of `points` (metres) in `header.frame_id`.
 sensor_msgs::PointCloud2 pointCloud(const std_msgs::Header& header, const Points3& points);
 
+/// The ids of an estimate's objects (hypothesis 0) as published: `ids[k]` for object k (from an
+/// ObjectTracker), or k itself when `ids` is empty. Throws std::invalid_argument when `ids` is
+/// neither empty nor one per object.
+using ObjectIds = std::vector<uint32_t>;
+
 /// The objects of hypothesis 0 of `estimate`, in the table frame named by `header`, and the
 /// superquadrics of the further decomposed hypotheses; `views`, `samples` and `symmetries` (the
-/// network passes) as the pipeline ran.
+/// network passes) as the pipeline ran. Each object carries its superquadric as a mesh too.
 ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& estimate, int views,
-                           int samples, int symmetries);
+                           int samples, int symmetries, const ObjectIds& ids = {});
 
-/// Every object's surface samples: x y z label rgb (label k + 1 for object k; rgb packed as
-/// rviz reads it, the colour of the object's marker).
+/// Every object's surface samples: x y z label rgb (label id + 1; rgb packed as rviz reads it,
+/// the colour of the object's marker, which follows its id).
 sensor_msgs::PointCloud2 instancesCloud(const std_msgs::Header& header,
-                                        const SceneEstimate& estimate);
+                                        const SceneEstimate& estimate, const ObjectIds& ids = {});
+
+/// A superquadric as a closed triangle mesh in its own frame (shape_msgs/Mesh, a few hundred
+/// triangles): a planning-scene collision object placed at the superquadric's pose.
+shape_msgs::Mesh superquadricMesh(const SuperquadricShape& sq);
 
 /// Voxel centres whose occupancy probability is at least `min_probability`: x y z probability.
 sensor_msgs::PointCloud2 occupancyCloud(const std_msgs::Header& header,
                                         const Grid3<float>& probability, double min_probability);
 
-/// DELETEALL, then per object a triangle mesh of its superquadric (namespace "superquadrics")
-/// and a text label with its id ("labels"), in the colours of instancesCloud().
+/// DELETEALL (the markers of vanished objects go), then per object a triangle mesh of its
+/// superquadric (namespace "superquadrics") and a text label with its id ("labels"), marker id
+/// = object id, in the colours of instancesCloud().
 visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
-                                              const SceneEstimate& estimate);
+                                              const SceneEstimate& estimate,
+                                              const ObjectIds& ids = {});
 
-/// 16UC1 image of pixel labels: 0 none, k + 1 object k (labels of -1 are 0).
-sensor_msgs::Image labelImage(const std_msgs::Header& header, const Image<int>& labels);
+/// 16UC1 image of pixel labels: 0 none, id + 1 for the pixels of object k (`labels` holds k;
+/// -1 is 0; ids above 65534 are written as 65535).
+sensor_msgs::Image labelImage(const std_msgs::Header& header, const Image<int>& labels,
+                              const ObjectIds& ids = {});
 
 }  // namespace simstack

@@ -24,12 +24,20 @@ Transform rigidFromPose(const geometry_msgs::Pose& pose, const std::string& what
 /// its further hypotheses.
 std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, int hypotheses);
 
-/// One ranked grasp as a message (contact pose: z axis along the approach).
-Grasp graspMsg(const RankedGrasp& grasp);
+/// What a grasp's pulls did: held and freed the target in every hypothesis; held in every one
+/// but did not always free it; or the seal broke in some.
+enum class GraspOutcome { kHeldAndFreed, kHeld, kFailed };
+GraspOutcome graspOutcome(const RankedGrasp& grasp);
 
-/// DELETEALL, then each grasp as an arrow pointing at its contact along -approach, coloured
-/// from green (best) to red (worst) (namespace "grasps"), and the rank of the best three as
-/// text ("grasp_ranks").
+/// One ranked grasp as a message: its tool and pre-grasp poses (toolPose(), pregraspPose()) in
+/// `pose_header`'s frame, mapped there from the scene's frame by `T_frame_scene`; the approach
+/// stays in the scene's frame.
+Grasp graspMsg(const RankedGrasp& grasp, const std_msgs::Header& pose_header,
+               const Transform& T_frame_scene, double pregrasp_distance_m);
+
+/// DELETEALL, then each grasp as an arrow pointing at its contact along -approach (namespace
+/// "grasps"), coloured by outcome: green held and freed, yellow held but not freed, red the
+/// seal broke; the rank of the best three as text ("grasp_ranks").
 visualization_msgs::MarkerArray graspMarkers(const std_msgs::Header& header,
                                              const std::vector<RankedGrasp>& grasps);
 

@@ -65,6 +65,8 @@ class PerceptionServer {
   bool stopRequested();
   void publish(const Frame& frame, const DepthView& view, const SceneEstimate& estimate, int views);
   void skip(const Frame& frame, const std::string& why);
+  /// One frame of a rendered box before the first subscription (ScenePerception::warmUp).
+  void warmUp();
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   bool saveOctomap(SaveOctomap::Request& req, SaveOctomap::Response& res);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
@@ -87,7 +89,7 @@ class PerceptionServer {
   image_transport::ImageTransport it_;
   image_transport::CameraSubscriber depth_sub_;
   ros::Subscriber mask_sub_;  ///< ~mask: the workspace mask, applied to every frame
-  ros::Publisher objects_pub_, instances_pub_, markers_pub_, occupancy_pub_;
+  ros::Publisher objects_pub_, instances_pub_, markers_pub_, occupancy_pub_, ready_pub_;
   image_transport::Publisher labels_pub_;
   ros::ServiceServer reset_srv_, save_srv_;
   diagnostic_updater::Updater diagnostics_;
@@ -109,6 +111,9 @@ class PerceptionServer {
   ros::Time last_stamp_;                    ///< stamp of the last frame taken by the worker
   long processed_before_ = 0;
   ros::SteadyTime rate_since_;
+  ObjectTracker tracker_;  ///< ids kept across frames (node/track_*); under mutex_
+  double warm_up_s_ = 0.0;
+  int warm_up_objects_ = 0;
   int decompose_samples_ = 1;  ///< as configured at start (samples may change live)
   std::mutex save_mutex_;
   StageTimings last_timings_;

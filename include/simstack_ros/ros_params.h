@@ -10,6 +10,7 @@
 #include <string>
 
 #include "simstack/grasping/grasp_ranking.h"
+#include "simstack/pipeline/object_tracker.h"
 #include "simstack/pipeline/perception_config.h"
 
 namespace simstack {
@@ -24,7 +25,15 @@ struct NodeConfig {
   double occupancy_min = 0.5;     ///< voxels at least this probably occupied go to ~occupancy
   bool accumulate_views = false;  ///< fuse every frame (pose from tf) until ~reset
   int max_views = 6;              ///< at most this many views fused (the newest kept)
-  std::string output_dir = "~/.ros/simstack";  ///< where ~save_octomap writes
+  /// Where ~save_octomap writes; "" = $ROS_HOME/simstack ($ROS_HOME defaults to ~/.ros).
+  std::string output_dir;
+  /// Objects, markers, instances, occupancy and labels latched: a late subscriber gets the last.
+  bool latch = true;
+  TrackerConfig tracking;  ///< node/track_max_centre_distance_m, node/track_max_size_ratio
+  /// Broadcast each object's superquadric pose on tf as <object_frame_prefix>object_<id>, a
+  /// child of table_frame at the frame's stamp.
+  bool publish_object_tf = true;
+  std::string object_frame_prefix = "simstack_";
   /// Throws std::invalid_argument naming the field.
   void validate() const;
 };
@@ -47,6 +56,8 @@ struct GraspServerConfig {
   /// A request without a scene is refused when the latest scene's stamp is older than this
   /// (the camera or the perception stopped); 0: any age.
   double max_scene_age_s = 10.0;
+  /// Pre-grasp stand-off of requests that ask for 0 (m).
+  double pregrasp_distance_m = 0.05;
   GraspRankingConfig ranking;  ///< cup, seal, physics, threads
   /// Throws std::invalid_argument naming the parameter.
   void validate() const;

@@ -8,19 +8,21 @@ pull held.
     rospy.init_node("pick_task")
     scene = grasp_client.latest_scene()              # refuses a stale or empty one
     target = grasp_client.top_object(scene)          # or any id of scene.objects
-    res = grasp_client.rank_grasps(scene, target)    # raises GraspServiceError on failure
+    res = grasp_client.rank_grasps(scene, target, target_frame="base_link")
     held = grasp_client.held_grasps(res)             # best first; empty: no pull held
     if held:
-        contact = held[0].contact                    # in res.header.frame_id, z out of the surface
+        tool = held[0].tool_pose                     # PoseStamped in base_link, z into the surface
+        pregrasp = held[0].pregrasp_pose             # 5 cm back along the approach
 
-The scene the target was chosen from is sent with the request: object ids are positions in
-one scene's list, not tracked from frame to frame.
+Object ids stay with their objects from frame to frame, so an id chosen from one scene names
+the same object in the next while it stays where it was.
 """
+import threading
 import time
 
+import actionlib
 import rospy
-from simstack.msg import ObjectArray
-from simstack.srv import RankGrasps, RankGraspsRequest
+from simstack.msg import ObjectArray, RankGraspsAction, RankGraspsGoal
 
 
 class GraspServiceError(RuntimeError):
@@ -72,24 +74,51 @@ def top_object(scene):
 
 
 def rank_grasps(scene, target_id, camera="camera", candidates=0, pull_distance_m=0.10,
-                pull_speed_mps=0.20, hypotheses=0, timeout=30.0):
-    """Calls /<camera>/grasps/rank_grasps on `target_id` of `scene` (an ObjectArray; None: the
-    server's latest, which it refuses when older than its ~max_scene_age_s) and returns the
-    response. `timeout` bounds the wait for the service, not the ranking: a request simulates
-    candidates x hypotheses pulls (64 x 3 by default: about 0.5 s on a 4-object pile,
-    docs/benchmarks.md; slower or longer pulls take longer in proportion). Raises GraspServiceError
-    with the server's message when it refuses the request."""
-    service = "/%s/grasps/rank_grasps" % camera
-    req = RankGraspsRequest(target_id=target_id, candidates=candidates,
-                            pull_distance_m=pull_distance_m, pull_speed_mps=pull_speed_mps,
-                            hypotheses=hypotheses)
+                pull_speed_mps=0.20, hypotheses=0, timeout=30.0, target_frame="",
+                pregrasp_distance_m=0.0, target_point=None, feedback=None):
+    """Ranks grasps through the action /<camera>/grasps/rank_grasps_action on `target_id` of
+    `scene` (an ObjectArray; None: the server's latest, which it refuses when older than its
+    ~max_scene_age_s) and returns the result (the fields of the service's response). `timeout`
+    bounds the wait for the server, not the ranking: a request simulates candidates x
+    hypotheses pulls (64 x 3 by default: about 0.5 s on a 4-object pile, docs/benchmarks.md;
+    slower or longer pulls take longer in proportion). `feedback(done, total, best)` is called
+    after each pull (`best`: the best grasp whose every pull is done, or None). `target_frame`
+    (any tf frame) is the frame of the grasps' tool and pre-grasp poses ("": the scene's);
+    `target_point` (a geometry_msgs/PointStamped) names the target instead of `target_id`: the
+    object whose surface is nearest it. Raises GraspServiceError with the server's message when
+    it refuses the request; KeyboardInterrupt cancels the ranking on the server."""
+    name = "/%s/grasps/rank_grasps_action" % camera
+    goal = RankGraspsGoal(target_id=target_id, candidates=candidates,
+                          pull_distance_m=pull_distance_m, pull_speed_mps=pull_speed_mps,
+                          hypotheses=hypotheses, target_frame=target_frame,
+                          pregrasp_distance_m=pregrasp_distance_m)
+    if target_point is not None:
+        goal.target_point = target_point
     if scene is not None:
-        req.scene = scene
+        goal.scene = scene
+    client = actionlib.SimpleActionClient(name, RankGraspsAction)
+    # On the wall clock: actionlib's own timeout reads ROS time, which under a looping or
+    # paused bag may never reach it.
+    waiting = threading.Thread(target=client.wait_for_server, daemon=True)
+    waiting.start()
+    waiting.join(timeout)
+    if waiting.is_alive():
+        raise GraspServiceError("no grasp server at %s within %g s (is grasps.launch running?)" % (
+            name, timeout))
+
+    def on_feedback(f):
+        if feedback is not None:
+            feedback(f.pulls_done, f.pulls_total, f.best if f.has_best else None)
+
+    client.send_goal(goal, feedback_cb=on_feedback)
     try:
-        rospy.wait_for_service(service, timeout=timeout)
-        res = rospy.ServiceProxy(service, RankGrasps)(req)
-    except (rospy.ROSException, rospy.ServiceException) as e:
-        raise GraspServiceError("%s: %s" % (service, e))
+        client.wait_for_result()
+    except BaseException:
+        client.cancel_goal()
+        raise
+    res = client.get_result()
+    if res is None:
+        raise GraspServiceError("%s: no result (the server stopped?)" % name)
     if not res.success:
         raise GraspServiceError(res.message)
     return res
@@ -97,6 +126,6 @@ def rank_grasps(scene, target_id, camera="camera", candidates=0, pull_distance_m
 
 def held_grasps(res):
     """The ranked grasps whose pull held in every hypothesis, best first. The response lists
-    every candidate, also those whose seal broke (ranked last, failed_share > 0); when none
-    held, res.message says so."""
-    return [g for g in res.grasps if g.failed_share == 0.0]
+    every candidate, also those whose seal broke (ranked last, held false); when none held,
+    res.message says so."""
+    return [g for g in res.grasps if g.held]

@@ -260,8 +260,48 @@ sensor_msgs::PointCloud2 pointCloud(const std_msgs::Header& header, const Points
   return cloud;
 }
 
+namespace {
+
+/// The published id of object k (see ObjectIds).
+uint32_t objectId(const ObjectIds& ids, size_t k) {
+  return ids.empty() ? static_cast<uint32_t>(k) : ids[k];
+}
+
+void checkIds(const ObjectIds& ids, size_t objects) {
+  if (!ids.empty() && ids.size() != objects)
+    throw std::invalid_argument(std::to_string(ids.size()) + " object ids for " +
+                                std::to_string(objects) + " objects");
+}
+
+/// The colour index of an id: the palette's colours from 1 on.
+int colourIndex(uint32_t id) { return static_cast<int>(id % 1000000u) + 1; }
+
+/// Triangles per face side of a superquadric's collision and marker mesh.
+constexpr int kMeshSubdivisions = 6;
+
+}  // namespace
+
+shape_msgs::Mesh superquadricMesh(const SuperquadricShape& sq) {
+  const TriangleMesh m = sq.meshObject(kMeshSubdivisions);
+  shape_msgs::Mesh out;
+  for (const Vec3& v : m.vertices) {
+    geometry_msgs::Point p;
+    p.x = v.x();
+    p.y = v.y();
+    p.z = v.z();
+    out.vertices.push_back(p);
+  }
+  for (const auto& t : m.triangles) {
+    shape_msgs::MeshTriangle tri;
+    for (int c = 0; c < 3; ++c) tri.vertex_indices[c] = static_cast<uint32_t>(t[c]);
+    out.triangles.push_back(tri);
+  }
+  return out;
+}
+
 ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& est, int views,
-                           int samples, int symmetries) {
+                           int samples, int symmetries, const ObjectIds& ids) {
+  checkIds(ids, est.instances().size());
   ObjectArray out;
   out.header = header;
   out.table_pose = poseMsg(est.T_table_camera.inverse());
@@ -281,8 +321,9 @@ ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& 
   const std::vector<InstanceEstimate>& instances = est.instances();
   for (size_t k = 0; k < instances.size(); ++k) {
     Object o;
-    o.id = static_cast<uint32_t>(k);
+    o.id = objectId(ids, k);
     o.superquadric = superquadricMsg(instances[k].superquadric);
+    o.mesh = superquadricMesh(instances[k].superquadric);
     o.surface = pointCloud(header, instances[k].points);
     o.voxels = static_cast<uint32_t>(instances[k].voxels);
     o.visible_fraction = static_cast<float>(instances[k].visible_fraction);
@@ -298,17 +339,20 @@ ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& 
   return out;
 }
 
-sensor_msgs::PointCloud2 instancesCloud(const std_msgs::Header& header, const SceneEstimate& est) {
+sensor_msgs::PointCloud2 instancesCloud(const std_msgs::Header& header, const SceneEstimate& est,
+                                        const ObjectIds& ids) {
+  checkIds(ids, est.instances().size());
   size_t n = 0;
   for (const InstanceEstimate& e : est.instances()) n += e.points.size();
   sensor_msgs::PointCloud2 cloud = cloudWithFields(header, n, {"x", "y", "z", "label", "rgb"});
   size_t i = 0;
   for (size_t k = 0; k < est.instances().size(); ++k) {
-    const float rgb = packedColour(static_cast<int>(k) + 1);
+    const uint32_t id = objectId(ids, k);
+    const float rgb = packedColour(colourIndex(id));
     for (const Vec3& p : est.instances()[k].points)
       putFloats(&cloud, i++,
                 {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()),
-                 static_cast<float>(k + 1), rgb});
+                 static_cast<float>(id) + 1.0f, rgb});
   }
   return cloud;
 }
@@ -332,7 +376,8 @@ sensor_msgs::PointCloud2 occupancyCloud(const std_msgs::Header& header,
 }
 
 visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
-                                              const SceneEstimate& est) {
+                                              const SceneEstimate& est, const ObjectIds& ids) {
+  checkIds(ids, est.instances().size());
   visualization_msgs::MarkerArray out;
   visualization_msgs::Marker clear;
   clear.header = header;
@@ -343,13 +388,14 @@ visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
     visualization_msgs::Marker mesh;
     mesh.header = header;
     mesh.ns = "superquadrics";
-    mesh.id = static_cast<int>(k);
+    const uint32_t id = objectId(ids, k);
+    mesh.id = static_cast<int>(id);
     mesh.type = visualization_msgs::Marker::TRIANGLE_LIST;
     mesh.action = visualization_msgs::Marker::ADD;
     mesh.pose = poseMsg(sq.T_table_object);
     mesh.scale.x = mesh.scale.y = mesh.scale.z = 1.0;
-    mesh.color = colourMsg(static_cast<int>(k) + 1);
-    const TriangleMesh m = sq.meshObject(8);
+    mesh.color = colourMsg(colourIndex(id));
+    const TriangleMesh m = sq.meshObject(kMeshSubdivisions);
     for (const auto& t : m.triangles)
       for (int c = 0; c < 3; ++c) {
         geometry_msgs::Point p;
@@ -362,7 +408,7 @@ visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
     visualization_msgs::Marker text;
     text.header = header;
     text.ns = "labels";
-    text.id = static_cast<int>(k);
+    text.id = static_cast<int>(id);
     text.type = visualization_msgs::Marker::TEXT_VIEW_FACING;
     text.action = visualization_msgs::Marker::ADD;
     text.pose.position.x = sq.T_table_object.translation().x();
@@ -371,15 +417,20 @@ visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
     text.pose.orientation.w = 1.0;
     text.scale.z = 0.04;
     text.color.r = text.color.g = text.color.b = text.color.a = 1.0f;
-    text.text = std::to_string(k);
+    text.text = std::to_string(id);
     out.markers.push_back(text);
   }
   return out;
 }
 
-sensor_msgs::Image labelImage(const std_msgs::Header& header, const Image<int>& labels) {
+sensor_msgs::Image labelImage(const std_msgs::Header& header, const Image<int>& labels,
+                              const ObjectIds& ids) {
   return image16(header, labels.width, labels.height, [&](size_t i) {
-    return static_cast<uint16_t>(std::max(0, std::min(labels.pixels[i] + 1, 65535)));
+    const int k = labels.pixels[i];
+    if (k < 0) return uint16_t{0};
+    const uint64_t id = ids.empty() ? static_cast<uint64_t>(k)
+                                    : (static_cast<size_t>(k) < ids.size() ? ids[k] : 65534u);
+    return static_cast<uint16_t>(std::min<uint64_t>(id + 1, 65535));
   });
 }
 

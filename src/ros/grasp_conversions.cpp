@@ -8,6 +8,11 @@
 
 namespace simstack {
 
+GraspOutcome graspOutcome(const RankedGrasp& g) {
+  if (g.outcomes.empty() || g.failed_share > 0.0) return GraspOutcome::kFailed;
+  return g.freed_share == 1.0 ? GraspOutcome::kHeldAndFreed : GraspOutcome::kHeld;
+}
+
 Transform rigidFromPose(const geometry_msgs::Pose& p, const std::string& what) {
   const Quat q(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z);
   const Vec3 t(p.position.x, p.position.y, p.position.z);
@@ -43,13 +48,16 @@ std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, 
   return scenes;
 }
 
-Grasp graspMsg(const RankedGrasp& g) {
+Grasp graspMsg(const RankedGrasp& g, const std_msgs::Header& pose_header,
+               const Transform& T_frame_scene, double pregrasp_distance_m) {
   Grasp m;
   const Vec3 z = g.candidate.approach_table.normalized();
-  Transform T = Transform::Identity();
-  T.linear() = Quat::FromTwoVectors(Vec3::UnitZ(), z).toRotationMatrix();
-  T.translation() = g.candidate.contact_table;
-  m.contact = poseMsg(T);
+  const Transform tool = T_frame_scene * toolPose(g.candidate);
+  m.tool_pose.header = m.pregrasp_pose.header = pose_header;
+  m.tool_pose.pose = poseMsg(tool);
+  m.pregrasp_pose.pose = poseMsg(pregraspPose(tool, pregrasp_distance_m));
+  m.held = !g.outcomes.empty() && g.failed_share == 0.0;
+  m.freed = !g.outcomes.empty() && g.freed_share == 1.0;
   m.approach.x = z.x(), m.approach.y = z.y(), m.approach.z = z.z();
   m.seal_score = static_cast<float>(g.candidate.seal_score);
   m.mean_displacement_m = static_cast<float>(g.mean_displacement_m);
@@ -90,8 +98,11 @@ visualization_msgs::MarkerArray graspMarkers(const std_msgs::Header& header,
     arrow.scale.x = 0.004;  // shaft diameter
     arrow.scale.y = 0.008;  // head diameter
     arrow.scale.z = 0.012;  // head length
-    const float rank = grasps.size() > 1 ? static_cast<float>(i) / (grasps.size() - 1) : 0.0f;
-    arrow.color.r = rank, arrow.color.g = 1.0f - rank, arrow.color.b = 0.0f, arrow.color.a = 1.0f;
+    // By outcome: held and freed green, held but not freed yellow, the seal broke red.
+    const GraspOutcome outcome = graspOutcome(grasps[i]);
+    arrow.color.r = outcome == GraspOutcome::kHeldAndFreed ? 0.0f : 1.0f;
+    arrow.color.g = outcome == GraspOutcome::kFailed ? 0.0f : 1.0f;
+    arrow.color.b = 0.0f, arrow.color.a = 1.0f;
     out.markers.push_back(arrow);
     if (i >= 3) continue;
     visualization_msgs::Marker text = arrow;

@@ -1,9 +1,12 @@
 #include "simstack_ros/grasp_server.h"
 
+#include <tf2_eigen/tf2_eigen.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -37,6 +40,13 @@ std::string badIds(const ObjectArray& scene) {
   return "";
 }
 
+/// Longest pre-grasp stand-off a request may ask for (m).
+constexpr double kMaxPregraspM = 1.0;
+/// A target_point farther than this from every object's surface names none (m).
+constexpr double kMaxTargetPointM = 0.1;
+/// How long a tf lookup waits for the transform (wall-clock seconds).
+constexpr double kTfWaitS = 0.5;
+
 /// How far a scene's lowest surface may be from z = 0, where the simulation puts the table,
 /// for the scene to be taken as resting on it (metres).
 constexpr double kTableGapM = 0.05;
@@ -59,7 +69,7 @@ std::string tableNote(const std::vector<SuperquadricShape>& scene, const std::st
 }  // namespace
 
 GraspServer::GraspServer(ros::NodeHandle nh, ros::NodeHandle pnh)
-    : nh_(nh), pnh_(pnh), config_(graspServerConfigFromParams(pnh)) {
+    : nh_(nh), pnh_(pnh), config_(graspServerConfigFromParams(pnh)), tf_listener_(tf_buffer_) {
   // Scenes on a queue and thread of their own: a request waiting for the ranking in progress
   // holds one of the service's threads, and with the scenes on that queue, the newest scene
   // would wait behind it and the request rank the one from before the ranking it waited for.
@@ -71,12 +81,24 @@ GraspServer::GraspServer(ros::NodeHandle nh, ros::NodeHandle pnh)
   scene_spinner_->start();
   markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("grasps", 1, true);
   rank_srv_ = pnh_.advertiseService("rank_grasps", &GraspServer::rank, this);
+  // A plain ActionServer: SimpleActionServer recalls a goal stamped before the last one, and
+  // under a looping bag's clock every goal after the first loop would be.
+  action_ = std::make_unique<actionlib::ActionServer<RankGraspsAction>>(
+      pnh_, "rank_grasps_action", [this](GoalHandle goal) { onGoal(goal); },
+      [this](GoalHandle goal) { onCancel(goal); }, false);
+  action_->start();
   ROS_INFO("simstack grasp_server: scenes from %s, ~rank_grasps ready (%d candidates, %d threads)",
            nh_.resolveName(config_.objects_topic).c_str(), config_.max_candidates,
            config_.ranking.threads);
 }
 
 GraspServer::~GraspServer() {
+  {
+    std::lock_guard<std::mutex> lock(goals_mutex_);
+    for (auto& [id, cancelled] : cancelled_) *cancelled = true;
+  }
+  for (GoalThread& t : goal_threads_) t.thread.join();  // each stops within a pull
+  action_.reset();
   scene_spinner_->stop();  // joins its thread: no scene callback runs past this line
   objects_sub_.shutdown();
 }
@@ -86,9 +108,104 @@ void GraspServer::onObjects(const ObjectArray::ConstPtr& msg) {
   latest_ = msg;
 }
 
+bool GraspServer::lookup(const std::string& target, const std::string& source,
+                         const ros::Time& stamp, Transform* T_target_source, std::string* why) {
+  // Waited for on the wall clock: under a paused bag's clock tf2's own timeout never ends.
+  const ros::SteadyTime deadline = ros::SteadyTime::now() + ros::WallDuration(kTfWaitS);
+  std::string error;
+  while (!tf_buffer_.canTransform(target, source, stamp, &error)) {
+    if (ros::SteadyTime::now() >= deadline) break;
+    ros::WallDuration(0.01).sleep();
+  }
+  try {
+    *T_target_source = tf2::transformToEigen(tf_buffer_.lookupTransform(target, source, stamp));
+    return true;
+  } catch (const tf2::TransformException& e) {
+    *why = "no transform '" + target + "' <- '" + source + "' at the scene's stamp " +
+           number(stamp.toSec()) + " s: " + e.what();
+    return false;
+  }
+}
+
+bool GraspServer::nearestToPoint(const geometry_msgs::PointStamped& point, const ObjectArray& scene,
+                                 int* target, std::string* why) {
+  Vec3 p(point.point.x, point.point.y, point.point.z);
+  if (!p.allFinite()) {
+    *why = "target_point is not finite";
+    return false;
+  }
+  const std::string frame = tf2Frame(point.header.frame_id);
+  const std::string scene_frame = tf2Frame(scene.header.frame_id);
+  if (frame != scene_frame) {
+    Transform T_scene_point;
+    if (!lookup(scene_frame, frame, scene.header.stamp, &T_scene_point, why)) {
+      *why = "target_point: " + *why;
+      return false;
+    }
+    p = T_scene_point * p;
+  }
+  // Inside an object (f < 1) beats outside, the deeper the better; outside, the nearer surface
+  // along the ray from the centre (the radial distance) wins.
+  double best = INFINITY, best_rank = INFINITY;
+  for (size_t k = 0; k < scene.objects.size(); ++k) {
+    const SuperquadricShape sq = superquadricFromMsg(
+        scene.objects[k].superquadric, "object " + std::to_string(scene.objects[k].id));
+    const double f = sq.insideOutside(p);
+    const double d = f < 1.0 ? 0.0 : sq.radialDistance(p);
+    const double rank = f < 1.0 ? f - 1.0 : d;
+    if (rank < best_rank) best_rank = rank, best = d, *target = static_cast<int>(k);
+  }
+  if (best > kMaxTargetPointM) {
+    *why = "no object's surface lies within " + number(kMaxTargetPointM) + " m of target_point (" +
+           number(p.x()) + ", " + number(p.y()) + ", " + number(p.z()) + ") in '" + scene_frame +
+           "': the nearest is " + number(best) + " m away";
+    return false;
+  }
+  return true;
+}
+
+bool GraspServer::placeRequest(const RankGrasps::Request& req, const ObjectArray& scene,
+                               RankGrasps::Response& res, PreparedRequest* out) {
+  int* target = &out->target;
+  *target = -1;
+  std::string ids;
+  for (size_t k = 0; k < scene.objects.size(); ++k) {
+    if (scene.objects[k].id == req.target_id) *target = static_cast<int>(k);
+    ids += (k ? ", " : "") + std::to_string(scene.objects[k].id);
+  }
+  if (!req.target_point.header.frame_id.empty()) {
+    if (!nearestToPoint(req.target_point, scene, target, &res.message)) return false;
+  } else if (*target < 0) {
+    res.message =
+        "unknown target id " + std::to_string(req.target_id) + " (the scene's ids: " + ids + ")";
+    return false;
+  }
+  res.target_id = scene.objects[*target].id;
+  if (!std::isfinite(req.pregrasp_distance_m) || req.pregrasp_distance_m < 0.0 ||
+      req.pregrasp_distance_m > kMaxPregraspM) {
+    res.message = "pregrasp_distance_m must lie in [0, " + number(kMaxPregraspM) + "] m, not " +
+                  number(req.pregrasp_distance_m) + " (0: the node's ~pregrasp_distance_m, " +
+                  number(config_.pregrasp_distance_m) + ")";
+    return false;
+  }
+  out->pregrasp_distance_m =
+      req.pregrasp_distance_m > 0.0 ? req.pregrasp_distance_m : config_.pregrasp_distance_m;
+  out->pose_header = res.header;
+  out->T_frame_scene = Transform::Identity();
+  if (!req.target_frame.empty() && tf2Frame(req.target_frame) != res.header.frame_id) {
+    out->pose_header.frame_id = tf2Frame(req.target_frame);
+    if (!lookup(out->pose_header.frame_id, res.header.frame_id, res.header.stamp,
+                &out->T_frame_scene, &res.message))
+      return false;
+  }
+  return true;
+}
+
 bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& res,
-                          std::vector<std::vector<SuperquadricShape>>* scenes, int* target,
-                          GraspRankingConfig* config, std::vector<Vec3>* cameras) {
+                          PreparedRequest* out) {
+  std::vector<std::vector<SuperquadricShape>>* scenes = &out->scenes;
+  GraspRankingConfig* config = &out->config;
+  std::vector<Vec3>* cameras = &out->cameras;
   ObjectArray::ConstPtr scene;
   if (!req.scene.objects.empty()) {
     scene = boost::make_shared<ObjectArray>(req.scene);
@@ -129,17 +246,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   }
   res.header = scene->header;
   res.header.frame_id = tf2Frame(res.header.frame_id);  // markers in rviz
-  *target = -1;
-  std::string ids;
-  for (size_t k = 0; k < scene->objects.size(); ++k) {
-    if (scene->objects[k].id == req.target_id) *target = static_cast<int>(k);
-    ids += (k ? ", " : "") + std::to_string(scene->objects[k].id);
-  }
-  if (*target < 0) {
-    res.message =
-        "unknown target id " + std::to_string(req.target_id) + " (the scene's ids: " + ids + ")";
-    return false;
-  }
+  if (!placeRequest(req, *scene, res, out)) return false;
   if (!positiveFinite(req.pull_distance_m) || req.pull_distance_m > config_.max_pull_distance_m) {
     res.message = "pull_distance_m must lie in (0, " + number(config_.max_pull_distance_m) +
                   "] m, not " + number(req.pull_distance_m) + " (e.g. 0.1)";
@@ -204,20 +311,107 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
 }
 
 bool GraspServer::rank(RankGrasps::Request& req, RankGrasps::Response& res) {
+  serve(req, res, {});
+  return true;
+}
+
+void GraspServer::onGoal(GoalHandle goal) {
+  const std::string id = goal.getGoalID().id;
+  auto cancelled = std::make_shared<std::atomic<bool>>(false);
+  std::lock_guard<std::mutex> lock(goals_mutex_);
+  cancelled_[id] = cancelled;
+  goal.setAccepted();
+  // Threads of finished goals are joined here, so that they do not pile up.
+  for (auto it = goal_threads_.begin(); it != goal_threads_.end();) {
+    if (*it->finished) {
+      it->thread.join();
+      it = goal_threads_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  // Its own thread: the spinner's stay free for cancels and the service.
+  auto finished = std::make_shared<std::atomic<bool>>(false);
+  std::thread thread([this, goal, id, cancelled, finished]() mutable {
+    runGoal(goal, *cancelled);
+    std::lock_guard<std::mutex> done(goals_mutex_);
+    cancelled_.erase(id);
+    *finished = true;
+  });
+  goal_threads_.push_back({std::move(thread), finished});
+}
+
+void GraspServer::onCancel(GoalHandle goal) {
+  std::lock_guard<std::mutex> lock(goals_mutex_);
+  const auto it = cancelled_.find(goal.getGoalID().id);
+  if (it != cancelled_.end()) *it->second = true;
+}
+
+void GraspServer::runGoal(GoalHandle goal, const std::atomic<bool>& cancelled) {
+  const RankGraspsGoal& g = *goal.getGoal();
+  RankGrasps::Request req;
+  req.scene = g.scene;
+  req.target_id = g.target_id;
+  req.target_point = g.target_point;
+  req.target_frame = g.target_frame;
+  req.pregrasp_distance_m = g.pregrasp_distance_m;
+  req.candidates = g.candidates;
+  req.pull_distance_m = g.pull_distance_m;
+  req.pull_speed_mps = g.pull_speed_mps;
+  req.use_camera_pose = g.use_camera_pose;
+  req.camera_pose = g.camera_pose;
+  req.hypotheses = g.hypotheses;
+  RankGrasps::Response res;
+  serve(req, res, [&](int done, int total, const Grasp* best) {
+    RankGraspsFeedback feedback;
+    feedback.pulls_done = static_cast<uint32_t>(done);
+    feedback.pulls_total = static_cast<uint32_t>(total);
+    feedback.has_best = best != nullptr;
+    if (best) feedback.best = *best;
+    goal.publishFeedback(feedback);
+    return !cancelled && ros::ok();
+  });
+  RankGraspsResult result;
+  result.success = res.success;
+  result.message = res.message;
+  result.header = res.header;
+  result.target_id = res.target_id;
+  result.grasps = res.grasps;
+  result.candidates_seen = res.candidates_seen;
+  result.candidates_sealable = res.candidates_sealable;
+  result.hypotheses_used = res.hypotheses_used;
+  result.baseline_displacement_m = res.baseline_displacement_m;
+  result.pulls = res.pulls;
+  result.time_s = res.time_s;
+  if (cancelled)
+    goal.setCanceled(result, res.message);
+  else if (res.success)
+    goal.setSucceeded(result, res.message);
+  else
+    goal.setAborted(result, res.message);
+}
+
+void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& res,
+                        const GraspFeedback& feedback) {
   std::lock_guard<std::mutex> lock(rank_mutex_);
   const auto start = std::chrono::steady_clock::now();
   res.success = false;
   try {
-    std::vector<std::vector<SuperquadricShape>> scenes;
-    int target = -1;
-    GraspRankingConfig config;
-    std::vector<Vec3> cameras;
-    if (!prepare(req, res, &scenes, &target, &config, &cameras)) {
+    PreparedRequest p;
+    if (!prepare(req, res, &p)) {
       ROS_WARN("simstack grasp_server: %s", res.message.c_str());
-      return true;
+      return;
     }
-    const GraspRanking ranking = rankGrasps(scenes, target, cameras, config);
-    for (const RankedGrasp& g : ranking.grasps) res.grasps.push_back(graspMsg(g));
+    RankingProgress progress;
+    if (feedback)
+      progress = [&](int done, int total, const RankedGrasp* best) {
+        std::optional<Grasp> msg;
+        if (best) msg = graspMsg(*best, p.pose_header, p.T_frame_scene, p.pregrasp_distance_m);
+        return feedback(done, total, msg ? &*msg : nullptr);
+      };
+    const GraspRanking ranking = rankGrasps(p.scenes, p.target, p.cameras, p.config, progress);
+    for (const RankedGrasp& g : ranking.grasps)
+      res.grasps.push_back(graspMsg(g, p.pose_header, p.T_frame_scene, p.pregrasp_distance_m));
     for (const SceneDrift& d : ranking.baseline)
       res.baseline_displacement_m.push_back(static_cast<float>(d.max_displacement_m));
     res.candidates_seen = static_cast<uint32_t>(ranking.candidates.visible);
@@ -226,10 +420,10 @@ bool GraspServer::rank(RankGrasps::Request& req, RankGrasps::Response& res) {
     res.pulls = static_cast<uint32_t>(ranking.pulls);
     res.message += std::to_string(ranking.grasps.size()) + " grasps ranked" +
                    (ranking.message.empty() ? "" : "; " + ranking.message);
-    res.success = true;
+    res.success = !ranking.stopped;  // cancelled: the grasps so far, not a ranking
     markers_pub_.publish(graspMarkers(res.header, ranking.grasps));
     ROS_INFO("simstack grasp_server: object %u: %zu grasps ranked, %d pulls in %zu hypotheses",
-             req.target_id, ranking.grasps.size(), ranking.pulls, ranking.hypotheses.size());
+             res.target_id, ranking.grasps.size(), ranking.pulls, ranking.hypotheses.size());
   } catch (const std::invalid_argument& e) {
     res.message = e.what();
     ROS_WARN("simstack grasp_server: %s", e.what());
@@ -238,7 +432,6 @@ bool GraspServer::rank(RankGrasps::Request& req, RankGrasps::Response& res) {
     ROS_ERROR("simstack grasp_server: %s", res.message.c_str());
   }
   res.time_s = std::chrono::duration<float>(std::chrono::steady_clock::now() - start).count();
-  return true;
 }
 
 }  // namespace simstack

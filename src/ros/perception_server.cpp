@@ -3,6 +3,7 @@
 #include <geometry_msgs/TransformStamped.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <simstack/ObjectArray.h>
+#include <std_msgs/Bool.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <visualization_msgs/MarkerArray.h>
 
@@ -21,6 +22,15 @@ std::string expandHome(const std::string& path) {
   if (path.rfind("~/", 0) != 0 && path != "~") return path;
   const char* home = std::getenv("HOME");
   return std::string(home ? home : "") + path.substr(1);
+}
+
+/// node/output_dir, or $ROS_HOME/simstack when it is empty (ROS_HOME as roslaunch reads it:
+/// ~/.ros when unset).
+std::string outputDirectory(const std::string& configured) {
+  if (!configured.empty()) return expandHome(configured);
+  const char* ros_home = std::getenv("ROS_HOME");
+  const std::string base = ros_home && *ros_home ? std::string(ros_home) : expandHome("~/.ros");
+  return base + "/simstack";
 }
 
 LiveSettingsConfig liveSettings(const PerceptionConfig& c) {
@@ -62,19 +72,23 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
       // Named after the nodelet, not the manager it is loaded into (two perception nodelets in
       // one manager must not report under one name); ~diagnostic_period is read from pnh.
       diagnostics_(nh, pnh, pnh.getNamespace()),
-      rate_since_(ros::SteadyTime::now()) {
+      rate_since_(ros::SteadyTime::now()),
+      tracker_(node_.tracking) {
   // Read by diagnostic_updater (default 1 s, once, at start); checked before anything is
   // advertised, so that a refused node offers no service that could call into it.
   const double period = diagnostics_.getPeriod();
   if (!(period >= 0.01 && period <= 3600.0))
     throw std::runtime_error(pnh_.resolveName("diagnostic_period") + " must lie in [0.01, 3600] s");
-  // Latched: a grasp client or rviz that starts later still gets the last scene.
-  objects_pub_ = pnh_.advertise<ObjectArray>("objects", 1, true);
-  instances_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("instances", 1);
-  markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("markers", 1);
-  occupancy_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("occupancy", 1);
+  // Latched (node/latch): a grasp client, task node or rviz that starts later still gets the
+  // last scene, as from octomap_server.
+  const bool latch = node_.latch;
+  objects_pub_ = pnh_.advertise<ObjectArray>("objects", 1, latch);
+  instances_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("instances", 1, latch);
+  markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("markers", 1, latch);
+  occupancy_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("occupancy", 1, latch);
+  ready_pub_ = pnh_.advertise<std_msgs::Bool>("ready", 1, true);
   image_transport::ImageTransport private_it(pnh_);
-  labels_pub_ = private_it.advertise("labels", 1);
+  labels_pub_ = private_it.advertise("labels", 1, latch);
   reset_srv_ = pnh_.advertiseService("reset", &PerceptionServer::reset, this);
   save_srv_ = pnh_.advertiseService("save_octomap", &PerceptionServer::saveOctomap, this);
   diagnostics_.setHardwareID("simstack_perception " + pnh_.getNamespace());
@@ -88,6 +102,7 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   reconfigure_->updateConfig(live);  // the node's parameters, not the .cfg's defaults
   reconfigure_->setCallback(
       [this](LiveSettingsConfig& settings, uint32_t level) { onSettings(settings, level); });
+  warmUp();
   // The hints read ~image_transport (image_transport's convention, `_image_transport:=...`)
   // from the node's own namespace: a nodelet's "~" would be its manager's.
   const image_transport::TransportHints hints(node_.image_transport, ros::TransportHints(), pnh_);
@@ -118,6 +133,10 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
            perception_->config().model_path.c_str(), perception_->config().samples,
            node_.estimate_table ? "estimated and broadcast as" : "from tf frame",
            node_.table_frame.c_str(), depth_sub_.getTopic().c_str());
+  // Ready once it listens: a launch file or bag player waiting for it loses no frame.
+  std_msgs::Bool ready;
+  ready.data = true;
+  ready_pub_.publish(ready);
   // Both on the monotonic wall clock, so also while a bag is paused: the silence check once a
   // second, /diagnostics once a period. Made after everything that may throw, so that no tick
   // reaches an object whose construction failed.
@@ -347,8 +366,12 @@ void PerceptionServer::process(const Frame& frame) {
           stamp.toSec(), (last_stamp_ - stamp).toSec(), depth_sub_.getTopic().c_str());
       views_.clear();
     }
+    if (stamp < last_stamp_) tracker_.reset();  // a restarted bag: its objects are new
     last_stamp_ = stamp;
-    if (reset_requested_) views_.clear();
+    if (reset_requested_) {
+      views_.clear();
+      tracker_.reset();
+    }
     reset_requested_ = false;
     view.mask = mask_;  // a mask of another size makes perceive() refuse the frame
     // The newest frame first: it places the grid, its patches regroup the instances and the
@@ -391,23 +414,57 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
     t.child_frame_id = node_.table_frame;
     tf_broadcaster_.sendTransform(t);
   }
+  std::vector<SuperquadricShape> shapes;
+  for (const InstanceEstimate& e : estimate.instances()) shapes.push_back(e.superquadric);
+  ObjectIds ids;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ids = tracker_.assign(shapes);
+  }
+  if (node_.publish_object_tf) {
+    std::vector<geometry_msgs::TransformStamped> frames;
+    for (size_t k = 0; k < shapes.size(); ++k) {
+      geometry_msgs::TransformStamped t = tf2::eigenToTransform(shapes[k].T_table_object);
+      t.header = header;
+      t.child_frame_id = node_.object_frame_prefix + "object_" + std::to_string(ids[k]);
+      frames.push_back(std::move(t));
+    }
+    if (!frames.empty()) tf_broadcaster_.sendTransform(frames);
+  }
   objects_pub_.publish(objectArrayMsg(header, estimate, views,
                                       static_cast<int>(estimate.hypotheses.size()),
-                                      perception_->config().symmetries));
-  instances_pub_.publish(instancesCloud(header, estimate));
-  markers_pub_.publish(objectMarkers(header, estimate));
+                                      perception_->config().symmetries, ids));
+  instances_pub_.publish(instancesCloud(header, estimate, ids));
+  markers_pub_.publish(objectMarkers(header, estimate, ids));
   double occupancy_min;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     occupancy_min = node_.occupancy_min;
   }
   occupancy_pub_.publish(occupancyCloud(header, estimate.occupancy_probability, occupancy_min));
-  if (labels_pub_.getNumSubscribers() > 0) {
+  // Latched, it is made for every frame (a later subscriber gets the last); else only when
+  // someone listens.
+  if (node_.latch || labels_pub_.getNumSubscribers() > 0) {
     DepthView posed = view;
     posed.T_table_camera = view.T_table_camera.value_or(estimate.T_table_camera);
-    labels_pub_.publish(labelImage(
-        camera_header, pixelInstances(posed, estimate, 0, labelMinHeight(perception_->config()))));
+    labels_pub_.publish(
+        labelImage(camera_header,
+                   pixelInstances(posed, estimate, 0, labelMinHeight(perception_->config())), ids));
   }
+}
+
+void PerceptionServer::warmUp() {
+  const ros::SteadyTime begun = ros::SteadyTime::now();
+  const SceneEstimate estimate = perception_->warmUp();
+  warm_up_s_ = (ros::SteadyTime::now() - begun).toSec();
+  warm_up_objects_ = static_cast<int>(estimate.instances().size());
+  if (warm_up_objects_ == 1)
+    ROS_INFO("simstack perception: network warmed up in %.2f s (the test box found)", warm_up_s_);
+  else
+    ROS_WARN(
+        "simstack perception: warm-up on a rendered box found %d objects, not 1: is the model "
+        "the one meant?",
+        warm_up_objects_);
 }
 
 bool PerceptionServer::reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
@@ -435,7 +492,7 @@ bool PerceptionServer::saveOctomap(SaveOctomap::Request& req, SaveOctomap::Respo
   }
   namespace fs = std::filesystem;
   try {
-    const fs::path dir = expandHome(node_.output_dir);
+    const fs::path dir = outputDirectory(node_.output_dir);
     fs::create_directories(dir);
     const fs::path target = dir / req.file_name;
     if (fs::is_symlink(target)) {
@@ -503,8 +560,13 @@ void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "no frame processed: " + last_error_);
   else if (failing_)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "frames skipped: " + last_error_);
+  else if (received_ == 0)
+    status.summary(diagnostic_msgs::DiagnosticStatus::OK, "ready, waiting for the first frame");
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "perceiving");
+  status.add("ready (model loaded and warmed up, listening)", std::string("true"));
+  status.add("warm-up objects found (a 12 x 8 x 6 cm box)", warm_up_objects_);
+  status.add("warm-up seconds", warm_up_s_);
   status.add("depth topic", depth_sub_.getTopic());
   status.add("seconds since the last frame", secondsWithoutFrame(now));
   status.add("frames received", received_);

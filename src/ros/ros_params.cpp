@@ -120,6 +120,11 @@ void NodeConfig::validate() const {
     throw std::invalid_argument("node/occupancy_min must lie in (0, 1]");
   if (max_views < 1 || max_views > 64)
     throw std::invalid_argument("node/max_views must lie in [1, 64]");
+  try {
+    tracking.validate();
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("node/track_*: ") + e.what());
+  }
 }
 
 PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
@@ -152,7 +157,8 @@ NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh) {
     for (auto& kv : given)
       if (!std::set<std::string>{"table_frame", "estimate_table", "tf_timeout_s", "input_timeout_s",
                                  "image_transport", "occupancy_min", "accumulate_views",
-                                 "max_views", "output_dir"}
+                                 "max_views", "output_dir", "latch", "track_max_centre_distance_m",
+                                 "track_max_size_ratio", "publish_object_tf", "object_frame_prefix"}
                .count(kv.first))
         throw std::runtime_error("unknown parameter " + pnh.resolveName("node/" + kv.first));
   }
@@ -168,6 +174,11 @@ NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh) {
   read(pnh, "node/accumulate_views", &c.accumulate_views);
   read(pnh, "node/max_views", &c.max_views);
   read(pnh, "node/output_dir", &c.output_dir);
+  read(pnh, "node/latch", &c.latch);
+  read(pnh, "node/publish_object_tf", &c.publish_object_tf);
+  read(pnh, "node/object_frame_prefix", &c.object_frame_prefix);
+  read(pnh, "node/track_max_centre_distance_m", &c.tracking.max_centre_distance_m);
+  read(pnh, "node/track_max_size_ratio", &c.tracking.max_size_ratio);
   c.validate();
   return c;
 }
@@ -182,6 +193,8 @@ void GraspServerConfig::validate() const {
   if (max_candidates_limit < max_candidates)
     throw std::invalid_argument("max_candidates_limit must be >= max_candidates");
   positive(max_pull_distance_m, "max_pull_distance_m");
+  if (!(pregrasp_distance_m >= 0.0 && pregrasp_distance_m <= 1.0))
+    throw std::invalid_argument("pregrasp_distance_m must lie in [0, 1] m");
   if (!(max_scene_age_s >= 0.0) || !std::isfinite(max_scene_age_s))
     throw std::invalid_argument("max_scene_age_s must be >= 0 (0: any age)");
   positive(ranking.candidates.cup_radius_m, "cup_radius_m");
@@ -199,7 +212,8 @@ GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
       "objects_topic",       "threads",          "max_candidates",   "max_candidates_limit",
       "max_pull_distance_m", "cup_radius_m",     "seal_tolerance_m", "surface_samples",
       "tool_length_m",       "max_force_n",      "cup_stiffness_hz", "settle_s",
-      "topple_deg",          "match_distance_m", "density_kgpm3",    "max_scene_age_s"};
+      "topple_deg",          "match_distance_m", "density_kgpm3",    "max_scene_age_s",
+      "pregrasp_distance_m"};
   XmlRpc::XmlRpcValue all;
   if (ros::param::get(pnh.getNamespace(), all) && all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
     for (auto& kv : all)
@@ -216,6 +230,7 @@ GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
   read(pnh, "max_candidates_limit", &c.max_candidates_limit);
   read(pnh, "max_pull_distance_m", &c.max_pull_distance_m);
   read(pnh, "max_scene_age_s", &c.max_scene_age_s);
+  read(pnh, "pregrasp_distance_m", &c.pregrasp_distance_m);
   read(pnh, "cup_radius_m", &k.cup_radius_m);
   read(pnh, "seal_tolerance_m", &k.seal_tolerance_m);
   read(pnh, "surface_samples", &k.surface_samples);

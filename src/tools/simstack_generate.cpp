@@ -78,6 +78,15 @@ int main(int argc, char** argv) {
   app.add_option("--ycb", o.ycb_dir,
                  "directory of YCB meshes (<dir>/<object>/nontextured.stl): mesh piles instead of "
                  "superquadrics");
+  app.add_option("--household", o.household_share,
+                 "share of the objects drawn from household shapes: bowls and cups (concave "
+                 "meshes), flat, thin and small superquadrics; 0 = the paper's piles")
+      ->check(FiniteNonNegative & CLI::Range(0.0, 1.0))
+      ->excludes("--ycb")
+      ->capture_default_str();
+  app.add_flag("--loose", o.loose,
+               "objects dropped 15 cm about the centre and kept side by side: piles need not be "
+               "one stack (real tables)");
   app.add_option("--views", o.views, "rendered views per scene written beside the dataset")
       ->check(FiniteNonNegative);
   app.add_option("--views-dir", o.views_dir, "where views go (default: <output stem>_views/)");
@@ -108,7 +117,10 @@ int main(int argc, char** argv) {
     const GenerationSummary s = generateDataset(o, [&](int done, int) { bar.update(done); });
     bar.finish();
     std::cout << "wrote " << o.scenes << " scenes (" << s.objects << " objects, "
-              << (o.ycb_dir.empty() ? "superquadrics" : "YCB meshes") << ") to " << o.output << "\n"
+              << (!o.ycb_dir.empty()        ? "YCB meshes"
+                  : o.household_share > 0.0 ? "superquadrics and household shapes"
+                                            : "superquadrics")
+              << ") to " << o.output << "\n"
               << "  grid " << o.resolution << "^3, " << o.extent_m / o.resolution * 100.0
               << " cm voxels, truncation " << s.truncation_m * 100.0 << " cm\n"
               << "  " << s.attempts << " piles drawn for " << o.scenes << " accepted ("

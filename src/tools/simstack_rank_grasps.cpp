@@ -46,6 +46,11 @@ int main(int argc, char** argv) {
   app.add_option("--rows", rows, "grasps printed")
       ->capture_default_str()
       ->check(CLI::Range(1, 1024));
+  double pregrasp_m = 0.05;
+  app.add_option("--pregrasp-distance", pregrasp_m,
+                 "metres the pre-grasp pose in grasps.json stands back from the contact")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
   app.add_option("--output", output, "directory for grasps.json and grasps.png (created)");
   CLI11_PARSE(app, argc, argv);
   config.pull.cup_radius_m = config.candidates.cup_radius_m;
@@ -76,7 +81,8 @@ int main(int argc, char** argv) {
     if (!ranking.message.empty()) std::cout << ranking.message << "\n";
     std::cout << graspTable(ranking, rows);
     if (!output.empty()) {
-      writeGraspJson((fs::path(staged->path()) / "grasps.json").string(), ranking, target_id);
+      writeGraspJson((fs::path(staged->path()) / "grasps.json").string(), ranking, target_id,
+                     pregrasp_m);
       writeGraspPicture((fs::path(staged->path()) / "grasps.png").string(), scene, ranking.grasps,
                         5);
       staged->commit();

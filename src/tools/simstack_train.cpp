@@ -104,7 +104,7 @@ void addOptions(CLI::App& app, Options& o) {
       ->check(CLI::ExistingFile);
   app.add_option("--ycb", o.mesh_dir,
                  "with --validate-only: the mesh directory of a YCB dataset (training takes "
-                 "superquadric piles only)")
+                 "superquadric and household piles only)")
       ->check(CLI::ExistingDirectory);
 }
 
@@ -124,7 +124,7 @@ int main(int argc, char** argv) {
   }
   if (!o.mesh_dir.empty() && o.validate_only.empty()) {
     std::cerr << "simstack_train: error: --ycb is for --validate-only (training takes "
-                 "superquadric piles only)\n";
+                 "superquadric and household piles only)\n";
     return 2;
   }
 

@@ -13,10 +13,11 @@ bool firstHeldGrasp(ros::NodeHandle& nh, const simstack::ObjectArray& scene, uin
   srv.request.target_id = target;
   srv.request.pull_distance_m = 0.10;
   srv.request.pull_speed_mps = 0.20;
+  srv.request.target_frame = "base_link";  // poses in the robot's frame
   if (client.waitForExistence(ros::Duration(30.0)) && client.call(srv) && srv.response.success)
     for (const simstack::Grasp& g : srv.response.grasps)
-      if (g.failed_share == 0.0f) {
-        *grasp = g;  // g.contact, in srv.response.header.frame_id
+      if (g.held) {
+        *grasp = g;  // g.tool_pose and g.pregrasp_pose: PoseStamped in base_link, z into the object
         return true;
       }
   return false;

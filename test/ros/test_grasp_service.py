@@ -266,10 +266,12 @@ class GraspService(unittest.TestCase):
         return done.returncode, done.stdout + done.stderr
 
     def test_8_the_script_ranks_the_top_object(self):
-        code, out = self.script("--target", "top", "--candidates", "4")
+        code, out = self.script("--target", "top", "--candidates", "32", "--progress")
         self.assertEqual(code, 0, out)
         self.assertRegex(out, r"object \d+: .*grasps ranked")
-        self.assertIn("rank  contact (m)", out)
+        self.assertIn("rank  contact (m, table)", out)
+        # The action's feedback (the last may come after the result, which ends the goal).
+        self.assertRegex(out, r"pulls \d+ of 32")
 
     def test_9_the_script_refuses_a_stale_latched_scene(self):
         # A latched scene arrives at once however old it is; the bag's clock reads 1 s or more.
@@ -295,7 +297,7 @@ class GraspService(unittest.TestCase):
         res = grasp_client.rank_grasps(scene, target, candidates=8)
         self.assertTrue(res.success, res.message)
         held = grasp_client.held_grasps(res)
-        self.assertTrue(all(g.failed_share == 0.0 for g in held))
+        self.assertTrue(all(g.failed_share == 0.0 and g.held for g in held))
         self.assertEqual(held, [g for g in res.grasps if g.failed_share == 0.0])
         with self.assertRaisesRegex(grasp_client.GraspServiceError, "unknown target id 99"):
             grasp_client.rank_grasps(scene, 99)

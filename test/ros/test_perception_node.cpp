@@ -10,6 +10,7 @@
 #include <sensor_msgs/image_encodings.h>
 #include <simstack/ObjectArray.h>
 #include <simstack/SaveOctomap.h>
+#include <std_msgs/Bool.h>
 #include <std_srvs/Empty.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/static_transform_broadcaster.h>
@@ -24,6 +25,7 @@
 #include <mutex>
 #include <optional>
 #include <random>
+#include <set>
 
 #include "../test_scenes.h"
 #include "simstack/render/depth_renderer.h"
@@ -205,6 +207,62 @@ TEST_F(PerceptionNodeTest, AKnownPileGivesItsObjects) {
     EXPECT_GT(o.visible_fraction, 0.05f);
     EXPECT_LT(o.visible_fraction, 0.95f);
   }
+}
+
+TEST_F(PerceptionNodeTest, IdsStayWithTheirObjectsAndLateSubscribersGetTheLatchedOutputs) {
+  const std::vector<SuperquadricShape> truth = knownPile();
+  const std::optional<ObjectArray> first = sendDepth(render(truth), 60.0);
+  const std::optional<ObjectArray> second = sendDepth(render(truth), 60.0);
+  ASSERT_TRUE(first && second) << "no objects within 60 s";
+  ASSERT_EQ(first->objects.size(), truth.size());
+  ASSERT_EQ(second->objects.size(), truth.size());
+  // Each object of the second frame has the id of the first frame's object where it stands.
+  for (const Object& b : second->objects) {
+    const auto& q = b.superquadric.pose.position;
+    const Object* nearest = nullptr;
+    double best = 1e9;
+    for (const Object& a : first->objects) {
+      const auto& p = a.superquadric.pose.position;
+      const double d = std::hypot(p.x - q.x, p.y - q.y, p.z - q.z);
+      if (d < best) best = d, nearest = &a;
+    }
+    ASSERT_NE(nearest, nullptr);
+    EXPECT_LT(best, 0.01);
+    EXPECT_EQ(b.id, nearest->id);
+    // The superquadric as a mesh for a planning scene: closed, indices in range.
+    EXPECT_GT(b.mesh.triangles.size(), 100u);
+    EXPECT_LT(b.mesh.triangles.size(), 1000u);
+    for (const shape_msgs::MeshTriangle& t : b.mesh.triangles)
+      for (uint32_t v : t.vertex_indices) ASSERT_LT(v, b.mesh.vertices.size());
+  }
+  // A subscriber that comes after the frame still gets it: the outputs are latched.
+  std::optional<visualization_msgs::MarkerArray> late_markers;
+  std::optional<sensor_msgs::PointCloud2> late_instances;
+  std::optional<bool> ready;
+  ros::Subscriber m = nh_.subscribe<visualization_msgs::MarkerArray>(
+      "/camera/perception/markers", 1,
+      [&](const visualization_msgs::MarkerArray::ConstPtr& msg) { late_markers = *msg; });
+  ros::Subscriber i = nh_.subscribe<sensor_msgs::PointCloud2>(
+      "/camera/perception/instances", 1,
+      [&](const sensor_msgs::PointCloud2::ConstPtr& msg) { late_instances = *msg; });
+  ros::Subscriber r = nh_.subscribe<std_msgs::Bool>(
+      "/camera/perception/ready", 1,
+      [&](const std_msgs::Bool::ConstPtr& msg) { ready = msg->data; });
+  for (int k = 0; k < 200 && !(late_markers && late_instances && ready); ++k) {
+    ros::spinOnce();
+    ros::WallDuration(0.05).sleep();
+  }
+  ASSERT_TRUE(late_markers && late_instances && ready) << "no latched markers, instances or ready";
+  EXPECT_TRUE(*ready);
+  EXPECT_EQ(late_instances->header.stamp, second->header.stamp);
+  ASSERT_FALSE(late_markers->markers.empty());
+  EXPECT_EQ(late_markers->markers.front().action, visualization_msgs::Marker::DELETEALL);
+  std::set<int> marker_ids;
+  for (const auto& marker : late_markers->markers)
+    if (marker.ns == "superquadrics") marker_ids.insert(marker.id);
+  std::set<int> object_ids;
+  for (const Object& o : second->objects) object_ids.insert(static_cast<int>(o.id));
+  EXPECT_EQ(marker_ids, object_ids);
 }
 
 TEST_F(PerceptionNodeTest, ACroppedBinnedImageIsReadThroughItsCameraInfo) {

@@ -18,7 +18,11 @@ struct GenerationOptions {
   int resolution = 32;
   std::string output;  ///< the HDF5 file
   int min_objects = 3, max_objects = 4;
-  std::string ycb_dir;    ///< mesh piles of <dir>/<object>/nontextured.stl ("" = superquadrics)
+  std::string ycb_dir;  ///< mesh piles of <dir>/<object>/nontextured.stl ("" = superquadrics)
+  /// Share of the objects drawn from household shapes (household.h); superquadric piles only.
+  double household_share = 0.0;
+  /// Drops scattered 15 cm about the pile's centre and piles kept when not one stack.
+  bool loose = false;
   int views = 0;          ///< rendered views per scene
   std::string views_dir;  ///< "" = <output stem>_views/
   bool pictures = false;  ///< colour depth and shaded ground-truth PNGs per view

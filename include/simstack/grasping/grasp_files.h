@@ -15,8 +15,11 @@ namespace simstack {
 std::string graspTable(const GraspRanking& ranking, int rows);
 
 /// JSON: target id, candidate counts, baseline per hypothesis, and every grasp best first with
-/// its per-hypothesis outcomes. Throws std::runtime_error naming the file when it cannot write.
-void writeGraspJson(const std::string& path, const GraspRanking& ranking, int target_id);
+/// its tool and pre-grasp poses (toolPose(), pregraspPose() `pregrasp_distance_m` back; the
+/// scene's frame, [x, y, z, qw, qx, qy, qz]) and per-hypothesis outcomes. Throws
+/// std::runtime_error naming the file when it cannot write.
+void writeGraspJson(const std::string& path, const GraspRanking& ranking, int target_id,
+                    double pregrasp_distance_m);
 
 /// The scene seen from above and in front (640x480), with the first `top` grasps as arrows
 /// pointing at their contacts, coloured from green (best) to red, numbered.

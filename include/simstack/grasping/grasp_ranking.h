@@ -5,6 +5,7 @@
 /// more scene hypotheses (the perception's latent samples): each candidate is simulated in
 /// each hypothesis and ranked by its mean and its worst case over them.
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -48,6 +49,7 @@ struct GraspRanking {
   std::vector<SceneDrift> baseline;  ///< per hypothesis used: the scene left alone
   std::vector<int> hypotheses;       ///< indices of the hypotheses used (0 first)
   int pulls = 0;                     ///< pulls simulated
+  bool stopped = false;  ///< the progress callback asked to stop: grasps holds what finished
   /// What the caller should know, notes joined by "; " (empty when all is well): hypotheses
   /// left out, no sealable surface, no grasp that held (in any hypothesis, or in every one), no
   /// grasp that freed the target.
@@ -77,9 +79,19 @@ PullOutcome executeGrasp(const PullSimulator& simulator,
 /// carried into a hypothesis along its approach axis onto that hypothesis's target (a miss is
 /// a failed pull there). `camera_positions` empty: the five default cameras. Throws
 /// std::invalid_argument for a bad target, shape or config.
+/// Called after each pull with the pulls done, their total and the best grasp among the
+/// candidates whose every pull is done (nullptr before the first); from the threads simulating,
+/// one call at a time. Returning false stops the ranking: pulls not yet begun are not
+/// simulated, so it ends within one pull per thread.
+using RankingProgress = std::function<bool(int done, int total, const RankedGrasp* best)>;
+
+/// Whether grasp `a` ranks before grasp `b`: fewer seal failures, then more often freed, fewer
+/// topples, less displacement (whole millimetres), lower peak load.
+bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b);
+
 GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypotheses, int target,
-                        const std::vector<Vec3>& camera_positions,
-                        const GraspRankingConfig& config);
+                        const std::vector<Vec3>& camera_positions, const GraspRankingConfig& config,
+                        const RankingProgress& progress = {});
 
 /// The lowest point of the scene's surfaces: z in the table frame, metres (infinity for an
 /// empty scene). A pile resting on the table has it near 0; the simulation's table is at z = 0,

@@ -35,6 +35,16 @@ struct SuctionCandidate {
   double seal_score = 1.0;              ///< 1 - rim_deviation / seal_tolerance, in [0, 1]
 };
 
+/// The suction tool's pose at a candidate, as a motion planner takes it (MoveIt's convention:
+/// the tool's z along its approach): origin at the contact, z along -approach_table (into the
+/// surface), x the table's x projected onto the contact plane (its y where x is within 10
+/// degrees of the normal), y = z x x.
+Transform toolPose(const SuctionCandidate& candidate);
+
+/// The pre-grasp pose: `tool` moved `distance_m` back along its own -z (out of the surface),
+/// same orientation. Throws std::invalid_argument for a negative or non-finite distance.
+Transform pregraspPose(const Transform& tool, double distance_m);
+
 struct CandidateSet {
   std::vector<SuctionCandidate> candidates;
   int surface_samples = 0;  ///< drawn on the target

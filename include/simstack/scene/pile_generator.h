@@ -34,6 +34,9 @@ struct PileConfig {
   double grid_margin_m = 0.04;     ///< free border kept inside the grid
   double table_half_size_m = 0.5;  ///< an object whose centre leaves this square fell off
   bool require_stack = true;       ///< one connected pile with at least one object not on the table
+  /// Share of the objects of a superquadric pile drawn from household shapes (household.h):
+  /// half of them containers, half flat, thin or small superquadrics. 0 = the paper's piles.
+  double household_share = 0.0;
   /// Per drop (8.3 s). Measured before the displacement rule of generate() existed: drops that
   /// needed longer were 4 % of drops and 17 % of steps.
   int max_settle_steps = 2000;

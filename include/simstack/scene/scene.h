@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "simstack/geometry/container.h"
 #include "simstack/geometry/convex_hull.h"
 #include "simstack/geometry/superquadric.h"
 #include "simstack/geometry/triangle_mesh.h"
@@ -29,6 +30,11 @@ class ObjectShape {
   /// that encloses no volume.
   static std::shared_ptr<const ObjectShape> fromMesh(const std::string& name, int catalogue_index,
                                                      const TriangleMesh& mesh);
+  /// An open container (a bowl or a cup) as a mesh shape named spec.name(), re-centred on its
+  /// volume centroid; its inside test is the container's exact one. Throws
+  /// std::invalid_argument for an invalid spec.
+  static std::shared_ptr<const ObjectShape> fromContainer(const ContainerSpec& spec,
+                                                          int catalogue_index);
 
   Kind kind() const { return kind_; }
   const std::string& name() const { return name_; }
@@ -47,8 +53,9 @@ class ObjectShape {
   /// Surface area (m^2) and area-weighted surface centroid (object frame) of the mesh.
   double surfaceArea() const { return area_m2_; }
   const Vec3& surfaceCentroidObject() const { return surface_centroid_; }
-  /// Exact inside test for superquadrics; convex-hull test for meshes (the YCB objects used
-  /// here are close to convex, and their scans have small holes that defeat parity tests).
+  /// Exact inside test for superquadrics and containers; convex-hull test for other meshes (the
+  /// YCB objects used here are close to convex, and their scans have small holes that defeat
+  /// parity tests).
   bool containsObject(const Vec3& p_object) const;
   double volume() const { return volume_; }
   /// Radius of the bounding sphere about the origin.
@@ -56,6 +63,8 @@ class ObjectShape {
 
  private:
   ObjectShape() = default;
+  static std::shared_ptr<ObjectShape> meshShape(const std::string& name, int catalogue_index,
+                                                const TriangleMesh& mesh);
   void finish(uint64_t sample_seed);
   void makeSamples() const;
 
@@ -69,6 +78,8 @@ class ObjectShape {
   mutable std::once_flag samples_once_;
   mutable std::vector<SurfacePoint> samples_;
   std::optional<ConvexHull> hull_;
+  std::optional<ContainerSpec> container_;
+  Vec3 container_base_ = Vec3::Zero();  ///< the container's base centre, object frame
   mutable double sample_spacing_m_ = 0.004;
   double area_m2_ = 0.0;
   Vec3 surface_centroid_ = Vec3::Zero();

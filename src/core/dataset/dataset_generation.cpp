@@ -21,6 +21,7 @@
 #include "simstack/io/image_io.h"
 #include "simstack/io/staged_output.h"
 #include "simstack/render/depth_renderer.h"
+#include "simstack/scene/household.h"
 #include "simstack/scene/mesh_catalogue.h"
 #include "simstack/scene/pile_generator.h"
 #include "simstack/seeds.h"
@@ -29,6 +30,8 @@ namespace fs = std::filesystem;
 
 namespace simstack {
 namespace {
+
+constexpr double kLooseDropRadius_m = 0.15;
 
 struct SceneResult {
   Pile pile;
@@ -82,7 +85,18 @@ std::unique_ptr<PileGenerator> makeGenerator(const GenerationOptions& o, Dataset
                                 std::to_string(o.extent_m) + " m)");
   config.min_size_m = o.min_size_m;
   config.max_size_m = o.max_size_m;
-  if (o.ycb_dir.empty()) return std::make_unique<PileGenerator>(config);
+  config.household_share = o.household_share;
+  if (o.loose) {
+    config.require_stack = false;
+    config.drop_radius_m = kLooseDropRadius_m;
+  }
+  if (o.ycb_dir.empty()) {
+    if (o.household_share > 0.0)
+      for (const auto& shape : containerCatalogue()) info->mesh_names.push_back(shape->name());
+    return std::make_unique<PileGenerator>(config);
+  }
+  if (o.household_share > 0.0)
+    throw std::invalid_argument("--household draws into superquadric piles: not with --ycb");
   if (!fs::is_directory(o.ycb_dir))
     throw std::runtime_error("--ycb: not a directory: " + o.ycb_dir);
   info->mesh_names = ycbObjectNames();

@@ -17,6 +17,12 @@ using nlohmann::json;
 
 json vec(const Vec3& v) { return json::array({v.x(), v.y(), v.z()}); }
 
+json poseJson(const Transform& T) {
+  const Quat q(T.linear());
+  const Vec3 t = T.translation();
+  return json::array({t.x(), t.y(), t.z(), q.w(), q.x(), q.y(), q.z()});
+}
+
 json outcomeJson(const PullOutcome& o) {
   return {{"mean_displacement_m", o.mean_displacement_m},
           {"max_displacement_m", o.max_displacement_m},
@@ -61,12 +67,18 @@ std::string graspTable(const GraspRanking& r, int rows) {
   return out.str();
 }
 
-void writeGraspJson(const std::string& path, const GraspRanking& r, int target_id) {
+void writeGraspJson(const std::string& path, const GraspRanking& r, int target_id,
+                    double pregrasp_distance_m) {
   json grasps = json::array();
   for (const RankedGrasp& g : r.grasps) {
     json outcomes = json::array();
     for (const PullOutcome& o : g.outcomes) outcomes.push_back(outcomeJson(o));
-    grasps.push_back({{"contact_m", vec(g.candidate.contact_table)},
+    const Transform tool = toolPose(g.candidate);
+    grasps.push_back({{"tool_pose", poseJson(tool)},
+                      {"pregrasp_pose", poseJson(pregraspPose(tool, pregrasp_distance_m))},
+                      {"held", !g.outcomes.empty() && g.failed_share == 0.0},
+                      {"freed", !g.outcomes.empty() && g.freed_share == 1.0},
+                      {"contact_m", vec(g.candidate.contact_table)},
                       {"approach", vec(g.candidate.approach_table)},
                       {"seal_score", g.candidate.seal_score},
                       {"rim_deviation_m", g.candidate.rim_deviation_m},

@@ -7,6 +7,7 @@
 #include <limits>
 #include <mutex>
 #include <numeric>
+#include <optional>
 #include <stdexcept>
 #include <thread>
 
@@ -135,9 +136,18 @@ int matchObject(const SuperquadricShape& reference, const std::vector<Superquadr
   return best;
 }
 
+bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b) {
+  if (a.failed_share != b.failed_share) return a.failed_share < b.failed_share;
+  if (a.freed_share != b.freed_share) return a.freed_share > b.freed_share;
+  if (a.mean_toppled != b.mean_toppled) return a.mean_toppled < b.mean_toppled;
+  const double da = std::round(a.score_m * 1e3), db = std::round(b.score_m * 1e3);
+  if (da != db) return da < db;
+  return a.peak_load < b.peak_load;
+}
+
 GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypotheses, int target,
-                        const std::vector<Vec3>& camera_positions,
-                        const GraspRankingConfig& config) {
+                        const std::vector<Vec3>& camera_positions, const GraspRankingConfig& config,
+                        const RankingProgress& progress) {
   if (hypotheses.empty()) throw std::invalid_argument("no scene to rank grasps in");
   for (const auto& scene : hypotheses)
     if (const std::string why = checkScene(scene); !why.empty()) throw std::invalid_argument(why);
@@ -180,31 +190,43 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
   const auto& cands = out.candidates.candidates;
   const int C = static_cast<int>(cands.size());
   std::vector<PullOutcome> outcomes(static_cast<size_t>(C) * H);
+  // Progress: pulls done, each candidate's pulls done, the best finished candidate.
+  std::mutex progress_mutex;
+  std::atomic<bool> stop{false};
+  std::vector<int> pulls_of(C, 0);
+  std::optional<RankedGrasp> best;
+  int done = 0;
+  const auto finished = [&](int c) {
+    RankedGrasp g;
+    g.candidate = cands[c];
+    g.outcomes.assign(outcomes.begin() + c * H, outcomes.begin() + (c + 1) * H);
+    summarise(&g);
+    return g;
+  };
   parallelFor(C * H, threads, [&](int job) {
+    if (stop) return;
     const int c = job / H, k = job % H;
     const auto& scene = hypotheses[out.hypotheses[k]];
     outcomes[job] =
         k == 0
             ? sims[0]->pullPerceived(target, cands[c].contact_table, cands[c].approach_table)
             : executeGrasp(*sims[k], scene, targets[k], cands[c], config.candidates.tool_length_m);
+    std::lock_guard<std::mutex> lock(progress_mutex);
+    ++done;
+    if (++pulls_of[c] == H && progress) {
+      RankedGrasp g = finished(c);
+      if (!best || rankedBefore(g, *best)) best = std::move(g);
+    }
+    if (progress && !progress(done, C * H, best ? &*best : nullptr)) stop = true;
   });
-  out.pulls = C * H;
-  for (int c = 0; c < C; ++c) {
-    RankedGrasp g;
-    g.candidate = cands[c];
-    g.outcomes.assign(outcomes.begin() + c * H, outcomes.begin() + (c + 1) * H);
-    summarise(&g);
-    out.grasps.push_back(g);
-  }
-  std::stable_sort(
-      out.grasps.begin(), out.grasps.end(), [](const RankedGrasp& a, const RankedGrasp& b) {
-        if (a.failed_share != b.failed_share) return a.failed_share < b.failed_share;
-        if (a.freed_share != b.freed_share) return a.freed_share > b.freed_share;
-        if (a.mean_toppled != b.mean_toppled) return a.mean_toppled < b.mean_toppled;
-        const double da = std::round(a.score_m * 1e3), db = std::round(b.score_m * 1e3);
-        if (da != db) return da < db;
-        return a.peak_load < b.peak_load;
-      });
+  out.pulls = done;
+  out.stopped = stop;
+  for (int c = 0; c < C; ++c)
+    if (pulls_of[c] == H) out.grasps.push_back(finished(c));
+  std::stable_sort(out.grasps.begin(), out.grasps.end(), rankedBefore);
+  if (out.stopped)
+    addNote(&out.message,
+            "stopped after " + std::to_string(done) + " of " + std::to_string(C * H) + " pulls");
   if (const std::string note = outcomeNote(out.grasps); !note.empty()) addNote(&out.message, note);
   return out;
 }

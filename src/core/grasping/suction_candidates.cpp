@@ -196,4 +196,26 @@ CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int 
   return out;
 }
 
+Transform toolPose(const SuctionCandidate& candidate) {
+  const Vec3 z = -candidate.approach_table.normalized();
+  const Vec3 reference =
+      std::abs(z.x()) < std::cos(10.0 * M_PI / 180.0) ? Vec3::UnitX() : Vec3::UnitY();
+  const Vec3 x = (reference - reference.dot(z) * z).normalized();
+  Transform T = Transform::Identity();
+  T.linear().col(0) = x;
+  T.linear().col(1) = z.cross(x);
+  T.linear().col(2) = z;
+  T.translation() = candidate.contact_table;
+  return T;
+}
+
+Transform pregraspPose(const Transform& tool, double distance_m) {
+  if (!(std::isfinite(distance_m) && distance_m >= 0.0))
+    throw std::invalid_argument("pre-grasp distance must be finite and >= 0, got " +
+                                std::to_string(distance_m));
+  Transform T = tool;
+  T.translation() -= distance_m * tool.linear().col(2);
+  return T;
+}
+
 }  // namespace simstack

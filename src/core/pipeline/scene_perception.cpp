@@ -16,6 +16,7 @@
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/model/cvae_inference.h"
 #include "simstack/pipeline/workspace.h"
+#include "simstack/render/depth_renderer.h"
 #include "simstack/tsdf/network_input.h"
 #include "simstack/tsdf/projective_tsdf.h"
 
@@ -757,6 +758,18 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
   out.timings.mesh_ms += msSince(t);
   out.timings.total_ms = msSince(start);
   return out;
+}
+
+SceneEstimate ScenePerception::warmUp() const {
+  SuperquadricShape box;
+  box.scale_m = Vec3(0.06, 0.04, 0.03);
+  box.exponents = Vec3(10.0, 10.0, 10.0);
+  box.T_table_object.translation() = Vec3(0.0, 0.0, 0.03);
+  const DepthRenderer renderer(Scene::fromSuperquadrics({box}));
+  DepthView view;
+  view.T_table_camera = lookAt(Vec3(0.45, -0.3, 0.55), Vec3(0.0, 0.0, 0.03));
+  view.depth = renderer.render(view.camera, *view.T_table_camera).depth;
+  return perceive(view);
 }
 
 }  // namespace simstack

@@ -40,10 +40,20 @@ const std::vector<std::string>& ycbObjectNames() {
   return names;
 }
 
+bool proceduralCatalogue(const std::vector<std::string>& names) {
+  for (const std::string& name : names)
+    if (!parseContainerName(name)) return false;
+  return true;
+}
+
 std::vector<std::shared_ptr<const ObjectShape>> loadMeshCatalogue(
     const std::string& dir, const std::vector<std::string>& names) {
   std::vector<std::shared_ptr<const ObjectShape>> shapes;
   for (size_t i = 0; i < names.size(); ++i) {
+    if (const auto container = parseContainerName(names[i])) {
+      shapes.push_back(ObjectShape::fromContainer(*container, static_cast<int>(i)));
+      continue;
+    }
     const std::string path = dir + "/" + names[i] + "/nontextured.stl";
     shapes.push_back(ObjectShape::fromMesh(names[i], static_cast<int>(i), loadMesh(path)));
   }

@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "simstack/geometry/voxel_grid.h"
+#include "simstack/scene/household.h"
 
 namespace simstack {
 namespace {
@@ -67,12 +68,19 @@ PileGenerator::PileGenerator(const PileConfig& config) : config_(config) {
       config.rest_check_rounds < 1) {
     throw std::invalid_argument("the rest check needs steps >= 1, tolerance > 0 and rounds >= 1");
   }
+  if (!(config.household_share >= 0.0 && config.household_share <= 1.0))
+    throw std::invalid_argument("household_share must be in [0, 1], got " +
+                                std::to_string(config.household_share));
+  if (config.household_share > 0.0) catalogue_ = containerCatalogue();
 }
 
 PileGenerator::PileGenerator(const PileConfig& config,
                              std::vector<std::shared_ptr<const ObjectShape>> catalogue)
     : PileGenerator(config) {
   if (catalogue.empty()) throw std::invalid_argument("mesh catalogue is empty");
+  if (config.household_share > 0.0)
+    throw std::invalid_argument(
+        "household shapes are drawn into superquadric piles, not mesh piles");
   catalogue_ = std::move(catalogue);
 }
 
@@ -334,6 +342,18 @@ bool PileGenerator::dropAll(Building* pile, std::mt19937_64& rng) const {
     SceneObject o;
     if (catalogue_.empty()) {
       o.shape = ObjectShape::fromSuperquadric(randomSuperquadric(rng));
+    } else if (config_.household_share > 0.0) {
+      // Household piles: the catalogue holds the containers (PileGenerator's constructor).
+      std::uniform_real_distribution<double> u(0.0, 1.0);
+      if (u(rng) >= config_.household_share) {
+        o.shape = ObjectShape::fromSuperquadric(randomSuperquadric(rng));
+      } else if (u(rng) < 0.5) {
+        std::uniform_int_distribution<size_t> pick(0, catalogue_.size() - 1);
+        o.shape = catalogue_[pick(rng)];
+      } else {
+        o.shape = ObjectShape::fromSuperquadric(
+            householdSuperquadric(rng, config_.min_exponent, config_.max_exponent));
+      }
     } else {
       std::uniform_int_distribution<size_t> pick(0, catalogue_.size() - 1);
       o.shape = catalogue_[pick(rng)];

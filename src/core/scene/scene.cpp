@@ -56,6 +56,11 @@ std::shared_ptr<const ObjectShape> ObjectShape::fromSuperquadric(const Superquad
 std::shared_ptr<const ObjectShape> ObjectShape::fromMesh(const std::string& name,
                                                          int catalogue_index,
                                                          const TriangleMesh& mesh) {
+  return meshShape(name, catalogue_index, mesh);
+}
+
+std::shared_ptr<ObjectShape> ObjectShape::meshShape(const std::string& name, int catalogue_index,
+                                                    const TriangleMesh& mesh) {
   const double volume = mesh.volume();
   if (mesh.empty() || !(std::abs(volume) > 1e-9)) {
     throw std::invalid_argument("mesh '" + name + "' encloses no volume");
@@ -74,6 +79,16 @@ std::shared_ptr<const ObjectShape> ObjectShape::fromMesh(const std::string& name
   s->hull_.emplace(s->mesh_.vertices);
   s->hull_points_ = s->hull_->vertices();
   s->finish(static_cast<uint64_t>(catalogue_index + 1) * 7919u);
+  return s;
+}
+
+std::shared_ptr<const ObjectShape> ObjectShape::fromContainer(const ContainerSpec& spec,
+                                                              int catalogue_index) {
+  const TriangleMesh mesh = spec.mesh();
+  // meshShape moves the volume centroid to the origin; the container frame's base follows.
+  std::shared_ptr<ObjectShape> s = meshShape(spec.name(), catalogue_index, mesh);
+  s->container_ = spec;
+  s->container_base_ = -mesh.volumeCentroid();
   return s;
 }
 
@@ -116,6 +131,7 @@ double ObjectShape::sampleSpacing() const {
 
 bool ObjectShape::containsObject(const Vec3& p_object) const {
   if (kind_ == Kind::kSuperquadric) return superquadric_.insideOutsideObject(p_object) < 1.0;
+  if (container_) return container_->contains(p_object - container_base_);
   return hull_->contains(p_object);
 }
 

@@ -1,0 +1,71 @@
+#include "simstack/pipeline/object_tracker.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <tuple>
+
+namespace simstack {
+namespace {
+
+Vec3 sortedAxes(const SuperquadricShape& sq) {
+  Vec3 a = sq.scale_m;
+  std::sort(a.data(), a.data() + 3);
+  return a;
+}
+
+/// The largest factor between corresponding sorted semi-axes.
+double sizeRatio(const Vec3& a, const Vec3& b) {
+  double worst = 1.0;
+  for (int i = 0; i < 3; ++i) {
+    const double lo = std::min(a[i], b[i]), hi = std::max(a[i], b[i]);
+    worst = std::max(worst, lo > 0.0 ? hi / lo : INFINITY);
+  }
+  return worst;
+}
+
+}  // namespace
+
+void TrackerConfig::validate() const {
+  if (!(std::isfinite(max_centre_distance_m) && max_centre_distance_m > 0.0))
+    throw std::invalid_argument("tracking max_centre_distance_m must be finite and > 0, got " +
+                                std::to_string(max_centre_distance_m));
+  if (!(std::isfinite(max_size_ratio) && max_size_ratio >= 1.0))
+    throw std::invalid_argument("tracking max_size_ratio must be finite and >= 1, got " +
+                                std::to_string(max_size_ratio));
+}
+
+ObjectTracker::ObjectTracker(const TrackerConfig& config) : config_(config) { config_.validate(); }
+
+std::vector<uint32_t> ObjectTracker::assign(const std::vector<SuperquadricShape>& objects) {
+  std::vector<Track> now(objects.size());
+  for (size_t i = 0; i < objects.size(); ++i)
+    now[i] = {0, objects[i].T_table_object.translation(), sortedAxes(objects[i])};
+  std::vector<std::tuple<double, size_t, size_t>> pairs;  // distance, new, previous
+  for (size_t i = 0; i < now.size(); ++i)
+    for (size_t j = 0; j < previous_.size(); ++j) {
+      const double d = (now[i].centre - previous_[j].centre).norm();
+      if (d <= config_.max_centre_distance_m &&
+          sizeRatio(now[i].sorted_axes, previous_[j].sorted_axes) <= config_.max_size_ratio)
+        pairs.emplace_back(d, i, j);
+    }
+  std::sort(pairs.begin(), pairs.end());
+  std::vector<bool> matched_new(now.size(), false), matched_old(previous_.size(), false);
+  for (const auto& [d, i, j] : pairs) {
+    if (matched_new[i] || matched_old[j]) continue;
+    matched_new[i] = matched_old[j] = true;
+    now[i].id = previous_[j].id;
+  }
+  std::vector<uint32_t> ids(now.size());
+  for (size_t i = 0; i < now.size(); ++i) {
+    if (!matched_new[i]) now[i].id = next_id_++;
+    ids[i] = now[i].id;
+  }
+  previous_ = std::move(now);
+  return ids;
+}
+
+void ObjectTracker::reset() { previous_.clear(); }
+
+}  // namespace simstack

@@ -1,0 +1,221 @@
+#!/usr/bin/env python3
+"""rostest node of test/ros/replay.test: the example bag replayed as a workcell would, with a
+static base_link -> table transform: the node is ready before the first frame and perceives
+every frame, ids stay with their objects, late subscribers get the latched outputs, and grasps
+come as PoseStamped in base_link, their target named by an id or by a point."""
+import math
+import time
+import unittest
+
+import actionlib
+import rosbag
+import rospkg
+import rospy
+import rostest
+from actionlib_msgs.msg import GoalStatus
+from geometry_msgs.msg import PointStamped, TransformStamped
+from simstack.msg import ObjectArray, RankGraspsAction, RankGraspsGoal
+from simstack.srv import RankGrasps, RankGraspsRequest
+from std_msgs.msg import Bool
+from tf2_msgs.msg import TFMessage
+from visualization_msgs.msg import MarkerArray
+
+BASE_FROM_TABLE = (0.6, -0.1, 0.75)  # base_link -> table: a translation only
+
+
+def quat_rotate(q, v):
+    """v turned by the unit quaternion q (x, y, z, w)."""
+    x, y, z, w = q
+    t = (2 * (y * v[2] - z * v[1]), 2 * (z * v[0] - x * v[2]), 2 * (x * v[1] - y * v[0]))
+    return (v[0] + w * t[0] + y * t[2] - z * t[1],
+            v[1] + w * t[1] + z * t[0] - x * t[2],
+            v[2] + w * t[2] + x * t[1] - y * t[0])
+
+
+def quat_conjugate(q):
+    return (-q[0], -q[1], -q[2], q[3])
+
+
+def outward_normal(sq, p_table):
+    """The superquadric's outward normal (gradient of its inside-outside function) at a table
+    point, in the table frame."""
+    o = sq.pose.orientation
+    q = (o.x, o.y, o.z, o.w)
+    c = sq.pose.position
+    d = quat_rotate(quat_conjugate(q), (p_table[0] - c.x, p_table[1] - c.y, p_table[2] - c.z))
+    a = (sq.semi_axes.x, sq.semi_axes.y, sq.semi_axes.z)
+    e = (sq.exponents.x, sq.exponents.y, sq.exponents.z)
+    g = [e[i] / a[i] * math.copysign(abs(d[i] / a[i]) ** (e[i] - 1.0), d[i]) for i in range(3)]
+    return quat_rotate(q, g)
+
+
+class Workcell(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("test_workcell")
+        tf = TransformStamped()
+        tf.header.frame_id, tf.child_frame_id = "base_link", "table"
+        tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z = BASE_FROM_TABLE
+        tf.transform.rotation.w = 1.0
+        cls.tf_pub = rospy.Publisher("/tf_static", TFMessage, queue_size=1, latch=True)
+        cls.tf_pub.publish(TFMessage(transforms=[tf]))
+        bag = rospkg.RosPack().get_path("simstack") + "/test/data/example_pile.bag"
+        with rosbag.Bag(bag) as b:
+            cls.bag_stamps = sorted(m.header.stamp.to_sec() for _, m, _ in
+                                    b.read_messages(topics=["/camera/depth/image_rect"]))
+        cls.scenes = {}
+        cls.ready_before_first = None
+        cls.object_frames = {}
+        cls.tf_sub = rospy.Subscriber("/tf", TFMessage, cls.on_tf)
+        cls.sub = rospy.Subscriber("/camera/perception/objects", ObjectArray, cls.on_scene)
+        ready = rospy.wait_for_message("/camera/perception/ready", Bool, timeout=180)
+        cls.ready = ready.data
+        cls.ready_before_first = not cls.scenes
+        deadline = time.time() + 240
+        while len(cls.scenes) < len(cls.bag_stamps) and time.time() < deadline:
+            time.sleep(0.2)
+        rospy.wait_for_service("/camera/grasps/rank_grasps", timeout=60)
+        cls.rank = rospy.ServiceProxy("/camera/grasps/rank_grasps", RankGrasps)
+
+    @classmethod
+    def on_tf(cls, msg):
+        for t in msg.transforms:
+            if t.child_frame_id.startswith("simstack_object_"):
+                cls.object_frames[(round(t.header.stamp.to_sec(), 3), t.child_frame_id)] = t
+
+    @classmethod
+    def on_scene(cls, msg):
+        cls.scenes[round(msg.header.stamp.to_sec(), 3)] = msg
+
+    def last_scene(self):
+        return self.scenes[max(self.scenes)]
+
+    def test_1_ready_before_the_first_frame_and_every_frame_perceived(self):
+        self.assertTrue(self.ready)
+        self.assertTrue(self.ready_before_first)
+        self.assertEqual(sorted(self.scenes), [round(s, 3) for s in self.bag_stamps])
+
+    def test_2_ids_stay_with_their_objects(self):
+        first = self.scenes[min(self.scenes)]
+        self.assertGreater(len(first.objects), 0)
+        for stamp, scene in sorted(self.scenes.items()):
+            for o in scene.objects:
+                p = o.superquadric.pose.position
+                near = min(first.objects, key=lambda f: math.dist(
+                    (p.x, p.y, p.z), (f.superquadric.pose.position.x, f.superquadric.pose.position.y,
+                                      f.superquadric.pose.position.z)))
+                q = near.superquadric.pose.position
+                if math.dist((p.x, p.y, p.z), (q.x, q.y, q.z)) < 0.02:
+                    self.assertEqual(o.id, near.id, "frame %.2f: the object at (%.3f, %.3f, %.3f)" % (
+                        stamp, p.x, p.y, p.z))
+
+    def test_3_late_subscribers_get_the_latched_outputs(self):
+        markers = rospy.wait_for_message("/camera/perception/markers", MarkerArray, timeout=10)
+        ids = sorted(m.id for m in markers.markers if m.ns == "superquadrics")
+        self.assertEqual(ids, sorted(o.id for o in self.last_scene().objects))
+
+    def test_4_grasps_in_base_link_point_into_the_target(self):
+        scene = self.last_scene()
+        top = max(scene.objects, key=lambda o: o.superquadric.pose.position.z)
+        req = RankGraspsRequest(target_id=top.id, candidates=16, pull_distance_m=0.1,
+                                pull_speed_mps=0.2, target_frame="base_link",
+                                pregrasp_distance_m=0.07)
+        res = self.rank(req)
+        self.assertTrue(res.success, res.message)
+        self.assertEqual(res.target_id, top.id)
+        self.assertGreater(len(res.grasps), 0)
+        for g in res.grasps:
+            self.assertEqual(g.tool_pose.header.frame_id, "base_link")
+            self.assertEqual(g.pregrasp_pose.header.frame_id, "base_link")
+            t, o = g.tool_pose.pose.position, g.tool_pose.pose.orientation
+            z = quat_rotate((o.x, o.y, o.z, o.w), (0.0, 0.0, 1.0))
+            contact_table = tuple(v - b for v, b in zip((t.x, t.y, t.z), BASE_FROM_TABLE))
+            n = outward_normal(top.superquadric, contact_table)
+            self.assertLess(sum(a * b for a, b in zip(n, z)), 0.0, "z must point into the target")
+            p = g.pregrasp_pose.pose.position
+            self.assertAlmostEqual(math.dist((p.x, p.y, p.z), (t.x, t.y, t.z)), 0.07, 5)
+            back = tuple(a - b for a, b in zip((p.x, p.y, p.z), (t.x, t.y, t.z)))
+            self.assertAlmostEqual(sum(a * b for a, b in zip(back, z)), -0.07, 5)
+
+    def test_5_a_target_named_by_a_point(self):
+        scene = self.last_scene()
+        for o in scene.objects:
+            c = o.superquadric.pose.position
+            point = PointStamped()
+            point.header.frame_id = "base_link"
+            point.point.x, point.point.y, point.point.z = (
+                c.x + BASE_FROM_TABLE[0], c.y + BASE_FROM_TABLE[1], c.z + BASE_FROM_TABLE[2])
+            res = self.rank(RankGraspsRequest(target_id=999, target_point=point, candidates=4,
+                                              pull_distance_m=0.1, pull_speed_mps=0.2))
+            self.assertTrue(res.success, res.message)
+            self.assertEqual(res.target_id, o.id)
+
+    def test_7_each_object_is_a_tf_frame(self):
+        for stamp, scene in self.scenes.items():
+            for o in scene.objects:
+                t = self.object_frames.get((stamp, "simstack_object_%d" % o.id))
+                self.assertIsNotNone(t, "no tf frame simstack_object_%d at %.2f" % (o.id, stamp))
+                self.assertEqual(t.header.frame_id, "table")
+                p = o.superquadric.pose.position
+                v = t.transform.translation
+                self.assertAlmostEqual(math.dist((p.x, p.y, p.z), (v.x, v.y, v.z)), 0.0, 6)
+
+    def test_8_the_action_gives_feedback_and_a_cancel_stops_it(self):
+        scene = self.last_scene()
+        top = max(scene.objects, key=lambda o: o.superquadric.pose.position.z)
+        client = actionlib.SimpleActionClient("/camera/grasps/rank_grasps_action", RankGraspsAction)
+        self.assertTrue(client.wait_for_server(rospy.Duration(30)))
+        # A whole ranking: feedback after every pull, the result as the service's.
+        feedback = []
+        goal = RankGraspsGoal(target_id=top.id, candidates=8, pull_distance_m=0.1,
+                              pull_speed_mps=0.2, target_frame="base_link")
+        client.send_goal(goal, feedback_cb=feedback.append)
+        self.assertTrue(client.wait_for_result(rospy.Duration(60)))
+        result = client.get_result()
+        self.assertEqual(client.get_state(), GoalStatus.SUCCEEDED, result.message)
+        self.assertTrue(result.success)
+        self.assertGreater(len(result.grasps), 0)
+        self.assertEqual(result.grasps[0].tool_pose.header.frame_id, "base_link")
+        done = [f.pulls_done for f in feedback]
+        self.assertEqual(done, sorted(done))
+        self.assertEqual(done[-1], result.pulls)
+        self.assertTrue(feedback[-1].has_best)
+        pull_s = result.time_s / result.pulls
+        # A long ranking cancelled after its first pulls: it ends within a pull per thread.
+        feedback = []
+        goal.candidates = 256
+        client.send_goal(goal, feedback_cb=feedback.append)
+        deadline = time.time() + 30
+        while len(feedback) < 3 and time.time() < deadline:
+            time.sleep(0.005)
+        self.assertGreaterEqual(len(feedback), 3)
+        cancelled = time.time()
+        client.cancel_goal()
+        self.assertTrue(client.wait_for_result(rospy.Duration(30)))
+        waited = time.time() - cancelled
+        result = client.get_result()
+        self.assertEqual(client.get_state(), GoalStatus.PREEMPTED, result.message)
+        self.assertFalse(result.success)
+        self.assertIn("stopped after", result.message)
+        self.assertLess(result.pulls, feedback[-1].pulls_total)
+        # One pull per thread (2) and the messages' round trip.
+        self.assertLess(waited, 2 * pull_s + 0.5, "cancel answered after %.3f s (a pull: %.3f s)" % (
+            waited, pull_s))
+
+    def test_6_an_unknown_frame_is_refused_by_name(self):
+        scene = self.last_scene()
+        res = self.rank(RankGraspsRequest(target_id=scene.objects[0].id, target_frame="no_such_frame",
+                                          candidates=4, pull_distance_m=0.1, pull_speed_mps=0.2))
+        self.assertFalse(res.success)
+        self.assertIn("no_such_frame", res.message)
+        far = PointStamped()
+        far.header.frame_id = "table"
+        far.point.z = 3.0
+        res = self.rank(RankGraspsRequest(target_point=far, candidates=4, pull_distance_m=0.1,
+                                          pull_speed_mps=0.2))
+        self.assertFalse(res.success)
+        self.assertIn("target_point", res.message)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("simstack", "workcell", Workcell)
