@@ -160,6 +160,29 @@ void perceiveShippedConfig(benchmark::State& state, const std::string& model,
   }
 }
 
+// The labels image (pixelInstances) of the bench pile's frame, which the node makes for every
+// frame while its outputs are latched; its peer is the frame itself (BM_PerceiveDefaultConfig).
+static void BM_PixelLabels(benchmark::State& state) {
+  const std::string dir = SIMSTACK_SOURCE_DIR;
+  try {
+    PerceptionConfig pc = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
+    pc.threads = 2;
+    const BenchScene& b = benchScene(32);
+    PinholeCamera camera;
+    const Vec3 c = b.scene.surfaceCentroid();
+    const Transform T = lookAt(c + Vec3(0.55, -0.35, 0.55), Vec3(c.x(), c.y(), 0.05));
+    const RenderResult r = DepthRenderer(b.scene).render(camera, T, SensorNoiseConfig::kinect(1));
+    const ScenePerception perception(pc);
+    const DepthView view{r.depth, camera, T};
+    const SceneEstimate e = perception.perceive(view);
+    for (auto _ : state)
+      benchmark::DoNotOptimize(pixelInstances(view, e, 0, labelMinHeight(perception.config())));
+  } catch (const std::exception& e) {
+    state.SkipWithError(e.what());
+  }
+}
+BENCHMARK(BM_PixelLabels)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // What a user runs: config/perception.yaml as shipped (its model, `fc`, with its card; its
 // symmetries: 4; the seen surface fitted to the depth points), and its peers with one network
 // pass and with mesh samples alone.
