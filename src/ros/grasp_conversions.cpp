@@ -9,8 +9,8 @@
 namespace simstack {
 
 GraspOutcome graspOutcome(const RankedGrasp& g) {
-  if (g.outcomes.empty() || g.failed_share > 0.0) return GraspOutcome::kFailed;
-  return g.freed_share == 1.0 ? GraspOutcome::kHeldAndFreed : GraspOutcome::kHeld;
+  if (!g.held()) return GraspOutcome::kFailed;
+  return g.freed() ? GraspOutcome::kHeldAndFreed : GraspOutcome::kHeld;
 }
 
 Transform rigidFromPose(const geometry_msgs::Pose& p, const std::string& what) {
@@ -56,8 +56,8 @@ Grasp graspMsg(const RankedGrasp& g, const std_msgs::Header& pose_header,
   m.tool_pose.header = m.pregrasp_pose.header = pose_header;
   m.tool_pose.pose = poseMsg(tool);
   m.pregrasp_pose.pose = poseMsg(pregraspPose(tool, pregrasp_distance_m));
-  m.held = !g.outcomes.empty() && g.failed_share == 0.0;
-  m.freed = !g.outcomes.empty() && g.freed_share == 1.0;
+  m.held = g.held();
+  m.freed = g.freed();
   m.approach.x = z.x(), m.approach.y = z.y(), m.approach.z = z.z();
   m.seal_score = static_cast<float>(g.candidate.seal_score);
   m.mean_displacement_m = static_cast<float>(g.mean_displacement_m);

@@ -41,6 +41,11 @@ struct RankedGrasp {
   /// millimetres (finer differences are within the physics' own drift); ties go to the lower
   /// peak load, the grasp with more margin against a wrong mass or centre.
   double score_m = 0.0;
+
+  /// The seal held through the pull in every hypothesis pulled in.
+  bool held() const { return !outcomes.empty() && failed_share == 0.0; }
+  /// The target came free in every hypothesis pulled in.
+  bool freed() const { return !outcomes.empty() && freed_share == 1.0; }
 };
 
 struct GraspRanking {

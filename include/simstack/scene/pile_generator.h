@@ -104,6 +104,9 @@ class PileGenerator {
   /// `check_height` false the grid's top is not tested (an object still falling may be above
   /// it).
   bool fits(const Scene& scene, std::string* why, bool check_height = true) const;
+  /// The mesh shapes drawn from (the YCB catalogue, or the containers of household piles),
+  /// catalogue index = position; empty for the paper's superquadric piles.
+  const std::vector<std::shared_ptr<const ObjectShape>>& catalogue() const { return catalogue_; }
   /// A random superquadric shape of this config's ranges.
   SuperquadricShape randomSuperquadric(std::mt19937_64& rng) const;
 

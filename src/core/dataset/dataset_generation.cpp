@@ -21,7 +21,6 @@
 #include "simstack/io/image_io.h"
 #include "simstack/io/staged_output.h"
 #include "simstack/render/depth_renderer.h"
-#include "simstack/scene/household.h"
 #include "simstack/scene/mesh_catalogue.h"
 #include "simstack/scene/pile_generator.h"
 #include "simstack/seeds.h"
@@ -91,9 +90,9 @@ std::unique_ptr<PileGenerator> makeGenerator(const GenerationOptions& o, Dataset
     config.drop_radius_m = kLooseDropRadius_m;
   }
   if (o.ycb_dir.empty()) {
-    if (o.household_share > 0.0)
-      for (const auto& shape : containerCatalogue()) info->mesh_names.push_back(shape->name());
-    return std::make_unique<PileGenerator>(config);
+    auto generator = std::make_unique<PileGenerator>(config);
+    for (const auto& shape : generator->catalogue()) info->mesh_names.push_back(shape->name());
+    return generator;
   }
   if (o.household_share > 0.0)
     throw std::invalid_argument("--household draws into superquadric piles: not with --ycb");

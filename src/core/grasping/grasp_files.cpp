@@ -76,8 +76,8 @@ void writeGraspJson(const std::string& path, const GraspRanking& r, int target_i
     const Transform tool = toolPose(g.candidate);
     grasps.push_back({{"tool_pose", poseJson(tool)},
                       {"pregrasp_pose", poseJson(pregraspPose(tool, pregrasp_distance_m))},
-                      {"held", !g.outcomes.empty() && g.failed_share == 0.0},
-                      {"freed", !g.outcomes.empty() && g.freed_share == 1.0},
+                      {"held", g.held()},
+                      {"freed", g.freed()},
                       {"contact_m", vec(g.candidate.contact_table)},
                       {"approach", vec(g.candidate.approach_table)},
                       {"seal_score", g.candidate.seal_score},

@@ -190,19 +190,13 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
   const auto& cands = out.candidates.candidates;
   const int C = static_cast<int>(cands.size());
   std::vector<PullOutcome> outcomes(static_cast<size_t>(C) * H);
-  // Progress: pulls done, each candidate's pulls done, the best finished candidate.
+  // Each candidate is summarised once its every pull is done; progress reads the best of those.
   std::mutex progress_mutex;
   std::atomic<bool> stop{false};
   std::vector<int> pulls_of(C, 0);
-  std::optional<RankedGrasp> best;
+  std::vector<std::optional<RankedGrasp>> ranked(C);
+  const RankedGrasp* best = nullptr;
   int done = 0;
-  const auto finished = [&](int c) {
-    RankedGrasp g;
-    g.candidate = cands[c];
-    g.outcomes.assign(outcomes.begin() + c * H, outcomes.begin() + (c + 1) * H);
-    summarise(&g);
-    return g;
-  };
   parallelFor(C * H, threads, [&](int job) {
     if (stop) return;
     const int c = job / H, k = job % H;
@@ -213,16 +207,19 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
             : executeGrasp(*sims[k], scene, targets[k], cands[c], config.candidates.tool_length_m);
     std::lock_guard<std::mutex> lock(progress_mutex);
     ++done;
-    if (++pulls_of[c] == H && progress) {
-      RankedGrasp g = finished(c);
-      if (!best || rankedBefore(g, *best)) best = std::move(g);
+    if (++pulls_of[c] == H) {
+      RankedGrasp& g = ranked[c].emplace();
+      g.candidate = cands[c];
+      g.outcomes.assign(outcomes.begin() + c * H, outcomes.begin() + (c + 1) * H);
+      summarise(&g);
+      if (!best || rankedBefore(g, *best)) best = &g;
     }
-    if (progress && !progress(done, C * H, best ? &*best : nullptr)) stop = true;
+    if (progress && !progress(done, C * H, best)) stop = true;
   });
   out.pulls = done;
   out.stopped = stop;
-  for (int c = 0; c < C; ++c)
-    if (pulls_of[c] == H) out.grasps.push_back(finished(c));
+  for (std::optional<RankedGrasp>& g : ranked)
+    if (g) out.grasps.push_back(std::move(*g));
   std::stable_sort(out.grasps.begin(), out.grasps.end(), rankedBefore);
   if (out.stopped)
     addNote(&out.message,
