@@ -100,6 +100,15 @@ expect "tiny focal length" "field of view" "$reconstruct" --depth "$good" --intr
 expect "normalized intrinsics" "field of view" "$reconstruct" --depth "$good" --intrinsics 0.82,1.09,0.5,0.5 --output "$dir/o"
 expect "principal point outside" "cx = 1999.5" "$reconstruct" --depth "$good" --intrinsics 525,525,1999.5,239.5 --output "$dir/o"
 expect "depth scale nan" "depth-scale" "$reconstruct" --depth "$good" --intrinsics $K --depth-scale nan --output "$dir/o"
+expect "depth scale with a float TIFF" "16-bit images only" "$reconstruct" --depth "$dir/random.tiff" \
+  --intrinsics 52.5,52.5,31.5,23.5 --depth-scale 5 --output "$dir/o"
+# Output names a file system cannot hold, or none.
+expect "empty --output" "the path is empty" "$reconstruct" --depth "$good" --intrinsics $K --output ""
+expect "--output with a newline" "control character" "$reconstruct" --depth "$good" --intrinsics $K \
+  --output "$dir/two
+lines"
+expect "--output of 300 characters" "at most 255" "$reconstruct" --depth "$good" --intrinsics $K \
+  --output "$dir/$(printf 'a%.0s' $(seq 300))"
 
 # Poses that cannot be a camera over a table.
 /usr/bin/python3 - "$view.yaml" "$dir" <<'PY'
@@ -110,9 +119,14 @@ open(sys.argv[2] + "/bad_pose.yaml", "w").write(re.sub(r"(translation: \[)[^,\]]
 m = re.search(r"translation: \[([^\]]+)\]", text)
 x, y, z = [float(v) for v in m.group(1).split(",")]
 open(sys.argv[2] + "/below.yaml", "w").write(text.replace(m.group(0), "translation: [%g, %g, %g]" % (x, y, -z)))
+# A kilometre away and more; no rotation at all.
+open(sys.argv[2] + "/far.yaml", "w").write(text.replace(m.group(0), "translation: [1e6, %g, %g]" % (y, z)))
+open(sys.argv[2] + "/zero_q.yaml", "w").write(re.sub(r"rotation_xyzw: \[[^\]]+\]", "rotation_xyzw: [0, 0, 0, 0]", text))
 PY
 expect "NaN pose" "pose is not finite" "$reconstruct" --depth "$good" --intrinsics $K --table-pose "$dir/bad_pose.yaml" --output "$dir/o"
 expect "camera below the table" "above" "$reconstruct" --depth "$good" --intrinsics $K --table-pose "$dir/below.yaml" --output "$dir/o"
+expect "camera 1e6 m away" "at most 100 m" "$reconstruct" --depth "$good" --intrinsics $K --table-pose "$dir/far.yaml" --output "$dir/o"
+expect "zero quaternion" "rotation_xyzw is zero" "$reconstruct" --depth "$good" --intrinsics $K --table-pose "$dir/zero_q.yaml" --output "$dir/o"
 
 # Configs out of range.
 sed 's/min_pile_height_m: 0.01/min_pile_height_m: -1/' "$(dirname "$0")/../config/perception.yaml" > "$dir/neg.yaml"
@@ -134,9 +148,24 @@ for m in cut_model random_model bad_card; do
   with_model $m
   expect "model $m" "$m" "$reconstruct" --config "$dir/${m}_config.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
 done
-sed "s|^perception:|perception:\n  samples: 100000|; s|model: models/|model: $pkg/models/|" \
-  "$pkg/config/perception.yaml" > "$dir/samples.yaml"
+# The shipped model with its card, 1000 bytes of the file inverted: the card's SHA-256 names it.
+cp "$pkg/models/simstack_r32_fc.pt" "$dir/inverted.pt"
+cp "$pkg/models/simstack_r32_fc.yaml" "$dir/inverted.yaml"
+/usr/bin/python3 - "$dir/inverted.pt" <<'PY'
+import sys
+data = bytearray(open(sys.argv[1], "rb").read())
+for i in range(len(data) // 2, len(data) // 2 + 1000):
+    data[i] ^= 0xFF
+open(sys.argv[1], "wb").write(bytes(data))
+PY
+expect "model with 1000 bytes inverted" "inverted.pt failed its SHA-256 check" "$reconstruct" \
+  --model "$dir/inverted.pt" --depth "$good" --intrinsics $K --output "$dir/o"
+{ echo "samples: 100000"; sed "s|model: models/|model: $pkg/models/|" "$pkg/config/perception.yaml"; } \
+  > "$dir/samples.yaml"
 expect "samples: 100000" "samples must lie in" "$reconstruct" --config "$dir/samples.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
+sed "s|decompose_samples: 1 |decompose_samples: 10|; s|model: models/|model: $pkg/models/|" \
+  "$pkg/config/perception.yaml" > "$dir/decompose.yaml"
+expect "decompose_samples: 10 with fc" "no latent code" "$reconstruct" --config "$dir/decompose.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
 sed "s|model: models/|model: $pkg/models/|" "$pkg/config/perception.yaml" > "$dir/gamma.yaml"
 printf 'hough:\n  gamma: .nan\n' >> "$dir/gamma.yaml"
 expect "hough gamma .nan" "hough.gamma" "$reconstruct" --config "$dir/gamma.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
@@ -184,6 +213,12 @@ expect "training config with a misspelt field" "unknown field training.lerning_r
   "$bin/simstack_train" --dataset "$dir/two.h5" --config "$dir/typo.yaml" --output "$dir/run_typo"
 succeed "train 2 steps" "$bin/simstack_train" --dataset "$dir/two.h5" --config "$train_config" \
   --output "$dir/run_done" --steps 2 --threads 1
+# The default config's 128 validation piles on a dataset of two: its last one validates, said.
+succeed "train with more validation piles than the dataset holds" "$bin/simstack_train" \
+  --dataset "$dir/two.h5" --config "$(dirname "$0")/../config/train_r32.yaml" \
+  --output "$dir/run_small" --steps 2 --threads 1
+grep -q "its last 1 are the validation" "$dir/out.txt" ||
+  { echo "FAIL train on a small dataset: no note in:"; cat "$dir/out.txt"; fail=1; }
 expect "train again into a run without --resume" "holds a training run" "$bin/simstack_train" \
   --dataset "$dir/two.h5" --config "$train_config" --output "$dir/run_done" --steps 2
 expect "train with --ycb" "--ycb is for --validate-only" "$bin/simstack_train" --dataset "$dir/two.h5" \

@@ -19,6 +19,7 @@
 #include "simstack/model/cvae.h"
 #include "simstack/model/cvae_inference.h"
 #include "simstack/model/cvae_trainer.h"
+#include "simstack/model/model_integrity.h"
 #include "simstack/model/training_sample.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/mesh_catalogue.h"
@@ -812,6 +813,58 @@ TEST(Cvae, BadModelFilesGiveClearErrors) {
   EXPECT_NE(ms.find("tensor "), std::string::npos) << ms;  // it names the tensor
   fs::remove(shapes);
   fs::remove(path);
+}
+
+TEST(Cvae, DamagedModelFilesAreRefusedByTheCheckThatFails) {
+  auto message = [](const std::string& path) {
+    try {
+      loadCvae(path);
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  // Its largest tensor all NaN (no card: only the weights' own check can tell).
+  Cvae model(tiny());
+  torch::Tensor largest;
+  for (const auto& p : model->named_parameters())
+    if (!largest.defined() || p.value().numel() > largest.numel()) largest = p.value();
+  {
+    torch::NoGradGuard no_grad;
+    largest.fill_(std::numeric_limits<float>::quiet_NaN());
+  }
+  const std::string nan = tempPath("simstack_nan.pt");
+  saveCvae(nan, model);
+  const std::string mn = message(nan);
+  EXPECT_NE(mn.find(nan), std::string::npos) << mn;
+  EXPECT_NE(mn.find("not finite"), std::string::npos) << mn;
+  fs::remove(nan);
+  // A good file and its card, then one byte of the file flipped: the card's SHA-256 catches it.
+  Cvae good(tiny());
+  const std::string path = tempPath("simstack_flipped.pt");
+  saveCvae(path, good);
+  ModelIntegrity m;
+  m.sha256 = sha256OfFile(path);
+  m.format = modelFormatVersion();
+  writeModelIntegrity(path, m);
+  EXPECT_EQ(message(path), "no error");
+  {
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekg(static_cast<std::streamoff>(fs::file_size(path) / 2));
+    const char c = static_cast<char>(f.peek());
+    f.seekp(static_cast<std::streamoff>(fs::file_size(path) / 2));
+    f.put(static_cast<char>(~c));
+  }
+  const std::string mf = message(path);
+  EXPECT_NE(mf.find(path), std::string::npos) << mf;
+  EXPECT_NE(mf.find("SHA-256"), std::string::npos) << mf;
+  // A card of another format version.
+  m.sha256 = sha256OfFile(path);
+  m.format = modelFormatVersion() + 1;
+  writeModelIntegrity(path, m);
+  EXPECT_NE(message(path).find("format"), std::string::npos) << message(path);
+  fs::remove(path);
+  fs::remove(modelCardPath(path));
 }
 
 TEST(Cvae, TinyModelOverfitsOneScene) {

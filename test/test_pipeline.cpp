@@ -14,6 +14,8 @@
 #include "simstack/eval/real_scenes.h"
 #include "simstack/eval/segmentation.h"
 #include "simstack/instances/instance_finder.h"
+#include "simstack/model/cvae_inference.h"
+#include "simstack/model/model_integrity.h"
 #include "simstack/pipeline/evaluated_methods.h"
 #include "simstack/pipeline/object_tracker.h"
 #include "simstack/pipeline/scene_perception.h"
@@ -69,7 +71,43 @@ TEST(PerceptionConfig, ShippedYamlHoldsTheDefaultsAndTyposAreErrors) {
   }
   std::ofstream(bad) << "hough:\n  min_traversals: many\n";
   EXPECT_THROW(loadPerceptionYaml(bad), std::runtime_error);
+  // The pipeline's own fields stand at the top level: a misspelt one, or the section an older
+  // layout kept them in, is refused by name.
+  const auto refusal = [&](const std::string& text) {
+    std::ofstream(bad) << text;
+    try {
+      loadPerceptionYaml(bad);
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NE(refusal("symetries: 4\n").find("unknown field 'symetries'"), std::string::npos);
+  EXPECT_NE(refusal("perception:\n  symmetries: 4\n").find("top level"), std::string::npos);
+  EXPECT_NE(refusal("node:\n  table_frame: t\n").find("perception_node.yaml"), std::string::npos);
   std::filesystem::remove(bad);
+}
+
+TEST(PerceptionConfig, ParametersAreLaidOverTheShippedFileFieldByField) {
+  // What the ROS node reads: the package's file, with a field of its own and one of a section.
+  const std::string dir = SIMSTACK_SOURCE_DIR;
+  const PerceptionConfig c =
+      overlayPerceptionYaml(dir + "/config/perception.yaml",
+                            "symmetries: 2\nsegments:\n  pixel_stride: 3\n", "params", dir);
+  const PerceptionConfig shipped = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
+  EXPECT_EQ(c.symmetries, 2);
+  EXPECT_EQ(c.segments.pixel_stride, 3);
+  EXPECT_EQ(c.segments.seed_resolution_m, shipped.segments.seed_resolution_m);  // kept
+  EXPECT_EQ(c.model_path, shipped.model_path);
+  EXPECT_EQ(c.hough.refinement, shipped.hough.refinement);  // the model's card
+  try {
+    overlayPerceptionYaml(dir + "/config/perception.yaml", "segments:\n  pixel_strid: 3\n",
+                          "the parameters under /camera/perception", dir);
+    ADD_FAILURE() << "a misspelt parameter must be an error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("segments.pixel_strid"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("/camera/perception"), std::string::npos) << e.what();
+  }
 }
 
 TEST(PerceptionConfig, ModelCardsBringTheirOwnSettings) {
@@ -103,7 +141,7 @@ TEST(PerceptionConfig, ModelCardsBringTheirOwnSettings) {
   const std::filesystem::path tmp = std::filesystem::temp_directory_path() / "simstack_model_cards";
   std::filesystem::create_directories(tmp);
   // What a config says explicitly overrides the card, field by field.
-  std::ofstream(tmp / "override.yaml") << "perception:\n  samples: 2\nhough:\n  refinement: 7\n";
+  std::ofstream(tmp / "override.yaml") << "samples: 2\nhough:\n  refinement: 7\n";
   const PerceptionConfig over = loadPerceptionYaml((tmp / "override.yaml").string(), dir,
                                                    dir + "/models/simstack_r32_fc_plain.pt");
   EXPECT_EQ(over.samples, 2);
@@ -612,15 +650,22 @@ TEST(ScenePerception, BadInputGetsClearErrors) {
 TEST(ScenePerception, AModelWithoutACodeGivesOneHypothesis) {
   const std::string fc = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32_fc.pt";
   ASSERT_TRUE(std::filesystem::exists(fc)) << fc << " is missing (the models are in git)";
-  // Hypotheses asked of `fc` (perception.launch decompose_samples:=3 with the default model,
-  // whose card says samples: 1): one scene to give, taken as one, not refused.
+  // Samples asked of `fc` are one scene; hypotheses asked of it would be that scene handed on
+  // as several: refused, naming the field.
   PerceptionConfig config;
   config.model_path = fc;
-  config.samples = 1;
-  config.decompose_samples = 3;
+  config.samples = 3;
+  config.decompose_samples = 1;
   const ScenePerception perception(config);
   EXPECT_EQ(perception.config().samples, 1);
-  EXPECT_EQ(perception.config().decompose_samples, 1);
+  config.decompose_samples = 10;
+  try {
+    ScenePerception{config};
+    ADD_FAILURE() << "decompose_samples 10 with fc accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("decompose_samples 10"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("no latent code"), std::string::npos) << e.what();
+  }
   // The C-VAE draws distinct samples: more decomposed than drawn is an error.
   ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
   config.model_path = kModel;
@@ -640,6 +685,39 @@ TEST(ScenePerception, AModelWithoutACodeGivesOneHypothesis) {
   }
   config.workspace.max_tiles = 9;
   EXPECT_NO_THROW(ScenePerception{config});
+}
+
+TEST(ScenePerception, ShippedModelsProveThemselvesAndADifferentSelfTestIsRefused) {
+  // Every shipped card records its file's hash, format and self-test, and the file passes.
+  for (const char* name : {"simstack_r32_fc", "simstack_r32", "simstack_r32_fc_plain"}) {
+    const std::string model = std::string(SIMSTACK_SOURCE_DIR) + "/models/" + name + ".pt";
+    const std::optional<ModelIntegrity> card = readModelIntegrity(model);
+    ASSERT_TRUE(card) << name << ": its card has no integrity: section";
+    EXPECT_GE(card->self_test_objects, 0) << name;
+    const ModelSelfTest t = checkModel(model);
+    EXPECT_EQ(t.objects, 1) << name << ": the rendered box is one object";
+  }
+  // A card that expects another result of the self-test: the model is refused, both named.
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "simstack_selftest";
+  std::filesystem::create_directories(dir);
+  const std::string copy = (dir / "m.pt").string();
+  std::filesystem::copy_file(SIMSTACK_SOURCE_DIR "/models/simstack_r32_fc.pt", copy,
+                             std::filesystem::copy_options::overwrite_existing);
+  std::filesystem::remove(dir / "m.yaml");
+  ModelIntegrity m;
+  m.sha256 = sha256OfFile(copy);
+  m.format = modelFormatVersion();
+  m.self_test_objects = 2;
+  m.self_test_occupied_voxels = 77;
+  writeModelIntegrity(copy, m);
+  try {
+    checkModel(copy);
+    ADD_FAILURE() << "a self-test that disagrees with the card was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("self-test"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(copy), std::string::npos) << e.what();
+  }
+  std::filesystem::remove_all(dir);
 }
 
 TEST(ScenePerception, EveryShippedModelSeesNothingOnAnEmptyTable) {
@@ -665,7 +743,8 @@ TEST(ScenePerception, EveryShippedModelSeesNothingOnAnEmptyTable) {
   for (const std::string& model : models) {
     PerceptionConfig config;
     config.model_path = model;
-    config.samples = config.decompose_samples = 8;
+    config.samples = 8;
+    config.decompose_samples = CvaeInference(model, 1).config().hasLatentCode() ? 8 : 1;
     const ScenePerception perception(config);
     for (const DepthView& view : views) {
       const SceneEstimate est = perception.perceive(view);

@@ -5,6 +5,7 @@
 #include <cstring>
 #include <limits>
 
+#include "simstack/pipeline/scene_perception.h"
 #include "simstack_ros/conversions.h"
 #include "simstack_ros/grasp_conversions.h"
 
@@ -204,6 +205,21 @@ TEST(GraspConversions, ScenesComeFromObjectsThenHypotheses) {
   const auto three = graspScenes(msg, 3);  // only one further hypothesis exists
   ASSERT_EQ(three.size(), 2u);
   EXPECT_EQ(three[1].size(), 2u);
+  // A scene published in another frame carries its table there: the shapes come back in the
+  // table frame.
+  Transform T_base_table = Transform::Identity();
+  T_base_table.linear() = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()).toRotationMatrix();
+  T_base_table.translation() = Vec3(0.5, 0.0, 0.7);
+  ObjectArray in_base = msg;
+  in_base.table_in_frame = poseMsg(T_base_table);
+  in_base.objects[0].superquadric.pose = poseMsg(T_base_table * sq.T_table_object);
+  in_base.hypotheses[0].superquadrics[1].pose = poseMsg(T_base_table * sq.T_table_object);
+  const auto back = graspScenes(in_base, 2);
+  EXPECT_TRUE(back[0][0].T_table_object.isApprox(sq.T_table_object, 1e-9));
+  EXPECT_TRUE(back[1][1].T_table_object.isApprox(sq.T_table_object, 1e-9));
+  EXPECT_TRUE(tableInFrame(msg).isApprox(Transform::Identity()));  // all zero: the table's own
+  in_base.table_in_frame.orientation.w = 2.0;
+  EXPECT_THROW(tableInFrame(in_base), std::invalid_argument);
   msg.objects[0].superquadric.pose.orientation.w = 3.0;
   EXPECT_THROW(graspScenes(msg, 1), std::invalid_argument);
 }
@@ -216,7 +232,10 @@ TEST(GraspConversions, ToolPoseLooksIntoTheSurfaceInTheAskedFrameAndArrowsShowTh
   base.frame_id = "base_link";
   Transform T_base_table = Transform::Identity();
   T_base_table.translation() = Vec3(0.5, 0.0, 0.7);
-  const Grasp m = graspMsg(g, base, T_base_table, 0.05);
+  Transform T_scene_table = Transform::Identity();  // the scene's frame: the table turned
+  T_scene_table.linear() = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitZ()).toRotationMatrix();
+  const Grasp m = graspMsg(g, base, T_base_table, T_scene_table, 0.05);
+  EXPECT_NEAR(m.approach.y, 1.0, 1e-9);  // the approach in the scene's frame
   EXPECT_EQ(m.tool_pose.header.frame_id, "base_link");
   EXPECT_EQ(m.pregrasp_pose.header.frame_id, "base_link");
   const Transform T = transformFromPose(m.tool_pose.pose);
@@ -231,11 +250,15 @@ TEST(GraspConversions, ToolPoseLooksIntoTheSurfaceInTheAskedFrameAndArrowsShowTh
   RankedGrasp held = g, failed = g;
   held.freed_share = 0.5;
   failed.failed_share = 0.5;
-  EXPECT_TRUE(graspMsg(g, base, T_base_table, 0.05).held);
-  EXPECT_TRUE(graspMsg(g, base, T_base_table, 0.05).freed);
-  EXPECT_FALSE(graspMsg(held, base, T_base_table, 0.05).freed);
+  const Transform I = Transform::Identity();
+  EXPECT_TRUE(graspMsg(g, base, T_base_table, I, 0.05).held);
+  EXPECT_TRUE(graspMsg(g, base, T_base_table, I, 0.05).freed);
+  EXPECT_FALSE(graspMsg(held, base, T_base_table, I, 0.05).freed);
   std_msgs::Header h;
-  const auto markers = graspMarkers(h, {g, held, failed, failed});
+  const auto markers = graspMarkers(h, {g, held, failed, failed}, T_base_table);
+  const geometry_msgs::Point& tip = markers.markers[1].points[1];  // at the contact, in h's frame
+  EXPECT_NEAR(tip.x, 0.6, 1e-9);
+  EXPECT_NEAR(tip.z, 1.0, 1e-9);
   ASSERT_EQ(markers.markers.size(), 8u);  // clear, four arrows, three ranks
   const auto colour = [&](int k) {
     const auto& c = markers.markers[k].color;
@@ -244,4 +267,48 @@ TEST(GraspConversions, ToolPoseLooksIntoTheSurfaceInTheAskedFrameAndArrowsShowTh
   EXPECT_EQ(colour(1), (std::vector<float>{0, 1, 0}));  // held and freed: green
   EXPECT_EQ(colour(3), (std::vector<float>{1, 1, 0}));  // held, not freed: yellow
   EXPECT_EQ(colour(5), (std::vector<float>{1, 0, 0}));  // failed: red
+}
+
+TEST(Conversions, OutputsAreWrittenInTheFrameTheTableIsPlacedIn) {
+  SceneEstimate est;
+  est.hypotheses.resize(1);
+  InstanceEstimate box;
+  box.superquadric.scale_m = Vec3(0.05, 0.04, 0.03);
+  box.superquadric.exponents = Vec3(8, 8, 8);
+  box.superquadric.T_table_object.translation() = Vec3(0.1, 0.0, 0.03);
+  box.points = {Vec3(0.1, 0.0, 0.06)};
+  est.hypotheses[0].instances.push_back(box);
+  est.hypotheses[0].decomposed = true;
+  est.occupancy_probability = Grid3<float>(GridSpec::sceneGrid(Vec2::Zero(), 0.64, 4), 0.0f);
+  est.occupancy_probability.data[0] = 1.0f;        // voxel (0, 0, 0), centre (-0.24, -0.24, 0.08)
+  Transform T_base_table = Transform::Identity();  // the table half a turn about z, 0.7 m up
+  T_base_table.linear() = Eigen::AngleAxisd(M_PI, Vec3::UnitZ()).toRotationMatrix();
+  T_base_table.translation() = Vec3(0.5, 0.0, 0.7);
+  std_msgs::Header base;
+  base.frame_id = "base_link";
+  const ObjectArray msg = objectArrayMsg(base, est, 1, 1, 4, {7}, T_base_table);
+  ASSERT_EQ(msg.objects.size(), 1u);
+  EXPECT_TRUE(transformFromPose(msg.table_in_frame).isApprox(T_base_table, 1e-9));
+  const geometry_msgs::Point& c = msg.objects[0].superquadric.pose.position;
+  EXPECT_NEAR(c.x, 0.4, 1e-9);
+  EXPECT_NEAR(c.z, 0.73, 1e-9);
+  // The grasp service reads it back in the table frame.
+  EXPECT_TRUE(
+      graspScenes(msg, 1)[0][0].T_table_object.isApprox(box.superquadric.T_table_object, 1e-6));
+  const sensor_msgs::PointCloud2 surface = msg.objects[0].surface;
+  float xyz[3];
+  std::memcpy(xyz, surface.data.data(), sizeof(xyz));
+  EXPECT_NEAR(xyz[0], 0.4f, 1e-6);
+  EXPECT_NEAR(xyz[2], 0.76f, 1e-6);
+  const sensor_msgs::PointCloud2 occupied =
+      occupancyCloud(base, est.occupancy_probability, 0.5, T_base_table);
+  ASSERT_EQ(occupied.width, 1u);
+  std::memcpy(xyz, occupied.data.data(), sizeof(xyz));
+  const Vec3 centre = T_base_table * est.occupancy_probability.spec.voxelCentre(0, 0, 0);
+  EXPECT_NEAR(xyz[0], centre.x(), 1e-6);
+  EXPECT_NEAR(xyz[2], centre.z(), 1e-6);
+  const auto markers = objectMarkers(base, est, {7}, T_base_table);
+  ASSERT_EQ(markers.markers.size(), 3u);  // clear, mesh, label
+  EXPECT_NEAR(markers.markers[1].pose.position.x, 0.4, 1e-9);
+  EXPECT_NEAR(markers.markers[2].pose.position.z, 0.73 + 0.05 + 0.03, 1e-9);  // above it
 }

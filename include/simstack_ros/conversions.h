@@ -59,16 +59,21 @@ sensor_msgs::PointCloud2 pointCloud(const std_msgs::Header& header, const Points
 /// neither empty nor one per object.
 using ObjectIds = std::vector<uint32_t>;
 
-/// The objects of hypothesis 0 of `estimate`, in the table frame named by `header`, and the
-/// superquadrics of the further decomposed hypotheses; `views`, `samples` and `symmetries` (the
-/// network passes) as the pipeline ran. Each object carries its superquadric as a mesh too.
+/// The functions below take an estimate in the table frame and write it in the frame `header`
+/// names, `T_frame_table` (the table frame in it; the identity when it is the table frame).
+
+/// The objects of hypothesis 0 of `estimate` and the superquadrics of the further decomposed
+/// hypotheses; `views`, `samples` and `symmetries` (the network passes) as the pipeline ran.
+/// Each object carries its superquadric as a mesh too.
 ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& estimate, int views,
-                           int samples, int symmetries, const ObjectIds& ids = {});
+                           int samples, int symmetries, const ObjectIds& ids = {},
+                           const Transform& T_frame_table = Transform::Identity());
 
 /// Every object's surface samples: x y z label rgb (label id + 1; rgb packed as rviz reads it,
 /// the colour of the object's marker, which follows its id).
 sensor_msgs::PointCloud2 instancesCloud(const std_msgs::Header& header,
-                                        const SceneEstimate& estimate, const ObjectIds& ids = {});
+                                        const SceneEstimate& estimate, const ObjectIds& ids = {},
+                                        const Transform& T_frame_table = Transform::Identity());
 
 /// A superquadric as a closed triangle mesh in its own frame (shape_msgs/Mesh, a few hundred
 /// triangles): a planning-scene collision object placed at the superquadric's pose.
@@ -76,14 +81,15 @@ shape_msgs::Mesh superquadricMesh(const SuperquadricShape& sq);
 
 /// Voxel centres whose occupancy probability is at least `min_probability`: x y z probability.
 sensor_msgs::PointCloud2 occupancyCloud(const std_msgs::Header& header,
-                                        const Grid3<float>& probability, double min_probability);
+                                        const Grid3<float>& probability, double min_probability,
+                                        const Transform& T_frame_table = Transform::Identity());
 
 /// DELETEALL (the markers of vanished objects go), then per object a triangle mesh of its
 /// superquadric (namespace "superquadrics") and a text label with its id ("labels"), marker id
 /// = object id, in the colours of instancesCloud().
-visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
-                                              const SceneEstimate& estimate,
-                                              const ObjectIds& ids = {});
+visualization_msgs::MarkerArray objectMarkers(
+    const std_msgs::Header& header, const SceneEstimate& estimate, const ObjectIds& ids = {},
+    const Transform& T_frame_table = Transform::Identity());
 
 /// 16UC1 image of pixel labels: 0 none, id + 1 for the pixels of object k (`labels` holds k;
 /// -1 is 0; ids above 65534 are written as 65535).

@@ -20,8 +20,12 @@ SuperquadricShape superquadricFromMsg(const simstack::Superquadric& msg, const s
 /// A unit-quaternion pose as a transform; rejects non-finite values and non-unit quaternions.
 Transform rigidFromPose(const geometry_msgs::Pose& pose, const std::string& what);
 
-/// The scenes of `msg` to simulate grasps in: its objects first, then up to `hypotheses` - 1 of
-/// its further hypotheses.
+/// T_frame_table of `msg` (its table_in_frame): the identity when all zero (a message made by
+/// hand); throws std::invalid_argument for a pose that is not finite or not a unit quaternion.
+Transform tableInFrame(const ObjectArray& msg);
+
+/// The scenes of `msg` to simulate grasps in, in its table frame (z up, table plane z = 0; the
+/// simulation's): its objects first, then up to `hypotheses` - 1 of its further hypotheses.
 std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, int hypotheses);
 
 /// What a grasp's pulls did: held and freed the target in every hypothesis; held in every one
@@ -29,16 +33,19 @@ std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, 
 enum class GraspOutcome { kHeldAndFreed, kHeld, kFailed };
 GraspOutcome graspOutcome(const RankedGrasp& grasp);
 
-/// One ranked grasp as a message: its tool and pre-grasp poses (toolPose(), pregraspPose()) in
-/// `pose_header`'s frame, mapped there from the scene's frame by `T_frame_scene`; the approach
-/// stays in the scene's frame.
+/// One ranked grasp (ranked in the table frame) as a message: its tool and pre-grasp poses
+/// (toolPose(), pregraspPose()) in `pose_header`'s frame, mapped there by `T_pose_table`; the
+/// approach in the scene's frame, `T_scene_table`.
 Grasp graspMsg(const RankedGrasp& grasp, const std_msgs::Header& pose_header,
-               const Transform& T_frame_scene, double pregrasp_distance_m);
+               const Transform& T_pose_table, const Transform& T_scene_table,
+               double pregrasp_distance_m);
 
 /// DELETEALL, then each grasp as an arrow pointing at its contact along -approach (namespace
 /// "grasps"), coloured by outcome: green held and freed, yellow held but not freed, red the
-/// seal broke; the rank of the best three as text ("grasp_ranks").
+/// seal broke; the rank of the best three as text ("grasp_ranks"); in `header`'s frame, where
+/// the table frame is `T_frame_table`.
 visualization_msgs::MarkerArray graspMarkers(const std_msgs::Header& header,
-                                             const std::vector<RankedGrasp>& grasps);
+                                             const std::vector<RankedGrasp>& grasps,
+                                             const Transform& T_frame_table);
 
 }  // namespace simstack

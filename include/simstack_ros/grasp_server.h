@@ -59,8 +59,9 @@ class GraspServer {
     int target = -1;                                     ///< index in the scene's objects
     GraspRankingConfig config;
     std::vector<Vec3> cameras;
-    std_msgs::Header pose_header;  ///< frame of the tool and pre-grasp poses
-    Transform T_frame_scene = Transform::Identity();
+    std_msgs::Header pose_header;                     ///< frame of the tool and pre-grasp poses
+    Transform T_pose_table = Transform::Identity();   ///< the table frame in pose_header's
+    Transform T_scene_table = Transform::Identity();  ///< and in the scene's
     double pregrasp_distance_m = 0.0;
   };
   void onObjects(const ObjectArray::ConstPtr& msg);

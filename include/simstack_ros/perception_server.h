@@ -4,8 +4,9 @@
 /// octomap_server's OctomapServer is): it subscribes depth/image_rect + depth/camera_info,
 /// finds the table (tf, or a RANSAC plane it then broadcasts), runs the pipeline on a worker
 /// thread and publishes the objects, their instance cloud, markers, the occupancy and the label
-/// image; services ~reset and ~save_octomap; live settings through dynamic_reconfigure
-/// (config/LiveSettings.cfg); diagnostics. Parameters: ros_params.h. Frames reach the worker
+/// image, in ~output_frame; services ~reset and ~save_octomap; live settings through
+/// dynamic_reconfigure (config/LiveSettings.cfg on ~, config/HoughSettings.cfg on ~hough);
+/// diagnostics. Parameters: ros_params.h. Frames reach the worker
 /// through a one-slot mailbox: the newest frame wins, callbacks never block, and the frames
 /// replaced before the worker took them are counted as dropped.
 
@@ -13,6 +14,7 @@
 #include <dynamic_reconfigure/server.h>
 #include <image_transport/image_transport.h>
 #include <ros/ros.h>
+#include <simstack/HoughSettingsConfig.h>
 #include <simstack/LiveSettingsConfig.h>
 #include <simstack/SaveOctomap.h>
 #include <std_srvs/Empty.h>
@@ -35,8 +37,10 @@ namespace simstack {
 
 class PerceptionServer {
  public:
-  /// Reads the parameters and loads the model: throws std::runtime_error naming the file or
-  /// parameter when it cannot. Then advertises, subscribes and starts the worker.
+  /// Reads the parameters (throws std::runtime_error naming a bad one), loads the model and
+  /// checks it (checkModel). A model that cannot be loaded or fails a check is refused: the
+  /// node reports ERROR in diagnostics, latches ~ready false and perceives nothing. Otherwise
+  /// it warms the network up, advertises, subscribes and starts the worker.
   PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh, const std::string& package_dir);
   /// Stops the worker (the frame it is on is finished first).
   ~PerceptionServer();
@@ -55,28 +59,38 @@ class PerceptionServer {
   /// The frame as a DepthView with its table pose (std::nullopt pose with estimate_table);
   /// false, with the reason, when the frame must be skipped.
   bool toView(const Frame& frame, DepthView* view, std::string* why);
-  /// Waits for table_frame <- camera_frame at `stamp` for tf_timeout_s of the clock of the
+  /// T_target_source at `stamp` from tf, waited for as waitForTransform does; false, with the
+  /// reason, when it did not come.
+  bool lookup(const std::string& target, const std::string& source, const ros::Time& stamp,
+              Transform* T_target_source, std::string* why);
+  /// After a failed lookup: when tf holds target <- source only far ahead of `stamp` (a clock
+  /// that ran ahead and was set back) for the third frame in a row, clears the tf buffer (static
+  /// transforms stay) and says so.
+  void checkClockJump(const std::string& target, const std::string& source, const ros::Time& stamp);
+  /// Waits for target <- source at `stamp` for tf_timeout_s of the clock of the
   /// stamps (simulated time under /use_sim_time: a bag played slowly gets as long in its own
   /// time) and at least as long on the wall clock; a simulated clock that stands still that
   /// long (a paused bag, or none started) ends it, as does the node stopping. False, with the
   /// reason, when the transform did not come.
-  bool waitForTransform(const std::string& camera_frame, const ros::Time& stamp, std::string* why);
+  bool waitForTransform(const std::string& target, const std::string& source,
+                        const ros::Time& stamp, std::string* why);
   /// Whether the destructor has asked the worker to end (takes mutex_).
   bool stopRequested();
-  void publish(const Frame& frame, const DepthView& view, const SceneEstimate& estimate, int views);
+  /// The estimate (in the table frame) published in the output frame, `T_output_table`.
+  void publish(const Frame& frame, const DepthView& view, const SceneEstimate& estimate, int views,
+               const Transform& T_output_table);
   void skip(const Frame& frame, const std::string& why);
   /// One frame of a rendered box before the first subscription (ScenePerception::warmUp).
   void warmUp();
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   bool saveOctomap(SaveOctomap::Request& req, SaveOctomap::Response& res);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
-  /// Once a second (wall time): a warning when no frame has come for node/input_timeout_s.
+  /// Once a second (wall time): a warning when no frame has come for ~input_timeout_s.
   void onSilenceCheck();
   /// Seconds since the last frame came (since the start before any), mutex_ held.
   double secondsWithoutFrame(const ros::SteadyTime& now) const;
   /// The same, or 0 while frames come within input_timeout_s (mutex_ held).
   double silenceSeconds(const ros::SteadyTime& now) const;
-  void onSettings(LiveSettingsConfig& settings, uint32_t level);
   /// Applies settings changed by dynamic_reconfigure (worker thread, between frames).
   void applySettings();
 
@@ -94,7 +108,8 @@ class PerceptionServer {
   ros::ServiceServer reset_srv_, save_srv_;
   diagnostic_updater::Updater diagnostics_;
   boost::recursive_mutex reconfigure_mutex_;
-  std::unique_ptr<dynamic_reconfigure::Server<LiveSettingsConfig>> reconfigure_;
+  std::unique_ptr<dynamic_reconfigure::Server<LiveSettingsConfig>> reconfigure_;         ///< on ~
+  std::unique_ptr<dynamic_reconfigure::Server<HoughSettingsConfig>> hough_reconfigure_;  ///< ~hough
   /// Wall time: simulated time stops with a bag and jumps back when it loops.
   ros::SteadyTimer silence_timer_, diagnostics_timer_;
 
@@ -115,6 +130,9 @@ class PerceptionServer {
   double warm_up_s_ = 0.0;
   int warm_up_objects_ = 0;
   int decompose_samples_ = 1;  ///< as configured at start (samples may change live)
+  /// Why the model was refused ("" when it was loaded): nothing is perceived then.
+  std::string model_error_;
+  int tf_ahead_frames_ = 0;  ///< frames in a row whose tf was only far ahead (worker thread)
   std::mutex save_mutex_;
   StageTimings last_timings_;
   std::shared_ptr<const SceneEstimate> last_scene_;
@@ -122,6 +140,7 @@ class PerceptionServer {
   Image<uint8_t> mask_;           ///< the last ~mask received (empty: none)
   bool reset_requested_ = false;
   std::optional<LiveSettingsConfig> pending_settings_;
+  std::optional<HoughSettingsConfig> pending_hough_;
   std::thread worker_;  ///< last: starts after everything it uses
 };
 

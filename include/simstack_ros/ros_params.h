@@ -1,9 +1,10 @@
 #pragma once
 /// @file ros_params.h
-/// Every parameter of the perception node, read in one place. The pipeline's settings come
-/// from the same file as the tools' (config/perception.yaml, loaded into the node's private
-/// namespace by the launch file) and are parsed by the core's loader, so a field has one name,
-/// one default and one check; the node's own settings are its `node:` section.
+/// Every parameter of the perception node, read in one place. Each setting is one parameter in
+/// the node's private namespace: the pipeline's (config/perception.yaml: ~model, ~symmetries,
+/// ~hough/bandwidth_m, ...) are parsed by the core's loader, laid over the package's
+/// config/perception.yaml, so a field has one name, one default and one check; the node's own
+/// (config/perception_node.yaml: ~table_frame, ~latch, ...) are read here.
 
 #include <ros/node_handle.h>
 
@@ -15,10 +16,12 @@
 
 namespace simstack {
 
-/// The node's own settings (`node:` in config/perception.yaml).
+/// The node's own settings (config/perception_node.yaml).
 struct NodeConfig {
-  std::string table_frame = "table";  ///< tf frame of the table (z up, plane z = 0); output frame
-  bool estimate_table = false;        ///< RANSAC plane per frame instead of tf, broadcast on tf
+  std::string table_frame = "table";  ///< tf frame of the table (z up, plane z = 0)
+  /// Frame of every output (objects, markers, clouds, object tf frames); "" = table_frame.
+  std::string output_frame;
+  bool estimate_table = false;   ///< RANSAC plane per frame instead of tf, broadcast on tf
   double tf_timeout_s = 0.2;     ///< wait for table_frame <- camera (stamp's clock and wall clock)
   double input_timeout_s = 5.0;  ///< no frame for this long (wall time): warn, diagnostics WARN
   std::string image_transport = "raw";
@@ -29,22 +32,26 @@ struct NodeConfig {
   std::string output_dir;
   /// Objects, markers, instances, occupancy and labels latched: a late subscriber gets the last.
   bool latch = true;
-  TrackerConfig tracking;  ///< node/track_max_centre_distance_m, node/track_max_size_ratio
+  TrackerConfig tracking;  ///< ~track_max_centre_distance_m, ~track_max_size_ratio
   /// Broadcast each object's superquadric pose on tf as <object_frame_prefix>object_<id>, a
-  /// child of table_frame at the frame's stamp.
+  /// child of the output frame at the frame's stamp.
   bool publish_object_tf = true;
   std::string object_frame_prefix = "simstack_";
+  /// The frame outputs are in: output_frame, or table_frame when it is empty.
+  const std::string& outputFrame() const {
+    return output_frame.empty() ? table_frame : output_frame;
+  }
   /// Throws std::invalid_argument naming the field.
   void validate() const;
 };
 
-/// The pipeline's settings from the parameters under `pnh` (sections perception, segments,
-/// fitting, table; a relative model path is taken from `package_dir`); with none of them set,
-/// `package_dir`/config/perception.yaml. Throws
-/// std::runtime_error naming the parameter when one is misspelt or of the wrong type.
+/// The pipeline's settings: `package_dir`/config/perception.yaml with the pipeline's parameters
+/// under `pnh` laid over it (~model, ~symmetries, ~hough/..., ~segments/...; a relative model
+/// path is taken from `package_dir`). Throws std::runtime_error naming the parameter when one
+/// is unknown (misspelt) or of the wrong type.
 PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
                                             const std::string& package_dir);
-/// The node's settings from `pnh`'s `node/` parameters (absent ones keep their defaults).
+/// The node's settings from `pnh`'s parameters (absent ones keep their defaults).
 NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh);
 
 /// The grasp server's settings (config/grasps.yaml, loaded into its private namespace).

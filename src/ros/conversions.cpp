@@ -276,6 +276,16 @@ void checkIds(const ObjectIds& ids, size_t objects) {
 /// The colour index of an id: the palette's colours from 1 on.
 int colourIndex(uint32_t id) { return static_cast<int>(id % 1000000u) + 1; }
 
+SuperquadricShape moved(SuperquadricShape sq, const Transform& T) {
+  sq.T_table_object = T * sq.T_table_object;
+  return sq;
+}
+
+Points3 moved(Points3 points, const Transform& T) {
+  for (Vec3& p : points) p = T * p;
+  return points;
+}
+
 /// Triangles per face side of a superquadric's collision and marker mesh.
 constexpr int kMeshSubdivisions = 6;
 
@@ -300,11 +310,13 @@ shape_msgs::Mesh superquadricMesh(const SuperquadricShape& sq) {
 }
 
 ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& est, int views,
-                           int samples, int symmetries, const ObjectIds& ids) {
+                           int samples, int symmetries, const ObjectIds& ids,
+                           const Transform& T_frame_table) {
   checkIds(ids, est.instances().size());
   ObjectArray out;
   out.header = header;
   out.table_pose = poseMsg(est.T_table_camera.inverse());
+  out.table_in_frame = poseMsg(T_frame_table);
   out.table_estimated = est.table_estimated;
   out.views = static_cast<uint32_t>(views);
   out.samples = static_cast<uint32_t>(samples);
@@ -322,9 +334,9 @@ ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& 
   for (size_t k = 0; k < instances.size(); ++k) {
     Object o;
     o.id = objectId(ids, k);
-    o.superquadric = superquadricMsg(instances[k].superquadric);
+    o.superquadric = superquadricMsg(moved(instances[k].superquadric, T_frame_table));
     o.mesh = superquadricMesh(instances[k].superquadric);
-    o.surface = pointCloud(header, instances[k].points);
+    o.surface = pointCloud(header, moved(instances[k].points, T_frame_table));
     o.voxels = static_cast<uint32_t>(instances[k].voxels);
     o.visible_fraction = static_cast<float>(instances[k].visible_fraction);
     o.truncated = instances[k].truncated;
@@ -333,14 +345,14 @@ ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& 
   for (size_t h = 1; h < est.hypotheses.size() && est.hypotheses[h].decomposed; ++h) {
     SceneSample hypothesis;
     for (const InstanceEstimate& e : est.hypotheses[h].instances)
-      hypothesis.superquadrics.push_back(superquadricMsg(e.superquadric));
+      hypothesis.superquadrics.push_back(superquadricMsg(moved(e.superquadric, T_frame_table)));
     out.hypotheses.push_back(std::move(hypothesis));
   }
   return out;
 }
 
 sensor_msgs::PointCloud2 instancesCloud(const std_msgs::Header& header, const SceneEstimate& est,
-                                        const ObjectIds& ids) {
+                                        const ObjectIds& ids, const Transform& T_frame_table) {
   checkIds(ids, est.instances().size());
   size_t n = 0;
   for (const InstanceEstimate& e : est.instances()) n += e.points.size();
@@ -349,16 +361,19 @@ sensor_msgs::PointCloud2 instancesCloud(const std_msgs::Header& header, const Sc
   for (size_t k = 0; k < est.instances().size(); ++k) {
     const uint32_t id = objectId(ids, k);
     const float rgb = packedColour(colourIndex(id));
-    for (const Vec3& p : est.instances()[k].points)
+    for (const Vec3& q : est.instances()[k].points) {
+      const Vec3 p = T_frame_table * q;
       putFloats(&cloud, i++,
                 {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()),
                  static_cast<float>(id) + 1.0f, rgb});
+    }
   }
   return cloud;
 }
 
 sensor_msgs::PointCloud2 occupancyCloud(const std_msgs::Header& header,
-                                        const Grid3<float>& probability, double min_probability) {
+                                        const Grid3<float>& probability, double min_probability,
+                                        const Transform& T_frame_table) {
   const GridSpec& g = probability.spec;
   std::vector<int> kept;
   for (int i = 0; i < static_cast<int>(probability.data.size()); ++i)
@@ -367,7 +382,7 @@ sensor_msgs::PointCloud2 occupancyCloud(const std_msgs::Header& header,
       cloudWithFields(header, kept.size(), {"x", "y", "z", "probability"});
   for (size_t j = 0; j < kept.size(); ++j) {
     const Vec3i v = g.unravel(kept[j]);
-    const Vec3 c = g.voxelCentre(v.x(), v.y(), v.z());
+    const Vec3 c = T_frame_table * g.voxelCentre(v.x(), v.y(), v.z());
     putFloats(&cloud, j,
               {static_cast<float>(c.x()), static_cast<float>(c.y()), static_cast<float>(c.z()),
                probability.data[kept[j]]});
@@ -376,7 +391,8 @@ sensor_msgs::PointCloud2 occupancyCloud(const std_msgs::Header& header,
 }
 
 visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
-                                              const SceneEstimate& est, const ObjectIds& ids) {
+                                              const SceneEstimate& est, const ObjectIds& ids,
+                                              const Transform& T_frame_table) {
   checkIds(ids, est.instances().size());
   visualization_msgs::MarkerArray out;
   visualization_msgs::Marker clear;
@@ -392,7 +408,7 @@ visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
     mesh.id = static_cast<int>(id);
     mesh.type = visualization_msgs::Marker::TRIANGLE_LIST;
     mesh.action = visualization_msgs::Marker::ADD;
-    mesh.pose = poseMsg(sq.T_table_object);
+    mesh.pose = poseMsg(T_frame_table * sq.T_table_object);
     mesh.scale.x = mesh.scale.y = mesh.scale.z = 1.0;
     mesh.color = colourMsg(colourIndex(id));
     const TriangleMesh m = sq.meshObject(kMeshSubdivisions);
@@ -411,9 +427,12 @@ visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
     text.id = static_cast<int>(id);
     text.type = visualization_msgs::Marker::TEXT_VIEW_FACING;
     text.action = visualization_msgs::Marker::ADD;
-    text.pose.position.x = sq.T_table_object.translation().x();
-    text.pose.position.y = sq.T_table_object.translation().y();
-    text.pose.position.z = sq.T_table_object.translation().z() + sq.scale_m.maxCoeff() + 0.03;
+    // Above the object along the table's up.
+    const Vec3 above = T_frame_table *
+                       (sq.T_table_object.translation() + Vec3(0, 0, sq.scale_m.maxCoeff() + 0.03));
+    text.pose.position.x = above.x();
+    text.pose.position.y = above.y();
+    text.pose.position.z = above.z();
     text.pose.orientation.w = 1.0;
     text.scale.z = 0.04;
     text.color.r = text.color.g = text.color.b = text.color.a = 1.0f;

@@ -32,27 +32,42 @@ SuperquadricShape superquadricFromMsg(const simstack::Superquadric& m, const std
   return sq;
 }
 
+Transform tableInFrame(const ObjectArray& msg) {
+  const geometry_msgs::Pose& p = msg.table_in_frame;
+  const bool unset = p.position.x == 0.0 && p.position.y == 0.0 && p.position.z == 0.0 &&
+                     p.orientation.x == 0.0 && p.orientation.y == 0.0 && p.orientation.z == 0.0 &&
+                     p.orientation.w == 0.0;
+  return unset ? Transform::Identity() : rigidFromPose(p, "the scene's table_in_frame");
+}
+
 std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, int hypotheses) {
+  const Transform T_table_frame = tableInFrame(msg).inverse();
+  const auto inTable = [&](SuperquadricShape sq) {
+    sq.T_table_object = T_table_frame * sq.T_table_object;
+    return sq;
+  };
   std::vector<std::vector<SuperquadricShape>> scenes(1);
   for (const Object& o : msg.objects)
-    scenes[0].push_back(superquadricFromMsg(o.superquadric, "object " + std::to_string(o.id)));
+    scenes[0].push_back(
+        inTable(superquadricFromMsg(o.superquadric, "object " + std::to_string(o.id))));
   for (size_t h = 0; h < msg.hypotheses.size() && static_cast<int>(scenes.size()) < hypotheses;
        ++h) {
     std::vector<SuperquadricShape> scene;
     for (size_t k = 0; k < msg.hypotheses[h].superquadrics.size(); ++k)
-      scene.push_back(superquadricFromMsg(
+      scene.push_back(inTable(superquadricFromMsg(
           msg.hypotheses[h].superquadrics[k],
-          "hypothesis " + std::to_string(h + 1) + " object " + std::to_string(k)));
+          "hypothesis " + std::to_string(h + 1) + " object " + std::to_string(k))));
     scenes.push_back(std::move(scene));
   }
   return scenes;
 }
 
 Grasp graspMsg(const RankedGrasp& g, const std_msgs::Header& pose_header,
-               const Transform& T_frame_scene, double pregrasp_distance_m) {
+               const Transform& T_pose_table, const Transform& T_scene_table,
+               double pregrasp_distance_m) {
   Grasp m;
-  const Vec3 z = g.candidate.approach_table.normalized();
-  const Transform tool = T_frame_scene * toolPose(g.candidate);
+  const Vec3 z = T_scene_table.linear() * g.candidate.approach_table.normalized();
+  const Transform tool = T_pose_table * toolPose(g.candidate);
   m.tool_pose.header = m.pregrasp_pose.header = pose_header;
   m.tool_pose.pose = poseMsg(tool);
   m.pregrasp_pose.pose = poseMsg(pregraspPose(tool, pregrasp_distance_m));
@@ -73,7 +88,8 @@ Grasp graspMsg(const RankedGrasp& g, const std_msgs::Header& pose_header,
 }
 
 visualization_msgs::MarkerArray graspMarkers(const std_msgs::Header& header,
-                                             const std::vector<RankedGrasp>& grasps) {
+                                             const std::vector<RankedGrasp>& grasps,
+                                             const Transform& T_frame_table) {
   visualization_msgs::MarkerArray out;
   visualization_msgs::Marker clear;
   clear.header = header;
@@ -81,8 +97,9 @@ visualization_msgs::MarkerArray graspMarkers(const std_msgs::Header& header,
   out.markers.push_back(clear);
   const double length_m = 0.06;
   for (size_t i = 0; i < grasps.size(); ++i) {
-    const Vec3 tip = grasps[i].candidate.contact_table;
-    const Vec3 tail = tip + length_m * grasps[i].candidate.approach_table.normalized();
+    const Vec3 tip = T_frame_table * grasps[i].candidate.contact_table;
+    const Vec3 tail =
+        tip + length_m * (T_frame_table.linear() * grasps[i].candidate.approach_table.normalized());
     visualization_msgs::Marker arrow;
     arrow.header = header;
     arrow.ns = "grasps";

@@ -51,19 +51,20 @@ constexpr double kTfWaitS = 0.5;
 /// for the scene to be taken as resting on it (metres).
 constexpr double kTableGapM = 0.05;
 
-/// A scene's lowest surface against the simulation's table at z = 0: below it by more than
-/// kTableGapM is refused (`*refuse`), as a scene in another frame than the table's; above it
-/// is said, as its objects fall before any pull. Empty when the scene rests on the table.
-std::string tableNote(const std::vector<SuperquadricShape>& scene, const std::string& frame,
-                      bool* refuse) {
+/// A scene's lowest surface (in its table frame) against the simulation's table at z = 0:
+/// below it by more than kTableGapM is refused (`*refuse`), as a scene whose table_in_frame is
+/// wrong; above it is said, as its objects fall before any pull. Empty when the scene rests on
+/// the table.
+std::string tableNote(const std::vector<SuperquadricShape>& scene, bool* refuse) {
   const double bottom = sceneBottom(scene);
   *refuse = bottom < -kTableGapM;
   if (std::abs(bottom) <= kTableGapM) return {};
-  return "the scene's lowest surface is at z = " + number(bottom) + " m in '" + frame +
-         "', where the simulation's table is at z = 0: " +
+  return "the scene's lowest surface is at z = " + number(bottom) +
+         " m in its table frame, where the simulation's table is at z = 0: " +
          (*refuse ? std::string("its objects would stand in the table")
                   : std::string("its objects fall before any pull")) +
-         " (a scene is in the table frame: z up, the table at z = 0)";
+         " (the table frame: z up, the table at z = 0; the scene's table_in_frame places it "
+         "in the scene's frame)";
 }
 
 }  // namespace
@@ -191,12 +192,14 @@ bool GraspServer::placeRequest(const RankGrasps::Request& req, const ObjectArray
   out->pregrasp_distance_m =
       req.pregrasp_distance_m > 0.0 ? req.pregrasp_distance_m : config_.pregrasp_distance_m;
   out->pose_header = res.header;
-  out->T_frame_scene = Transform::Identity();
+  out->T_pose_table = out->T_scene_table;
   if (!req.target_frame.empty() && tf2Frame(req.target_frame) != res.header.frame_id) {
     out->pose_header.frame_id = tf2Frame(req.target_frame);
-    if (!lookup(out->pose_header.frame_id, res.header.frame_id, res.header.stamp,
-                &out->T_frame_scene, &res.message))
+    Transform T_pose_scene;
+    if (!lookup(out->pose_header.frame_id, res.header.frame_id, res.header.stamp, &T_pose_scene,
+                &res.message))
       return false;
+    out->T_pose_table = T_pose_scene * out->T_scene_table;
   }
   return true;
 }
@@ -246,6 +249,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   }
   res.header = scene->header;
   res.header.frame_id = tf2Frame(res.header.frame_id);  // markers in rviz
+  out->T_scene_table = tableInFrame(*scene);            // throws for a bad pose (caught by serve())
   if (!placeRequest(req, *scene, res, out)) return false;
   if (!positiveFinite(req.pull_distance_m) || req.pull_distance_m > config_.max_pull_distance_m) {
     res.message = "pull_distance_m must lie in (0, " + number(config_.max_pull_distance_m) +
@@ -260,7 +264,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   // 0: every hypothesis the scene carries (what the perception was launched to publish).
   const int wanted = static_cast<int>(std::min<size_t>(
       req.hypotheses == 0 ? 1 + scene->hypotheses.size() : size_t{req.hypotheses}, 64));
-  *scenes = graspScenes(*scene, wanted);  // throws for a bad pose (caught by rank())
+  *scenes = graspScenes(*scene, wanted);  // in the table frame; throws for a bad pose
   for (size_t h = 0; h < scenes->size(); ++h)
     if (const std::string why = checkScene((*scenes)[h]); !why.empty()) {
       // checkScene counts objects in the message's order, from 0.
@@ -271,7 +275,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
       return false;
     }
   bool below = false;
-  std::string notes = tableNote((*scenes)[0], res.header.frame_id, &below);
+  std::string notes = tableNote((*scenes)[0], &below);
   if (below) {
     res.message = notes;
     return false;
@@ -283,13 +287,14 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
         "publishes them with a model that has a latent code and decompose_samples above 1, as "
         "grasps.launch does by default); ";
   if (static_cast<int>(scenes->size()) < wanted)
-    notes += std::to_string(wanted) + " hypotheses asked for, the scene has " +
-             std::to_string(scenes->size()) + "; ";
+    notes += std::to_string(req.hypotheses == 0 ? wanted : req.hypotheses) +
+             " hypotheses asked for, the scene has " + std::to_string(scenes->size()) + "; ";
   *config = config_.ranking;
   int count = req.candidates == 0 ? config_.max_candidates
                                   : static_cast<int>(std::min<uint32_t>(req.candidates, 1u << 20));
   if (count > config_.max_candidates_limit) {
-    notes += std::to_string(count) + " candidates asked for, clamped to max_candidates_limit " +
+    notes += std::to_string(req.candidates) +
+             " candidates asked for, clamped to max_candidates_limit " +
              std::to_string(config_.max_candidates_limit) + "; ";
     count = config_.max_candidates_limit;
   }
@@ -304,7 +309,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
       res.message = "camera_pose.position is not finite";
       return false;
     }
-    cameras->push_back(eye);
+    cameras->push_back(out->T_scene_table.inverse() * eye);
   }
   res.message = notes;
   return true;
@@ -406,12 +411,15 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
     if (feedback)
       progress = [&](int done, int total, const RankedGrasp* best) {
         std::optional<Grasp> msg;
-        if (best) msg = graspMsg(*best, p.pose_header, p.T_frame_scene, p.pregrasp_distance_m);
+        if (best)
+          msg = graspMsg(*best, p.pose_header, p.T_pose_table, p.T_scene_table,
+                         p.pregrasp_distance_m);
         return feedback(done, total, msg ? &*msg : nullptr);
       };
     const GraspRanking ranking = rankGrasps(p.scenes, p.target, p.cameras, p.config, progress);
     for (const RankedGrasp& g : ranking.grasps)
-      res.grasps.push_back(graspMsg(g, p.pose_header, p.T_frame_scene, p.pregrasp_distance_m));
+      res.grasps.push_back(
+          graspMsg(g, p.pose_header, p.T_pose_table, p.T_scene_table, p.pregrasp_distance_m));
     for (const SceneDrift& d : ranking.baseline)
       res.baseline_displacement_m.push_back(static_cast<float>(d.max_displacement_m));
     res.candidates_seen = static_cast<uint32_t>(ranking.candidates.visible);
@@ -421,7 +429,7 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
     res.message += std::to_string(ranking.grasps.size()) + " grasps ranked" +
                    (ranking.message.empty() ? "" : "; " + ranking.message);
     res.success = !ranking.stopped;  // cancelled: the grasps so far, not a ranking
-    markers_pub_.publish(graspMarkers(res.header, ranking.grasps));
+    markers_pub_.publish(graspMarkers(res.header, ranking.grasps, p.T_scene_table));
     ROS_INFO("simstack grasp_server: object %u: %zu grasps ranked, %d pulls in %zu hypotheses",
              res.target_id, ranking.grasps.size(), ranking.pulls, ranking.hypotheses.size());
   } catch (const std::invalid_argument& e) {

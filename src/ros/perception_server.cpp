@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "simstack/io/octomap_io.h"
+#include "simstack/io/staged_output.h"
 #include "simstack_ros/conversions.h"
 
 namespace simstack {
@@ -24,7 +25,7 @@ std::string expandHome(const std::string& path) {
   return std::string(home ? home : "") + path.substr(1);
 }
 
-/// node/output_dir, or $ROS_HOME/simstack when it is empty (ROS_HOME as roslaunch reads it:
+/// ~output_dir, or $ROS_HOME/simstack when it is empty (ROS_HOME as roslaunch reads it:
 /// ~/.ros when unset).
 std::string outputDirectory(const std::string& configured) {
   if (!configured.empty()) return expandHome(configured);
@@ -33,23 +34,31 @@ std::string outputDirectory(const std::string& configured) {
   return base + "/simstack";
 }
 
-LiveSettingsConfig liveSettings(const PerceptionConfig& c) {
+LiveSettingsConfig liveSettings(const PerceptionConfig& c, double occupancy_min) {
   LiveSettingsConfig live;
   live.samples = c.samples;
   live.symmetries = c.symmetries;
-  live.hough_refinement = c.hough.refinement;
-  live.hough_min_traversals = c.hough.min_traversals;
-  live.hough_bandwidth_m = c.hough.bandwidth_m;
-  live.hough_min_instance_voxels = c.hough.min_instance_voxels;
-  live.hough_min_vote_norm = c.hough.min_vote_norm;
   live.min_instance_points = c.min_instance_points;
   live.joint_refinement = c.joint_refinement;
+  live.occupancy_min = occupancy_min;
+  return live;
+}
+
+HoughSettingsConfig houghSettings(const HoughConfig& h) {
+  HoughSettingsConfig live;
+  live.refinement = h.refinement;
+  live.min_traversals = h.min_traversals;
+  live.bandwidth_m = h.bandwidth_m;
+  live.min_instance_voxels = h.min_instance_voxels;
+  live.min_vote_norm = h.min_vote_norm;
   return live;
 }
 
 /// Why a file name given to ~save_octomap is refused ("" when it is fine).
 std::string badFileName(const std::string& name) {
   if (name.empty()) return "no file name given";
+  if (const std::string why = unwritablePath(name); !why.empty())
+    return "'" + name.substr(0, 80) + (name.size() > 80 ? "...'" : "'") + ": " + why;
   if (name.find('/') != std::string::npos || name.find('\\') != std::string::npos)
     return "'" + name + "' is not a plain file name (no directories)";
   if (name == "." || name == ".." || name.find("..") != std::string::npos)
@@ -66,7 +75,6 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
     : nh_(nh),
       pnh_(pnh),
       node_(nodeConfigFromParams(pnh)),
-      perception_(std::make_unique<ScenePerception>(perceptionConfigFromParams(pnh, package_dir))),
       tf_listener_(tf_buffer_),
       it_(nh),
       // Named after the nodelet, not the manager it is loaded into (two perception nodelets in
@@ -79,29 +87,58 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   const double period = diagnostics_.getPeriod();
   if (!(period >= 0.01 && period <= 3600.0))
     throw std::runtime_error(pnh_.resolveName("diagnostic_period") + " must lie in [0.01, 3600] s");
-  // Latched (node/latch): a grasp client, task node or rviz that starts later still gets the
+  const PerceptionConfig config = perceptionConfigFromParams(pnh, package_dir);
+  ready_pub_ = pnh_.advertise<std_msgs::Bool>("ready", 1, true);
+  diagnostics_.setHardwareID("simstack_perception " + pnh_.getNamespace());
+  diagnostics_.add("perception", this, &PerceptionServer::diagnose);
+  started_ = ros::SteadyTime::now();
+  diagnostics_timer_ =
+      nh_.createSteadyTimer(ros::WallDuration(period),
+                            [this](const ros::SteadyTimerEvent&) { diagnostics_.force_update(); });
+  // A model that cannot be loaded, or that fails its card's checks (SHA-256, format, finite
+  // weights, the self-test): the node stays up, says so in diagnostics (ERROR) and on ~ready
+  // (false), and perceives nothing, rather than publish scenes a broken network made.
+  try {
+    perception_ = std::make_unique<ScenePerception>(config);
+    checkModel(config.model_path);
+  } catch (const std::runtime_error& e) {
+    perception_.reset();
+    model_error_ = e.what();
+    ROS_ERROR("simstack perception: model refused, nothing will be perceived: %s", e.what());
+    std_msgs::Bool ready;
+    ready.data = false;
+    ready_pub_.publish(ready);
+    return;
+  }
+  // Latched (~latch): a grasp client, task node or rviz that starts later still gets the
   // last scene, as from octomap_server.
   const bool latch = node_.latch;
   objects_pub_ = pnh_.advertise<ObjectArray>("objects", 1, latch);
   instances_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("instances", 1, latch);
   markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("markers", 1, latch);
   occupancy_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("occupancy", 1, latch);
-  ready_pub_ = pnh_.advertise<std_msgs::Bool>("ready", 1, true);
   image_transport::ImageTransport private_it(pnh_);
   labels_pub_ = private_it.advertise("labels", 1, latch);
   reset_srv_ = pnh_.advertiseService("reset", &PerceptionServer::reset, this);
   save_srv_ = pnh_.advertiseService("save_octomap", &PerceptionServer::saveOctomap, this);
-  diagnostics_.setHardwareID("simstack_perception " + pnh_.getNamespace());
-  diagnostics_.add("perception", this, &PerceptionServer::diagnose);
-  started_ = ros::SteadyTime::now();
   decompose_samples_ = perception_->config().decompose_samples;
-  LiveSettingsConfig live = liveSettings(perception_->config());
-  live.occupancy_min = node_.occupancy_min;
+  // Two servers, so that every live setting keeps its parameter's name: ~samples, ~symmetries,
+  // ... on ~, the Hough voting's on ~hough (~hough/bandwidth_m). Each shows the node's
+  // parameters, not the .cfg's defaults.
   reconfigure_ =
       std::make_unique<dynamic_reconfigure::Server<LiveSettingsConfig>>(reconfigure_mutex_, pnh_);
-  reconfigure_->updateConfig(live);  // the node's parameters, not the .cfg's defaults
-  reconfigure_->setCallback(
-      [this](LiveSettingsConfig& settings, uint32_t level) { onSettings(settings, level); });
+  reconfigure_->updateConfig(liveSettings(perception_->config(), node_.occupancy_min));
+  reconfigure_->setCallback([this](LiveSettingsConfig& settings, uint32_t) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pending_settings_ = settings;
+  });
+  hough_reconfigure_ = std::make_unique<dynamic_reconfigure::Server<HoughSettingsConfig>>(
+      reconfigure_mutex_, ros::NodeHandle(pnh_, "hough"));
+  hough_reconfigure_->updateConfig(houghSettings(perception_->config().hough));
+  hough_reconfigure_->setCallback([this](HoughSettingsConfig& settings, uint32_t) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pending_hough_ = settings;
+  });
   warmUp();
   // The hints read ~image_transport (image_transport's convention, `_image_transport:=...`)
   // from the node's own namespace: a nodelet's "~" would be its manager's.
@@ -110,9 +147,8 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
     depth_sub_ =
         it_.subscribeCamera("depth/image_rect", 1, &PerceptionServer::onFrame, this, hints);
   } catch (const image_transport::TransportLoadException& e) {
-    const bool overridden = hints.getTransport() != node_.image_transport;
-    throw std::runtime_error((overridden ? "~image_transport '" : "node/image_transport '") +
-                             hints.getTransport() + "' cannot be loaded: " + e.what());
+    throw std::runtime_error("~image_transport '" + hints.getTransport() +
+                             "' cannot be loaded: " + e.what());
   }
   // A latched publisher's mask arrives once; a bad one is reported and the previous one kept.
   const std::string mask_topic = pnh_.resolveName("mask");
@@ -129,10 +165,12 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
                     mask_topic.c_str(), e.what());
         }
       });
-  ROS_INFO("simstack perception: model %s (%d samples), table %s '%s', listening on %s",
-           perception_->config().model_path.c_str(), perception_->config().samples,
-           node_.estimate_table ? "estimated and broadcast as" : "from tf frame",
-           node_.table_frame.c_str(), depth_sub_.getTopic().c_str());
+  ROS_INFO(
+      "simstack perception: model %s (%d samples), table %s '%s', outputs in '%s', listening "
+      "on %s",
+      perception_->config().model_path.c_str(), perception_->config().samples,
+      node_.estimate_table ? "estimated and broadcast as" : "from tf frame",
+      node_.table_frame.c_str(), node_.outputFrame().c_str(), depth_sub_.getTopic().c_str());
   // Ready once it listens: a launch file or bag player waiting for it loses no frame.
   std_msgs::Bool ready;
   ready.data = true;
@@ -142,9 +180,6 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   // reaches an object whose construction failed.
   silence_timer_ = nh_.createSteadyTimer(
       ros::WallDuration(1.0), [this](const ros::SteadyTimerEvent&) { onSilenceCheck(); });
-  diagnostics_timer_ =
-      nh_.createSteadyTimer(ros::WallDuration(period),
-                            [this](const ros::SteadyTimerEvent&) { diagnostics_.force_update(); });
   // Last: from here the worker owns the pipeline (settings change between its frames), and
   // onFrame only fills the mailbox.
   worker_ = std::thread(&PerceptionServer::work, this);
@@ -167,6 +202,7 @@ PerceptionServer::~PerceptionServer() {
   mask_sub_.shutdown();
   reset_srv_.shutdown();
   save_srv_.shutdown();
+  hough_reconfigure_.reset();
   reconfigure_.reset();
 }
 
@@ -252,20 +288,58 @@ bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* 
     return false;
   }
   if (node_.estimate_table) return true;  // the pipeline fits the plane
-  const ros::Time stamp = frame.image->header.stamp;
-  if (!waitForTransform(camera_frame, stamp, why)) return false;
-  try {
-    view->T_table_camera =
-        tf2::transformToEigen(tf_buffer_.lookupTransform(node_.table_frame, camera_frame, stamp));
-  } catch (const tf2::TransformException& e) {
-    *why = "no transform " + node_.table_frame + " <- '" + camera_frame + "': " + e.what();
-    return false;
-  }
-  return true;
+  view->T_table_camera = Transform::Identity();
+  return lookup(node_.table_frame, camera_frame, frame.image->header.stamp, &*view->T_table_camera,
+                why);
 }
 
-bool PerceptionServer::waitForTransform(const std::string& camera_frame, const ros::Time& stamp,
-                                        std::string* why) {
+bool PerceptionServer::lookup(const std::string& target, const std::string& source,
+                              const ros::Time& stamp, Transform* T_target_source,
+                              std::string* why) {
+  bool found = waitForTransform(target, source, stamp, why);
+  if (found) {
+    try {
+      *T_target_source = tf2::transformToEigen(tf_buffer_.lookupTransform(target, source, stamp));
+    } catch (const tf2::TransformException& e) {
+      *why = "no transform " + target + " <- '" + source + "': " + e.what();
+      found = false;
+    }
+  }
+  if (found)
+    tf_ahead_frames_ = 0;
+  else
+    checkClockJump(target, source, stamp);
+  return found;
+}
+
+void PerceptionServer::checkClockJump(const std::string& target, const std::string& source,
+                                      const ros::Time& stamp) {
+  // tf drops a transform older than its newest by more than its cache (10 s): after a clock
+  // that ran ahead is set right, it keeps only the poses from ahead and refuses the new ones.
+  constexpr double kAheadS = 10.0;
+  ros::Time latest;
+  try {
+    latest = tf_buffer_.lookupTransform(target, source, ros::Time(0)).header.stamp;
+  } catch (const tf2::TransformException&) {
+    tf_ahead_frames_ = 0;  // no transform at all: not a clock's doing
+    return;
+  }
+  if (latest.isZero() || (latest - stamp).toSec() <= kAheadS) {
+    tf_ahead_frames_ = 0;
+    return;
+  }
+  if (++tf_ahead_frames_ < 3) return;
+  ROS_WARN(
+      "simstack perception: tf holds %s <- '%s' only %.0f s ahead of the frames, three frames "
+      "in a row (a clock that was set wrong and then corrected?): the tf buffer is cleared and "
+      "refilled from now on",
+      target.c_str(), source.c_str(), (latest - stamp).toSec());
+  tf_buffer_.clear();
+  tf_ahead_frames_ = 0;
+}
+
+bool PerceptionServer::waitForTransform(const std::string& target, const std::string& source,
+                                        const ros::Time& stamp, std::string* why) {
   // tf2's own timeout counts ros::Time alone: under a paused bag's clock it never ended, and
   // the worker (and a nodelet's unload, which joins it) waited for the bag to play on.
   const double timeout = node_.tf_timeout_s;
@@ -275,7 +349,7 @@ bool PerceptionServer::waitForTransform(const std::string& camera_frame, const r
   ros::Time last = start;
   ros::SteadyTime last_moved = begun;
   std::string error;
-  while (!tf_buffer_.canTransform(node_.table_frame, camera_frame, stamp, &error)) {
+  while (!tf_buffer_.canTransform(target, source, stamp, &error)) {
     const ros::SteadyTime wall = ros::SteadyTime::now();
     const ros::Time now = ros::Time::now();
     if (now != last) {
@@ -286,7 +360,7 @@ bool PerceptionServer::waitForTransform(const std::string& camera_frame, const r
                                                   (wall - last_moved).toSec() >= timeout);
     if (waited || stopRequested()) {
       std::ostringstream out;
-      out << "no transform " << node_.table_frame << " <- '" << camera_frame << "' ";
+      out << "no transform " << target << " <- '" << source << "' ";
       if (waited)
         out << "within " << timeout << " s";
       else
@@ -305,47 +379,49 @@ bool PerceptionServer::stopRequested() {
   return stop_;
 }
 
-void PerceptionServer::onSettings(LiveSettingsConfig& settings, uint32_t) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  pending_settings_ = settings;
-}
-
 void PerceptionServer::applySettings() {
   std::optional<LiveSettingsConfig> s;
+  std::optional<HoughSettingsConfig> h;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     s.swap(pending_settings_);
+    h.swap(pending_hough_);
     if (s) node_.occupancy_min = s->occupancy_min;
   }
-  if (!s) return;
+  if (!s && !h) return;
   PerceptionConfig c = perception_->config();
-  c.samples = s->samples;
-  c.symmetries = s->symmetries;
-  c.hough.refinement = s->hough_refinement;
-  c.hough.min_traversals = s->hough_min_traversals;
-  c.hough.bandwidth_m = s->hough_bandwidth_m;
-  c.hough.min_instance_voxels = s->hough_min_instance_voxels;
-  c.hough.min_vote_norm = s->hough_min_vote_norm;
-  c.min_instance_points = s->min_instance_points;
-  c.joint_refinement = s->joint_refinement;
-  c.decompose_samples = std::min(decompose_samples_, c.samples);
+  if (s) {
+    c.samples = s->samples;
+    c.symmetries = s->symmetries;
+    c.min_instance_points = s->min_instance_points;
+    c.joint_refinement = s->joint_refinement;
+    c.decompose_samples = std::min(decompose_samples_, c.samples);
+  }
+  if (h) {
+    c.hough.refinement = h->refinement;
+    c.hough.min_traversals = h->min_traversals;
+    c.hough.bandwidth_m = h->bandwidth_m;
+    c.hough.min_instance_voxels = h->min_instance_voxels;
+    c.hough.min_vote_norm = h->min_vote_norm;
+  }
   try {
     perception_->updateSettings(c);
   } catch (const std::invalid_argument& e) {
     ROS_ERROR("simstack perception: new settings refused, the previous ones stay: %s", e.what());
   }
-  // What is in effect (a refused value, or an FC model's single sample) shown back.
-  LiveSettingsConfig shown = liveSettings(perception_->config());
-  shown.occupancy_min = s->occupancy_min;
-  // Not over a change that came in meanwhile (it is applied, and shown, at the next frame).
-  // The reconfigure server's lock, then mutex_ (the order of its callback, onSettings), keeps
-  // a change from landing between the check and the update.
+  // What is in effect (a refused value, or an FC model's single sample) shown back, but not
+  // over a change that came in meanwhile (it is applied, and shown, at the next frame). The
+  // reconfigure servers' lock, then mutex_ (the order of their callbacks), keeps a change from
+  // landing between the check and the update.
   boost::recursive_mutex::scoped_lock shown_lock(reconfigure_mutex_);
+  double occupancy_min;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (pending_settings_) return;
+    if (pending_settings_ || pending_hough_) return;
+    occupancy_min = node_.occupancy_min;
   }
-  reconfigure_->updateConfig(shown);
+  reconfigure_->updateConfig(liveSettings(perception_->config(), occupancy_min));
+  hough_reconfigure_->updateConfig(houghSettings(perception_->config().hough));
 }
 
 void PerceptionServer::process(const Frame& frame) {
@@ -353,6 +429,15 @@ void PerceptionServer::process(const Frame& frame) {
   DepthView view;
   std::string why;
   if (!toView(frame, &view, &why)) return skip(frame, why);
+  // The output frame's pose, looked up before the pipeline runs: a frame that cannot be placed
+  // in it costs nothing.
+  std::optional<Transform> T_output_camera;
+  if (node_.outputFrame() != node_.table_frame) {
+    T_output_camera = Transform::Identity();
+    if (!lookup(node_.outputFrame(), tf2Frame(frame.image->header.frame_id),
+                frame.image->header.stamp, &*T_output_camera, &why))
+      return skip(frame, "~output_frame: " + why);
+  }
   std::vector<DepthView> views;
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -388,7 +473,10 @@ void PerceptionServer::process(const Frame& frame) {
   } catch (const std::exception& e) {
     return skip(frame, e.what());  // not kept: a refused view would spoil every later frame
   }
-  publish(frame, view, estimate, static_cast<int>(views.size()));
+  const Transform T_output_table =
+      T_output_camera ? Transform(*T_output_camera * estimate.T_table_camera.inverse())
+                      : Transform::Identity();
+  publish(frame, view, estimate, static_cast<int>(views.size()), T_output_table);
   std::lock_guard<std::mutex> lock(mutex_);
   if (node_.accumulate_views && view.T_table_camera) {
     views_.push_back(std::move(view));
@@ -401,10 +489,11 @@ void PerceptionServer::process(const Frame& frame) {
 }
 
 void PerceptionServer::publish(const Frame& frame, const DepthView& view,
-                               const SceneEstimate& estimate, int views) {
+                               const SceneEstimate& estimate, int views,
+                               const Transform& T_output_table) {
   std_msgs::Header header;
   header.stamp = frame.image->header.stamp;
-  header.frame_id = node_.table_frame;
+  header.frame_id = node_.outputFrame();
   std_msgs::Header camera_header = frame.image->header;  // of the labels image and the table's tf
   camera_header.frame_id = tf2Frame(camera_header.frame_id);
   if (estimate.table_estimated) {
@@ -424,7 +513,8 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
   if (node_.publish_object_tf) {
     std::vector<geometry_msgs::TransformStamped> frames;
     for (size_t k = 0; k < shapes.size(); ++k) {
-      geometry_msgs::TransformStamped t = tf2::eigenToTransform(shapes[k].T_table_object);
+      geometry_msgs::TransformStamped t =
+          tf2::eigenToTransform(Transform(T_output_table * shapes[k].T_table_object));
       t.header = header;
       t.child_frame_id = node_.object_frame_prefix + "object_" + std::to_string(ids[k]);
       frames.push_back(std::move(t));
@@ -433,15 +523,16 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
   }
   objects_pub_.publish(objectArrayMsg(header, estimate, views,
                                       static_cast<int>(estimate.hypotheses.size()),
-                                      perception_->config().symmetries, ids));
-  instances_pub_.publish(instancesCloud(header, estimate, ids));
-  markers_pub_.publish(objectMarkers(header, estimate, ids));
+                                      perception_->config().symmetries, ids, T_output_table));
+  instances_pub_.publish(instancesCloud(header, estimate, ids, T_output_table));
+  markers_pub_.publish(objectMarkers(header, estimate, ids, T_output_table));
   double occupancy_min;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     occupancy_min = node_.occupancy_min;
   }
-  occupancy_pub_.publish(occupancyCloud(header, estimate.occupancy_probability, occupancy_min));
+  occupancy_pub_.publish(
+      occupancyCloud(header, estimate.occupancy_probability, occupancy_min, T_output_table));
   // Latched, it is made for every frame (a later subscriber gets the last); else only when
   // someone listens.
   if (node_.latch || labels_pub_.getNumSubscribers() > 0) {
@@ -546,6 +637,11 @@ void PerceptionServer::onSilenceCheck() {
 
 void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   std::lock_guard<std::mutex> lock(mutex_);
+  if (!model_error_.empty()) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "model refused: " + model_error_);
+    status.add("ready (model loaded and warmed up, listening)", std::string("false"));
+    return;
+  }
   const ros::SteadyTime now = ros::SteadyTime::now();
   const double seconds = std::max(1e-3, (now - rate_since_).toSec());
   const double rate = (processed_ - processed_before_) / seconds;

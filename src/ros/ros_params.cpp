@@ -2,7 +2,6 @@
 
 #include <ros/console.h>
 #include <ros/param.h>
-#include <simstack/LiveSettingsConfig.h>
 #include <xmlrpcpp/XmlRpcValue.h>
 
 #include <algorithm>
@@ -67,118 +66,115 @@ void read(const ros::NodeHandle& pnh, const std::string& name, T* value) {
     throw std::runtime_error(pnh.resolveName(name) + " has the wrong type");
 }
 
-/// The sections of the node's private namespace: the perception config's and `node`.
-std::set<std::string> sections() {
-  std::set<std::string> out(perceptionConfigSections().begin(), perceptionConfigSections().end());
-  out.insert("node");
-  return out;
+/// Every parameter of the node's own (config/perception_node.yaml) once, with its field: reading
+/// and the check for unknown names walk the same list.
+template <class C, class F>
+void nodeFields(C& c, F&& f) {
+  f("table_frame", c.table_frame);
+  f("output_frame", c.output_frame);
+  f("estimate_table", c.estimate_table);
+  f("tf_timeout_s", c.tf_timeout_s);
+  f("input_timeout_s", c.input_timeout_s);
+  f("image_transport", c.image_transport);
+  f("occupancy_min", c.occupancy_min);
+  f("accumulate_views", c.accumulate_views);
+  f("max_views", c.max_views);
+  f("output_dir", c.output_dir);
+  f("latch", c.latch);
+  f("publish_object_tf", c.publish_object_tf);
+  f("object_frame_prefix", c.object_frame_prefix);
+  f("track_max_centre_distance_m", c.tracking.max_centre_distance_m);
+  f("track_max_size_ratio", c.tracking.max_size_ratio);
 }
 
-/// "perception, hough, ... or node", for messages.
-std::string sectionList() {
-  std::string out;
-  for (const std::string& s : perceptionConfigSections()) out += s + ", ";
-  return out.substr(0, out.size() - 2) + " or node";
+const std::set<std::string>& nodeParameters() {
+  static const std::set<std::string> names = [] {
+    std::set<std::string> out;
+    NodeConfig c;
+    nodeFields(c, [&](const char* name, auto&) { out.insert(name); });
+    return out;
+  }();
+  return names;
 }
 
-/// Checks what else lies in the node's private namespace. A map there is a config section, and
-/// a misspelt one is an error, except under the node's image topic: image_transport's
-/// publisher plugins (compressed, theora) keep their dynamic_reconfigure settings there, and
-/// those outlive the node, so a restarted node finds them. A scalar there that is none of
-/// dynamic_reconfigure's live settings (nor image_transport's or diagnostic_updater's) is most
-/// likely a `node/` field written without its section: it is ignored with a warning.
-void checkPrivateNamespace(const ros::NodeHandle& pnh) {
+bool isPipelineParameter(const std::string& name) {
+  const std::vector<std::string>& f = perceptionConfigFields();
+  const std::vector<std::string>& s = perceptionConfigSections();
+  return std::find(f.begin(), f.end(), name) != f.end() ||
+         std::find(s.begin(), s.end(), name) != s.end();
+}
+
+/// Every parameter in the node's private namespace must be one it reads, so that a misspelt
+/// one stops the node rather than being ignored. Besides the pipeline's and the node's own:
+/// diagnostic_updater's ~diagnostic_period, and the maps image_transport's publisher plugins
+/// (compressed, theora) keep under the ~labels topic, which outlive the node.
+void checkPrivateNamespace(const ros::NodeHandle& pnh, XmlRpc::XmlRpcValue& all) {
+  for (auto& kv : all) {
+    const std::string& name = kv.first;
+    if (isPipelineParameter(name) || nodeParameters().count(name) || name == "diagnostic_period" ||
+        (name == "labels" && kv.second.getType() == XmlRpc::XmlRpcValue::TypeStruct))
+      continue;
+    throw std::runtime_error(
+        "unknown parameter " + pnh.resolveName(name) +
+        " (the node reads the pipeline's settings of config/perception.yaml and its own of "
+        "config/perception_node.yaml, each under its own name; docs/reference.md)");
+  }
+}
+
+/// The node's private parameters (an empty map when there are none).
+XmlRpc::XmlRpcValue privateParameters(const ros::NodeHandle& pnh) {
   XmlRpc::XmlRpcValue all;
   if (!ros::param::get(pnh.getNamespace(), all) || all.getType() != XmlRpc::XmlRpcValue::TypeStruct)
-    return;
-  std::set<std::string> scalars{"image_transport", "diagnostic_period"};
-  for (const auto& d : LiveSettingsConfig::__getParamDescriptions__()) scalars.insert(d->name);
-  const std::set<std::string> known = sections();
-  for (auto& kv : all) {
-    if (kv.second.getType() == XmlRpc::XmlRpcValue::TypeStruct) {
-      if (!known.count(kv.first) && kv.first != "labels")
-        throw std::runtime_error("unknown parameter section " + pnh.resolveName(kv.first) + " (" +
-                                 sectionList() + ")");
-    } else if (!scalars.count(kv.first)) {
-      ROS_WARN(
-          "simstack: parameter %s is not one the node reads and is ignored (the node's own "
-          "settings are under %s)",
-          pnh.resolveName(kv.first).c_str(), pnh.resolveName("node/").c_str());
-    }
-  }
+    return XmlRpc::XmlRpcValue();
+  return all;
 }
 
 }  // namespace
 
 void NodeConfig::validate() const {
-  if (table_frame.empty()) throw std::invalid_argument("node/table_frame is empty");
+  if (table_frame.empty()) throw std::invalid_argument("~table_frame is empty");
   if (!(tf_timeout_s >= 0.0 && tf_timeout_s <= 10.0))
-    throw std::invalid_argument("node/tf_timeout_s must lie in [0, 10] s");
+    throw std::invalid_argument("~tf_timeout_s must lie in [0, 10] s");
   if (!(input_timeout_s >= 0.5 && input_timeout_s <= 3600.0))
-    throw std::invalid_argument("node/input_timeout_s must lie in [0.5, 3600] s");
+    throw std::invalid_argument("~input_timeout_s must lie in [0.5, 3600] s");
   if (!(occupancy_min > 0.0 && occupancy_min <= 1.0))
-    throw std::invalid_argument("node/occupancy_min must lie in (0, 1]");
+    throw std::invalid_argument("~occupancy_min must lie in (0, 1]");
   if (max_views < 1 || max_views > 64)
-    throw std::invalid_argument("node/max_views must lie in [1, 64]");
+    throw std::invalid_argument("~max_views must lie in [1, 64]");
   try {
     tracking.validate();
   } catch (const std::invalid_argument& e) {
-    throw std::invalid_argument(std::string("node/track_*: ") + e.what());
+    throw std::invalid_argument(std::string("~track_*: ") + e.what());
   }
 }
 
 PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
                                             const std::string& package_dir) {
-  checkPrivateNamespace(pnh);
-  const std::vector<std::string>& config_sections = perceptionConfigSections();
-  // Nothing loaded (a node started by hand): the package's own config, as the tools do.
-  if (std::none_of(config_sections.begin(), config_sections.end(),
-                   [&](const std::string& s) { return pnh.hasParam(s); }))
+  XmlRpc::XmlRpcValue all = privateParameters(pnh);
+  if (all.getType() != XmlRpc::XmlRpcValue::TypeStruct)  // none at all
     return loadPerceptionYaml(package_dir + "/config/perception.yaml", package_dir);
+  checkPrivateNamespace(pnh, all);
+  // The package's config, with the pipeline's parameters found under ~ laid over it.
   std::ostringstream yaml;
-  for (const std::string& section : config_sections) {
-    XmlRpc::XmlRpcValue v;
-    if (!pnh.getParam(section, v)) continue;
-    if (v.getType() != XmlRpc::XmlRpcValue::TypeStruct)
-      throw std::runtime_error(pnh.resolveName(section) + " must be a map of parameters");
-    yaml << section << ":";
-    emit(yaml, v, 2);
+  for (auto& kv : all) {
+    if (!isPipelineParameter(kv.first)) continue;
+    yaml << kv.first << ":";
+    emit(yaml, kv.second, 2);
     yaml << "\n";
   }
-  return parsePerceptionYaml(yaml.str(), "the parameters under " + pnh.getNamespace(), package_dir);
+  return overlayPerceptionYaml(package_dir + "/config/perception.yaml", yaml.str(),
+                               "the parameters under " + pnh.getNamespace(), package_dir);
 }
 
 NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh) {
+  XmlRpc::XmlRpcValue all = privateParameters(pnh);
+  if (all.getType() == XmlRpc::XmlRpcValue::TypeStruct) checkPrivateNamespace(pnh, all);
   NodeConfig c;
-  XmlRpc::XmlRpcValue given;
-  if (pnh.getParam("node", given)) {
-    if (given.getType() != XmlRpc::XmlRpcValue::TypeStruct)
-      throw std::runtime_error(pnh.resolveName("node") + " must be a map of parameters");
-    for (auto& kv : given)
-      if (!std::set<std::string>{"table_frame", "estimate_table", "tf_timeout_s", "input_timeout_s",
-                                 "image_transport", "occupancy_min", "accumulate_views",
-                                 "max_views", "output_dir", "latch", "track_max_centre_distance_m",
-                                 "track_max_size_ratio", "publish_object_tf", "object_frame_prefix"}
-               .count(kv.first))
-        throw std::runtime_error("unknown parameter " + pnh.resolveName("node/" + kv.first));
-  }
   // A value of the wrong type (1 for true, "0.5" for 0.5) stops the node rather than being
   // replaced by the default unnoticed.
-  read(pnh, "node/table_frame", &c.table_frame);
+  nodeFields(c, [&](const char* name, auto& value) { read(pnh, name, &value); });
   c.table_frame = tf2Frame(c.table_frame);
-  read(pnh, "node/estimate_table", &c.estimate_table);
-  read(pnh, "node/tf_timeout_s", &c.tf_timeout_s);
-  read(pnh, "node/input_timeout_s", &c.input_timeout_s);
-  read(pnh, "node/image_transport", &c.image_transport);
-  read(pnh, "node/occupancy_min", &c.occupancy_min);
-  read(pnh, "node/accumulate_views", &c.accumulate_views);
-  read(pnh, "node/max_views", &c.max_views);
-  read(pnh, "node/output_dir", &c.output_dir);
-  read(pnh, "node/latch", &c.latch);
-  read(pnh, "node/publish_object_tf", &c.publish_object_tf);
-  read(pnh, "node/object_frame_prefix", &c.object_frame_prefix);
-  read(pnh, "node/track_max_centre_distance_m", &c.tracking.max_centre_distance_m);
-  read(pnh, "node/track_max_size_ratio", &c.tracking.max_size_ratio);
+  c.output_frame = tf2Frame(c.output_frame);
   c.validate();
   return c;
 }

@@ -13,6 +13,8 @@
 #include <string>
 #include <vector>
 
+#include "simstack/io/staged_output.h"
+
 namespace simstack {
 
 /// A finite number that `ok` accepts; otherwise "'TEXT' is not a finite number WHAT".
@@ -47,6 +49,15 @@ inline const CLI::Validator SeedNumber(
       return "'" + text + "' is not a seed (a whole number >= 0)";
     },
     "SEED");
+
+/// A path to write: not empty, no control characters, names within the file system's limits
+/// (unwritablePath).
+inline const CLI::Validator WritablePath(
+    [](std::string& text) -> std::string {
+      const std::string why = unwritablePath(text);
+      return why.empty() ? std::string() : "'" + text.substr(0, 80) + "': " + why;
+    },
+    "PATH");
 
 /// Throws std::runtime_error when the file `output` (given as `option`) would replace one of
 /// `inputs`, by the same or another name (a link, "./", ".."): an evaluation's --output naming

@@ -8,6 +8,7 @@
 
 #include "simstack/io/image_io.h"
 #include "simstack/model/cvae_config.h"
+#include "simstack/pipeline/scene_perception.h"
 
 namespace simstack {
 
@@ -69,10 +70,10 @@ std::vector<PerceptionConfig> PerceptionOptions::configs() const {
     // is the user's, relative to the working directory.
     PerceptionConfig c = loadPerceptionYaml(
         config_path_, base, model.empty() ? "" : std::filesystem::absolute(model).string());
-    if (c.model_path.empty())
-      throw std::runtime_error(config_path_ + ": no perception.model given");
+    if (c.model_path.empty()) throw std::runtime_error(config_path_ + ": no model given");
     if (!std::filesystem::exists(c.model_path))
       throw std::runtime_error(config_path_ + ": model " + c.model_path + " does not exist");
+    if (checked_models_.insert(c.model_path).second) checkModel(c.model_path);
     if (samples_opt_->count()) c.samples = samples_;
     if (seed_opt_ && seed_opt_->count()) c.seed = seed_;
     if (threads_opt_->count()) c.threads = threads_;

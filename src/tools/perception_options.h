@@ -8,6 +8,7 @@
 #include <CLI/CLI.hpp>
 
 #include <cmath>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -42,8 +43,10 @@ class PerceptionOptions {
   PerceptionOptions(CLI::App& app, Which which);
   PerceptionOptions(CLI::App& app) : PerceptionOptions(app, Which()) {}
 
-  /// One config per --model given (in order), or the config's own model when none is.
-  /// Throws std::runtime_error naming the file when a config, card or model is unusable.
+  /// One config per --model given (in order), or the config's own model when none is. Each
+  /// model is checked once per process (checkModel: its card's SHA-256 and format, finite
+  /// weights, the self-test). Throws std::runtime_error naming the file when a config, card or
+  /// model is unusable.
   std::vector<PerceptionConfig> configs() const;
   /// The first of configs().
   PerceptionConfig config() const { return configs().front(); }
@@ -57,6 +60,7 @@ class PerceptionOptions {
   int samples_ = 3, threads_ = 2, symmetries_ = 4;
   uint64_t seed_ = 0;
   bool no_joint_ = false;
+  mutable std::set<std::string> checked_models_;
   CLI::Option *samples_opt_ = nullptr, *seed_opt_ = nullptr, *threads_opt_ = nullptr,
               *symmetries_opt_ = nullptr;
 };

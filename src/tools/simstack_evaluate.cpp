@@ -7,6 +7,7 @@
 #include <iostream>
 #include <optional>
 
+#include "cli_checks.h"
 #include "perception_options.h"
 #include "progress.h"
 #include "simstack/eval/real_scenes.h"
@@ -130,7 +131,7 @@ int main(int argc, char** argv) {
                  "labelled PCDs (mOSD: label / 10 the object) instead of --dataset: Overlap "
                  "P/R/F, %75 and object counts, overall and by mOSD category")
       ->check(CLI::ExistingDirectory);
-  app.add_option("--output", output, "results JSON (every view)")->required();
+  app.add_option("--output", output, "results JSON (every view)")->required()->check(WritablePath);
   app.add_option("--summary", summary, "also a small JSON: per method its means and bins");
   app.add_option("--width", o.width,
                  "rendered view width (pixels; the protocol's 640): fx scales with the width, fy "
@@ -166,7 +167,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 64));
   app.add_option("--refine", refine_iterations,
                  "with --multi-view: also each C-VAE with this many Adam steps fitting its codes "
-                 "to every view (_opt, _first_opt; perception.refine_iterations)")
+                 "to every view (_opt, _first_opt; the config's refine_iterations)")
       ->check(FinitePositive);
   app.add_flag("--no-classical", no_classical, "skip the classical baseline");
   app.add_flag("--no-stability", no_stability, "skip the physics stability test");

@@ -5,6 +5,7 @@
 #include <fstream>
 #include <iostream>
 
+#include "cli_checks.h"
 #include "perception_options.h"
 #include "progress.h"
 #include "simstack/eval/grasp_evaluation.h"
@@ -50,7 +51,9 @@ int main(int argc, char** argv) {
   app.add_option("--dataset", dataset, "test dataset of superquadric piles")
       ->required()
       ->check(CLI::ExistingFile);
-  app.add_option("--output", output, "results JSON (summary and every pick)")->required();
+  app.add_option("--output", output, "results JSON (summary and every pick)")
+      ->required()
+      ->check(WritablePath);
   app.add_option("--scenes", o.scenes, "the first N scenes (0 = all)")
       ->capture_default_str()
       ->check(FiniteNonNegative);

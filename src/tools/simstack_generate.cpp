@@ -64,7 +64,7 @@ int main(int argc, char** argv) {
   app.add_option("--resolution", o.resolution, "grid resolution R (R^3 voxels)")
       ->check(CLI::Range(4, 256))
       ->capture_default_str();
-  app.add_option("--output", o.output, "output HDF5 file")->required();
+  app.add_option("--output", o.output, "output HDF5 file")->required()->check(WritablePath);
   app.add_option("--objects", objects, "objects per pile, MIN:MAX")->capture_default_str();
   app.add_option("--sizes", sizes,
                  "superquadrics' full extent along each axis, MIN:MAX metres (drawn uniformly); "

@@ -7,6 +7,7 @@
 #include <iostream>
 #include <optional>
 
+#include "cli_checks.h"
 #include "simstack/grasping/grasp_files.h"
 #include "simstack/io/scene_io.h"
 #include "simstack/io/staged_output.h"
@@ -51,7 +52,8 @@ int main(int argc, char** argv) {
                  "metres the pre-grasp pose in grasps.json stands back from the contact")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0));
-  app.add_option("--output", output, "directory for grasps.json and grasps.png (created)");
+  app.add_option("--output", output, "directory for grasps.json and grasps.png (created)")
+      ->check(WritablePath);
   CLI11_PARSE(app, argc, argv);
   config.pull.cup_radius_m = config.candidates.cup_radius_m;
 

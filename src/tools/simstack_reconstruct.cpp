@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "cli_checks.h"
 #include "perception_options.h"
 #include "simstack/io/image_io.h"
 #include "simstack/io/scene_io.h"
@@ -23,12 +24,16 @@ namespace fs = std::filesystem;
 
 namespace {
 
-DepthView readView(const std::string& depth_path, double depth_scale, const std::string& intrinsics,
-                   const std::string& pose_path, const std::string& mask_path) {
+DepthView readView(const std::string& depth_path, std::optional<double> depth_scale,
+                   const std::string& intrinsics, const std::string& pose_path,
+                   const std::string& mask_path) {
   DepthView view;
   std::string ext = fs::path(depth_path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
   if (ext == ".pcd") {
+    if (depth_scale)
+      throw std::invalid_argument("--depth-scale applies to 16-bit PNGs; " + depth_path +
+                                  " is a point cloud, in metres (leave it out)");
     // An unorganized cloud is placed on the pixels of the view file's camera, else of the
     // intrinsics over the image their principal point centres.
     std::optional<PinholeCamera> organizer;
@@ -95,9 +100,10 @@ int main(int argc, char** argv) {
   app.add_option("--intrinsics", intrinsics,
                  "fx,fy,cx,cy in pixels; may be left out when every --depth has its --table-pose "
                  "view file, which holds them");
-  app.add_option("--depth-scale", depth_scale, "metres per unit of a 16-bit PNG")
-      ->capture_default_str()
-      ->check(FinitePositive);
+  const CLI::Option* scale_option =
+      app.add_option("--depth-scale", depth_scale, "metres per unit of a 16-bit PNG")
+          ->capture_default_str()
+          ->check(FinitePositive);
   app.add_option("--table-pose", pose_paths,
                  "YAML with T_table_camera (a view file of simstack_generate --views), one per "
                  "--depth in the same order; without it (one depth only) the table plane is "
@@ -107,7 +113,7 @@ int main(int argc, char** argv) {
                  "8-bit PNG of the (first) depth's size: pixels where it is 0 are ignored (not "
                  "the workspace), also for the table plane")
       ->check(CLI::ExistingFile);
-  app.add_option("--output", output, "output directory (created)")->required();
+  app.add_option("--output", output, "output directory (created)")->required()->check(WritablePath);
   const PerceptionOptions perception(app);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
@@ -122,9 +128,9 @@ int main(int argc, char** argv) {
       throw std::invalid_argument("more --table-pose files than --depth files");
     std::vector<DepthView> views;
     for (size_t i = 0; i < depth_paths.size(); ++i)
-      views.push_back(readView(depth_paths[i], depth_scale, intrinsics,
-                               i < pose_paths.size() ? pose_paths[i] : "",
-                               i == 0 ? mask_path : ""));
+      views.push_back(readView(
+          depth_paths[i], scale_option->count() ? std::optional<double>(depth_scale) : std::nullopt,
+          intrinsics, i < pose_paths.size() ? pose_paths[i] : "", i == 0 ? mask_path : ""));
     const DepthView& view = views.front();
     const std::string pose_path = pose_paths.empty() ? "" : pose_paths.front();
     const PerceptionConfig config = perception.config();

@@ -11,6 +11,7 @@
 #include "progress.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/model/cvae_trainer.h"
+#include "simstack/pipeline/scene_perception.h"
 
 using namespace simstack;
 
@@ -76,7 +77,8 @@ void addOptions(CLI::App& app, Options& o) {
       ->check(CLI::ExistingFile);
   app.add_option("--output", o.output,
                  "output directory (model.pt, model.yaml, checkpoints, train_log.csv); required "
-                 "unless --validate-only");
+                 "unless --validate-only")
+      ->check(WritablePath);
   app.add_flag("--resume", o.resume, "continue from OUTPUT/checkpoint.pt");
   app.add_option("--threads", o.threads, "torch threads (overrides training.threads)")
       ->check(CLI::Range(1, 256));
@@ -154,6 +156,7 @@ int main(int argc, char** argv) {
     std::string command;
     for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
     CvaeTrainer trainer(o.dataset, model, training, o.output, command);
+    if (!trainer.note().empty()) std::printf("note: %s\n", trainer.note().c_str());
     std::unique_ptr<ProgressBar> bar;
     bool validated = false;  // in this process: until then there is no IoU to show
     const TrainingReport r = trainer.run(o.resume, [&](const TrainingProgress& p) {
@@ -171,6 +174,12 @@ int main(int argc, char** argv) {
     });
     if (bar) bar->finish();
     printTrained(model.architecture, o.output, r);
+    // The card records what the file is, so that every later load can tell it was not damaged.
+    const std::string model_file = (std::filesystem::path(o.output) / "model.pt").string();
+    const ModelIntegrity m = stampModel(model_file);
+    std::printf("self-test on a rendered box: %d object(s), %d occupied voxels (card: %s)\n",
+                m.self_test_objects, m.self_test_occupied_voxels,
+                modelCardPath(model_file).c_str());
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_train: error: " << e.what() << "\n";

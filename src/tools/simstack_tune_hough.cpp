@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "cli_checks.h"
 #include "perception_options.h"
 #include "progress.h"
 #include "simstack/io/staged_output.h"
@@ -95,68 +96,29 @@ std::string chosenSection(const std::vector<std::string>& datasets, size_t views
   return out.str();
 }
 
-/// A model card's text with its perception: section (the top-level key down to the next
-/// one, less the comments and blank lines just above that, plus the comments just above the
-/// section) replaced by `section`, every other line kept; `section` is appended when the card
-/// has none. Line ends are written as \n.
-std::string withPerceptionSection(const std::string& card, const std::string& section) {
-  std::vector<std::string> lines;
-  std::istringstream in(card);
-  for (std::string line; std::getline(in, line);) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    lines.push_back(line);
-  }
-  auto comment_or_blank = [&](size_t i) { return lines[i].empty() || lines[i][0] == '#'; };
-  size_t begin = lines.size(), end = lines.size();
-  for (size_t i = 0; i < lines.size(); ++i) {
-    if (lines[i].rfind("perception:", 0) != 0) continue;
-    begin = i;
-    end = i + 1;
-    while (end < lines.size() && (comment_or_blank(end) || lines[end][0] == ' ')) ++end;
-    while (end < lines.size() && end > begin + 1 && comment_or_blank(end - 1)) --end;
-    while (begin > 0 && lines[begin - 1].rfind('#', 0) == 0) --begin;
-    break;
-  }
-  std::string out;
-  for (size_t i = 0; i < begin; ++i) out += lines[i] + "\n";
-  out += section;
-  for (size_t i = end; i < lines.size(); ++i) out += lines[i] + "\n";
-  return out;
-}
-
-/// --apply: the chosen section written into the model's card in place of its own (a card
-/// holding only it when the model has none). The result is read back first: its perception:
-/// must be the chosen one and every other top-level entry the card's own, or the card is left
-/// as it was.
-void applyToCard(const std::string& card_path, const std::string& section,
-                 const std::string& output) {
-  std::string card;
-  if (std::ifstream in{card_path}) card.assign(std::istreambuf_iterator<char>(in), {});
-  const std::string text = withPerceptionSection(card, section);
-  const YAML::Node before =
-      card.empty() ? YAML::Node(YAML::NodeType::Map) : parseYamlText(card, "model card", card_path);
-  const YAML::Node after = parseYamlText(text, "model card", card_path);
-  const YAML::Node chosen = parseYamlText(section, "chosen section", output);
-  auto same = [](const YAML::Node& a, const YAML::Node& b) {
-    return YAML::Dump(a) == YAML::Dump(b);
+/// The values of each Hough field to try, as repeatable options.
+void addSweepOptions(CLI::App& app, HoughSweep& sweep) {
+  auto values = [&app](const char* name, auto& list, const char* what, CLI::Validator check) {
+    app.add_option(name, list, what)->capture_default_str()->check(check);
   };
-  bool ok =
-      before.IsMap() && after.IsMap() && after.size() == before.size() + !before["perception"];
-  ok = ok && same(after["perception"], chosen["perception"]);
-  for (auto it = before.begin(); ok && it != before.end(); ++it) {
-    const std::string key = it->first.as<std::string>();
-    ok = key == "perception" || same(after[key], it->second);
-  }
-  if (!ok)
-    throw std::runtime_error("cannot put the chosen section into " + card_path +
-                             " without changing the rest of it; copy it from " + output +
-                             " by hand");
-  StagedFile staged(card_path);
-  std::ofstream f(staged.path());
-  f << text;
-  f.close();
-  if (!f) throw std::runtime_error("cannot write " + card_path);
-  staged.commit();
+  values("--refinement", sweep.refinements, "fine cells per voxel to try", CLI::Range(1, 16));
+  values("--min-traversals", sweep.traversals, "mu values to try", FiniteNonNegative);
+  values("--bandwidth", sweep.bandwidths, "mean-shift radii to try (m)",
+         FinitePositive & CLI::Range(0.001, 10.0));
+  values("--min-instance-voxels", sweep.min_voxels, "minimum instance sizes to try",
+         FiniteNonNegative);
+  values("--min-vote-norm", sweep.min_norms,
+         "vote lengths to try below which a voxel casts no ray (blunt, unsure votes)",
+         FiniteNonNegative & CLI::Range(0.0, 1.0));
+  values("--reversed-stop", sweep.reversed_stops,
+         "consecutive voxels of reversed votes that stop a ray (0 = off) to try",
+         FiniteNonNegative);
+  values("--split-below", sweep.split_below,
+         "split test: solidities below which an instance is cut (0 = off) to try",
+         FiniteNonNegative & CLI::Range(0.0, 1.0));
+  values("--split-accept", sweep.split_accept,
+         "split test: joint solidities of the two parts that keep a cut, to try",
+         FinitePositive & CLI::Range(0.01, 1.0));
 }
 
 }  // namespace
@@ -180,7 +142,9 @@ int main(int argc, char** argv) {
   app.add_option("--dataset", datasets, "validation piles (simstack_generate); repeatable")
       ->required()
       ->check(CLI::ExistingFile);
-  app.add_option("--output", output, "YAML with the model card's perception: section")->required();
+  app.add_option("--output", output, "YAML with the model card's perception: section")
+      ->required()
+      ->check(WritablePath);
   app.add_flag("--apply", apply,
                "also replace the perception: section of the model's card with the chosen one "
                "(the card's other lines kept; a card made when the model has none)");
@@ -191,27 +155,7 @@ int main(int argc, char** argv) {
       ->check(FiniteNonNegative);
   app.add_option("--seed", seed, "viewpoint seed")->capture_default_str()->check(SeedNumber);
   app.add_flag("--noise", noise, "Kinect-like sensor noise in the rendered views");
-  auto values = [&](const char* name, auto& list, const char* what, CLI::Validator check) {
-    app.add_option(name, list, what)->capture_default_str()->check(check);
-  };
-  values("--refinement", sweep.refinements, "fine cells per voxel to try", CLI::Range(1, 16));
-  values("--min-traversals", sweep.traversals, "mu values to try", FiniteNonNegative);
-  values("--bandwidth", sweep.bandwidths, "mean-shift radii to try (m)",
-         FinitePositive & CLI::Range(0.001, 10.0));
-  values("--min-instance-voxels", sweep.min_voxels, "minimum instance sizes to try",
-         FiniteNonNegative);
-  values("--min-vote-norm", sweep.min_norms,
-         "vote lengths to try below which a voxel casts no ray (blunt, unsure votes)",
-         FiniteNonNegative & CLI::Range(0.0, 1.0));
-  values("--reversed-stop", sweep.reversed_stops,
-         "consecutive voxels of reversed votes that stop a ray (0 = off) to try",
-         FiniteNonNegative);
-  values("--split-below", sweep.split_below,
-         "split test: solidities below which an instance is cut (0 = off) to try",
-         FiniteNonNegative & CLI::Range(0.0, 1.0));
-  values("--split-accept", sweep.split_accept,
-         "split test: joint solidities of the two parts that keep a cut, to try",
-         FinitePositive & CLI::Range(0.01, 1.0));
+  addSweepOptions(app, sweep);
   app.add_option("--top", top, "rows of the table")->capture_default_str()->check(FinitePositive);
   CLI11_PARSE(app, argc, argv);
   if (apply && app.count("--model") == 0) {
@@ -251,10 +195,9 @@ int main(int argc, char** argv) {
     if (!f) throw std::runtime_error("cannot write " + output);
     written.commit();
     std::cout << "\nchosen setting written to " << output << "\n";
-    if (apply) {
-      applyToCard(modelCardPath(pc.model_path), chosen, output);
-      std::cout << "and put into the card " << modelCardPath(pc.model_path) << "\n";
-    }
+    if (apply)
+      writeTopLevelSection(modelCardPath(pc.model_path), "perception", chosen, "model card");
+    if (apply) std::cout << "and put into the card " << modelCardPath(pc.model_path) << "\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_tune_hough: error: " << e.what() << "\n";

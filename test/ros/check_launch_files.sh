@@ -45,7 +45,7 @@ expect "replay.launch bag:=relative: from roslaunch's directory" ' /tmp/runs/my.
   bash -c 'cd /tmp && roslaunch --args /player "$1" bag:=runs/my.bag' _ "$(cd "$launch" && pwd)/replay.launch"
 expect "replay.launch bag:=~/b.bag: from HOME" " $HOME/b.bag __name" \
   roslaunch --args /player "$launch/replay.launch" 'bag:=~/b.bag'
-sed 's#^  model: .*#  model: models/simstack_r32_fc_plain.pt#' "$source_dir/config/perception.yaml" \
+sed 's#^model: .*#model: models/simstack_r32_fc_plain.pt#' "$source_dir/config/perception.yaml" \
   > "$ROS_HOME/own.yaml"
 expect "perception.launch decompose_samples:=3 config:=C: C's model" \
   'perception/model: models/simstack_r32_fc_plain.pt$' \
@@ -57,11 +57,21 @@ expect "grasps.launch hypotheses:=1: the config's model" 'perception/model: mode
 expect "replay.launch decompose_samples:=3: the C-VAE" 'perception/model: .*/simstack_r32.pt$' \
   dump "$launch/replay.launch" decompose_samples:=3
 expect "grasps.launch image_transport:=compressedDepth reaches the node" \
-  'node/image_transport: compressedDepth$' dump "$launch/grasps.launch" image_transport:=compressedDepth
-expect "grasps.launch accumulate_views:=true reaches the node" 'node/accumulate_views: true$' \
+  'perception/image_transport: compressedDepth$' dump "$launch/grasps.launch" image_transport:=compressedDepth
+expect "grasps.launch accumulate_views:=true reaches the node" 'perception/accumulate_views: true$' \
   dump "$launch/grasps.launch" accumulate_views:=true
+expect "grasps.launch output_frame:=base_link reaches the node" 'perception/output_frame: base_link$' \
+  dump "$launch/grasps.launch" output_frame:=base_link
 expect "grasps.launch manager:=driver loads into it" 'PerceptionNodelet driver ' \
   roslaunch --args /camera/perception "$launch/grasps.launch" manager:=driver
+# One name per setting: no parameter of the perception node lies in a section named after the
+# node's own settings or the pipeline's (the names of an older layout: ~perception/symmetries,
+# ~node/table_frame).
+if dump "$launch/perception.launch" | grep -E '^/camera/perception/(perception|node)/'; then
+  echo "FAILED: perception.launch sets parameters under ~perception/ or ~node/"; status=1
+else
+  echo "ok: perception.launch: one name per setting"
+fi
 # A node that loads a config clears what an earlier launch left in its namespace.
 if ! /usr/bin/python3 - "$launch"/*.launch <<'PY'
 import sys, xml.etree.ElementTree as ET

@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
-# A missing or corrupt model, or a ~image_transport no plugin provides, at start: perception_node
-# exits non-zero with a ROS_FATAL that names it (no crash); the nodelet reports it and its manager
-# keeps running.
+# A missing, corrupt or damaged model at start (a file that is not a model; the shipped model
+# with one byte flipped, which its card's SHA-256 catches): perception_node stays up, says
+# "model refused" naming the file and the check, reports ERROR on /diagnostics, latches ~ready
+# false and publishes no ObjectArray; the nodelet does the same inside a manager that keeps
+# running. A ~image_transport no plugin provides is a configuration error: the node exits 1 with
+# a ROS_FATAL naming it.
 # Usage: test_bad_model.sh BUILD_DIR SOURCE_DIR
 set -e
 build=$1
@@ -13,35 +16,62 @@ ROS_SESSION_REMOVE_HOME=1
 ros_session_start
 node="$build/devel/lib/simstack/perception_node"
 echo "not a model" > "$ROS_HOME/corrupt.pt"
-for model in "$ROS_HOME/missing.pt" "$ROS_HOME/corrupt.pt"; do
-  set +e
-  timeout 60 "$node" __ns:=bad _perception/model:="$model" > "$ROS_HOME/node.log" 2>&1
-  status=$?
-  set -e
-  if [ "$status" -ne 1 ]; then
-    echo "perception_node with $model exited with $status, not 1"; cat "$ROS_HOME/node.log"; exit 1
-  fi
-  grep -q "FATAL.*$(basename "$model")" "$ROS_HOME/node.log" ||
-    { echo "no FATAL naming $model:"; cat "$ROS_HOME/node.log"; exit 1; }
-done
+cp "$2/models/simstack_r32_fc.pt" "$ROS_HOME/flipped.pt"
+cp "$2/models/simstack_r32_fc.yaml" "$ROS_HOME/flipped.yaml"
+/usr/bin/python3 - "$ROS_HOME/flipped.pt" <<'PY'
+import sys
+path = sys.argv[1]
+data = bytearray(open(path, "rb").read())
+data[len(data) // 2] ^= 0xFF  # one byte inside the weights
+open(path, "wb").write(bytes(data))
+PY
+
+# refused NS MODEL CHECK: the node in namespace NS with MODEL says why (CHECK) on its log and in
+# /diagnostics, ~ready is false, and it offers no objects topic.
+refused() {
+  local ns=$1 model=$2 check=$3 log="$ROS_HOME/$1.log"
+  ros_session_spawn "$log" "$node" __ns:="$ns" _model:="$model"
+  local pid=${ROS_SESSION_PIDS[-1]}
+  for _ in $(seq 120); do grep -q "model refused" "$log" && break; sleep 0.5; done
+  grep "ERROR.*model refused" "$log" | grep "$(basename "$model")" | grep -q "$check" ||
+    { echo "$ns: no ERROR naming $model and '$check':"; cat "$log"; exit 1; }
+  timeout 20 rostopic echo -n 1 "/$ns/perception/ready" | grep -q "data: False" ||
+    { echo "$ns: ~ready is not false"; exit 1; }
+  timeout 20 /usr/bin/python3 - "$ns" "$(basename "$model")" <<'PY' || { echo "$ns: no ERROR on /diagnostics"; exit 1; }
+import sys, rospy
+from diagnostic_msgs.msg import DiagnosticArray
+ns, name = sys.argv[1], sys.argv[2]
+rospy.init_node("diagnostics_reader", anonymous=True)
+while not rospy.is_shutdown():
+    for s in rospy.wait_for_message("/diagnostics", DiagnosticArray, timeout=15).status:
+        if s.name.startswith(ns + "/perception") and s.level == 2 and name in s.message:
+            sys.exit(0)
+PY
+  if rostopic list | grep -q "^/$ns/perception/objects$"; then
+    echo "$ns: a refused model's node offers an objects topic"; exit 1; fi
+  kill -0 "$pid" || { echo "$ns: the node exited"; cat "$log"; exit 1; }
+  ros_session_kill "$pid"
+}
+refused missing "$ROS_HOME/missing.pt" "not found"
+refused corrupt "$ROS_HOME/corrupt.pt" "not a libtorch archive"
+refused flipped "$ROS_HOME/flipped.pt" "SHA-256"
+
 # image_transport's own parameter, ~image_transport, names a transport that no plugin provides.
 set +e
-timeout 60 "$node" __ns:=bad _perception/model:="$2/models/simstack_r32_fc.pt" \
-  _image_transport:=nosuch > "$ROS_HOME/node.log" 2>&1
+timeout 60 "$node" __ns:=bad _image_transport:=nosuch > "$ROS_HOME/node.log" 2>&1
 status=$?
 set -e
 [ "$status" -eq 1 ] && grep -q "FATAL.*~image_transport 'nosuch' cannot be loaded" "$ROS_HOME/node.log" ||
   { echo "perception_node with ~image_transport nosuch exited with $status:"; cat "$ROS_HOME/node.log"; exit 1; }
 ros_session_spawn "$ROS_HOME/manager.log" rosrun nodelet nodelet manager __name:=manager
 timeout 30 bash -c 'until rosnode list 2>/dev/null | grep -q /manager; do sleep 0.3; done'
-rosparam set /perception/perception/model "$ROS_HOME/corrupt.pt"
+rosparam set /perception/model "$ROS_HOME/corrupt.pt"
 ros_session_spawn "$ROS_HOME/load.log" rosrun nodelet nodelet load simstack/PerceptionNodelet \
   manager __name:=perception --no-bond
-for _ in $(seq 120); do grep -q "FATAL.*corrupt.pt" "$ROS_HOME/manager.log" && break; sleep 0.5; done
-grep -q "FATAL.*corrupt.pt" "$ROS_HOME/manager.log" ||
+for _ in $(seq 120); do grep -q "model refused.*corrupt.pt" "$ROS_HOME/manager.log" && break; sleep 0.5; done
+grep -q "ERROR.*model refused.*corrupt.pt" "$ROS_HOME/manager.log" ||
   { echo "the manager did not report the model:"; cat "$ROS_HOME/manager.log"; exit 1; }
 # The nodelet reads it from its own namespace (a nodelet's "~" handle is its manager's).
-rosparam set /transport/perception/model "$2/models/simstack_r32_fc.pt"
 rosparam set /transport/image_transport nosuch
 ros_session_spawn "$ROS_HOME/load2.log" rosrun nodelet nodelet load simstack/PerceptionNodelet \
   manager __name:=transport --no-bond
@@ -49,4 +79,4 @@ for _ in $(seq 120); do grep -q "FATAL.*~image_transport 'nosuch'" "$ROS_HOME/ma
 grep -q "FATAL.*~image_transport 'nosuch' cannot be loaded" "$ROS_HOME/manager.log" ||
   { echo "the nodelet did not read its ~image_transport:"; cat "$ROS_HOME/manager.log"; exit 1; }
 rosnode ping -c 1 /manager > /dev/null || { echo "the manager died"; cat "$ROS_HOME/manager.log"; exit 1; }
-echo "bad models and transports refused: node exits 1, nodelet reports and its manager lives"
+echo "bad models refused (ERROR, ~ready false, no objects), the node and the manager alive; a bad transport exits 1"

@@ -143,8 +143,11 @@ class GraspService(unittest.TestCase):
     def test_3_too_many_candidates_are_clamped_and_said(self):
         res = self.lonely(request(scene=self.scene, candidates=1000))
         self.assertTrue(res.success, res.message)
-        self.assertIn("clamped", res.message)
+        self.assertIn("1000 candidates asked for, clamped", res.message)
         self.assertLessEqual(len(res.grasps), 8)
+        # The number asked is said as asked, however large.
+        res = self.lonely(request(scene=self.scene, candidates=4294967295))
+        self.assertIn("4294967295 candidates asked for", res.message)
 
     def test_4_a_target_without_sealable_surface_gives_no_grasps_and_says_why(self):
         scene = copy.deepcopy(self.scene)
@@ -179,6 +182,8 @@ class GraspService(unittest.TestCase):
         more = self.rank(request(scene=scene, candidates=4, hypotheses=5))
         self.assertEqual(more.hypotheses_used, 3)
         self.assertIn("5 hypotheses asked for, the scene has 3", more.message)
+        many = self.rank(request(scene=scene, candidates=4, hypotheses=1000))
+        self.assertIn("1000 hypotheses asked for, the scene has 3", many.message)
 
     def test_6_a_stale_latest_scene_is_refused_and_a_fresh_one_ranked(self):
         # Simulated time from the looping bag: its clock restarts at 1 s every few seconds, so

@@ -14,6 +14,7 @@
 #include <std_srvs/Empty.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/static_transform_broadcaster.h>
+#include <tf2_ros/transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
 #include <visualization_msgs/MarkerArray.h>
 
@@ -397,7 +398,7 @@ TEST_F(PerceptionNodeTest, ResetAndSaveOctomap) {
   std_srvs::Empty empty;
   EXPECT_TRUE(ros::service::call("/camera/perception/reset", empty));
   std::string dir;
-  ASSERT_TRUE(nh_.getParam("/camera/perception/node/output_dir", dir));
+  ASSERT_TRUE(nh_.getParam("/camera/perception/output_dir", dir));
   SaveOctomap save;
   for (const char* bad :
        {"../escape.ot", "/tmp/absolute.ot", "sub/dir.ot", "", "scene.txt", ".."}) {
@@ -406,6 +407,17 @@ TEST_F(PerceptionNodeTest, ResetAndSaveOctomap) {
     EXPECT_FALSE(save.response.success) << bad;
     EXPECT_FALSE(save.response.message.empty());
   }
+  // A name holding a newline, and one over the file system's 255 bytes: refused by a plain
+  // message naming the limit.
+  save.request.file_name = "two\nlines.ot";
+  ASSERT_TRUE(ros::service::call("/camera/perception/save_octomap", save));
+  EXPECT_FALSE(save.response.success);
+  EXPECT_NE(save.response.message.find("control character"), std::string::npos)
+      << save.response.message;
+  save.request.file_name = std::string(300, 'a') + ".ot";
+  ASSERT_TRUE(ros::service::call("/camera/perception/save_octomap", save));
+  EXPECT_FALSE(save.response.success);
+  EXPECT_NE(save.response.message.find("at most 255"), std::string::npos) << save.response.message;
   std::filesystem::create_directories(dir);
   std::filesystem::remove(std::filesystem::path(dir) / "link.ot");
   std::filesystem::create_symlink("/tmp/simstack_link_target.ot",
@@ -450,6 +462,27 @@ TEST_F(PerceptionNodeTest, LiveSettingsChangeTheNextFrame) {
   ASSERT_TRUE(out);
   EXPECT_EQ(out->samples, 1u);
   EXPECT_EQ(out->symmetries, 1u);
+  // One name per setting: the parameter the node was started with is the one changed.
+  int symmetries = 0;
+  ASSERT_TRUE(nh_.getParam("/camera/perception/symmetries", symmetries));
+  EXPECT_EQ(symmetries, 1);
+  std::vector<std::string> names;
+  ASSERT_TRUE(ros::param::getParamNames(names));
+  for (const std::string& n : names) {
+    EXPECT_NE(n.rfind("/camera/perception/perception/", 0), 0u) << n;
+    EXPECT_NE(n.rfind("/camera/perception/node/", 0), 0u) << n;
+  }
+  // The Hough voting's live settings on ~hough, under the names of the config's hough section.
+  dynamic_reconfigure::Reconfigure hough;
+  dynamic_reconfigure::DoubleParameter bandwidth;
+  bandwidth.name = "bandwidth_m";
+  bandwidth.value = 0.04;
+  hough.request.config.doubles.push_back(bandwidth);
+  ASSERT_TRUE(ros::service::call("/camera/perception/hough/set_parameters", hough));
+  double set_bandwidth = 0.0;
+  ASSERT_TRUE(nh_.getParam("/camera/perception/hough/bandwidth_m", set_bandwidth));
+  EXPECT_DOUBLE_EQ(set_bandwidth, 0.04);
+  EXPECT_TRUE(sendDepth(depth, 60.0));  // a frame perceived with it
   // A count of passes the pipeline refuses leaves the one in effect.
   ASSERT_TRUE(set("symmetries", 3));
   out = sendDepth(depth, 60.0);
@@ -588,6 +621,39 @@ TEST_F(PerceptionNodeTest, DiagnosticsComeOncePerDiagnosticPeriod) {
   EXPECT_GE(count[slow], 3) << "the default 1 s: about 4 in 4 s";
   EXPECT_LE(count[slow], 6);
   EXPECT_EQ(hardware[slow], "simstack_perception /camera/perception");
+}
+
+TEST_F(PerceptionNodeTest, ATfClockThatJumpedBackIsNoticedAndTheBufferCleared) {
+  // A camera whose pose comes on /tf stamped by a clock an hour ahead, then corrected: tf keeps
+  // the hour-ahead poses and drops the corrected ones as too old, so without a clear every
+  // later frame would be skipped. The node clears its buffer after three such frames.
+  tf2_ros::TransformBroadcaster moving;
+  const std::string frame = "clock_jump_camera";
+  const DepthImage depth = render(knownPile());
+  auto sendAt = [&](ros::Time stamp, double seconds) {
+    geometry_msgs::TransformStamped t = tf2::eigenToTransform(T_table_camera_);
+    t.header.frame_id = "table";
+    t.child_frame_id = frame;
+    sensor_msgs::Image image = imageMsg(depth, stamp);
+    sensor_msgs::CameraInfo info = infoMsg(stamp);
+    image.header.frame_id = info.header.frame_id = frame;
+    for (double dt : {-0.2, -0.1, 0.0, 0.1, 0.2}) {  // tf around the stamp, as a driver streams it
+      t.header.stamp = stamp + ros::Duration(dt);
+      moving.sendTransform(t);
+      ros::WallDuration(0.05).sleep();
+    }
+    wire->info_pub.publish(info);
+    wire->image_pub.publish(image);
+    return answerTo(wire->received, stamp, seconds);
+  };
+  ros::WallDuration(1.0).sleep();  // the nodes' tf listeners connect to the new broadcaster
+  const ros::Time ahead = ros::Time::now() + ros::Duration(3600.0);
+  ASSERT_TRUE(sendAt(ahead, 60.0)) << "the frame an hour ahead, with its tf, was not perceived";
+  int perceived_at = -1;
+  for (int k = 0; k < 8 && perceived_at < 0; ++k)
+    if (sendAt(ros::Time::now(), 5.0)) perceived_at = k;
+  ASSERT_GE(perceived_at, 0) << "no frame perceived after the clock was set back";
+  EXPECT_LE(perceived_at, 4) << "the buffer should be cleared after three frames";
 }
 
 }  // namespace

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """rostest node of test/ros/replay.test: the example bag replayed as a workcell would, with a
-static base_link -> table transform: the node is ready before the first frame and perceives
-every frame, ids stay with their objects, late subscribers get the latched outputs, and grasps
-come as PoseStamped in base_link, their target named by an id or by a point."""
+static base_link -> table transform and the perception's outputs in base_link (~output_frame):
+the node is ready before the first frame and perceives every frame, ids stay with their objects,
+late subscribers get the latched outputs, and grasps come as PoseStamped in base_link, their
+target named by an id or by a point."""
 import math
 import time
 import unittest
@@ -13,14 +14,16 @@ import rospkg
 import rospy
 import rostest
 from actionlib_msgs.msg import GoalStatus
-from geometry_msgs.msg import PointStamped, TransformStamped
+from geometry_msgs.msg import PointStamped
 from simstack.msg import ObjectArray, RankGraspsAction, RankGraspsGoal
 from simstack.srv import RankGrasps, RankGraspsRequest
 from std_msgs.msg import Bool
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
-BASE_FROM_TABLE = (0.6, -0.1, 0.75)  # base_link -> table: a translation only
+# base_link -> table (as replay.test publishes it): the table a quarter turn about z, raised.
+BASE_FROM_TABLE = (0.6, -0.1, 0.75)
+BASE_FROM_TABLE_ROTATION = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))
 
 
 def quat_rotate(q, v):
@@ -36,13 +39,13 @@ def quat_conjugate(q):
     return (-q[0], -q[1], -q[2], q[3])
 
 
-def outward_normal(sq, p_table):
-    """The superquadric's outward normal (gradient of its inside-outside function) at a table
-    point, in the table frame."""
+def outward_normal(sq, p):
+    """The superquadric's outward normal (gradient of its inside-outside function) at a point,
+    both in the superquadric's frame."""
     o = sq.pose.orientation
     q = (o.x, o.y, o.z, o.w)
     c = sq.pose.position
-    d = quat_rotate(quat_conjugate(q), (p_table[0] - c.x, p_table[1] - c.y, p_table[2] - c.z))
+    d = quat_rotate(quat_conjugate(q), (p[0] - c.x, p[1] - c.y, p[2] - c.z))
     a = (sq.semi_axes.x, sq.semi_axes.y, sq.semi_axes.z)
     e = (sq.exponents.x, sq.exponents.y, sq.exponents.z)
     g = [e[i] / a[i] * math.copysign(abs(d[i] / a[i]) ** (e[i] - 1.0), d[i]) for i in range(3)]
@@ -53,12 +56,6 @@ class Workcell(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
         rospy.init_node("test_workcell")
-        tf = TransformStamped()
-        tf.header.frame_id, tf.child_frame_id = "base_link", "table"
-        tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z = BASE_FROM_TABLE
-        tf.transform.rotation.w = 1.0
-        cls.tf_pub = rospy.Publisher("/tf_static", TFMessage, queue_size=1, latch=True)
-        cls.tf_pub.publish(TFMessage(transforms=[tf]))
         bag = rospkg.RosPack().get_path("simstack") + "/test/data/example_pile.bag"
         with rosbag.Bag(bag) as b:
             cls.bag_stamps = sorted(m.header.stamp.to_sec() for _, m, _ in
@@ -129,8 +126,7 @@ class Workcell(unittest.TestCase):
             self.assertEqual(g.pregrasp_pose.header.frame_id, "base_link")
             t, o = g.tool_pose.pose.position, g.tool_pose.pose.orientation
             z = quat_rotate((o.x, o.y, o.z, o.w), (0.0, 0.0, 1.0))
-            contact_table = tuple(v - b for v, b in zip((t.x, t.y, t.z), BASE_FROM_TABLE))
-            n = outward_normal(top.superquadric, contact_table)
+            n = outward_normal(top.superquadric, (t.x, t.y, t.z))  # both in base_link
             self.assertLess(sum(a * b for a, b in zip(n, z)), 0.0, "z must point into the target")
             p = g.pregrasp_pose.pose.position
             self.assertAlmostEqual(math.dist((p.x, p.y, p.z), (t.x, t.y, t.z)), 0.07, 5)
@@ -143,8 +139,7 @@ class Workcell(unittest.TestCase):
             c = o.superquadric.pose.position
             point = PointStamped()
             point.header.frame_id = "base_link"
-            point.point.x, point.point.y, point.point.z = (
-                c.x + BASE_FROM_TABLE[0], c.y + BASE_FROM_TABLE[1], c.z + BASE_FROM_TABLE[2])
+            point.point.x, point.point.y, point.point.z = c.x, c.y, c.z
             res = self.rank(RankGraspsRequest(target_id=999, target_point=point, candidates=4,
                                               pull_distance_m=0.1, pull_speed_mps=0.2))
             self.assertTrue(res.success, res.message)
@@ -155,10 +150,23 @@ class Workcell(unittest.TestCase):
             for o in scene.objects:
                 t = self.object_frames.get((stamp, "simstack_object_%d" % o.id))
                 self.assertIsNotNone(t, "no tf frame simstack_object_%d at %.2f" % (o.id, stamp))
-                self.assertEqual(t.header.frame_id, "table")
+                self.assertEqual(t.header.frame_id, "base_link")
                 p = o.superquadric.pose.position
                 v = t.transform.translation
                 self.assertAlmostEqual(math.dist((p.x, p.y, p.z), (v.x, v.y, v.z)), 0.0, 6)
+
+    def test_9_outputs_are_in_the_output_frame(self):
+        scene = self.last_scene()
+        self.assertEqual(scene.header.frame_id, "base_link")
+        p, o = scene.table_in_frame.position, scene.table_in_frame.orientation
+        for a, b in zip((p.x, p.y, p.z, o.x, o.y, o.z, o.w), BASE_FROM_TABLE + BASE_FROM_TABLE_ROTATION):
+            self.assertAlmostEqual(a, b, 5)
+        # Every object stands on the table: its centre above the table's plane in base_link.
+        for obj in scene.objects:
+            c = obj.superquadric.pose.position
+            self.assertGreater(c.z, BASE_FROM_TABLE[2])
+        markers = rospy.wait_for_message("/camera/perception/markers", MarkerArray, timeout=10)
+        self.assertTrue(all(m.header.frame_id == "base_link" for m in markers.markers))
 
     def test_8_the_action_gives_feedback_and_a_cancel_stops_it(self):
         scene = self.last_scene()

@@ -3,6 +3,7 @@
 /// Reading and writing depth, masks and pictures (PNG via OpenCV), and view descriptions (YAML).
 /// Every function throws std::runtime_error naming the file on failure.
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,11 +17,15 @@ namespace simstack {
 void writeDepthPng(const std::string& path, const DepthImage& depth);
 /// Largest side of a depth image the readers accept (pixels).
 constexpr int kMaxDepthImageSide = 4096;
+/// Farthest a view description may place its camera from the table's origin (m).
+constexpr double kMaxCameraDistanceM = 100.0;
 
-/// Reads a one-channel 16-bit PNG (units of `depth_scale_m`, default mm) or 32-bit float TIFF
-/// in metres. Throws std::runtime_error naming the file for anything else (colour images
-/// included) and for a side over kMaxDepthImageSide.
-DepthImage readDepthImage(const std::string& path, double depth_scale_m = 0.001);
+/// Reads a one-channel 16-bit PNG (units of `depth_scale_m`, mm when not given) or 32-bit float
+/// TIFF in metres. Throws std::runtime_error naming the file for anything else (colour images
+/// included), for a side over kMaxDepthImageSide, and for a scale given with a float image
+/// (its unit is the metre).
+DepthImage readDepthImage(const std::string& path,
+                          std::optional<double> depth_scale_m = std::nullopt);
 /// 8-bit PNG of an instance mask.
 void writeMaskPng(const std::string& path, const InstanceImage& mask);
 InstanceImage readMaskPng(const std::string& path);

@@ -9,6 +9,13 @@
 
 namespace simstack {
 
+/// Longest name of one file or directory the file systems here take (bytes).
+constexpr size_t kMaxFileNameBytes = 255;
+/// Why `path` cannot name a file or directory to write, as a sentence naming the limit ("" when
+/// it can): empty, holding a control character (a newline, say), a component longer than
+/// kMaxFileNameBytes, or the whole longer than 4096 bytes.
+std::string unwritablePath(const std::string& path);
+
 /// Whether directory `outer` is `inner` or holds it (both taken absolute and normal, "out/" as
 /// "out"): replacing `outer` would remove `inner`.
 bool pathHolds(const std::string& outer, const std::string& inner);

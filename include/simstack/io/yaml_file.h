@@ -18,4 +18,18 @@ YAML::Node loadYamlFile(const std::string& path, const std::string& what);
 YAML::Node parseYamlText(const std::string& text, const std::string& what,
                          const std::string& source);
 
+/// `text` (YAML with comments) with its top-level section `key` (the line `key:` down to the
+/// next top-level key, less the comments and blank lines just above that, plus the comments
+/// just above the section) replaced by `section`, every other line kept; `section` is appended
+/// when the text has none. Line ends are written as \n.
+std::string withTopLevelSection(const std::string& text, const std::string& key,
+                                const std::string& section);
+/// The file `path` (`what`: "model card") with its section `key` replaced by `section` (YAML
+/// text holding `key:` alone), written whole or not at all; a file that does not exist is
+/// created holding the section. The result is read back first: its `key` must be the section's
+/// and every other top-level entry the file's own, or the file is left as it was and
+/// std::runtime_error says to edit it by hand.
+void writeTopLevelSection(const std::string& path, const std::string& key,
+                          const std::string& section, const std::string& what);
+
 }  // namespace simstack

@@ -69,6 +69,9 @@ class CvaeTrainer {
   CvaeTrainer(const std::string& dataset_path, const CvaeConfig& model, const TrainConfig& training,
               const std::string& output_dir, const std::string& command_line);
   ~CvaeTrainer();
+  /// What the trainer chose for the user ("" when nothing): a dataset that holds no more scenes
+  /// than training.validation_scenes is validated on its last quarter instead.
+  const std::string& note() const;
   /// Trains to training.steps (from the last checkpoint when `resume`) and writes
   /// <output>/model.pt and its card <output>/model.yaml. `progress`, when given, is called
   /// after every step from the calling thread.

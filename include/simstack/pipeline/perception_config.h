@@ -74,18 +74,19 @@ struct PerceptionConfig {
   WorkspaceConfig workspace;  ///< where to look, and the tiles covering it
 };
 
-/// The sections of a perception config that loadPerceptionYaml reads, in file order (`node:`,
-/// the ROS node's own, is not among them).
+/// The sections of a perception config (maps at its top level), in file order.
 const std::vector<std::string>& perceptionConfigSections();
+/// The pipeline's own fields, at the top level of a perception config (model, samples, ...).
+const std::vector<std::string>& perceptionConfigFields();
 
-/// Reads a perception config: sections `perception:`, `segments:`, `surface_instances:`,
-/// `fitting:`, `table:` and `workspace:` (absent fields keep their defaults; unknown fields are
-/// errors, so that a typo is not silently ignored); a `node:` section holds the ROS node's own
-/// parameters and is not read here. `model_path`, when given, replaces the file's
-/// `perception.model`. A relative model path is taken relative to `base_dir` when given. Then the
-/// model's card is read (applyModelCard), and last the file's own `perception.samples` and `hough:`
-/// section, which override the card's when present (normally they are absent). Throws
-/// std::runtime_error naming the file and the field.
+/// Reads a perception config: the pipeline's own fields at the top level (model, symmetries,
+/// ...) and the sections `hough:`, `segments:`, `surface_instances:`, `fitting:`, `table:` and
+/// `workspace:` (absent fields keep their defaults; unknown fields are errors, so that a typo is
+/// not silently ignored). `model_path`, when given, replaces the file's `model`. A relative model
+/// path is taken relative to `base_dir` when given. Then the model's card is read
+/// (applyModelCard), and last the file's own `samples` and `hough:` section, which override the
+/// card's when present (normally they are absent). Throws std::runtime_error naming the file
+/// and the field.
 PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& base_dir = "",
                                     const std::string& model_path = "");
 
@@ -94,6 +95,14 @@ PerceptionConfig parsePerceptionYaml(const std::string& text, const std::string&
                                      const std::string& base_dir = "",
                                      const std::string& model_path = "");
 
+/// The config file at `defaults_path` with `overrides` (YAML text of the same form, `source`
+/// naming it in errors) laid over it field by field: a section given in both keeps the file's
+/// fields the overrides leave out. What the ROS node reads: the package's config with the
+/// node's parameters on top.
+PerceptionConfig overlayPerceptionYaml(const std::string& defaults_path,
+                                       const std::string& overrides, const std::string& source,
+                                       const std::string& base_dir);
+
 /// Reads `samples` and `hough` from the `perception:` section of the card of
 /// `config->model_path` into `config`. Returns the card's path, or "" when the model has no card
 /// or the card no such section (the values in `config` stay). Throws std::runtime_error naming
@@ -101,7 +110,7 @@ PerceptionConfig parsePerceptionYaml(const std::string& text, const std::string&
 std::string applyModelCard(PerceptionConfig* config);
 /// A model card's `perception:` section (YAML text) for these settings.
 std::string modelCardPerceptionYaml(int samples, const HoughConfig& hough);
-/// The YAML text of a config (all six sections).
+/// The YAML text of a config (every field and section).
 std::string perceptionYaml(const PerceptionConfig& config);
 
 }  // namespace simstack

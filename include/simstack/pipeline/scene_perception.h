@@ -19,6 +19,7 @@
 #include "simstack/geometry/voxel_grid.h"
 #include "simstack/instances/surface_segments.h"
 #include "simstack/model/cvae_config.h"
+#include "simstack/model/model_integrity.h"
 #include "simstack/pipeline/perception_config.h"
 #include "simstack/pipeline/table_plane.h"
 
@@ -158,5 +159,23 @@ class ScenePerception {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// A model's self-test: what the pipeline's defaults (one sample, one network pass, the default
+/// Hough setting, none of the model card's) perceive with it on warmUp()'s rendered box.
+struct ModelSelfTest {
+  int objects = 0;
+  int occupied_voxels = 0;  ///< occupancy probability >= 0.5
+};
+ModelSelfTest runModelSelfTest(const std::string& model_path);
+/// Checks the model at `model_path` as every loader does (its card's SHA-256 and format, finite
+/// weights), then runs the self-test and compares it with the card's `integrity.self_test`: the
+/// same object count, and occupied voxels within 5 % (a few voxels for a small count). Returns
+/// the self-test's result; throws std::runtime_error naming the model and what failed (nothing
+/// is compared when the card records no self-test).
+ModelSelfTest checkModel(const std::string& model_path);
+/// Records the model file's SHA-256, format and self-test in its card's `integrity:` section
+/// (after training, or after replacing the file on purpose) and returns them; the weights must
+/// be finite. std::runtime_error naming the file when it cannot be read or the card written.
+ModelIntegrity stampModel(const std::string& model_path);
 
 }  // namespace simstack

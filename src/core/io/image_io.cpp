@@ -77,7 +77,8 @@ std::pair<uint32_t, uint32_t> declaredSize(const std::string& path) {
 
 }  // namespace
 
-DepthImage readDepthImage(const std::string& path, double depth_scale_m) {
+DepthImage readDepthImage(const std::string& path, std::optional<double> depth_scale) {
+  const double depth_scale_m = depth_scale.value_or(0.001);
   const auto [width, height] = declaredSize(path);
   if (width > static_cast<uint32_t>(kMaxDepthImageSide) ||
       height > static_cast<uint32_t>(kMaxDepthImageSide))
@@ -99,6 +100,10 @@ DepthImage readDepthImage(const std::string& path, double depth_scale_m) {
       for (int u = 0; u < m.cols; ++u)
         depth.at(u, v) = static_cast<float>(m.at<uint16_t>(v, u) * depth_scale_m);
   } else if (m.type() == CV_32FC1) {
+    if (depth_scale)
+      throw std::runtime_error(path +
+                               " holds 32-bit float depth, in metres: a depth scale applies to "
+                               "16-bit images only (leave it out)");
     for (int v = 0; v < m.rows; ++v)
       for (int u = 0; u < m.cols; ++u) depth.at(u, v) = m.at<float>(v, u);
   } else {
@@ -267,9 +272,26 @@ ViewDescription readViewYaml(const std::string& path) {
     const auto q = n["T_table_camera"]["rotation_xyzw"].as<std::vector<double>>();
     if (t.size() != 3 || q.size() != 4)
       throw std::runtime_error("translation needs 3 values and rotation_xyzw 4");
+    const Vec3 translation(t[0], t[1], t[2]);
+    const Quat rotation(q[3], q[0], q[1], q[2]);
+    // A camera farther than the sensor range can reach (perception's max_depth_m <= 100 m) from
+    // the table sees nothing of it; a zero quaternion is no rotation at all.
+    if (!translation.allFinite() || !rotation.coeffs().allFinite())
+      throw std::runtime_error("T_table_camera: pose is not finite");
+    if (translation.norm() > kMaxCameraDistanceM)
+      throw std::runtime_error("T_table_camera.translation places the camera " +
+                               std::to_string(translation.norm()) +
+                               " m from the table's origin; "
+                               "at most " +
+                               std::to_string(static_cast<int>(kMaxCameraDistanceM)) +
+                               " m is a camera that sees the table");
+    if (rotation.norm() < 1e-6)
+      throw std::runtime_error(
+          "T_table_camera.rotation_xyzw is zero: not a rotation (a unit quaternion x y z w, e.g. "
+          "[0, 0, 0, 1] for none)");
     view.T_table_camera = Transform::Identity();
-    view.T_table_camera.linear() = Quat(q[3], q[0], q[1], q[2]).normalized().toRotationMatrix();
-    view.T_table_camera.translation() = Vec3(t[0], t[1], t[2]);
+    view.T_table_camera.linear() = rotation.normalized().toRotationMatrix();
+    view.T_table_camera.translation() = translation;
   } catch (const YAML::Exception& e) {
     throw std::runtime_error("cannot read view description " + path + ": " + e.what());
   } catch (const std::runtime_error& e) {

@@ -54,6 +54,23 @@ std::string ownerOf(const fs::path& dir) {
 
 }  // namespace
 
+std::string unwritablePath(const std::string& path) {
+  if (path.empty()) return "the path is empty: name a file or directory";
+  for (const char c : path)
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f)
+      return "the path holds a control character (code " +
+             std::to_string(static_cast<int>(static_cast<unsigned char>(c))) +
+             ", a newline or tab, say): names may not";
+  if (path.size() > 4096)
+    return "the path is " + std::to_string(path.size()) + " bytes long: at most 4096";
+  for (const auto& part : fs::path(path))
+    if (part.native().size() > kMaxFileNameBytes)
+      return "a name in the path is " + std::to_string(part.native().size()) +
+             " bytes long: at most " + std::to_string(kMaxFileNameBytes) +
+             " (the file system's limit)";
+  return "";
+}
+
 bool pathHolds(const std::string& outer, const std::string& inner) {
   const fs::path o = normalPath(outer), i = normalPath(inner);
   return std::mismatch(o.begin(), o.end(), i.begin(), i.end()).first == o.end();

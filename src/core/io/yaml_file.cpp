@@ -1,7 +1,13 @@
 #include "simstack/io/yaml_file.h"
 
+#include <fstream>
+#include <iterator>
 #include <map>
+#include <sstream>
 #include <stdexcept>
+#include <vector>
+
+#include "simstack/io/staged_output.h"
 
 namespace simstack {
 namespace {
@@ -55,6 +61,61 @@ YAML::Node loadYamlFile(const std::string& path, const std::string& what) {
 YAML::Node parseYamlText(const std::string& text, const std::string& what,
                          const std::string& source) {
   return checked(what, source, [&] { return YAML::Load(text); });
+}
+
+std::string withTopLevelSection(const std::string& text, const std::string& key,
+                                const std::string& section) {
+  std::vector<std::string> lines;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    lines.push_back(line);
+  }
+  auto comment_or_blank = [&](size_t i) { return lines[i].empty() || lines[i][0] == '#'; };
+  size_t begin = lines.size(), end = lines.size();
+  for (size_t i = 0; i < lines.size(); ++i) {
+    if (lines[i].rfind(key + ":", 0) != 0) continue;
+    begin = i;
+    end = i + 1;
+    while (end < lines.size() && (comment_or_blank(end) || lines[end][0] == ' ')) ++end;
+    while (end < lines.size() && end > begin + 1 && comment_or_blank(end - 1)) --end;
+    while (begin > 0 && lines[begin - 1].rfind('#', 0) == 0) --begin;
+    break;
+  }
+  std::string out;
+  for (size_t i = 0; i < begin; ++i) out += lines[i] + "\n";
+  out += section;
+  for (size_t i = end; i < lines.size(); ++i) out += lines[i] + "\n";
+  return out;
+}
+
+void writeTopLevelSection(const std::string& path, const std::string& key,
+                          const std::string& section, const std::string& what) {
+  std::string old;
+  if (std::ifstream in{path}) old.assign(std::istreambuf_iterator<char>(in), {});
+  const std::string text = withTopLevelSection(old, key, section);
+  const YAML::Node before =
+      old.empty() ? YAML::Node(YAML::NodeType::Map) : parseYamlText(old, what, path);
+  const YAML::Node after = parseYamlText(text, what, path);
+  const YAML::Node wanted = parseYamlText(section, what + " section", key);
+  auto same = [](const YAML::Node& a, const YAML::Node& b) {
+    return YAML::Dump(a) == YAML::Dump(b);
+  };
+  bool ok = before.IsMap() && after.IsMap() && after.size() == before.size() + !before[key];
+  ok = ok && same(after[key], wanted[key]);
+  for (auto it = before.begin(); ok && it != before.end(); ++it) {
+    const std::string k = it->first.as<std::string>();
+    ok = k == key || same(after[k], it->second);
+  }
+  if (!ok)
+    throw std::runtime_error("cannot put the " + key + ": section into " + what + " " + path +
+                             " without changing the rest of it; edit it by hand");
+  StagedFile staged(path);
+  std::ofstream f(staged.path());
+  f << text;
+  f.close();
+  if (!f) throw std::runtime_error("cannot write " + path);
+  staged.commit();
 }
 
 }  // namespace simstack

@@ -8,12 +8,14 @@
 #include <tuple>
 #include <utility>
 
+#include "simstack/model/model_integrity.h"
+
 namespace simstack {
 namespace {
 
 namespace F = torch::nn::functional;
 
-constexpr int64_t kFormatVersion = 1;
+const int64_t kFormatVersion = modelFormatVersion();
 
 // A 3D convolution that takes oneDNN's path at inference (see ConvBlock).
 torch::Tensor conv3d(torch::nn::Conv3d conv, const torch::Tensor& x, int stride, int padding) {
@@ -647,6 +649,7 @@ void saveCvae(const std::string& path, Cvae& model, const std::string& metadata,
 
 Cvae loadCvae(const std::string& path, const CvaeConfig* expect, std::string* metadata) {
   if (!std::filesystem::exists(path)) throw std::runtime_error("model file not found: " + path);
+  verifyModelFile(path);  // the card's SHA-256 and format, before a damaged file is parsed
   torch::serialize::InputArchive archive;
   try {
     archive.load_from(path);
@@ -698,6 +701,12 @@ Cvae loadCvae(const std::string& path, const CvaeConfig* expect, std::string* me
       throw std::runtime_error("model file " + path + ": tensor " + name + " has shape " +
                                c10::str(t.sizes()) + " but its config builds " +
                                c10::str(c10::IntArrayRef(built.at(name))));
+  // A weight that is NaN or infinite makes every output NaN: the network would see nothing.
+  for (const auto& [name, t] : namedTensors(model))
+    if (t.is_floating_point() && !torch::isfinite(t).all().item<bool>())
+      throw std::runtime_error("model file " + path + ": tensor " + name +
+                               " holds values that are not finite (NaN or infinite): the file is "
+                               "damaged");
   if (metadata && archive.try_read("simstack_metadata", meta)) *metadata = meta.toStringRef();
   return model;
 }

@@ -361,6 +361,7 @@ struct CvaeTrainer::Impl {
   std::unique_ptr<DatasetReader> reader;
   int train_scenes = 0;
   std::string card_perception;  // the card's perception: section, read before training
+  std::string note;             // what the trainer chose for the user (CvaeTrainer::note)
 
   /// `trained_on` receives a resumed checkpoint's metadata (checkpointMetadata).
   Cvae loadOrCreate(bool resuming, const fs::path& checkpoint, std::string* trained_on) const;
@@ -389,13 +390,21 @@ CvaeTrainer::CvaeTrainer(const std::string& dataset_path, const CvaeConfig& mode
   impl_->reader = std::make_unique<DatasetReader>(dataset_path);
   const DatasetInfo& info = impl_->reader->info();
   checkDatasetFitsModel(info, model, dataset_path, "the model config");
-  impl_->train_scenes = info.num_scenes - training.validation_scenes;
-  if (impl_->train_scenes < 1) {
-    throw std::runtime_error(
-        "dataset " + dataset_path + " has " + std::to_string(info.num_scenes) +
-        " scenes; more than validation_scenes = " + std::to_string(training.validation_scenes) +
-        " are needed (lower --validation-scenes, or generate more scenes)");
+  // A dataset smaller than the validation asked for (a newcomer's first run on a few dozen
+  // piles): a quarter of it validates, and the note says so.
+  if (info.num_scenes < 2)
+    throw std::runtime_error("dataset " + dataset_path + " has " + std::to_string(info.num_scenes) +
+                             " scene: training needs at least 2 (one to train on, one to "
+                             "validate on); generate more scenes");
+  if (training.validation_scenes >= info.num_scenes) {
+    impl_->config.validation_scenes = std::max(1, info.num_scenes / 4);
+    impl_->note =
+        "dataset " + dataset_path + " holds " + std::to_string(info.num_scenes) +
+        " scenes, not more than validation_scenes = " + std::to_string(training.validation_scenes) +
+        ": its last " + std::to_string(impl_->config.validation_scenes) +
+        " are the validation (--validation-scenes chooses)";
   }
+  impl_->train_scenes = info.num_scenes - impl_->config.validation_scenes;
   std::error_code ec;
   fs::create_directories(output_dir, ec);
   if (ec)
@@ -403,6 +412,8 @@ CvaeTrainer::CvaeTrainer(const std::string& dataset_path, const CvaeConfig& mode
 }
 
 CvaeTrainer::~CvaeTrainer() = default;
+
+const std::string& CvaeTrainer::note() const { return impl_->note; }
 
 TrainingReport CvaeTrainer::validateModel(const std::string& dataset_path,
                                           const std::string& model_path,

@@ -130,22 +130,30 @@ void emit(YAML::Emitter& e, const std::array<double, 3>& value) {
   e << YAML::EndSeq;
 }
 
+/// Reads the fields `fields` names from the map `n` into `c`; `prefix` ("hough.") names them in
+/// errors. Keys of `n` that are not fields are left to the caller.
+template <class C, class Fields>
+void readFields(const YAML::Node& n, const std::string& prefix, C* c, Fields fields,
+                const std::string& path) {
+  fields(*c, [&](const char* key, auto& value) {
+    if (!n[key]) return;
+    try {
+      value = n[key].as<std::remove_reference_t<decltype(value)>>();
+    } catch (const YAML::Exception& e) {
+      throw std::runtime_error(path + ": " + prefix + key + ": " + e.what());
+    }
+  });
+}
+
 template <class C, class Fields>
 void readSection(const YAML::Node& root, const char* name, C* c, Fields fields,
                  const std::string& path) {
   const YAML::Node n = root[name];
   if (!n || n.IsNull()) return;  // absent, or every field left out: the defaults
   if (!n.IsMap()) throw std::runtime_error(path + ": '" + name + "' must be a map");
+  readFields(n, std::string(name) + ".", c, fields, path);
   std::set<std::string> known;
-  fields(*c, [&](const char* key, auto& value) {
-    known.insert(key);
-    if (!n[key]) return;
-    try {
-      value = n[key].as<std::remove_reference_t<decltype(value)>>();
-    } catch (const YAML::Exception& e) {
-      throw std::runtime_error(path + ": " + name + "." + key + ": " + e.what());
-    }
-  });
+  fields(*c, [&](const char* key, auto&) { known.insert(key); });
   for (const auto& kv : n) {
     const std::string key = kv.first.as<std::string>();
     if (!known.count(key)) throw std::runtime_error(path + ": unknown field " + name + "." + key);
@@ -162,27 +170,61 @@ void writeSection(YAML::Emitter& e, const char* name, C& c, Fields fields) {
   e << YAML::EndMap;
 }
 
-void readSamples(const YAML::Node& perception, PerceptionConfig* c, const std::string& path) {
-  if (!perception["samples"]) return;
+/// `samples` of the map `n`; `prefix` names it in errors.
+void readSamples(const YAML::Node& n, const std::string& prefix, PerceptionConfig* c,
+                 const std::string& path) {
+  if (!n["samples"]) return;
   try {
-    c->samples = perception["samples"].as<int>();
+    c->samples = n["samples"].as<int>();
   } catch (const YAML::Exception& e) {
-    throw std::runtime_error(path + ": perception.samples: " + e.what());
+    throw std::runtime_error(path + ": " + prefix + "samples: " + e.what());
   }
+}
+
+/// Refuses a top-level key that is neither a field nor a section, naming what it is instead
+/// when it is a section this file no longer holds.
+void checkTopLevel(const YAML::Node& root, const std::string& path) {
+  const std::vector<std::string>& fields = perceptionConfigFields();
+  const std::vector<std::string>& sections = perceptionConfigSections();
+  for (const auto& kv : root) {
+    const std::string key = kv.first.as<std::string>();
+    if (key == "perception")
+      throw std::runtime_error(path +
+                               ": the pipeline's own fields (model, samples, symmetries, ...) "
+                               "stand at the top level of the file, not in a 'perception:' "
+                               "section");
+    if (key == "node")
+      throw std::runtime_error(path +
+                               ": 'node:' is not part of a perception config: the ROS node's "
+                               "own settings are its parameters (config/perception_node.yaml)");
+    if (std::find(fields.begin(), fields.end(), key) == fields.end() &&
+        std::find(sections.begin(), sections.end(), key) == sections.end())
+      throw std::runtime_error(path + ": unknown field '" + key + "'");
+  }
+}
+
+/// The model path resolved, the model's card read, then what the file says of the card's
+/// settings explicitly (normally nothing).
+PerceptionConfig finishConfig(PerceptionConfig c, const YAML::Node& root, const std::string& path,
+                              const std::string& base_dir, const std::string& model_path) {
+  if (!model_path.empty()) c.model_path = model_path;
+  if (!c.model_path.empty() && !base_dir.empty() &&
+      std::filesystem::path(c.model_path).is_relative())
+    c.model_path = (std::filesystem::path(base_dir) / c.model_path).string();
+  c.model_card_path = applyModelCard(&c);
+  readSamples(root, "", &c, path);
+  readSection(
+      root, "hough", &c.hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
+  return c;
 }
 
 PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& path,
                                     const std::string& base_dir, const std::string& model_path) {
   PerceptionConfig c;
   if (!root.IsMap()) throw std::runtime_error(path + ": expected a YAML map");
-  for (const auto& kv : root) {
-    const std::string section = kv.first.as<std::string>();
-    const auto& known = perceptionConfigSections();
-    if (section != "node" && std::find(known.begin(), known.end(), section) == known.end())
-      throw std::runtime_error(path + ": unknown section '" + section + "'");
-  }
-  readSection(
-      root, "perception", &c, [](auto& x, auto&& f) { perceptionFields(x, f); }, path);
+  checkTopLevel(root, path);
+  readFields(
+      root, "", &c, [](auto& x, auto&& f) { perceptionFields(x, f); }, path);
   readSection(
       root, "segments", &c.segments, [](auto& x, auto&& f) { segmentFields(x, f); }, path);
   readSection(
@@ -194,24 +236,25 @@ PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& p
       root, "table", &c.table, [](auto& x, auto&& f) { tableFields(x, f); }, path);
   readSection(
       root, "workspace", &c.workspace, [](auto& x, auto&& f) { workspaceFields(x, f); }, path);
-  if (!model_path.empty()) c.model_path = model_path;
-  if (!c.model_path.empty() && !base_dir.empty() &&
-      std::filesystem::path(c.model_path).is_relative())
-    c.model_path = (std::filesystem::path(base_dir) / c.model_path).string();
-  // The model's own settings, then what this file says of them explicitly (normally nothing).
-  c.model_card_path = applyModelCard(&c);
-  if (root["perception"]) readSamples(root["perception"], &c, path);
-  readSection(
-      root, "hough", &c.hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
-  return c;
+  return finishConfig(c, root, path, base_dir, model_path);
 }
 
 }  // namespace
 
 const std::vector<std::string>& perceptionConfigSections() {
-  static const std::vector<std::string> sections{
-      "perception", "hough", "segments", "surface_instances", "fitting", "table", "workspace"};
+  static const std::vector<std::string> sections{"hough",   "segments", "surface_instances",
+                                                 "fitting", "table",    "workspace"};
   return sections;
+}
+
+const std::vector<std::string>& perceptionConfigFields() {
+  static const std::vector<std::string> fields = [] {
+    std::vector<std::string> out;
+    PerceptionConfig c;
+    perceptionFields(c, [&](const char* key, auto&) { out.emplace_back(key); });
+    return out;
+  }();
+  return fields;
 }
 
 std::string applyModelCard(PerceptionConfig* config) {
@@ -227,7 +270,7 @@ std::string applyModelCard(PerceptionConfig* config) {
       throw std::runtime_error(path + ": unknown field perception." + key +
                                " (a model card's perception section holds samples and hough)");
   }
-  readSamples(section, config, path);
+  readSamples(section, "perception.", config, path);
   readSection(
       section, "hough", &config->hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
   return path;
@@ -242,6 +285,27 @@ PerceptionConfig parsePerceptionYaml(const std::string& text, const std::string&
                                      const std::string& base_dir, const std::string& model_path) {
   const YAML::Node root = parseYamlText(text, "perception config", source);
   return perceptionFromYaml(root, source, base_dir, model_path);
+}
+
+PerceptionConfig overlayPerceptionYaml(const std::string& defaults_path,
+                                       const std::string& overrides, const std::string& source,
+                                       const std::string& base_dir) {
+  YAML::Node merged = YAML::Clone(loadYamlFile(defaults_path, "perception config"));
+  if (!merged.IsMap()) throw std::runtime_error(defaults_path + ": expected a YAML map");
+  const YAML::Node over = parseYamlText(overrides, "perception config", source);
+  if (over.IsNull()) return perceptionFromYaml(merged, defaults_path, base_dir, "");
+  if (!over.IsMap()) throw std::runtime_error(source + ": expected a YAML map");
+  checkTopLevel(over, source);
+  for (const auto& kv : over) {
+    const std::string key = kv.first.as<std::string>();
+    if (kv.second.IsMap() && merged[key] && merged[key].IsMap()) {
+      YAML::Node section = merged[key];
+      for (const auto& field : kv.second) section[field.first.as<std::string>()] = field.second;
+    } else {
+      merged[key] = kv.second;
+    }
+  }
+  return perceptionFromYaml(merged, source + " over " + defaults_path, base_dir, "");
 }
 
 std::string modelCardPerceptionYaml(int samples, const HoughConfig& hough) {
@@ -260,7 +324,10 @@ std::string perceptionYaml(const PerceptionConfig& config) {
   YAML::Emitter e;
   e.SetDoublePrecision(10);  // 0.05, not 0.050000000000000003
   e << YAML::BeginMap;
-  writeSection(e, "perception", c, [](auto& x, auto&& f) { perceptionFields(x, f); });
+  perceptionFields(c, [&](const char* key, const auto& value) {
+    e << YAML::Key << key << YAML::Value;
+    emit(e, value);
+  });
   writeSection(e, "hough", c.hough, [](auto& x, auto&& f) { houghFields(x, f); });
   writeSection(e, "segments", c.segments, [](auto& x, auto&& f) { segmentFields(x, f); });
   writeSection(e, "surface_instances", c.surface_instances,

@@ -15,6 +15,7 @@
 #include "simstack/instances/instance_finder.h"
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/model/cvae_inference.h"
+#include "simstack/model/model_integrity.h"
 #include "simstack/pipeline/workspace.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/tsdf/network_input.h"
@@ -464,8 +465,14 @@ PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
                                 std::to_string(kMaxHoughFineCells) + "; lower one of them");
   config.threads = cappedThreads(config.threads);
   if (!model.hasLatentCode()) {
+    // Its one scene would be decomposed once and handed on as if it were several hypotheses.
+    if (config.decompose_samples > 1)
+      throw std::invalid_argument(
+          "decompose_samples " + std::to_string(config.decompose_samples) + ": the model (" +
+          model.architecture +
+          ") has no latent code and draws one scene; more than 1 needs a model with one (the "
+          "C-VAE, models/simstack_r32.pt)");
     config.samples = 1;
-    config.decompose_samples = std::min(config.decompose_samples, 1);
   }
   return config;
 }
@@ -770,6 +777,47 @@ SceneEstimate ScenePerception::warmUp() const {
   view.T_table_camera = lookAt(Vec3(0.45, -0.3, 0.55), Vec3(0.0, 0.0, 0.03));
   view.depth = renderer.render(view.camera, *view.T_table_camera).depth;
   return perceive(view);
+}
+
+ModelSelfTest runModelSelfTest(const std::string& model_path) {
+  PerceptionConfig config;
+  config.model_path = model_path;
+  config.samples = 1;
+  config.symmetries = 1;
+  const SceneEstimate estimate = ScenePerception(config).warmUp();
+  ModelSelfTest out;
+  out.objects = static_cast<int>(estimate.instances().size());
+  for (float p : estimate.occupancy_probability.data) out.occupied_voxels += p >= 0.5f;
+  return out;
+}
+
+ModelSelfTest checkModel(const std::string& model_path) {
+  const std::optional<ModelIntegrity> card = readModelIntegrity(model_path);
+  const ModelSelfTest got = runModelSelfTest(model_path);  // loading verifies hash and weights
+  if (!card || card->self_test_objects < 0) return got;
+  const int want = card->self_test_occupied_voxels;
+  const bool same = got.objects == card->self_test_objects &&
+                    std::abs(got.occupied_voxels - want) <= std::max(5, want / 20);
+  if (!same)
+    throw std::runtime_error(
+        "model " + model_path + " failed its self-test: on a rendered box its card " +
+        modelCardPath(model_path) + " expects " + std::to_string(card->self_test_objects) +
+        " object(s) and " + std::to_string(want) + " occupied voxels, it perceives " +
+        std::to_string(got.objects) + " and " + std::to_string(got.occupied_voxels) +
+        " (a damaged model, or not the one the card describes)");
+  return got;
+}
+
+ModelIntegrity stampModel(const std::string& model_path) {
+  ModelIntegrity m;
+  m.sha256 = sha256OfFile(model_path);
+  m.format = modelFormatVersion();
+  writeModelIntegrity(model_path, m);  // the hash first: the self-test loads through its check
+  const ModelSelfTest t = runModelSelfTest(model_path);
+  m.self_test_objects = t.objects;
+  m.self_test_occupied_voxels = t.occupied_voxels;
+  writeModelIntegrity(model_path, m);
+  return m;
 }
 
 }  // namespace simstack
