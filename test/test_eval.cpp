@@ -409,8 +409,25 @@ TEST(GraspSummary, PicksNeverPulledFreeNothingAndDoNotDiluteThePulls) {
   picks[1].outcome.cup_held = false, picks[1].outcome.mean_displacement_m = 0.030;
   picks[1].outcome.toppled = 1;
   picks[2].found = false, picks[2].grasped = false, picks[2].outcome.cup_held = false;
-  const nlohmann::json s = graspSummary(picks);
-  ASSERT_EQ(s.size(), 1u);
+  // The oracle's picks of the same three targets: two freed, one whose seal broke.
+  for (int t = 0; t < 3; ++t) {
+    picks[t].target = t;
+    PickResult o;
+    o.method = "truth", o.chooser = "ranked", o.target = t;
+    o.outcome.cup_held = t < 2;
+    o.outcome.target_freed = t < 2;
+    picks.push_back(o);
+  }
+  const nlohmann::json all = graspSummary(picks);
+  ASSERT_EQ(all.size(), 2u);
+  const nlohmann::json s = nlohmann::json::array({all[0]});
+  // Against the oracle: half its freed share (one target of its two), 1.5 times its seal
+  // breaks (one of two pulls against one of three).
+  EXPECT_NEAR(s[0]["freed_of_oracle"].get<double>(), 0.5, 1e-12);
+  EXPECT_NEAR(s[0]["seal_broke_of_oracle"].get<double>(), 1.5, 1e-12);
+  EXPECT_LE(s[0]["freed_of_oracle_ci95"][0].get<double>(), 0.5);
+  EXPECT_GE(s[0]["freed_of_oracle_ci95"][1].get<double>(), 0.5);
+  EXPECT_NEAR(all[1]["freed_of_oracle"].get<double>(), 1.0, 1e-12);
   EXPECT_DOUBLE_EQ(s[0]["picks"].get<double>(), 3.0);
   EXPECT_NEAR(s[0]["pulled_share"].get<double>(), 2.0 / 3, 1e-12);
   EXPECT_NEAR(s[0]["freed_share"].get<double>(), 1.0 / 3, 1e-12);
@@ -419,8 +436,7 @@ TEST(GraspSummary, PicksNeverPulledFreeNothingAndDoNotDiluteThePulls) {
   EXPECT_NEAR(s[0]["mean_displacement_mm"].get<double>(), 20.0, 1e-9);
   EXPECT_NEAR(s[0]["freed_mean_displacement_mm"].get<double>(), 10.0, 1e-9);
   EXPECT_NEAR(s[0]["toppled_share"].get<double>(), 0.5, 1e-12);
-  EXPECT_NE(graspSummaryTable(s).find("| m | ranked | 3 | 67 % | 33 % | 50 % | 20.0 |"),
-            std::string::npos)
+  EXPECT_NE(graspSummaryTable(s).find("| m | ranked | 3 | 67 % | 33 % | 50 % ("), std::string::npos)
       << graspSummaryTable(s);
 }
 

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <optional>
+#include <random>
 #include <string>
 
 #include "simstack/grasping/grasp_ranking.h"
@@ -54,6 +55,89 @@ TEST(SuctionCandidates, RimOfAFlatFaceSealsAndASphereCapDeviatesByItsSagitta) {
   ASSERT_TRUE(hit.has_value());
   EXPECT_NEAR(hit->z(), 0.03, 1e-6);
   EXPECT_FALSE(enterSuperquadric(sphere, {0.05, 0, 1}, -Vec3::UnitZ(), 2.0).has_value());
+}
+
+TEST(SuctionCandidates, MeasuredPointsSealOnAFaceAndNotOverAnEdgeOrAGap) {
+  // Depth points (2 mm noise) on the top and one side of a 10 cm box whose top is at z = 0.1.
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> noise(0.0, 0.002);
+  Points3 top, with_side;
+  for (double x = -0.05; x <= 0.05; x += 0.003)
+    for (double y = -0.05; y <= 0.05; y += 0.003) top.emplace_back(x, y, 0.1 + noise(rng));
+  with_side = top;
+  for (double y = -0.05; y <= 0.05; y += 0.003)
+    for (double z = 0.0; z <= 0.1; z += 0.003) with_side.emplace_back(0.05 + noise(rng), y, z);
+  const CandidateConfig config;
+  const MeasuredSeal middle = measuredSeal(with_side, {0, 0, 0.1}, Vec3(0.2, 0, 1), config);
+  EXPECT_TRUE(middle.seen && middle.seals) << middle.deviation_m;
+  EXPECT_GT(middle.normal.z(), 0.999);  // the measured face's normal, not the asked approach
+  const MeasuredSeal edge = measuredSeal(with_side, {0.045, 0, 0.1}, Vec3::UnitZ(), config);
+  EXPECT_TRUE(edge.seen);
+  EXPECT_FALSE(edge.seals) << "over the box's edge: " << edge.deviation_m;
+  Points3 holed;  // a gap under part of the rim: nothing for y > 0.008 near x = 0
+  for (const Vec3& p : top)
+    if (!(p.y() > 0.008 && std::abs(p.x()) < 0.02)) holed.push_back(p);
+  const MeasuredSeal gap = measuredSeal(holed, {0, 0, 0.1}, Vec3::UnitZ(), config);
+  EXPECT_TRUE(gap.seen);  // its middle was measured
+  EXPECT_FALSE(gap.seals);
+  // Nothing measured under the cup's middle: not seen, judged on the superquadric alone.
+  EXPECT_FALSE(measuredSeal(top, {0.2, 0, 0.1}, Vec3::UnitZ(), config).seen);
+  EXPECT_FALSE(measuredSeal({}, {0, 0, 0.1}, Vec3::UnitZ(), config).seen);
+}
+
+TEST(GraspRanking, CandidatesOnMeasuredSurfaceTakeItsNormal) {
+  // The top box of the stack, its top face measured 4 degrees off the superquadric's (the
+  // fit's error): candidates there approach along the measured face's normal.
+  const std::vector<SuperquadricShape> stack = twoBoxStack();
+  const SuperquadricShape& target = stack[1];
+  const Vec3 top = target.T_table_object.translation() + Vec3(0, 0, target.scale_m.z());
+  const Mat3 tilt = Eigen::AngleAxisd(4.0 * M_PI / 180.0, Vec3::UnitX()).toRotationMatrix();
+  Points3 measured;
+  for (double x = -target.scale_m.x(); x <= target.scale_m.x(); x += 0.003)
+    for (double y = -target.scale_m.y(); y <= target.scale_m.y(); y += 0.003)
+      measured.push_back(top + tilt * Vec3(x, y, 0));
+  GraspRankingConfig config;
+  config.candidates.max_candidates = 8;
+  const GraspRanking r = rankGrasps({stack}, 1, {}, config, {}, measured);
+  ASSERT_FALSE(r.grasps.empty()) << r.message;
+  EXPECT_GT(r.candidates.measured, 0);
+  int measured_grasps = 0;
+  for (const RankedGrasp& g : r.grasps) {
+    if (!g.candidate.measured) continue;
+    ++measured_grasps;
+    EXPECT_GT(g.candidate.approach_table.dot(tilt * Vec3::UnitZ()), std::cos(0.5 * M_PI / 180));
+  }
+  EXPECT_GT(measured_grasps, 0);
+  // Without the points, the same candidates keep the superquadric's normal.
+  const GraspRanking plain = rankGrasps({stack}, 1, {}, config);
+  ASSERT_FALSE(plain.grasps.empty());
+  EXPECT_FALSE(plain.grasps.front().candidate.measured);
+}
+
+TEST(GraspRanking, PerturbedCopiesMoveEveryObjectAndStayOnTheTable) {
+  const std::vector<SuperquadricShape> stack = twoBoxStack();
+  PerturbationConfig p;
+  p.copies = 3;
+  const auto copies = perturbedCopies(stack, p);
+  ASSERT_EQ(copies.size(), 3u);
+  for (const auto& copy : copies) {
+    ASSERT_EQ(copy.size(), stack.size());
+    EXPECT_GE(sceneBottom(copy), sceneBottom(stack) - 1e-9);  // nothing pushed into the table
+    for (size_t i = 0; i < copy.size(); ++i)
+      EXPECT_FALSE(copy[i].T_table_object.isApprox(stack[i].T_table_object, 1e-9)) << i;
+  }
+  EXPECT_TRUE(perturbedCopies(stack, p)[1][0].T_table_object.isApprox(
+      copies[1][0].T_table_object));  // the same seed, the same copies
+  // Ranked with them: every candidate is pulled in the scene and in each copy.
+  GraspRankingConfig config;
+  config.candidates.max_candidates = 4;
+  config.perturbation = p;
+  const GraspRanking r = rankGrasps({stack}, 1, {}, config);
+  ASSERT_FALSE(r.grasps.empty()) << r.message;
+  EXPECT_EQ(r.hypotheses.size(), 4u);
+  EXPECT_EQ(r.grasps.front().outcomes.size(), 4u);
+  p.copies = 65;
+  EXPECT_THROW(p.validate(), std::invalid_argument);
 }
 
 TEST(SuctionCandidates, ASphereSealsLessThanABoxFace) {

@@ -62,6 +62,7 @@ class GraspServer {
     std_msgs::Header pose_header;                     ///< frame of the tool and pre-grasp poses
     Transform T_pose_table = Transform::Identity();   ///< the table frame in pose_header's
     Transform T_scene_table = Transform::Identity();  ///< and in the scene's
+    Points3 measured_target;  ///< depth points measured on the target, table frame
     double pregrasp_distance_m = 0.0;
   };
   void onObjects(const ObjectArray::ConstPtr& msg);

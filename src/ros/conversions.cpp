@@ -337,6 +337,7 @@ ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& 
     o.superquadric = superquadricMsg(moved(instances[k].superquadric, T_frame_table));
     o.mesh = superquadricMesh(instances[k].superquadric);
     o.surface = pointCloud(header, moved(instances[k].points, T_frame_table));
+    o.measured_points = static_cast<uint32_t>(instances[k].measured_points);
     o.voxels = static_cast<uint32_t>(instances[k].voxels);
     o.visible_fraction = static_cast<float>(instances[k].visible_fraction);
     o.truncated = instances[k].truncated;

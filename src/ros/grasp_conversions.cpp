@@ -1,6 +1,7 @@
 #include "simstack_ros/grasp_conversions.h"
 
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 #include <string>
 
@@ -62,6 +63,34 @@ std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, 
   return scenes;
 }
 
+Points3 measuredSurface(const Object& object, const Transform& T_table_frame) {
+  const sensor_msgs::PointCloud2& cloud = object.surface;
+  const size_t n = static_cast<size_t>(cloud.width) * cloud.height;
+  if (object.measured_points == 0) return {};
+  const std::string what = "object " + std::to_string(object.id) + ": surface cloud";
+  if (object.measured_points > n)
+    throw std::invalid_argument(what + " holds " + std::to_string(n) + " points, not the " +
+                                std::to_string(object.measured_points) + " measured_points says");
+  int offsets[3] = {-1, -1, -1};
+  for (const sensor_msgs::PointField& f : cloud.fields)
+    for (int i = 0; i < 3; ++i)
+      if (f.name == std::string(1, "xyz"[i]) && f.datatype == sensor_msgs::PointField::FLOAT32 &&
+          f.offset + 4 <= cloud.point_step)
+        offsets[i] = static_cast<int>(f.offset);
+  if (offsets[0] < 0 || offsets[1] < 0 || offsets[2] < 0 || cloud.is_bigendian ||
+      cloud.data.size() < n * cloud.point_step)
+    throw std::invalid_argument(what + " has no float32 x y z fields, or less data than its size");
+  Points3 out;
+  for (size_t i = 0; i < object.measured_points; ++i) {
+    float xyz[3];
+    for (int c = 0; c < 3; ++c)
+      std::memcpy(&xyz[c], &cloud.data[i * cloud.point_step + offsets[c]], sizeof(float));
+    const Vec3 p(xyz[0], xyz[1], xyz[2]);
+    if (p.allFinite()) out.push_back(T_table_frame * p);
+  }
+  return out;
+}
+
 Grasp graspMsg(const RankedGrasp& g, const std_msgs::Header& pose_header,
                const Transform& T_pose_table, const Transform& T_scene_table,
                double pregrasp_distance_m) {
@@ -74,6 +103,7 @@ Grasp graspMsg(const RankedGrasp& g, const std_msgs::Header& pose_header,
   m.held = g.held();
   m.freed = g.freed();
   m.approach.x = z.x(), m.approach.y = z.y(), m.approach.z = z.z();
+  m.seal_measured = g.candidate.measured;
   m.seal_score = static_cast<float>(g.candidate.seal_score);
   m.mean_displacement_m = static_cast<float>(g.mean_displacement_m);
   m.worst_displacement_m = static_cast<float>(g.worst_displacement_m);

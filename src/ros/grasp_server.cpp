@@ -265,6 +265,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   const int wanted = static_cast<int>(std::min<size_t>(
       req.hypotheses == 0 ? 1 + scene->hypotheses.size() : size_t{req.hypotheses}, 64));
   *scenes = graspScenes(*scene, wanted);  // in the table frame; throws for a bad pose
+  out->measured_target = measuredSurface(scene->objects[out->target], out->T_scene_table.inverse());
   for (size_t h = 0; h < scenes->size(); ++h)
     if (const std::string why = checkScene((*scenes)[h]); !why.empty()) {
       // checkScene counts objects in the message's order, from 0.
@@ -416,7 +417,8 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
                          p.pregrasp_distance_m);
         return feedback(done, total, msg ? &*msg : nullptr);
       };
-    const GraspRanking ranking = rankGrasps(p.scenes, p.target, p.cameras, p.config, progress);
+    const GraspRanking ranking =
+        rankGrasps(p.scenes, p.target, p.cameras, p.config, progress, p.measured_target);
     for (const RankedGrasp& g : ranking.grasps)
       res.grasps.push_back(
           graspMsg(g, p.pose_header, p.T_pose_table, p.T_scene_table, p.pregrasp_distance_m));

@@ -201,15 +201,17 @@ void GraspServerConfig::validate() const {
     throw std::invalid_argument("surface_samples must lie in [100, 100000]");
   if (ranking.threads < 0) throw std::invalid_argument("threads must be >= 0 (0: all cores)");
   ranking.pull.validate();
+  ranking.perturbation.validate();
 }
 
 GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
   static const std::set<std::string> known{
-      "objects_topic",       "threads",          "max_candidates",   "max_candidates_limit",
-      "max_pull_distance_m", "cup_radius_m",     "seal_tolerance_m", "surface_samples",
-      "tool_length_m",       "max_force_n",      "cup_stiffness_hz", "settle_s",
-      "topple_deg",          "match_distance_m", "density_kgpm3",    "max_scene_age_s",
-      "pregrasp_distance_m"};
+      "objects_topic",       "threads",          "max_candidates",     "max_candidates_limit",
+      "max_pull_distance_m", "cup_radius_m",     "seal_tolerance_m",   "surface_samples",
+      "tool_length_m",       "max_force_n",      "cup_stiffness_hz",   "settle_s",
+      "topple_deg",          "match_distance_m", "density_kgpm3",      "max_scene_age_s",
+      "pregrasp_distance_m", "perturbed_copies", "perturb_position_m", "perturb_rotation_deg",
+      "perturb_scale_share"};
   XmlRpc::XmlRpcValue all;
   if (ros::param::get(pnh.getNamespace(), all) && all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
     for (auto& kv : all)
@@ -237,6 +239,11 @@ GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
   read(pnh, "density_kgpm3", &p.physics.density_kgpm3);
   read(pnh, "topple_deg", &topple_deg);
   read(pnh, "match_distance_m", &c.ranking.match_distance_m);
+  PerturbationConfig& q = c.ranking.perturbation;
+  read(pnh, "perturbed_copies", &q.copies);
+  read(pnh, "perturb_position_m", &q.position_m);
+  read(pnh, "perturb_rotation_deg", &q.rotation_deg);
+  read(pnh, "perturb_scale_share", &q.scale_share);
   p.cup_radius_m = k.cup_radius_m;
   p.topple_rad = topple_deg * M_PI / 180.0;
   c.validate();

@@ -33,6 +33,39 @@ std::unique_ptr<NetworkMethod> networkMethod(PerceptionConfig c, int hypotheses)
   return method;
 }
 
+/// How seals are judged, and the perturbed copies.
+void addSealOptions(CLI::App& app, GraspEvaluationOptions* o, bool* superquadric_seal) {
+  app.add_option("--perturbed", o->ranking.perturbation.copies,
+                 "perturbed copies of the estimate each candidate is also pulled in (the "
+                 "oracle's ranking on the true pile takes none)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 64));
+  app.add_flag("--true-seal", o->true_seal,
+               "a grasp executed in the true pile must also seal on the true surface where it "
+               "lands (else it holds nothing), not only withstand the pull");
+  app.add_flag("--superquadric-seal", *superquadric_seal,
+               "judge seals on the estimated superquadrics alone, not on the depth points "
+               "measured on the target (the ranking without the measured surface)");
+}
+
+/// Every pick, one JSON object each.
+nlohmann::json pickRows(const std::vector<PickResult>& picks) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (const PickResult& p : picks)
+    rows.push_back({{"scene", p.scene},
+                    {"target", p.target},
+                    {"method", p.method},
+                    {"chooser", p.chooser},
+                    {"found", p.found},
+                    {"grasped", p.grasped},
+                    {"mean_displacement_m", p.outcome.mean_displacement_m},
+                    {"max_displacement_m", p.outcome.max_displacement_m},
+                    {"toppled", p.outcome.toppled},
+                    {"freed", p.outcome.target_freed},
+                    {"failed", p.outcome.failed()}});
+  return rows;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -73,9 +106,12 @@ int main(int argc, char** argv) {
       ->check(SeedNumber);
   app.add_flag("--no-noise", no_noise, "clean rendered views instead of Kinect-like noise");
   app.add_flag("--no-classical", no_classical, "skip the classical baseline");
+  bool superquadric_seal = false;
+  addSealOptions(app, &o, &superquadric_seal);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
   o.noise = !no_noise;
+  o.measured_seal = !superquadric_seal;
   try {
     std::vector<std::string> inputs = perception.inputFiles();
     inputs.push_back(dataset);
@@ -101,19 +137,7 @@ int main(int argc, char** argv) {
         evaluateGrasps(reader, run, o, [&](int done, int) { bar.update(done); });
     bar.finish();
     const nlohmann::json summary = graspSummary(picks);
-    nlohmann::json rows = nlohmann::json::array();
-    for (const PickResult& p : picks)
-      rows.push_back({{"scene", p.scene},
-                      {"target", p.target},
-                      {"method", p.method},
-                      {"chooser", p.chooser},
-                      {"found", p.found},
-                      {"grasped", p.grasped},
-                      {"mean_displacement_m", p.outcome.mean_displacement_m},
-                      {"max_displacement_m", p.outcome.max_displacement_m},
-                      {"toppled", p.outcome.toppled},
-                      {"freed", p.outcome.target_freed},
-                      {"failed", p.outcome.failed()}});
+    const nlohmann::json rows = pickRows(picks);
     std::ofstream f(staged.path());
     f << nlohmann::json{{"dataset", dataset},
                         {"scenes", n},
@@ -121,6 +145,9 @@ int main(int argc, char** argv) {
                         {"noise", o.noise},
                         {"seed", o.seed},
                         {"hypotheses", o.hypotheses},
+                        {"measured_seal", o.measured_seal},
+                        {"perturbed_copies", o.ranking.perturbation.copies},
+                        {"true_seal", o.true_seal},
                         {"summary", summary},
                         {"picks", rows}}
              .dump(1)

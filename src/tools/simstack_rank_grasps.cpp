@@ -15,6 +15,25 @@
 using namespace simstack;
 namespace fs = std::filesystem;
 
+namespace {
+
+/// The depth points measured on the target: those labelled target_id + 1 in `cloud_path`, or
+/// in the reconstruction's instances.pcd beside the scene file when none is given (none when
+/// there is no such file).
+Points3 measuredTarget(const std::string& scene_path, std::string cloud_path, int target_id) {
+  if (cloud_path.empty()) {
+    const fs::path beside = fs::path(scene_path).parent_path() / "instances.pcd";
+    if (!fs::exists(beside)) return {};
+    cloud_path = beside.string();
+  }
+  Points3 out = readLabelledPoints(cloud_path, static_cast<uint32_t>(target_id + 1));
+  std::cout << "seals judged on " << out.size() << " points of object " << target_id
+            << " measured in " << cloud_path << "\n";
+  return out;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   std::string scene_path, output;
   int target_id = -1, rows = 10;
@@ -47,6 +66,15 @@ int main(int argc, char** argv) {
   app.add_option("--rows", rows, "grasps printed")
       ->capture_default_str()
       ->check(CLI::Range(1, 1024));
+  std::string measured_path;
+  app.add_option("--measured", measured_path,
+                 "labelled cloud of the depth points measured on the objects (x y z label, label "
+                 "id + 1: simstack_reconstruct's instances.pcd, taken from beside --scene when "
+                 "this is not given); the target's judge its seals")
+      ->check(CLI::ExistingFile);
+  bool superquadric_seal = false;
+  app.add_flag("--superquadric-seal", superquadric_seal,
+               "judge seals on the superquadric alone, not on measured points");
   double pregrasp_m = 0.05;
   app.add_option("--pregrasp-distance", pregrasp_m,
                  "metres the pre-grasp pose in grasps.json stands back from the contact")
@@ -71,9 +99,11 @@ int main(int argc, char** argv) {
       throw std::invalid_argument(scene_path + ": " + why);
     std::optional<StagedDirectory> staged;  // before the work: a bad --output fails at once
     if (!output.empty()) staged.emplace(output, "simstack_rank_grasps");
+    const Points3 measured =
+        superquadric_seal ? Points3() : measuredTarget(scene_path, measured_path, target_id);
     const auto start = std::chrono::steady_clock::now();
     const GraspRanking ranking =
-        rankGrasps({scene}, static_cast<int>(found - ids.begin()), {}, config);
+        rankGrasps({scene}, static_cast<int>(found - ids.begin()), {}, config, {}, measured);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     std::cout << "object " << target_id << ": " << ranking.candidates.visible << " of "

@@ -32,6 +32,9 @@ struct MethodEstimate {
   std::vector<TriangleMesh> surfaces;  ///< the predicted full surface of each hypothesis
   std::vector<std::vector<float>> hypotheses_tsdf;  ///< per hypothesis on `grid`; <= 0 occupied
   std::vector<SuperquadricShape> superquadrics;     ///< the objects found, table frame
+  /// Per object, the depth points measured on it (table frame; empty when the method keeps
+  /// none): where a grasp's seal is judged.
+  std::vector<Points3> measured_surfaces;
   /// The objects of the further hypotheses that were decomposed (robust grasp ranking).
   std::vector<std::vector<SuperquadricShape>> further_superquadrics;
   Image<int> pixel_instances;  ///< instance per pixel of the view, -1 none (may stay empty)

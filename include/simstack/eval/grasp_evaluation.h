@@ -27,6 +27,14 @@ struct GraspEvaluationOptions {
   /// Hypotheses the ranking simulates each candidate in: the estimate, then up to H - 1 of a
   /// method's further decomposed hypotheses (MethodEstimate::further_superquadrics).
   int hypotheses = 1;
+  /// The ranking on an estimate judges seals on the depth points the method measured on the
+  /// target (MethodEstimate::measured_surfaces), as the grasp service does; false: on the
+  /// superquadrics alone.
+  bool measured_seal = true;
+  /// A grasp executed in the true pile must also seal on the true surface where its approach
+  /// line meets it (the rim within the seal tolerance of the cup's plane, as on the estimate);
+  /// false: only the pull's force and moment can break it.
+  bool true_seal = false;
 };
 
 /// One pick: a chooser's grasp on a method's scene, executed in the true pile.

@@ -15,9 +15,28 @@
 
 namespace simstack {
 
+/// Copies of the scene each candidate is also pulled in, each object moved, turned and resized
+/// at random by about what an estimate is off (normal draws, these standard deviations): a
+/// grasp that holds only in the estimate as it is ranks below one that holds in them too.
+struct PerturbationConfig {
+  int copies = 0;             ///< 0: none
+  double position_m = 0.01;   ///< across the table (x, y)
+  double rotation_deg = 5.0;  ///< about a random axis
+  double scale_share = 0.1;   ///< of each semi-axis
+  uint64_t seed = 0;          ///< the same seed gives the same copies
+  /// Throws std::invalid_argument naming the field.
+  void validate() const;
+};
+
+/// The copies of `scene` as PerturbationConfig draws them (objects in the same order; each
+/// lifted, if need be, so that it does not reach below the table).
+std::vector<std::vector<SuperquadricShape>> perturbedCopies(
+    const std::vector<SuperquadricShape>& scene, const PerturbationConfig& config);
+
 struct GraspRankingConfig {
   CandidateConfig candidates;
   PullConfig pull;
+  PerturbationConfig perturbation;  ///< copies of hypothesis 0 pulled in too
   /// Threads simulating candidates (0: all cores). The ranking does not depend on it.
   int threads = 1;
   /// A hypothesis's object matches the target when their centres are this close (metres),
@@ -52,7 +71,8 @@ struct GraspRanking {
   std::vector<RankedGrasp> grasps;   ///< best first
   CandidateSet candidates;           ///< the candidate search (counts) on hypothesis 0
   std::vector<SceneDrift> baseline;  ///< per hypothesis used: the scene left alone
-  std::vector<int> hypotheses;       ///< indices of the hypotheses used (0 first)
+  std::vector<int> hypotheses;       ///< indices of the hypotheses used (0 first); the
+                                     ///< perturbed copies follow, numbered on from the last
   int pulls = 0;                     ///< pulls simulated
   bool stopped = false;  ///< the progress callback asked to stop: grasps holds what finished
   /// What the caller should know, notes joined by "; " (empty when all is well): hypotheses
@@ -94,9 +114,11 @@ using RankingProgress = std::function<bool(int done, int total, const RankedGras
 /// topples, less displacement (whole millimetres), lower peak load.
 bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b);
 
+/// `measured_target`: depth points measured on hypotheses[0][target] (table frame), where the
+/// seal is judged and the approach taken (suctionCandidates); empty: the superquadric alone.
 GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypotheses, int target,
                         const std::vector<Vec3>& camera_positions, const GraspRankingConfig& config,
-                        const RankingProgress& progress = {});
+                        const RankingProgress& progress = {}, const Points3& measured_target = {});
 
 /// The lowest point of the scene's surfaces: z in the table frame, metres (infinity for an
 /// empty scene). A pile resting on the table has it near 0; the simulation's table is at z = 0,

@@ -33,7 +33,30 @@ struct SuctionCandidate {
   Vec3 approach_table = Vec3::UnitZ();  ///< unit outward surface normal at the contact
   double rim_deviation_m = 0.0;         ///< largest distance of the rim from the cup's plane
   double seal_score = 1.0;              ///< 1 - rim_deviation / seal_tolerance, in [0, 1]
+  /// The camera measured the surface under the cup and it seals there (measuredSeal): the
+  /// approach is the measured surface's normal. False: judged on the superquadric alone.
+  bool measured = false;
 };
+
+/// What the depth points measured on a target say of a cup placed at a contact.
+struct MeasuredSeal {
+  bool seen = false;           ///< the points cover the middle of the cup's footprint
+  bool seals = false;          ///< ... and the rim's zone, on one plane within the seal tolerance
+  Vec3 normal = Vec3::Zero();  ///< that plane's normal, on the side of the approach
+  Vec3 centre = Vec3::Zero();  ///< a point of the plane
+  double deviation_m = std::numeric_limits<double>::infinity();  ///< worst sector's offset
+};
+
+/// The seal judged on `measured_table` (depth points on the target, table frame), of the points
+/// near the approach axis through `contact` (within its radius along it). Seen: at least six
+/// lie within half the cup's radius of the axis. Their plane (refitted on the points under the
+/// cup near it) is the surface the cup lands on; at each of 16 points of the rim, the measured
+/// points within 0.4 radii of it must exist (no hole, no edge with nothing of the target beyond
+/// it, nothing in front) and their mean offset from the plane must lie within the seal
+/// tolerance (a mean, so that the sensor's noise on single points does not break a flat face's
+/// seal while a bend or an edge still does).
+MeasuredSeal measuredSeal(const Points3& measured_table, const Vec3& contact, const Vec3& approach,
+                          const CandidateConfig& config);
 
 /// The suction tool's pose at a candidate, as a motion planner takes it (MoveIt's convention:
 /// the tool's z along its approach): origin at the contact, z along -approach_table (into the
@@ -50,7 +73,9 @@ struct CandidateSet {
   int surface_samples = 0;  ///< drawn on the target
   int visible = 0;          ///< of them seen by a camera
   int reachable = 0;        ///< of those, approachable from above the table
-  int sealable = 0;         ///< of those, where the rim seals
+  int sealable = 0;         ///< of those, where the rim seals (on the superquadric and, where
+                            ///< the camera measured the surface, on the measured points)
+  int measured = 0;         ///< of those, on surface the camera measured
 };
 
 /// The five virtual cameras of the paper's section 4.3: one above the scene's centre and four
@@ -73,9 +98,11 @@ double rimDeviation(const SuperquadricShape& sq, const Vec3& contact_table,
                     double limit_m = std::numeric_limits<double>::infinity());
 
 /// Candidates on scene[target] seen from any of `camera_positions` (table frame; the other
-/// objects and the table occlude). Throws std::invalid_argument for a bad target or config.
+/// objects and the table occlude). With `measured_table` (depth points on the target): a
+/// candidate on measured surface must seal there too (measuredSeal) and takes its normal.
+/// Throws std::invalid_argument for a bad target or config.
 CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int target,
                                const std::vector<Vec3>& camera_positions,
-                               const CandidateConfig& config);
+                               const CandidateConfig& config, const Points3& measured_table = {});
 
 }  // namespace simstack

@@ -34,6 +34,11 @@ TriangleMesh readMeshPly(const std::string& path);
 void writeLabelledCloudPcd(const std::string& path, const Points3& points,
                            const std::vector<int>& labels);
 
+/// The points of a PCD of x y z label (as writeLabelledCloudPcd writes it) whose label is
+/// `label`; the file is checked first (checkPcdHeader). Throws std::runtime_error naming the
+/// file when it cannot be read or has no label field.
+Points3 readLabelledPoints(const std::string& path, uint32_t label);
+
 /// Reads a PCD file's header and checks it before PCL sees the file (PCL crashes on some
 /// malformed files and allocates what any header claims): x y z fields, consistent SIZE /
 /// TYPE / COUNT, WIDTH and HEIGHT at most kMaxDepthImageSide, POINTS = WIDTH x HEIGHT, and

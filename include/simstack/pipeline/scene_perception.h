@@ -31,6 +31,9 @@ struct InstanceEstimate {
   /// What was fitted: the views' depth points on the instance and samples of the part of
   /// `mesh` no view saw (PerceptionConfig::observed_points), or samples of `mesh`.
   Points3 points;
+  /// The first this many of `points` are depth points the views measured on it (its seen
+  /// surface, where a suction cup's seal is judged); 0 without observed_points.
+  int measured_points = 0;
   Vec3 vote_centre = Vec3::Zero();  ///< Hough centre
   int voxels = 0;
   /// Share of `mesh`'s area that the first view's camera sees (0..1): the rest was completed.

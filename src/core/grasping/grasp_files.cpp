@@ -81,6 +81,7 @@ void writeGraspJson(const std::string& path, const GraspRanking& r, int target_i
                       {"contact_m", vec(g.candidate.contact_table)},
                       {"approach", vec(g.candidate.approach_table)},
                       {"seal_score", g.candidate.seal_score},
+                      {"seal_measured", g.candidate.measured},
                       {"rim_deviation_m", g.candidate.rim_deviation_m},
                       {"mean_displacement_m", g.mean_displacement_m},
                       {"worst_displacement_m", g.worst_displacement_m},

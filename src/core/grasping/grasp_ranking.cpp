@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdlib>
 #include <exception>
 #include <limits>
 #include <mutex>
 #include <numeric>
 #include <optional>
+#include <random>
 #include <stdexcept>
 #include <thread>
 
@@ -84,6 +86,44 @@ void summarise(RankedGrasp* g) {
 
 }  // namespace
 
+void PerturbationConfig::validate() const {
+  if (copies < 0 || copies > 64)
+    throw std::invalid_argument("perturbation copies must lie in [0, 64]");
+  if (!(position_m >= 0.0 && position_m <= 0.1))
+    throw std::invalid_argument("perturbation position_m must lie in [0, 0.1] m");
+  if (!(rotation_deg >= 0.0 && rotation_deg <= 45.0))
+    throw std::invalid_argument("perturbation rotation_deg must lie in [0, 45]");
+  if (!(scale_share >= 0.0 && scale_share <= 0.5))
+    throw std::invalid_argument("perturbation scale_share must lie in [0, 0.5]");
+}
+
+std::vector<std::vector<SuperquadricShape>> perturbedCopies(
+    const std::vector<SuperquadricShape>& scene, const PerturbationConfig& config) {
+  config.validate();
+  std::mt19937_64 rng(config.seed * 0x9E3779B97F4A7C15ull + 17);
+  std::normal_distribution<double> unit(0.0, 1.0);
+  std::vector<std::vector<SuperquadricShape>> out;
+  for (int c = 0; c < config.copies; ++c) {
+    std::vector<SuperquadricShape> copy = scene;
+    for (SuperquadricShape& sq : copy) {
+      const double bottom = sceneBottom({sq});
+      sq.T_table_object.translation() += config.position_m * Vec3(unit(rng), unit(rng), 0.0);
+      const Vec3 axis = Vec3(unit(rng), unit(rng), unit(rng)).normalized();
+      const double angle = config.rotation_deg * M_PI / 180.0 * unit(rng);
+      sq.T_table_object.linear() =
+          Eigen::AngleAxisd(angle, axis).toRotationMatrix() * sq.T_table_object.linear();
+      for (int i = 0; i < 3; ++i)
+        sq.scale_m[i] *= std::clamp(1.0 + config.scale_share * unit(rng), 0.5, 1.5);
+      // No deeper into the table than it was: the simulation's table would throw it up.
+      const double lowest = std::min(bottom, 0.0);
+      const double now = sceneBottom({sq});
+      if (now < lowest) sq.T_table_object.translation().z() += lowest - now;
+    }
+    out.push_back(std::move(copy));
+  }
+  return out;
+}
+
 std::optional<Vec3> carryCandidate(const SuctionCandidate& c, const SuperquadricShape& target,
                                    double tool_length_m) {
   const double reach = tool_length_m + 2.0 * target.scale_m.maxCoeff() + 0.1;
@@ -147,7 +187,7 @@ bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b) {
 
 GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypotheses, int target,
                         const std::vector<Vec3>& camera_positions, const GraspRankingConfig& config,
-                        const RankingProgress& progress) {
+                        const RankingProgress& progress, const Points3& measured_target) {
   if (hypotheses.empty()) throw std::invalid_argument("no scene to rank grasps in");
   for (const auto& scene : hypotheses)
     if (const std::string why = checkScene(scene); !why.empty()) throw std::invalid_argument(why);
@@ -160,7 +200,7 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
   const auto& scene0 = hypotheses[0];
   out.candidates = suctionCandidates(
       scene0, target, camera_positions.empty() ? defaultCameraPositions(scene0) : camera_positions,
-      config.candidates);
+      config.candidates, measured_target);
   std::vector<int> targets;
   for (size_t h = 0; h < hypotheses.size(); ++h) {
     const int t =
@@ -181,11 +221,19 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
                 " mm cup seals");
     return out;
   }
-  const int H = static_cast<int>(out.hypotheses.size());
+  // The perturbed copies of hypothesis 0, pulled in like further hypotheses.
+  std::vector<std::vector<SuperquadricShape>> scenes;
+  for (int h : out.hypotheses) scenes.push_back(hypotheses[h]);
+  int next = static_cast<int>(hypotheses.size());
+  for (auto& copy : perturbedCopies(scene0, config.perturbation)) {
+    out.hypotheses.push_back(next++);
+    scenes.push_back(std::move(copy));
+    targets.push_back(target);
+  }
+  const int H = static_cast<int>(scenes.size());
   std::vector<std::unique_ptr<PullSimulator>> sims(H);
-  parallelFor(H, threads, [&](int k) {
-    sims[k] = std::make_unique<PullSimulator>(hypotheses[out.hypotheses[k]], config.pull);
-  });
+  parallelFor(H, threads,
+              [&](int k) { sims[k] = std::make_unique<PullSimulator>(scenes[k], config.pull); });
   for (const auto& s : sims) out.baseline.push_back(s->drift());
   const auto& cands = out.candidates.candidates;
   const int C = static_cast<int>(cands.size());
@@ -200,7 +248,7 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
   parallelFor(C * H, threads, [&](int job) {
     if (stop) return;
     const int c = job / H, k = job % H;
-    const auto& scene = hypotheses[out.hypotheses[k]];
+    const auto& scene = scenes[k];
     outcomes[job] =
         k == 0
             ? sims[0]->pullPerceived(target, cands[c].contact_table, cands[c].approach_table)

@@ -1,10 +1,15 @@
 #include "simstack/grasping/suction_candidates.h"
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <random>
 #include <stdexcept>
+#include <tuple>
+#include <utility>
 
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/scene.h"
@@ -164,9 +169,78 @@ double rimDeviation(const SuperquadricShape& sq, const Vec3& contact, const Vec3
   return worst;
 }
 
+namespace {
+
+/// The least-squares plane of `points`: their centroid and the normal on the side of `side`.
+std::pair<Vec3, Vec3> fitPlane(const Points3& points, const Vec3& side) {
+  Vec3 centre = Vec3::Zero();
+  for (const Vec3& p : points) centre += p;
+  centre /= static_cast<double>(points.size());
+  Mat3 cov = Mat3::Zero();
+  for (const Vec3& p : points) cov += (p - centre) * (p - centre).transpose();
+  const Eigen::SelfAdjointEigenSolver<Mat3> eig(cov);
+  Vec3 n = eig.eigenvectors().col(0);  // the direction of the smallest spread
+  if (n.dot(side) < 0.0) n = -n;
+  return {centre, n};
+}
+
+}  // namespace
+
+MeasuredSeal measuredSeal(const Points3& measured, const Vec3& contact, const Vec3& approach,
+                          const CandidateConfig& config) {
+  constexpr int kRimPoints = 16;
+  constexpr size_t kMiddlePoints = 6;  // fewer under the cup's middle: the camera did not see it
+  const Vec3 a = approach.normalized();
+  const double r = config.cup_radius_m;
+  Points3 under, middle;
+  for (const Vec3& p : measured) {
+    const Vec3 d = p - contact;
+    const double along = d.dot(a), radial = (d - along * a).norm();
+    if (std::abs(along) > r || radial > 1.4 * r) continue;
+    under.push_back(p);
+    if (radial <= 0.5 * r) middle.push_back(p);
+  }
+  MeasuredSeal out;
+  out.seen = middle.size() >= kMiddlePoints;
+  if (!out.seen) return out;
+  // The plane the cup's middle lands on, refitted on every point under the cup near it (the
+  // sensor's noise on a patch of a centimetre tilts a plane of the middle alone by degrees).
+  auto [centre, n] = fitPlane(middle, a);
+  Points3 near;
+  for (const Vec3& p : under)
+    if (std::abs((p - centre).dot(n)) <= 2.0 * config.seal_tolerance_m) near.push_back(p);
+  std::tie(centre, n) = fitPlane(near, a);
+  out.normal = n;
+  out.centre = centre;
+  // The rim: at each of its points, the measured points within 0.4 radii of it (across the
+  // plane) must exist (no hole, no edge with nothing of the target beyond it, nothing in
+  // front) and lie, on average, within the tolerance of the plane.
+  const Vec3 u = perpendicular(n), v = n.cross(u);
+  out.deviation_m = 0.0;
+  for (int k = 0; k < kRimPoints; ++k) {
+    const double phi = 2.0 * M_PI * k / kRimPoints;
+    const Vec3 rim = contact + r * (std::cos(phi) * u + std::sin(phi) * v);
+    double sum = 0.0;
+    int count = 0;
+    for (const Vec3& p : under) {
+      const Vec3 d = p - rim;
+      if ((d - d.dot(n) * n).norm() > 0.4 * r) continue;
+      sum += (p - centre).dot(n);
+      ++count;
+    }
+    if (count == 0) {
+      out.deviation_m = std::numeric_limits<double>::infinity();
+      break;
+    }
+    out.deviation_m = std::max(out.deviation_m, std::abs(sum / count));
+  }
+  out.seals = out.deviation_m <= config.seal_tolerance_m;
+  return out;
+}
+
 CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int target,
                                const std::vector<Vec3>& camera_positions,
-                               const CandidateConfig& config) {
+                               const CandidateConfig& config, const Points3& measured) {
   validate(scene, target, config);
   const SuperquadricShape& sq = scene[target];
   RenderConfig render;
@@ -189,9 +263,21 @@ CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int 
                                      config.rim_points, config.seal_tolerance_m);
     if (!(c.rim_deviation_m <= config.seal_tolerance_m)) continue;
     c.seal_score = 1.0 - c.rim_deviation_m / config.seal_tolerance_m;
+    if (!measured.empty()) {
+      const MeasuredSeal m = measuredSeal(measured, c.contact_table, c.approach_table, config);
+      if (m.seen && !m.seals) continue;  // the camera saw an edge, a bend or a gap there
+      if (m.seen) {
+        // The measured surface's normal, and the contact on its plane.
+        c.approach_table = m.normal;
+        c.contact_table -= (c.contact_table - m.centre).dot(m.normal) * m.normal;
+        c.seal_score = 1.0 - m.deviation_m / config.seal_tolerance_m;
+        c.measured = true;
+      }
+    }
     sealable.push_back(c);
   }
   out.sealable = static_cast<int>(sealable.size());
+  for (const SuctionCandidate& c : sealable) out.measured += c.measured;
   out.candidates = spread(sealable, config.max_candidates);
   return out;
 }

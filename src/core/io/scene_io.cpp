@@ -191,6 +191,25 @@ void writeLabelledCloudPcd(const std::string& path, const Points3& points,
     throw std::runtime_error("cannot write " + path);
 }
 
+Points3 readLabelledPoints(const std::string& path, uint32_t label) {
+  checkPcdHeader(path);
+  pcl::PCLPointCloud2 header;
+  if (pcl::io::loadPCDFile(path, header) != 0)
+    throw std::runtime_error("cannot read the labelled cloud " + path);
+  if (std::none_of(header.fields.begin(), header.fields.end(),
+                   [](const pcl::PCLPointField& f) { return f.name == "label"; }))
+    throw std::runtime_error(path +
+                             " has no label field (x y z label, as simstack_reconstruct "
+                             "writes instances.pcd)");
+  pcl::PointCloud<pcl::PointXYZL> cloud;
+  pcl::fromPCLPointCloud2(header, cloud);
+  Points3 out;
+  for (const pcl::PointXYZL& p : cloud)
+    if (p.label == label && std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z))
+      out.emplace_back(p.x, p.y, p.z);
+  return out;
+}
+
 void checkPcdHeader(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
   if (!f) throw std::runtime_error("cannot open " + path);

@@ -68,7 +68,10 @@ MethodEstimate NetworkMethod::estimateViews(const std::vector<DepthView>& views,
     out.hypotheses_tsdf.push_back(h.tsdf_m.data);
     out.surfaces.push_back(h.surface.empty() ? extractSurface(h.tsdf_m) : h.surface);
   }
-  for (const InstanceEstimate& e : est.instances()) out.superquadrics.push_back(e.superquadric);
+  for (const InstanceEstimate& e : est.instances()) {
+    out.superquadrics.push_back(e.superquadric);
+    out.measured_surfaces.emplace_back(e.points.begin(), e.points.begin() + e.measured_points);
+  }
   for (size_t h = 1; h < est.hypotheses.size() && est.hypotheses[h].decomposed; ++h) {
     out.further_superquadrics.emplace_back();
     for (const InstanceEstimate& e : est.hypotheses[h].instances)

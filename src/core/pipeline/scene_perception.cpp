@@ -122,7 +122,8 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, int n, ui
 /// to a voxel off, and the fits weigh them accordingly (docs/experiments.md). When the views
 /// hold fewer of them than that share, samples of the seen mesh make up the difference.
 std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Grid3<int>& labels,
-                               const std::vector<MeasuredView>& views, int n, uint64_t seed) {
+                               const std::vector<MeasuredView>& views, int n, uint64_t seed,
+                               std::vector<int>* measured_counts) {
   TriangleMesh all;
   std::vector<size_t> first(parts.size() + 1, 0);
   for (size_t k = 0; k < parts.size(); ++k) {
@@ -141,12 +142,14 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Gri
     }
   }
   std::vector<Points3> points(parts.size());
+  measured_counts->assign(parts.size(), 0);
   for (size_t k = 0; k < parts.size(); ++k) {
     std::mt19937_64 rng(seed * 7919 + k);
     if (parts[k].empty()) {  // found on the surface alone (surface_instances.h): what was seen
       points[k] = measured[k];
       std::shuffle(points[k].begin(), points[k].end(), rng);
       if (static_cast<int>(points[k].size()) > n) points[k].resize(n);
+      (*measured_counts)[k] = static_cast<int>(points[k].size());
       continue;
     }
     std::vector<bool> seen_k(seen.begin() + first[k], seen.begin() + first[k + 1]), unseen_k;
@@ -162,6 +165,7 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Gri
     std::shuffle(m.begin(), m.end(), rng);
     if (static_cast<int>(m.size()) > n) m.resize(n);
     points[k] = m;
+    (*measured_counts)[k] = static_cast<int>(m.size());
     const int from_seen_mesh = std::max(0, n_seen - static_cast<int>(m.size()));
     for (const SurfacePoint& s : subMesh(parts[k], seen_k).sampleSurface(from_seen_mesh, rng))
       points[k].push_back(s.position);
@@ -202,9 +206,11 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
       splitByLabel(h->surface, triangleLabels(h->surface, h->labels), seg.size());
   for (size_t k = 0; k < parts.size(); ++k)
     if (outside[k]) parts[k] = TriangleMesh();
+  std::vector<int> measured_counts(parts.size(), 0);
   const std::vector<Points3> points =
       config.observed_points && !measured_views.empty()
-          ? fitPoints(parts, h->labels, measured_views, config.points_per_instance, config.seed)
+          ? fitPoints(parts, h->labels, measured_views, config.points_per_instance, config.seed,
+                      &measured_counts)
           : fitPoints(parts, config.points_per_instance, config.seed);
   if (timings) timings->mesh_ms += msSince(t);
 
@@ -223,6 +229,7 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
     // An instance the network did not predict (found on the surface) is its superquadric.
     e.mesh = parts[k].empty() ? superquadricsMesh({*fits[k]}) : parts[k];
     e.points = points[k];
+    e.measured_points = measured_counts[k];
     e.vote_centre = seg.centres_table[k];
     e.voxels = seg.voxel_counts[k];
     h->instances.push_back(std::move(e));
