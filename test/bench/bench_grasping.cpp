@@ -1,6 +1,7 @@
 // Grasp ranking: 64 candidates on a fixed 4-object pile, simulated in H = 1 and H = 3 scene
-// hypotheses on 1 and 2 threads (the 1-thread run is the peer of the 2-thread one), and the
-// candidate search alone. Counters: pulls simulated per second.
+// hypotheses on 1 and 2 threads (the 1-thread run is the peer of the 2-thread one), with and
+// without perturbed copies of the scene, and the candidate search alone. Counters: pulls
+// simulated per second.
 #include <benchmark/benchmark.h>
 
 #include "../test_scenes.h"
@@ -56,6 +57,26 @@ BENCHMARK(BM_RankGrasps)
     ->Args({1, 2})
     ->Args({3, 1})
     ->Args({3, 2})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(2.0);
+
+// The same ranking (H = 1, 2 threads) with the scene's perturbed copies: copies = 0 is the peer.
+static void BM_RankGraspsPerturbed(benchmark::State& state) {
+  const auto scenes = hypotheses(1);
+  GraspRankingConfig config;
+  config.candidates.max_candidates = 64;
+  config.threads = 2;
+  config.perturbation.copies = static_cast<int>(state.range(0));
+  long pulls = 0;
+  for (auto _ : state) pulls += rankGrasps(scenes, kTarget, {}, config).pulls;
+  state.counters["pulls_per_s"] =
+      benchmark::Counter(static_cast<double>(pulls), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_RankGraspsPerturbed)
+    ->ArgNames({"copies"})
+    ->Arg(0)
+    ->Arg(4)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->MinTime(2.0);
