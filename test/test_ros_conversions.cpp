@@ -276,7 +276,8 @@ TEST(Conversions, OutputsAreWrittenInTheFrameTheTableIsPlacedIn) {
   box.superquadric.scale_m = Vec3(0.05, 0.04, 0.03);
   box.superquadric.exponents = Vec3(8, 8, 8);
   box.superquadric.T_table_object.translation() = Vec3(0.1, 0.0, 0.03);
-  box.points = {Vec3(0.1, 0.0, 0.06)};
+  box.points = {Vec3(0.1, 0.0, 0.06), Vec3(0.1, 0.0, 0.0)};
+  box.measured_points = 1;  // the first point was measured, the second predicted
   est.hypotheses[0].instances.push_back(box);
   est.hypotheses[0].decomposed = true;
   est.occupancy_probability = Grid3<float>(GridSpec::sceneGrid(Vec2::Zero(), 0.64, 4), 0.0f);
@@ -295,6 +296,10 @@ TEST(Conversions, OutputsAreWrittenInTheFrameTheTableIsPlacedIn) {
   // The grasp service reads it back in the table frame.
   EXPECT_TRUE(
       graspScenes(msg, 1)[0][0].T_table_object.isApprox(box.superquadric.T_table_object, 1e-6));
+  // The grasp service reads the measured points back, in the table frame.
+  const Points3 measured = measuredSurface(msg.objects[0], T_base_table.inverse());
+  ASSERT_EQ(measured.size(), 1u);
+  EXPECT_TRUE(measured[0].isApprox(Vec3(0.1, 0.0, 0.06), 1e-6));
   const sensor_msgs::PointCloud2 surface = msg.objects[0].surface;
   float xyz[3];
   std::memcpy(xyz, surface.data.data(), sizeof(xyz));

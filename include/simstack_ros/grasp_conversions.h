@@ -30,7 +30,7 @@ std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, 
 
 /// The depth points measured on `object` (the first measured_points of its surface cloud, x y
 /// z float32), in its table frame: `T_table_frame` maps the message's frame there. Throws
-/// std::invalid_argument for a cloud without float32 x y z or with fewer points than it claims.
+/// std::invalid_argument for a cloud without x y z fields or with fewer points than it claims.
 Points3 measuredSurface(const Object& object, const Transform& T_table_frame);
 
 /// What a grasp's pulls did: held and freed the target in every hypothesis; held in every one

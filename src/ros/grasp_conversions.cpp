@@ -1,7 +1,8 @@
 #include "simstack_ros/grasp_conversions.h"
 
+#include <sensor_msgs/point_cloud2_iterator.h>
+
 #include <cmath>
-#include <cstring>
 #include <stdexcept>
 #include <string>
 
@@ -68,25 +69,19 @@ Points3 measuredSurface(const Object& object, const Transform& T_table_frame) {
   const size_t n = static_cast<size_t>(cloud.width) * cloud.height;
   if (object.measured_points == 0) return {};
   const std::string what = "object " + std::to_string(object.id) + ": surface cloud";
-  if (object.measured_points > n)
-    throw std::invalid_argument(what + " holds " + std::to_string(n) + " points, not the " +
+  if (object.measured_points > n || cloud.data.size() < n * cloud.point_step)
+    throw std::invalid_argument(what + " holds " + std::to_string(n) + " points (" +
+                                std::to_string(cloud.data.size()) + " bytes), not the " +
                                 std::to_string(object.measured_points) + " measured_points says");
-  int offsets[3] = {-1, -1, -1};
-  for (const sensor_msgs::PointField& f : cloud.fields)
-    for (int i = 0; i < 3; ++i)
-      if (f.name == std::string(1, "xyz"[i]) && f.datatype == sensor_msgs::PointField::FLOAT32 &&
-          f.offset + 4 <= cloud.point_step)
-        offsets[i] = static_cast<int>(f.offset);
-  if (offsets[0] < 0 || offsets[1] < 0 || offsets[2] < 0 || cloud.is_bigendian ||
-      cloud.data.size() < n * cloud.point_step)
-    throw std::invalid_argument(what + " has no float32 x y z fields, or less data than its size");
   Points3 out;
-  for (size_t i = 0; i < object.measured_points; ++i) {
-    float xyz[3];
-    for (int c = 0; c < 3; ++c)
-      std::memcpy(&xyz[c], &cloud.data[i * cloud.point_step + offsets[c]], sizeof(float));
-    const Vec3 p(xyz[0], xyz[1], xyz[2]);
-    if (p.allFinite()) out.push_back(T_table_frame * p);
+  try {
+    sensor_msgs::PointCloud2ConstIterator<float> x(cloud, "x"), y(cloud, "y"), z(cloud, "z");
+    for (size_t i = 0; i < object.measured_points; ++i, ++x, ++y, ++z) {
+      const Vec3 p(*x, *y, *z);
+      if (p.allFinite()) out.push_back(T_table_frame * p);
+    }
+  } catch (const std::runtime_error& e) {  // no such field
+    throw std::invalid_argument(what + ": " + e.what());
   }
   return out;
 }

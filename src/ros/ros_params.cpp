@@ -150,17 +150,17 @@ void NodeConfig::validate() const {
 
 PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
                                             const std::string& package_dir) {
-  XmlRpc::XmlRpcValue all = privateParameters(pnh);
-  if (all.getType() != XmlRpc::XmlRpcValue::TypeStruct)  // none at all
-    return loadPerceptionYaml(package_dir + "/config/perception.yaml", package_dir);
-  checkPrivateNamespace(pnh, all);
   // The package's config, with the pipeline's parameters found under ~ laid over it.
+  XmlRpc::XmlRpcValue all = privateParameters(pnh);
   std::ostringstream yaml;
-  for (auto& kv : all) {
-    if (!isPipelineParameter(kv.first)) continue;
-    yaml << kv.first << ":";
-    emit(yaml, kv.second, 2);
-    yaml << "\n";
+  if (all.getType() == XmlRpc::XmlRpcValue::TypeStruct) {
+    checkPrivateNamespace(pnh, all);
+    for (auto& kv : all) {
+      if (!isPipelineParameter(kv.first)) continue;
+      yaml << kv.first << ":";
+      emit(yaml, kv.second, 2);
+      yaml << "\n";
+    }
   }
   return overlayPerceptionYaml(package_dir + "/config/perception.yaml", yaml.str(),
                                "the parameters under " + pnh.getNamespace(), package_dir);

@@ -44,16 +44,14 @@ PullOutcome executeOnTruth(const PullSimulator& sim, const std::vector<Superquad
                            int target, const SuctionCandidate& c,
                            const GraspEvaluationOptions& options) {
   const CandidateConfig& k = options.ranking.candidates;
-  if (options.true_seal) {
-    const auto contact = carryCandidate(c, truth[target], k.tool_length_m);
-    if (!contact || !(rimDeviation(truth[target], *contact, c.approach_table, k.cup_radius_m,
-                                   k.rim_points, k.seal_tolerance_m) <= k.seal_tolerance_m)) {
-      PullOutcome no_seal;
-      no_seal.cup_held = false;
-      return no_seal;
-    }
-  }
-  return executeGrasp(sim, truth, target, c, k.tool_length_m);
+  if (!options.true_seal) return executeGrasp(sim, truth, target, c, k.tool_length_m);
+  PullOutcome no_seal;
+  no_seal.cup_held = false;
+  const auto contact = carryCandidate(c, truth[target], k.tool_length_m);
+  if (!contact || !(rimDeviation(truth[target], *contact, c.approach_table, k.cup_radius_m,
+                                 k.rim_points, k.seal_tolerance_m) <= k.seal_tolerance_m))
+    return no_seal;
+  return sim.pullPerceived(target, *contact, c.approach_table);
 }
 
 // The picks of every chooser for one method's estimate of one target.
