@@ -8,10 +8,10 @@
 
 #include <H5Cpp.h>
 
-#include "simstack/dataset/dataset.h"
 #include "simstack/io/staged_output.h"
-#include "simstack/scene/household.h"
-#include "simstack/scene/pile_generator.h"
+#include "simstack/offline/dataset/dataset.h"
+#include "simstack/offline/piles/household.h"
+#include "simstack/offline/piles/pile_generator.h"
 
 using namespace simstack;
 

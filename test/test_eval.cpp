@@ -10,18 +10,18 @@
 #include <set>
 #include <tuple>
 
-#include "simstack/eval/evaluator.h"
-#include "simstack/eval/grasp_evaluation.h"
-#include "simstack/eval/real_scenes.h"
-#include "simstack/eval/scene_metrics.h"
-#include "simstack/eval/segmentation.h"
 #include "simstack/io/scene_io.h"
-#include "simstack/pipeline/classical_baseline.h"
-#include "simstack/pipeline/evaluated_methods.h"
+#include "simstack/offline/dataset/ground_truth.h"
+#include "simstack/offline/eval/classical_baseline.h"
+#include "simstack/offline/eval/evaluated_methods.h"
+#include "simstack/offline/eval/evaluator.h"
+#include "simstack/offline/eval/grasp_evaluation.h"
+#include "simstack/offline/eval/real_scenes.h"
+#include "simstack/offline/eval/scene_metrics.h"
+#include "simstack/offline/eval/segmentation.h"
+#include "simstack/offline/piles/pile_generator.h"
 #include "simstack/render/depth_renderer.h"
-#include "simstack/scene/pile_generator.h"
 #include "simstack/scene/scene.h"
-#include "simstack/tsdf/ground_truth.h"
 #include "test_scenes.h"
 
 namespace simstack {

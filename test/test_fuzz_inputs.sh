@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Malformed inputs through the tools (issue 24's corpus, generated here: no third-party
-# files). Every case must end with a non-zero exit and one message line naming the problem, or
-# with exit 0 and a sensible result: never a signal, never more than 60 s.
+# Malformed inputs through the tools (a corpus generated here: no third-party files). Every case
+# must end with a non-zero exit and one message line naming the problem, or with exit 0 and a
+# sensible result: never a signal, never more than 60 s.
 # Usage: test_fuzz_inputs.sh BIN_DIR
 set -u
 bin=$1

@@ -8,7 +8,8 @@
 #include <string>
 
 #include "simstack/grasping/grasp_ranking.h"
-#include "simstack/scene/pile_generator.h"
+#include "simstack/grasping/grasp_request.h"
+#include "simstack/offline/piles/pile_generator.h"
 #include "test_scenes.h"
 
 namespace simstack {
@@ -136,6 +137,13 @@ TEST(GraspRanking, PerturbedCopiesMoveEveryObjectAndStayOnTheTable) {
   ASSERT_FALSE(r.grasps.empty()) << r.message;
   EXPECT_EQ(r.hypotheses.size(), 4u);
   EXPECT_EQ(r.grasps.front().outcomes.size(), 4u);
+  for (const RankedGrasp& g : r.grasps) {
+    int held = 0;
+    for (size_t k = 1; k < g.outcomes.size(); ++k) held += g.outcomes[k].cup_held ? 1 : 0;
+    EXPECT_DOUBLE_EQ(g.copies_held_share, held / 3.0);
+  }
+  config.perturbation.copies = 0;
+  EXPECT_TRUE(std::isnan(rankGrasps({stack}, 1, {}, config).grasps.front().copies_held_share));
   p.copies = 65;
   EXPECT_THROW(p.validate(), std::invalid_argument);
 }
@@ -182,6 +190,25 @@ TEST(GraspRanking, RanksAStraightLiftFirstOnTheStack) {
   EXPECT_GT(r.grasps.front().candidate.approach_table.z(), 0.9);
 }
 
+TEST(GraspRanking, TiesGoToThePullNearerTheCentreOfMass) {
+  GraspRankingConfig config;
+  config.candidates.max_candidates = 16;
+  const std::vector<SuperquadricShape> stack = twoBoxStack();
+  const GraspRanking r = rankGrasps({stack}, 1, {}, config);
+  ASSERT_FALSE(r.grasps.empty()) << r.message;
+  for (const RankedGrasp& g : r.grasps) {  // the arm: the centre's distance from the pull line
+    const Vec3 arm = stack[1].centroid() - g.candidate.contact_table;
+    EXPECT_NEAR(g.com_offset_m, arm.cross(g.candidate.approach_table).norm(), 1e-9);
+  }
+  RankedGrasp near = r.grasps.front(), far = near;
+  near.com_offset_m = 0.004, far.com_offset_m = 0.02;
+  near.peak_load = 0.9, far.peak_load = 0.1;  // the centre decides before the load
+  EXPECT_TRUE(rankedBefore(near, far));
+  EXPECT_FALSE(rankedBefore(far, near));
+  far.com_offset_m = 0.0042;  // within the same millimetre: the lower load
+  EXPECT_TRUE(rankedBefore(far, near));
+}
+
 TEST(GraspRanking, RanksASlideOutFirstUnderABridge) {
   GraspRankingConfig config;
   config.candidates.max_candidates = 16;
@@ -190,7 +217,7 @@ TEST(GraspRanking, RanksASlideOutFirstUnderABridge) {
   EXPECT_LT(std::abs(r.grasps.front().candidate.approach_table.z()), 0.5);
 }
 
-// 34 of 40 generated piles (docs/experiments.md); these eight all do.
+// 34 of 40 generated piles (docs/experiments.md, "Grasp ranking"); these eight all do.
 TEST(GraspRanking, TruePilesLeftAloneMoveUnderTwoMillimetres) {
   PileGenerator gen{PileConfig()};
   for (uint64_t seed = 1; seed <= 8; ++seed) {
@@ -375,6 +402,61 @@ TEST(GraspRanking, RejectsBadScenesAndSettings) {
   c = config, c.pull.cup_stiffness_hz = 10.0;
   rejects(good, 0, c, "cup_stiffness_hz must be at most 9.5");
   EXPECT_THROW(rankGrasps({}, 0, {}, config), std::invalid_argument);
+}
+
+TEST(GraspRequest, TheSceneMustRestOnTheTableAndThePullStayInBounds) {
+  GraspRequest request;
+  request.scenes = {twoBoxStack()};
+  request.target = 1;
+  const GraspPolicy policy;
+  const PreparedGrasps ok = prepareGrasps(request, GraspRankingConfig(), policy);
+  EXPECT_TRUE(ok.notes.empty()) << ok.notes;
+  EXPECT_EQ(ok.config.candidates.max_candidates, policy.max_candidates);
+  EXPECT_EQ(ok.config.pull.pull_distance_m, request.pull_distance_m);
+  EXPECT_EQ(ok.pregrasp_m, policy.pregrasp_distance_m);
+  const auto refused = [&](GraspRequest r, const std::string& says) {
+    try {
+      prepareGrasps(r, GraspRankingConfig(), policy);
+      ADD_FAILURE() << "accepted; expected: " << says;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+    }
+  };
+  GraspRequest sunk = request, raised = request;
+  for (SuperquadricShape& sq : sunk.scenes[0]) sq.T_table_object.translation().z() -= 0.3;
+  refused(sunk, "would stand in the table");
+  for (SuperquadricShape& sq : raised.scenes[0]) sq.T_table_object.translation().z() += 0.3;
+  EXPECT_NE(prepareGrasps(raised, GraspRankingConfig(), policy).notes.find("fall before any pull"),
+            std::string::npos);
+  GraspRequest far = request, fast = request, standoff = request, target = request;
+  far.pull_distance_m = 0.6;
+  refused(far, "pull_distance_m must lie in (0, 0.5] m, not 0.6");
+  fast.pull_speed_mps = std::numeric_limits<double>::quiet_NaN();
+  refused(fast, "pull_speed_mps must lie in (0, 2] m/s, not nan");
+  standoff.pregrasp_m = -0.1;
+  refused(standoff, "pregrasp_distance_m must lie in [0, 1] m");
+  target.target = 2;
+  refused(target, "target 2 is not an object of the 2-object scene");
+  GraspRequest many = request;
+  many.candidates = 1000;
+  many.hypotheses = 3;
+  many.scenes.push_back(twoBoxStack());
+  const PreparedGrasps clamped = prepareGrasps(many, GraspRankingConfig(), policy);
+  EXPECT_EQ(clamped.config.candidates.max_candidates, policy.max_candidates_limit);
+  EXPECT_NE(clamped.notes.find("1000 candidates asked for, clamped"), std::string::npos);
+  EXPECT_NE(clamped.notes.find("3 hypotheses asked for, the scene has 2"), std::string::npos);
+  EXPECT_EQ(clamped.scenes.size(), 2u);
+  GraspRequest bad_hypothesis = many;
+  bad_hypothesis.scenes[1][0].scale_m.x() = -1.0;
+  refused(bad_hypothesis, "hypothesis 1 (of the scene's hypotheses), object 0: semi-axes");
+}
+
+TEST(GraspRequest, AStaleSceneIsRefusedUnlessAnyAgeIsAllowed) {
+  EXPECT_TRUE(staleScene(5.0, 10.0).empty());
+  EXPECT_TRUE(staleScene(-3.0, 10.0).empty());  // a looping bag's stamp ahead of now
+  EXPECT_TRUE(staleScene(1e6, 0.0).empty());    // 0: any age
+  EXPECT_NE(staleScene(12.0, 10.0).find("12 s old (max_scene_age_s 10)"), std::string::npos);
+  EXPECT_NE(staleScene(2e5, 10.0).find("simulated time"), std::string::npos);
 }
 
 TEST(SuctionCandidates, ToolPoseLooksIntoTheSurfaceAndThePregraspStandsBackAlongTheApproach) {

@@ -11,18 +11,19 @@
 #include <optional>
 #include <thread>
 
-#include "simstack/eval/real_scenes.h"
-#include "simstack/eval/segmentation.h"
 #include "simstack/instances/instance_finder.h"
 #include "simstack/model/cvae_inference.h"
 #include "simstack/model/model_integrity.h"
-#include "simstack/pipeline/evaluated_methods.h"
+#include "simstack/offline/dataset/ground_truth.h"
+#include "simstack/offline/eval/evaluated_methods.h"
+#include "simstack/offline/eval/real_scenes.h"
+#include "simstack/offline/eval/segmentation.h"
+#include "simstack/offline/piles/mesh_catalogue.h"
+#include "simstack/offline/piles/pile_generator.h"
 #include "simstack/pipeline/object_tracker.h"
 #include "simstack/pipeline/scene_perception.h"
+#include "simstack/pipeline/view_history.h"
 #include "simstack/render/depth_renderer.h"
-#include "simstack/scene/mesh_catalogue.h"
-#include "simstack/scene/pile_generator.h"
-#include "simstack/tsdf/ground_truth.h"
 #include "test_scenes.h"
 
 namespace simstack {
@@ -706,7 +707,7 @@ TEST(ScenePerception, ShippedModelsProveThemselvesAndADifferentSelfTestIsRefused
   std::filesystem::remove(dir / "m.yaml");
   ModelIntegrity m;
   m.sha256 = sha256OfFile(copy);
-  m.format = modelFormatVersion();
+  m.format_version = modelFormatVersion();
   m.self_test_objects = 2;
   m.self_test_occupied_voxels = 77;
   writeModelIntegrity(copy, m);
@@ -930,6 +931,43 @@ TEST(ObjectTracker, IdsStayWithTheirObjectsAndVanishedOnesAreRetired) {
   bad = TrackerConfig();
   bad.max_centre_distance_m = std::nan("");
   EXPECT_THROW(ObjectTracker{bad}, std::invalid_argument);
+}
+
+// A view told apart by its depth's width; posed unless `posed` is false.
+DepthView numberedView(int n, bool posed = true) {
+  DepthView v;
+  v.depth = DepthImage(n, 1, 1.0f);
+  if (posed) v.T_table_camera = Transform::Identity();
+  return v;
+}
+
+TEST(ViewHistory, FusesTheNewestViewsFirstAndForgetsThoseOfAnotherTime) {
+  ViewHistory history(3);
+  for (int n = 1; n <= 4; ++n) {
+    EXPECT_FALSE(history.arrive(n * 1000000000LL).went_back);
+    history.keep(numberedView(n));
+  }
+  EXPECT_EQ(history.size(), 2u);  // a frame fuses two of them with itself
+  std::vector<DepthView> views = history.viewsWith(numberedView(5));
+  ASSERT_EQ(views.size(), 3u);
+  EXPECT_EQ(views[0].depth.width, 5);  // the new frame first, then the newest kept
+  EXPECT_EQ(views[1].depth.width, 4);
+  EXPECT_EQ(views[2].depth.width, 3);
+  // An unposed view (the table estimated from its own depth) is perceived alone, not kept.
+  EXPECT_EQ(history.viewsWith(numberedView(6, false)).size(), 1u);
+  history.keep(numberedView(6, false));
+  EXPECT_EQ(history.size(), 2u);
+  // A bag that restarted: its first frame is stamped before the last one.
+  const ViewHistory::Arrival back = history.arrive(2500000000LL);
+  EXPECT_TRUE(back.went_back);
+  EXPECT_EQ(back.cleared, 2u);
+  EXPECT_NEAR(back.back_s, 1.5, 1e-9);
+  EXPECT_EQ(history.viewsWith(numberedView(7)).size(), 1u);
+  // One view at most: each frame alone, nothing kept.
+  history.setMaxViews(1);
+  history.keep(numberedView(8));
+  EXPECT_EQ(history.size(), 0u);
+  EXPECT_THROW(history.setMaxViews(0), std::invalid_argument);
 }
 
 }  // namespace

@@ -2,10 +2,10 @@
 
 #include <filesystem>
 
+#include "simstack/offline/piles/household.h"
+#include "simstack/offline/piles/mesh_catalogue.h"
+#include "simstack/offline/piles/pile_generator.h"
 #include "simstack/physics/physics_world.h"
-#include "simstack/scene/household.h"
-#include "simstack/scene/mesh_catalogue.h"
-#include "simstack/scene/pile_generator.h"
 
 using namespace simstack;
 

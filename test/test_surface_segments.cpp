@@ -5,11 +5,11 @@
 #include <functional>
 #include <map>
 
-#include "simstack/eval/segmentation.h"
 #include "simstack/instances/surface_segments.h"
+#include "simstack/offline/dataset/ground_truth.h"
+#include "simstack/offline/eval/segmentation.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/scene/scene.h"
-#include "simstack/tsdf/ground_truth.h"
 
 namespace simstack {
 namespace {

@@ -4,9 +4,9 @@
 #include <cmath>
 #include <limits>
 
+#include "simstack/offline/dataset/ground_truth.h"
+#include "simstack/offline/piles/pile_generator.h"
 #include "simstack/render/depth_renderer.h"
-#include "simstack/scene/pile_generator.h"
-#include "simstack/tsdf/ground_truth.h"
 #include "simstack/tsdf/projective_tsdf.h"
 
 #include "test_scenes.h"

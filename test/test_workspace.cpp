@@ -1,5 +1,5 @@
 // Workcell scenes: the workspace box and mask, the table plane among other planes, and tiles
-// for piles wider than one grid (issue 26).
+// for piles wider than one grid.
 #include <gtest/gtest.h>
 
 #include <array>
@@ -9,11 +9,11 @@
 #include <iostream>
 #include <random>
 
-#include "simstack/eval/occupancy.h"
+#include "simstack/offline/dataset/ground_truth.h"
+#include "simstack/offline/eval/occupancy.h"
+#include "simstack/offline/piles/pile_generator.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
-#include "simstack/scene/pile_generator.h"
-#include "simstack/tsdf/ground_truth.h"
 #include "test_scenes.h"
 
 namespace simstack {

@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "simstack/pipeline/scene_perception.h"
+#include "simstack/pipeline/view_history.h"
 #include "simstack_ros/ros_params.h"
 
 namespace simstack {
@@ -123,7 +124,6 @@ class PerceptionServer {
   ros::SteadyTime last_warning_;
   ros::SteadyTime started_, last_arrival_;  ///< when the node started; when the last frame came
   ros::SteadyTime last_silence_warning_;    ///< zero while frames arrive
-  ros::Time last_stamp_;                    ///< stamp of the last frame taken by the worker
   long processed_before_ = 0;
   ros::SteadyTime rate_since_;
   ObjectTracker tracker_;  ///< ids kept across frames (node/track_*); under mutex_
@@ -136,8 +136,8 @@ class PerceptionServer {
   std::mutex save_mutex_;
   StageTimings last_timings_;
   std::shared_ptr<const SceneEstimate> last_scene_;
-  std::vector<DepthView> views_;  ///< accumulated views (accumulate_views)
-  Image<uint8_t> mask_;           ///< the last ~mask received (empty: none)
+  ViewHistory views_;    ///< accumulated views (accumulate_views)
+  Image<uint8_t> mask_;  ///< the last ~mask received (empty: none)
   bool reset_requested_ = false;
   std::optional<LiveSettingsConfig> pending_settings_;
   std::optional<HoughSettingsConfig> pending_hough_;

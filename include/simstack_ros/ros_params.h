@@ -10,7 +10,7 @@
 
 #include <string>
 
-#include "simstack/grasping/grasp_ranking.h"
+#include "simstack/grasping/grasp_request.h"
 #include "simstack/pipeline/object_tracker.h"
 #include "simstack/pipeline/perception_config.h"
 
@@ -57,15 +57,8 @@ NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh);
 /// The grasp server's settings (config/grasps.yaml, loaded into its private namespace).
 struct GraspServerConfig {
   std::string objects_topic = "perception/objects";  ///< scene of requests without one
-  int max_candidates = 64;                           ///< grasps simulated when a request asks for 0
-  int max_candidates_limit = 256;                    ///< requests for more are clamped to this
-  double max_pull_distance_m = 0.5;                  ///< longer pulls are rejected
-  /// A request without a scene is refused when the latest scene's stamp is older than this
-  /// (the camera or the perception stopped); 0: any age.
-  double max_scene_age_s = 10.0;
-  /// Pre-grasp stand-off of requests that ask for 0 (m).
-  double pregrasp_distance_m = 0.05;
-  GraspRankingConfig ranking;  ///< cup, seal, physics, threads
+  GraspPolicy policy;                                ///< what a request may ask (grasp_request.h)
+  GraspRankingConfig ranking;                        ///< cup, seal, physics, threads
   /// Throws std::invalid_argument naming the parameter.
   void validate() const;
 };

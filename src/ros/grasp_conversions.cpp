@@ -107,6 +107,9 @@ Grasp graspMsg(const RankedGrasp& g, const std_msgs::Header& pose_header,
   m.freed_share = static_cast<float>(g.freed_share);
   m.failed_share = static_cast<float>(g.failed_share);
   m.score_m = static_cast<float>(g.score_m);
+  m.perturbed_held_share = static_cast<float>(g.copies_held_share);
+  m.com_offset_m = static_cast<float>(g.com_offset_m);
+  m.peak_load = static_cast<float>(g.peak_load);
   for (const PullOutcome& o : g.outcomes)
     m.hypothesis_displacement_m.push_back(static_cast<float>(o.mean_displacement_m));
   return m;

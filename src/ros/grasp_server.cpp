@@ -8,7 +8,6 @@
 #include <cmath>
 #include <optional>
 #include <set>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -17,16 +16,6 @@
 
 namespace simstack {
 namespace {
-
-bool positiveFinite(double v) { return std::isfinite(v) && v > 0.0; }
-
-/// A number as a person writes it: 0.1, 2, nan (std::to_string gives 0.100000 and -nan).
-std::string number(double v) {
-  if (std::isnan(v)) return "nan";
-  std::ostringstream out;
-  out << v;
-  return out.str();
-}
 
 /// Why a scene's objects cannot be told apart by id or placed ("" when they can).
 std::string badIds(const ObjectArray& scene) {
@@ -40,32 +29,10 @@ std::string badIds(const ObjectArray& scene) {
   return "";
 }
 
-/// Longest pre-grasp stand-off a request may ask for (m).
-constexpr double kMaxPregraspM = 1.0;
 /// A target_point farther than this from every object's surface names none (m).
 constexpr double kMaxTargetPointM = 0.1;
 /// How long a tf lookup waits for the transform (wall-clock seconds).
 constexpr double kTfWaitS = 0.5;
-
-/// How far a scene's lowest surface may be from z = 0, where the simulation puts the table,
-/// for the scene to be taken as resting on it (metres).
-constexpr double kTableGapM = 0.05;
-
-/// A scene's lowest surface (in its table frame) against the simulation's table at z = 0:
-/// below it by more than kTableGapM is refused (`*refuse`), as a scene whose table_in_frame is
-/// wrong; above it is said, as its objects fall before any pull. Empty when the scene rests on
-/// the table.
-std::string tableNote(const std::vector<SuperquadricShape>& scene, bool* refuse) {
-  const double bottom = sceneBottom(scene);
-  *refuse = bottom < -kTableGapM;
-  if (std::abs(bottom) <= kTableGapM) return {};
-  return "the scene's lowest surface is at z = " + number(bottom) +
-         " m in its table frame, where the simulation's table is at z = 0: " +
-         (*refuse ? std::string("its objects would stand in the table")
-                  : std::string("its objects fall before any pull")) +
-         " (the table frame: z up, the table at z = 0; the scene's table_in_frame places it "
-         "in the scene's frame)";
-}
 
 }  // namespace
 
@@ -89,7 +56,7 @@ GraspServer::GraspServer(ros::NodeHandle nh, ros::NodeHandle pnh)
       [this](GoalHandle goal) { onCancel(goal); }, false);
   action_->start();
   ROS_INFO("simstack grasp_server: scenes from %s, ~rank_grasps ready (%d candidates, %d threads)",
-           nh_.resolveName(config_.objects_topic).c_str(), config_.max_candidates,
+           nh_.resolveName(config_.objects_topic).c_str(), config_.policy.max_candidates,
            config_.ranking.threads);
 }
 
@@ -182,15 +149,6 @@ bool GraspServer::placeRequest(const RankGrasps::Request& req, const ObjectArray
     return false;
   }
   res.target_id = scene.objects[*target].id;
-  if (!std::isfinite(req.pregrasp_distance_m) || req.pregrasp_distance_m < 0.0 ||
-      req.pregrasp_distance_m > kMaxPregraspM) {
-    res.message = "pregrasp_distance_m must lie in [0, " + number(kMaxPregraspM) + "] m, not " +
-                  number(req.pregrasp_distance_m) + " (0: the node's ~pregrasp_distance_m, " +
-                  number(config_.pregrasp_distance_m) + ")";
-    return false;
-  }
-  out->pregrasp_distance_m =
-      req.pregrasp_distance_m > 0.0 ? req.pregrasp_distance_m : config_.pregrasp_distance_m;
   out->pose_header = res.header;
   out->T_pose_table = out->T_scene_table;
   if (!req.target_frame.empty() && tf2Frame(req.target_frame) != res.header.frame_id) {
@@ -206,9 +164,6 @@ bool GraspServer::placeRequest(const RankGrasps::Request& req, const ObjectArray
 
 bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& res,
                           PreparedRequest* out) {
-  std::vector<std::vector<SuperquadricShape>>* scenes = &out->scenes;
-  GraspRankingConfig* config = &out->config;
-  std::vector<Vec3>* cameras = &out->cameras;
   ObjectArray::ConstPtr scene;
   if (!req.scene.objects.empty()) {
     scene = boost::make_shared<ObjectArray>(req.scene);
@@ -222,17 +177,10 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
                   " yet (is the perception running? its log says why not)";
     return false;
   }
-  if (req.scene.objects.empty() && config_.max_scene_age_s > 0.0 && !scene->header.stamp.isZero()) {
-    // Under simulated time a replayed bag may loop: a stamp ahead of now is not stale.
+  if (req.scene.objects.empty() && !scene->header.stamp.isZero()) {
     const double age = (ros::Time::now() - scene->header.stamp).toSec();
-    if (age > config_.max_scene_age_s) {
-      res.message = "the latest scene on " + topic + " is " + number(age) +
-                    " s old (max_scene_age_s " + number(config_.max_scene_age_s) + "): " +
-                    (age > 86400.0 ? "a day or more apart: is one of this node and the scene's "
-                                     "publisher on simulated time (/use_sim_time) and the other "
-                                     "not? "
-                                   : "is the perception still running? ") +
-                    "Send the scene in the request, or raise ~max_scene_age_s (0: any age)";
+    if (const std::string why = staleScene(age, config_.policy.max_scene_age_s); !why.empty()) {
+      res.message = "the latest scene on " + topic + " is " + why;
       return false;
     }
   }
@@ -251,68 +199,32 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   res.header.frame_id = tf2Frame(res.header.frame_id);  // markers in rviz
   out->T_scene_table = tableInFrame(*scene);            // throws for a bad pose (caught by serve())
   if (!placeRequest(req, *scene, res, out)) return false;
-  if (!positiveFinite(req.pull_distance_m) || req.pull_distance_m > config_.max_pull_distance_m) {
-    res.message = "pull_distance_m must lie in (0, " + number(config_.max_pull_distance_m) +
-                  "] m, not " + number(req.pull_distance_m) + " (e.g. 0.1)";
-    return false;
-  }
-  if (!positiveFinite(req.pull_speed_mps) || req.pull_speed_mps > 2.0) {
-    res.message =
-        "pull_speed_mps must lie in (0, 2] m/s, not " + number(req.pull_speed_mps) + " (e.g. 0.2)";
-    return false;
-  }
-  // 0: every hypothesis the scene carries (what the perception was launched to publish).
-  const int wanted = static_cast<int>(std::min<size_t>(
-      req.hypotheses == 0 ? 1 + scene->hypotheses.size() : size_t{req.hypotheses}, 64));
-  *scenes = graspScenes(*scene, wanted);  // in the table frame; throws for a bad pose
-  out->measured_target = measuredSurface(scene->objects[out->target], out->T_scene_table.inverse());
-  for (size_t h = 0; h < scenes->size(); ++h)
-    if (const std::string why = checkScene((*scenes)[h]); !why.empty()) {
-      // checkScene counts objects in the message's order, from 0.
-      res.message =
-          (h == 0 ? std::string("the scene's ")
-                  : "hypothesis " + std::to_string(h) + " (of the scene's hypotheses), ") +
-          why;
-      return false;
-    }
-  bool below = false;
-  std::string notes = tableNote((*scenes)[0], &below);
-  if (below) {
-    res.message = notes;
-    return false;
-  }
-  if (!notes.empty()) notes += "; ";
-  if (req.hypotheses == 0 && scene->hypotheses.empty())
-    notes +=
-        "ranked in the objects alone: the scene carries no hypotheses (the perception "
-        "publishes them with a model that has a latent code and decompose_samples above 1, as "
-        "grasps.launch does by default); ";
-  if (static_cast<int>(scenes->size()) < wanted)
-    notes += std::to_string(req.hypotheses == 0 ? wanted : req.hypotheses) +
-             " hypotheses asked for, the scene has " + std::to_string(scenes->size()) + "; ";
-  *config = config_.ranking;
-  int count = req.candidates == 0 ? config_.max_candidates
-                                  : static_cast<int>(std::min<uint32_t>(req.candidates, 1u << 20));
-  if (count > config_.max_candidates_limit) {
-    notes += std::to_string(req.candidates) +
-             " candidates asked for, clamped to max_candidates_limit " +
-             std::to_string(config_.max_candidates_limit) + "; ";
-    count = config_.max_candidates_limit;
-  }
-  config->candidates.max_candidates = count;
-  config->pull.pull_distance_m = req.pull_distance_m;
-  config->pull.pull_speed_mps = req.pull_speed_mps;
-  cameras->clear();
+  GraspRequest request;
+  request.scenes = graspScenes(*scene, GraspPolicy::kMaxHypotheses);  // table frame; throws
+  request.target = out->target;
+  request.pull_distance_m = req.pull_distance_m;
+  request.pull_speed_mps = req.pull_speed_mps;
+  request.candidates = req.candidates;
+  request.hypotheses = req.hypotheses;
+  request.pregrasp_m = req.pregrasp_distance_m;
   if (req.use_camera_pose) {  // its position only: candidates are what is in sight from it
     const geometry_msgs::Point& p = req.camera_pose.position;
-    const Vec3 eye(p.x, p.y, p.z);
-    if (!eye.allFinite()) {
-      res.message = "camera_pose.position is not finite";
-      return false;
-    }
-    cameras->push_back(out->T_scene_table.inverse() * eye);
+    request.camera_table = out->T_scene_table.inverse() * Vec3(p.x, p.y, p.z);
   }
-  res.message = notes;
+  // Throws std::invalid_argument saying what is out of bounds (caught by serve()).
+  PreparedGrasps prepared = prepareGrasps(request, config_.ranking, config_.policy);
+  out->scenes = std::move(prepared.scenes);
+  out->config = prepared.config;
+  out->cameras = prepared.cameras;
+  out->pregrasp_distance_m = prepared.pregrasp_m;
+  out->measured_target = measuredSurface(scene->objects[out->target], out->T_scene_table.inverse());
+  std::string notes = prepared.notes;
+  if (req.hypotheses == 0 && scene->hypotheses.empty())
+    notes += std::string(notes.empty() ? "" : "; ") +
+             "ranked in the objects alone: the scene carries no hypotheses (the perception "
+             "publishes them with a model that has a latent code and decompose_samples above 1, "
+             "as grasps.launch does by default)";
+  res.message = notes.empty() ? notes : notes + "; ";
   return true;
 }
 

@@ -34,23 +34,36 @@ std::string outputDirectory(const std::string& configured) {
   return base + "/simstack";
 }
 
-LiveSettingsConfig liveSettings(const PerceptionConfig& c, double occupancy_min) {
+/// Each live setting (config/LiveSettings.cfg, config/HoughSettings.cfg) beside the field it
+/// sets: the one place they are paired. `f(live_field, field)` is called for each pair.
+template <typename F>
+void pairLiveSettings(LiveSettingsConfig& live, PerceptionConfig& c, double& occupancy_min, F f) {
+  f(live.samples, c.samples);
+  f(live.symmetries, c.symmetries);
+  f(live.min_instance_points, c.min_instance_points);
+  f(live.joint_refinement, c.joint_refinement);
+  f(live.occupancy_min, occupancy_min);
+}
+template <typename F>
+void pairHoughSettings(HoughSettingsConfig& live, HoughConfig& h, F f) {
+  f(live.refinement, h.refinement);
+  f(live.min_traversals, h.min_traversals);
+  f(live.bandwidth_m, h.bandwidth_m);
+  f(live.min_instance_voxels, h.min_instance_voxels);
+  f(live.min_vote_norm, h.min_vote_norm);
+}
+const auto kShow = [](auto& live, const auto& field) { live = field; };
+const auto kApply = [](const auto& live, auto& field) { field = live; };
+
+LiveSettingsConfig liveSettings(PerceptionConfig c, double occupancy_min) {
   LiveSettingsConfig live;
-  live.samples = c.samples;
-  live.symmetries = c.symmetries;
-  live.min_instance_points = c.min_instance_points;
-  live.joint_refinement = c.joint_refinement;
-  live.occupancy_min = occupancy_min;
+  pairLiveSettings(live, c, occupancy_min, kShow);
   return live;
 }
 
-HoughSettingsConfig houghSettings(const HoughConfig& h) {
+HoughSettingsConfig houghSettings(HoughConfig h) {
   HoughSettingsConfig live;
-  live.refinement = h.refinement;
-  live.min_traversals = h.min_traversals;
-  live.bandwidth_m = h.bandwidth_m;
-  live.min_instance_voxels = h.min_instance_voxels;
-  live.min_vote_norm = h.min_vote_norm;
+  pairHoughSettings(live, h, kShow);
   return live;
 }
 
@@ -386,24 +399,17 @@ void PerceptionServer::applySettings() {
     std::lock_guard<std::mutex> lock(mutex_);
     s.swap(pending_settings_);
     h.swap(pending_hough_);
-    if (s) node_.occupancy_min = s->occupancy_min;
   }
   if (!s && !h) return;
   PerceptionConfig c = perception_->config();
   if (s) {
-    c.samples = s->samples;
-    c.symmetries = s->symmetries;
-    c.min_instance_points = s->min_instance_points;
-    c.joint_refinement = s->joint_refinement;
+    double occupancy_min = 0.0;
+    pairLiveSettings(*s, c, occupancy_min, kApply);
     c.decompose_samples = std::min(decompose_samples_, c.samples);
+    std::lock_guard<std::mutex> lock(mutex_);
+    node_.occupancy_min = occupancy_min;
   }
-  if (h) {
-    c.hough.refinement = h->refinement;
-    c.hough.min_traversals = h->min_traversals;
-    c.hough.bandwidth_m = h->bandwidth_m;
-    c.hough.min_instance_voxels = h->min_instance_voxels;
-    c.hough.min_vote_norm = h->min_vote_norm;
-  }
+  if (h) pairHoughSettings(*h, c.hough, kApply);
   try {
     perception_->updateSettings(c);
   } catch (const std::invalid_argument& e) {
@@ -441,31 +447,21 @@ void PerceptionServer::process(const Frame& frame) {
   std::vector<DepthView> views;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    // A stamp older than the last frame's: a bag that restarted or loops, or a second
-    // publisher. The frame is perceived, but views of another time are not fused with it.
-    const ros::Time stamp = frame.image->header.stamp;
-    if (stamp < last_stamp_ && !views_.empty()) {
+    views_.setMaxViews(node_.accumulate_views ? node_.max_views : 1);
+    const ViewHistory::Arrival arrival = views_.arrive(frame.image->header.stamp.toNSec());
+    if (arrival.cleared > 0)
       ROS_WARN(
           "simstack perception: frame stamped %.3f s is %.3f s older than the last one on "
           "%s (a bag restarted?): the accumulated views are cleared",
-          stamp.toSec(), (last_stamp_ - stamp).toSec(), depth_sub_.getTopic().c_str());
-      views_.clear();
-    }
-    if (stamp < last_stamp_) tracker_.reset();  // a restarted bag: its objects are new
-    last_stamp_ = stamp;
+          frame.image->header.stamp.toSec(), arrival.back_s, depth_sub_.getTopic().c_str());
+    if (arrival.went_back) tracker_.reset();  // a restarted bag: its objects are new
     if (reset_requested_) {
       views_.clear();
       tracker_.reset();
     }
     reset_requested_ = false;
     view.mask = mask_;  // a mask of another size makes perceive() refuse the frame
-    // The newest frame first: it places the grid, its patches regroup the instances and the
-    // labels are drawn over it (with condition_views: first, it alone conditions the network).
-    views.push_back(view);
-    if (node_.accumulate_views && view.T_table_camera) {
-      const size_t older = std::min(views_.size(), static_cast<size_t>(node_.max_views - 1));
-      views.insert(views.end(), views_.rbegin(), views_.rbegin() + older);
-    }
+    views = views_.viewsWith(view);
   }
   SceneEstimate estimate;
   try {
@@ -478,10 +474,7 @@ void PerceptionServer::process(const Frame& frame) {
                       : Transform::Identity();
   publish(frame, view, estimate, static_cast<int>(views.size()), T_output_table);
   std::lock_guard<std::mutex> lock(mutex_);
-  if (node_.accumulate_views && view.T_table_camera) {
-    views_.push_back(std::move(view));
-    while (static_cast<int>(views_.size()) > node_.max_views) views_.erase(views_.begin());
-  }
+  views_.keep(std::move(view));
   ++processed_;
   failing_ = false;
   last_timings_ = estimate.timings;

@@ -185,14 +185,7 @@ void GraspServerConfig::validate() const {
       throw std::invalid_argument(std::string(name) + " must be a positive number");
   };
   if (objects_topic.empty()) throw std::invalid_argument("objects_topic must not be empty");
-  if (max_candidates < 1) throw std::invalid_argument("max_candidates must be >= 1");
-  if (max_candidates_limit < max_candidates)
-    throw std::invalid_argument("max_candidates_limit must be >= max_candidates");
-  positive(max_pull_distance_m, "max_pull_distance_m");
-  if (!(pregrasp_distance_m >= 0.0 && pregrasp_distance_m <= 1.0))
-    throw std::invalid_argument("pregrasp_distance_m must lie in [0, 1] m");
-  if (!(max_scene_age_s >= 0.0) || !std::isfinite(max_scene_age_s))
-    throw std::invalid_argument("max_scene_age_s must be >= 0 (0: any age)");
+  policy.validate();
   positive(ranking.candidates.cup_radius_m, "cup_radius_m");
   positive(ranking.candidates.seal_tolerance_m, "seal_tolerance_m");
   positive(ranking.candidates.tool_length_m, "tool_length_m");
@@ -224,11 +217,11 @@ GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
   read(pnh, "objects_topic", &c.objects_topic);
   c.ranking.threads = 2;
   read(pnh, "threads", &c.ranking.threads);
-  read(pnh, "max_candidates", &c.max_candidates);
-  read(pnh, "max_candidates_limit", &c.max_candidates_limit);
-  read(pnh, "max_pull_distance_m", &c.max_pull_distance_m);
-  read(pnh, "max_scene_age_s", &c.max_scene_age_s);
-  read(pnh, "pregrasp_distance_m", &c.pregrasp_distance_m);
+  read(pnh, "max_candidates", &c.policy.max_candidates);
+  read(pnh, "max_candidates_limit", &c.policy.max_candidates_limit);
+  read(pnh, "max_pull_distance_m", &c.policy.max_pull_distance_m);
+  read(pnh, "max_scene_age_s", &c.policy.max_scene_age_s);
+  read(pnh, "pregrasp_distance_m", &c.policy.pregrasp_distance_m);
   read(pnh, "cup_radius_m", &k.cup_radius_m);
   read(pnh, "seal_tolerance_m", &k.seal_tolerance_m);
   read(pnh, "surface_samples", &k.surface_samples);

@@ -35,7 +35,7 @@ int main(int argc, char** argv) {
         std::printf(
             "%s: stamped into %s: sha256 %s, format %d, self-test %d object(s), %d "
             "occupied voxels\n",
-            model.c_str(), modelCardPath(model).c_str(), m.sha256.c_str(), m.format,
+            model.c_str(), modelCardPath(model).c_str(), m.sha256.c_str(), m.format_version,
             m.self_test_objects, m.self_test_occupied_voxels);
         continue;
       }

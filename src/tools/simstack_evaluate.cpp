@@ -1,4 +1,4 @@
-// simstack_evaluate: the paper's single-view protocol (DESIGN.md section 5, Table 1) for
+// simstack_evaluate: the paper's single-view protocol (docs/design.md section 6, Table 1) for
 // trained models and the classical baseline in one run on the same rendered views
 // (eval/evaluator.h), or the labelled real scenes (eval/real_scenes.h).
 #include <CLI/CLI.hpp>
@@ -10,10 +10,10 @@
 #include "cli_checks.h"
 #include "perception_options.h"
 #include "progress.h"
-#include "simstack/eval/real_scenes.h"
 #include "simstack/io/staged_output.h"
 #include "simstack/model/cpu_allocator.h"
-#include "simstack/pipeline/evaluated_methods.h"
+#include "simstack/offline/eval/evaluated_methods.h"
+#include "simstack/offline/eval/real_scenes.h"
 
 using namespace simstack;
 
@@ -121,9 +121,9 @@ int main(int argc, char** argv) {
   bool no_classical = false, no_stability = false;
   int refine_iterations = 0;
   CLI::App app{
-      "Evaluate trained models and the classical baseline on a test dataset (DESIGN.md section "
-      "5): every scene from random viewpoints in the paper's ranges, S latent samples per view "
-      "(1 for the FC baselines); writes JSON and prints the table."};
+      "Evaluate trained models and the classical baseline on a test dataset (docs/design.md "
+      "section 6): every scene from random viewpoints in the paper's ranges, S latent samples "
+      "per view (1 for the FC baselines); writes JSON and prints the table."};
   const PerceptionOptions perception(app, {true, false, false});
   app.add_option("--dataset", dataset, "test dataset (a seed never used for training)")
       ->check(CLI::ExistingFile);

@@ -2,16 +2,17 @@
 // chosen on each method's estimate of generated piles, executed in the true piles.
 #include <CLI/CLI.hpp>
 
+#include <cstdio>
 #include <fstream>
 #include <iostream>
 
 #include "cli_checks.h"
 #include "perception_options.h"
 #include "progress.h"
-#include "simstack/eval/grasp_evaluation.h"
 #include "simstack/io/staged_output.h"
 #include "simstack/model/cpu_allocator.h"
-#include "simstack/pipeline/evaluated_methods.h"
+#include "simstack/offline/eval/evaluated_methods.h"
+#include "simstack/offline/eval/grasp_evaluation.h"
 
 using namespace simstack;
 
@@ -40,6 +41,19 @@ void addSealOptions(CLI::App& app, GraspEvaluationOptions* o, bool* superquadric
                  "oracle's ranking on the true pile takes none)")
       ->capture_default_str()
       ->check(CLI::Range(0, 64));
+  PerturbationConfig& p = o->ranking.perturbation;
+  app.add_option("--perturb-position", p.position_m,
+                 "standard deviation of a copy's shift across the table (m)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 0.1));
+  app.add_option("--perturb-rotation", p.rotation_deg,
+                 "standard deviation of a copy's turn about a random axis (degrees)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 45.0));
+  app.add_option("--perturb-scale", p.scale_share,
+                 "standard deviation of a copy's semi-axes, as a share of each")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 0.5));
   app.add_flag("--true-seal", o->true_seal,
                "a grasp executed in the true pile must also seal on the true surface where it "
                "lands (else it holds nothing), not only withstand the pull");
@@ -52,18 +66,52 @@ void addSealOptions(CLI::App& app, GraspEvaluationOptions* o, bool* superquadric
 nlohmann::json pickRows(const std::vector<PickResult>& picks) {
   nlohmann::json rows = nlohmann::json::array();
   for (const PickResult& p : picks)
-    rows.push_back({{"scene", p.scene},
-                    {"target", p.target},
-                    {"method", p.method},
-                    {"chooser", p.chooser},
-                    {"found", p.found},
-                    {"grasped", p.grasped},
-                    {"mean_displacement_m", p.outcome.mean_displacement_m},
-                    {"max_displacement_m", p.outcome.max_displacement_m},
-                    {"toppled", p.outcome.toppled},
-                    {"freed", p.outcome.target_freed},
-                    {"failed", p.outcome.failed()}});
+    rows.push_back(
+        {{"scene", p.scene},
+         {"target", p.target},
+         {"method", p.method},
+         {"chooser", p.chooser},
+         {"found", p.found},
+         {"grasped", p.grasped},
+         {"mean_displacement_m", p.outcome.mean_displacement_m},
+         {"max_displacement_m", p.outcome.max_displacement_m},
+         {"toppled", p.outcome.toppled},
+         {"freed", p.outcome.target_freed},
+         {"failed", p.outcome.failed()},
+         {"centre_error_m", {p.error.centre_m.x(), p.error.centre_m.y(), p.error.centre_m.z()}},
+         {"rotation_error_deg", p.error.rotation_deg},
+         {"scale_ratio",
+          {p.error.scale_ratio.x(), p.error.scale_ratio.y(), p.error.scale_ratio.z()}}});
   return rows;
+}
+
+/// The run's settings, as the results file records them.
+nlohmann::json runSettings(const GraspEvaluationOptions& o) {
+  const PerturbationConfig& p = o.ranking.perturbation;
+  return {{"candidates", o.ranking.candidates.max_candidates},
+          {"noise", o.noise},
+          {"seed", o.seed},
+          {"hypotheses", o.hypotheses},
+          {"measured_seal", o.measured_seal},
+          {"perturbed_copies", p.copies},
+          {"perturb_position_m", p.position_m},
+          {"perturb_rotation_deg", p.rotation_deg},
+          {"perturb_scale_share", p.scale_share},
+          {"true_seal", o.true_seal}};
+}
+
+/// Each method's estimate error, as estimateErrorSummary gives it.
+void printEstimateErrors(const nlohmann::json& errors) {
+  for (const auto& e : errors)
+    std::printf(
+        "%s, %d targets: estimates off by %.1f mm per axis across the table, %.1f mm in "
+        "height, %.1f deg, %.1f %% of each semi-axis (rms; as a normal's deviation from the "
+        "median: %.1f mm, %.1f mm, %.1f deg, %.1f %%)\n",
+        e["method"].get<std::string>().c_str(), e["targets"].get<int>(),
+        1e3 * e["position_rms_m"].get<double>(), 1e3 * e["height_rms_m"].get<double>(),
+        e["rotation_rms_deg"].get<double>(), 100 * e["scale_rms_share"].get<double>(),
+        1e3 * e["position_robust_sd_m"].get<double>(), 1e3 * e["height_robust_sd_m"].get<double>(),
+        e["rotation_robust_sd_deg"].get<double>(), 100 * e["scale_robust_sd_share"].get<double>());
 }
 
 }  // namespace
@@ -137,25 +185,22 @@ int main(int argc, char** argv) {
         evaluateGrasps(reader, run, o, [&](int done, int) { bar.update(done); });
     bar.finish();
     const nlohmann::json summary = graspSummary(picks);
+    const nlohmann::json errors = estimateErrorSummary(picks);
     const nlohmann::json rows = pickRows(picks);
     std::ofstream f(staged.path());
-    f << nlohmann::json{{"dataset", dataset},
-                        {"scenes", n},
-                        {"candidates", o.ranking.candidates.max_candidates},
-                        {"noise", o.noise},
-                        {"seed", o.seed},
-                        {"hypotheses", o.hypotheses},
-                        {"measured_seal", o.measured_seal},
-                        {"perturbed_copies", o.ranking.perturbation.copies},
-                        {"true_seal", o.true_seal},
-                        {"summary", summary},
-                        {"picks", rows}}
-             .dump(1)
-      << "\n";
+    nlohmann::json doc = runSettings(o);
+    doc["dataset"] = dataset;
+    doc["scenes"] = n;
+    doc["summary"] = summary;
+    doc["estimate_error"] = errors;
+    doc["picks"] = rows;
+    f << doc.dump(1) << "\n";
     f.close();
     if (!f) throw std::runtime_error("cannot write " + output);
     staged.commit();
-    std::cout << "\n" << graspSummaryTable(summary) << "\nresults: " << output << "\n";
+    std::cout << "\n" << graspSummaryTable(summary) << "\n";
+    printEstimateErrors(errors);
+    std::cout << "results: " << output << "\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_evaluate_grasps: error: " << e.what() << "\n";

@@ -7,7 +7,7 @@
 
 #include "cli_checks.h"
 #include "progress.h"
-#include "simstack/dataset/dataset_generation.h"
+#include "simstack/offline/dataset/dataset_generation.h"
 
 using namespace simstack;
 
@@ -56,7 +56,7 @@ int main(int argc, char** argv) {
   std::string objects = "3:4", sizes = "0.05:0.3";
   CLI::App app{
       "Generate random piles settled under Bullet physics and write the HDF5 dataset "
-      "of ground-truth TSDF, centre votes and labels (DESIGN.md section 4)."};
+      "of ground-truth TSDF, centre votes and labels (docs/design.md section 5)."};
   app.add_option("--scenes", o.scenes, "number of piles")->required()->check(FinitePositive);
   app.add_option("--seed", o.seed, "random seed (scene i uses a hash of seed and i)")
       ->required()

@@ -9,6 +9,7 @@
 
 #include "cli_checks.h"
 #include "simstack/grasping/grasp_files.h"
+#include "simstack/grasping/grasp_request.h"
 #include "simstack/io/scene_io.h"
 #include "simstack/io/staged_output.h"
 
@@ -30,6 +31,29 @@ Points3 measuredTarget(const std::string& scene_path, std::string cloud_path, in
   std::cout << "seals judged on " << out.size() << " points of object " << target_id
             << " measured in " << cloud_path << "\n";
   return out;
+}
+
+/// The service's checks on the request: bounds, and a valid scene resting on the table (one far
+/// below z = 0 of its frame is refused, one above it said); this tool's own option ranges are
+/// the bounds.
+PreparedGrasps prepare(const std::vector<SuperquadricShape>& scene, int target,
+                       const GraspRankingConfig& config, double pregrasp_m,
+                       const std::string& scene_path) {
+  GraspRequest request;
+  request.scenes = {scene};
+  request.target = target;
+  request.pull_distance_m = config.pull.pull_distance_m;
+  request.pull_speed_mps = config.pull.pull_speed_mps;
+  request.candidates = static_cast<uint32_t>(config.candidates.max_candidates);
+  request.pregrasp_m = pregrasp_m;
+  GraspPolicy policy;
+  policy.max_candidates_limit = 1024;
+  policy.max_pull_distance_m = 1.0;
+  try {
+    return prepareGrasps(request, config, policy);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(scene_path + ": " + e.what());
+  }
 }
 
 }  // namespace
@@ -95,15 +119,16 @@ int main(int argc, char** argv) {
       throw std::invalid_argument("no object with id " + std::to_string(target_id) + " in " +
                                   scene_path + " (its ids: " + known + ")");
     }
-    if (const std::string why = checkScene(scene); !why.empty())
-      throw std::invalid_argument(scene_path + ": " + why);
+    const int target = static_cast<int>(found - ids.begin());
+    const PreparedGrasps prepared = prepare(scene, target, config, pregrasp_m, scene_path);
+    if (!prepared.notes.empty()) std::cout << prepared.notes << "\n";
     std::optional<StagedDirectory> staged;  // before the work: a bad --output fails at once
     if (!output.empty()) staged.emplace(output, "simstack_rank_grasps");
     const Points3 measured =
         superquadric_seal ? Points3() : measuredTarget(scene_path, measured_path, target_id);
     const auto start = std::chrono::steady_clock::now();
     const GraspRanking ranking =
-        rankGrasps({scene}, static_cast<int>(found - ids.begin()), {}, config, {}, measured);
+        rankGrasps(prepared.scenes, target, prepared.cameras, prepared.config, {}, measured);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     std::cout << "object " << target_id << ": " << ranking.candidates.visible << " of "

@@ -17,7 +17,7 @@
 #include "simstack/io/scene_io.h"
 #include "simstack/io/staged_output.h"
 #include "simstack/model/cpu_allocator.h"
-#include "simstack/pipeline/reconstruction_files.h"
+#include "simstack/offline/reconstruction/reconstruction_files.h"
 
 using namespace simstack;
 namespace fs = std::filesystem;

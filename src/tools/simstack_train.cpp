@@ -10,7 +10,7 @@
 #include "cli_checks.h"
 #include "progress.h"
 #include "simstack/model/cpu_allocator.h"
-#include "simstack/model/cvae_trainer.h"
+#include "simstack/offline/training/cvae_trainer.h"
 #include "simstack/pipeline/scene_perception.h"
 
 using namespace simstack;

@@ -1,5 +1,5 @@
 // simstack_tune_hough: chooses the Hough-voting setting of one model on validation piles
-// (pipeline/hough_tuning.h) and writes it as the `perception:` section of the model's card.
+// (offline/tuning/hough_tuning.h) and writes it as a model card's `perception:` section to paste.
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -18,7 +18,7 @@
 #include "simstack/io/staged_output.h"
 #include "simstack/io/yaml_file.h"
 #include "simstack/model/cpu_allocator.h"
-#include "simstack/pipeline/hough_tuning.h"
+#include "simstack/offline/tuning/hough_tuning.h"
 
 using namespace simstack;
 
@@ -128,15 +128,15 @@ int main(int argc, char** argv) {
   std::string output;
   int views_per_scene = 2, scenes = 0, top = 10;
   uint64_t seed = 7;
-  bool noise = false, apply = false;
+  bool noise = false;
   HoughSweep sweep;
   CLI::App app{
       "Choose the Hough-voting setting of a model on validation piles (a seed used neither for "
       "training nor for testing): the network runs once per rendered view, every combination "
       "of the listed values is scored by the share of views whose instance count is exact "
       "(then by voxel segmentation agreement), and the best is written to --output as a model "
-      "card's perception: section; --apply also puts it into the model's card "
-      "(models/<name>.yaml) in place of the card's own. Several --dataset files pool their "
+      "card's perception: section, to paste into the model's card (models/<name>.yaml) in "
+      "place of the card's own. Several --dataset files pool their "
       "views (piles of 3-4 objects and of 5-8, say), so that one setting serves both."};
   const PerceptionOptions perception(app, {false, false, false});
   app.add_option("--dataset", datasets, "validation piles (simstack_generate); repeatable")
@@ -145,9 +145,6 @@ int main(int argc, char** argv) {
   app.add_option("--output", output, "YAML with the model card's perception: section")
       ->required()
       ->check(WritablePath);
-  app.add_flag("--apply", apply,
-               "also replace the perception: section of the model's card with the chosen one "
-               "(the card's other lines kept; a card made when the model has none)");
   app.add_option("--views", views_per_scene, "random viewpoints per scene")
       ->capture_default_str()
       ->check(FinitePositive);
@@ -158,11 +155,6 @@ int main(int argc, char** argv) {
   addSweepOptions(app, sweep);
   app.add_option("--top", top, "rows of the table")->capture_default_str()->check(FinitePositive);
   CLI11_PARSE(app, argc, argv);
-  if (apply && app.count("--model") == 0) {
-    std::cerr << "simstack_tune_hough: error: --apply needs --model (the card it would rewrite "
-                 "is otherwise the shipped model's)\n";
-    return 2;
-  }
   keepFreedMemoryForReuse();  // the network runs in this process
   try {
     std::vector<std::string> inputs = perception.inputFiles();
@@ -194,10 +186,10 @@ int main(int argc, char** argv) {
     f.close();  // a failed flush shows only here
     if (!f) throw std::runtime_error("cannot write " + output);
     written.commit();
-    std::cout << "\nchosen setting written to " << output << "\n";
-    if (apply)
-      writeTopLevelSection(modelCardPath(pc.model_path), "perception", chosen, "model card");
-    if (apply) std::cout << "and put into the card " << modelCardPath(pc.model_path) << "\n";
+    std::cout << "\nchosen setting written to " << output << ": paste its perception: section "
+              << "into " << modelCardPath(pc.model_path)
+              << " in place of the card's own (a hough: section in the perception config "
+                 "overrides every model's)\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_tune_hough: error: " << e.what() << "\n";

@@ -20,8 +20,8 @@
 #include <string>
 #include <vector>
 
+#include "simstack/offline/piles/pile_generator.h"
 #include "simstack/render/depth_renderer.h"
-#include "simstack/scene/pile_generator.h"
 #include "simstack_ros/conversions.h"
 
 using namespace simstack;

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The perception node under load (issue: 640x480 depth at 30 Hz for 60 s): answers per second,
+# The perception node under load (640x480 depth at 30 Hz for 60 s): answers per second,
 # latency from image stamp to ~objects (median, 95th percentile), frames not answered (dropped
 # by the one-slot mailbox) and the node's resident memory at 10 s and at the end; once on idle
 # cores and once beside one busy process (the camera driver and the planner of a workcell), with

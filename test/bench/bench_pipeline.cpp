@@ -11,10 +11,10 @@
 #include "simstack/fitting/superquadric_fit.h"
 #include "simstack/instances/hough_voting.h"
 #include "simstack/model/cpu_allocator.h"
+#include "simstack/offline/dataset/ground_truth.h"
 #include "simstack/pipeline/perception_config.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
-#include "simstack/tsdf/ground_truth.h"
 
 using namespace simstack;
 
@@ -86,7 +86,7 @@ static void BM_JointFitFourObjects(benchmark::State& state) {
   // Its peer: final solves on the 600-point cover alone (these surfaces surround their shapes,
   // so by default the fits end with a few steps on all 1000 points).
   if (state.range(0) == 0) fc.surrounded_share = 2.0;
-  // Its other peer: the joint refinement's 3 rounds, the default until 2026-11-28.
+  // Its other peer: the joint refinement's 3 rounds, the former default.
   if (state.range(1) == 1) fc.joint_rounds = 3;
   for (auto _ : state) benchmark::DoNotOptimize(fitInstances(pts, fc, true));
 }

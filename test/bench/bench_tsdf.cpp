@@ -3,8 +3,8 @@
 #include <benchmark/benchmark.h>
 #include <octomap/octomap.h>
 
+#include "simstack/offline/piles/pile_generator.h"
 #include "simstack/render/depth_renderer.h"
-#include "simstack/scene/pile_generator.h"
 #include "simstack/tsdf/projective_tsdf.h"
 
 using namespace simstack;

@@ -1,10 +1,10 @@
-// The superquadric fitter against known shapes (issue 25's peer harness): three shape sets
-// (equal exponents, simstack's three-exponent family, classical two-exponent superquadrics),
-// each seen whole and from one side, 2000 points with 1 mm noise, scored by the Chamfer
-// distance of the fit to the TRUE full surface. The truth's own score (the metric's floor) is
-// printed beside the fits. EMS (Liu et al., CVPR 2022) measured on this protocol in issue 25:
-// equal exponents, full view 0.41 / 0.39 mm (mean / median), partial 1.72 / 0.57 mm, 153 ms
-// median per fit; its floor was 0.39 / 0.38 mm.
+// The superquadric fitter against known shapes (docs/results.md, "Superquadric fits of known
+// shapes"): three shape sets (equal exponents, simstack's three-exponent family, classical
+// two-exponent superquadrics), each seen whole and from one side, 2000 points with 1 mm noise,
+// scored by the Chamfer distance of the fit to the TRUE full surface. The truth's own score
+// (the metric's floor) is printed beside the fits. EMS (Liu et al., CVPR 2022), measured on
+// this protocol with its public code: equal exponents, full view 0.41 / 0.39 mm (mean /
+// median), partial 1.72 / 0.57 mm, 153 ms median per fit; its floor was 0.39 / 0.38 mm.
 //
 // Usage: fit_harness [--shapes 30] [--config perception.yaml] [--json FILE]
 
@@ -19,8 +19,8 @@
 #include <random>
 #include <sstream>
 
-#include "simstack/eval/scene_metrics.h"
 #include "simstack/fitting/superquadric_fit.h"
+#include "simstack/offline/eval/scene_metrics.h"
 #include "simstack/pipeline/perception_config.h"
 
 using namespace simstack;
@@ -149,7 +149,7 @@ double median(std::vector<double> v) {
 int main(int argc, char** argv) {
   CLI::App app{
       "Superquadric fits of known shapes, full and partial views, scored against the "
-      "true surface (issue 25's protocol)"};
+      "true surface (docs/results.md, \"Superquadric fits of known shapes\")"};
   int shapes = 30, points = 2000;
   double noise_mm = 1.0, density = 1.4e6;
   uint64_t seed = 1;
@@ -160,7 +160,7 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   app.add_option("--density", density,
                  "Chamfer samples per square metre (1.4e6: the truth scores about 0.39 mm, as "
-                 "in the issue's measurement)")
+                 "in the measurement of EMS)")
       ->check(CLI::PositiveNumber);
   app.add_option("--seed", seed, "random seed");
   app.add_option("--config", config_path, "perception config whose fitting: section is used")

@@ -104,7 +104,7 @@ constexpr double kCollapseSpanM = 0.02;
 /// has pushed it out of its neighbours by shrinking it away: the per-instance fit stands, made
 /// smaller until clear of them (fitInstances).
 /// (Measured on the synthetic test set: such shapes end below 0.2 % of it, all others above
-/// 1.5 %; docs/experiments.md, "Fits that never collapse".)
+/// 1.5 %; docs/experiments.md, "Fitting".)
 constexpr double kLeastJointVolumeShare = 0.01;
 
 /// True when `shape` is collapsed for `points_table`: the points span more than

@@ -1,6 +1,6 @@
 #pragma once
 /// @file voxel_grid.h
-/// Axis-aligned voxel grids in the table frame (DESIGN.md section 3).
+/// Axis-aligned voxel grids in the table frame (docs/design.md section 4).
 /// Memory order: x fastest, then y, then z (linear = (iz * R + iy) * R + ix), so that a grid
 /// maps to a C-order array [z][y][x] in HDF5, numpy and torch ([D, H, W]).
 
@@ -18,7 +18,8 @@ struct GridSpec {
   double voxel_size_m = 0.02;
   int resolution = 32;
 
-  /// The scene grid of DESIGN.md: side `extent_m`, x/y centred on `centre_xy`, z from 0 up.
+  /// The scene grid (docs/design.md section 4): side `extent_m`, x/y centred on `centre_xy`, z
+  /// from 0 up.
   static GridSpec sceneGrid(const Vec2& centre_xy, double extent_m, int resolution);
 
   int voxelCount() const { return resolution * resolution * resolution; }

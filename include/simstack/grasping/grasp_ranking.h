@@ -6,6 +6,7 @@
 /// each hypothesis and ranked by its mean and its worst case over them.
 
 #include <functional>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -16,14 +17,15 @@
 namespace simstack {
 
 /// Copies of the scene each candidate is also pulled in, each object moved, turned and resized
-/// at random by about what an estimate is off (normal draws, these standard deviations): a
+/// at random by about what an estimate is off (normal draws, these standard deviations; the
+/// defaults are `fc`'s estimate errors on the synthetic test piles, robust deviations): a
 /// grasp that holds only in the estimate as it is ranks below one that holds in them too.
 struct PerturbationConfig {
-  int copies = 0;             ///< 0: none
-  double position_m = 0.01;   ///< across the table (x, y)
-  double rotation_deg = 5.0;  ///< about a random axis
-  double scale_share = 0.1;   ///< of each semi-axis
-  uint64_t seed = 0;          ///< the same seed gives the same copies
+  int copies = 0;              ///< 0: none
+  double position_m = 0.0127;  ///< across the table (x, y)
+  double rotation_deg = 5.9;   ///< about a random axis
+  double scale_share = 0.146;  ///< of each semi-axis
+  uint64_t seed = 0;           ///< the same seed gives the same copies
   /// Throws std::invalid_argument naming the field.
   void validate() const;
 };
@@ -55,10 +57,16 @@ struct RankedGrasp {
   double failed_share = 0.0;          ///< hypotheses where the seal broke
   double freed_share = 0.0;           ///< hypotheses where the target came free
   double peak_load = 0.0;             ///< largest PullOutcome::peak_load over hypotheses
+  /// Share of the perturbed copies in which the seal held (NaN when none were pulled in).
+  double copies_held_share = std::numeric_limits<double>::quiet_NaN();
+  /// Distance of the pull's line (through the contact along the approach) from the target's
+  /// centre of mass in hypothesis 0: the arm of the moment that peels the cup.
+  double com_offset_m = 0.0;
   /// What the ranking sorts by after failures, freeing and topples: (mean + worst) / 2 of the
   /// mean displacement, which is the paper's score for one hypothesis, compared in whole
-  /// millimetres (finer differences are within the physics' own drift); ties go to the lower
-  /// peak load, the grasp with more margin against a wrong mass or centre.
+  /// millimetres (finer differences are within the physics' own drift); ties go to the pull
+  /// passing nearer the centre of mass (whole millimetres), then to the lower peak load: the
+  /// grasps with more margin against a wrong mass or centre.
   double score_m = 0.0;
 
   /// The seal held through the pull in every hypothesis pulled in.
@@ -111,7 +119,8 @@ PullOutcome executeGrasp(const PullSimulator& simulator,
 using RankingProgress = std::function<bool(int done, int total, const RankedGrasp* best)>;
 
 /// Whether grasp `a` ranks before grasp `b`: fewer seal failures, then more often freed, fewer
-/// topples, less displacement (whole millimetres), lower peak load.
+/// topples, less displacement (whole millimetres), a pull nearer the centre of mass (whole
+/// millimetres), lower peak load.
 bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b);
 
 /// `measured_target`: depth points measured on hypotheses[0][target] (table frame), where the

@@ -120,7 +120,7 @@ double seenFreeShare(const SurfaceSegments& s, const std::vector<int>& a, const 
 /// Hidden voxels follow the visible surface, not the votes: of a box resting on a wider one,
 /// the upper part takes the lower box's middle under it (the paper's assignment rule to the
 /// groups' vote centres fixed that case but scored worse superquadrics and stability on the
-/// test sets; docs/experiments.md).
+/// test sets; docs/experiments.md, "Instances: surface regrouping").
 InstanceSegmentation regroupAlongSurfaceSegments(const SurfaceSegments& segments,
                                                  const SurfaceSegmentConfig& config,
                                                  int min_part_voxels,

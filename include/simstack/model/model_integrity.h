@@ -14,8 +14,8 @@ namespace simstack {
 
 /// What a model's card says of its file.
 struct ModelIntegrity {
-  std::string sha256;  ///< of the .pt file, 64 lower-case hex digits
-  int format = 0;      ///< simstack's model file format the file was written in
+  std::string sha256;      ///< of the .pt file, 64 lower-case hex digits
+  int format_version = 0;  ///< simstack's model file format the file was written in
   /// The self-test's expected result: objects and voxels occupied (probability >= 0.5) that the
   /// pipeline's defaults perceive on a rendered box with this model; -1 when not recorded.
   int self_test_objects = -1;

@@ -1,6 +1,6 @@
 #pragma once
 /// @file scene_perception.h
-/// The one entry point from depth to superquadrics (DESIGN.md section 1), used by the tools,
+/// The one entry point from depth to superquadrics (docs/design.md section 1), used by the tools,
 /// the evaluation and the benchmarks:
 ///   depth (+ table pose, or a RANSAC table) -> partial TSDF -> C-VAE samples ->
 ///   Hough-voting instances -> marching cubes -> superquadric fits.

@@ -10,7 +10,7 @@
 namespace simstack {
 
 struct ProjectiveTsdfConfig {
-  double truncation_m = 0.06;  ///< tau; DESIGN default is 3 voxels
+  double truncation_m = 0.06;  ///< tau; 3 voxels by default (docs/design.md section 4)
   float max_weight = 64.0f;    ///< fusion weight cap
   /// Value of never-observed voxels: unknown space behind surfaces may be solid, so it reads
   /// as -tau; the weight channel (0) tells it apart from observed solid.

@@ -708,7 +708,7 @@ std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points,
     // Every n-th point, as the joint refinement always took them. A surface cover here (the
     // per-instance fit's choice) left 5 % fewer of the C-VAE's fitted test piles stable, a
     // random subset 2 % fewer; the classical baseline's image-ordered points fared better
-    // with the cover (experiments.md).
+    // with the cover (docs/experiments.md, "Fitting").
     const size_t stride =
         std::max<size_t>(1, (points[i].size() + c.joint_points - 1) / c.joint_points);
     for (size_t k = 0; k < points[i].size(); k += stride) subset[i].push_back(points[i][k]);

@@ -1,6 +1,7 @@
 #include "simstack/grasping/grasp_files.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -90,6 +91,10 @@ void writeGraspJson(const std::string& path, const GraspRanking& r, int target_i
                       {"freed_share", g.freed_share},
                       {"failed_share", g.failed_share},
                       {"score_m", g.score_m},
+                      {"perturbed_held_share",
+                       std::isnan(g.copies_held_share) ? json(nullptr) : json(g.copies_held_share)},
+                      {"com_offset_m", g.com_offset_m},
+                      {"peak_load", g.peak_load},
                       {"per_hypothesis", outcomes}});
   }
   json baseline = json::array();

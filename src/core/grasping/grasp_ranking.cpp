@@ -70,8 +70,18 @@ int threadCount(int requested) {
   return requested == 0 ? cores : std::min(requested, cores);
 }
 
-void summarise(RankedGrasp* g) {
+/// `copies`: the last outcomes are pulls in perturbed copies.
+void summarise(RankedGrasp* g, int copies, const SuperquadricShape& target) {
   const double n = static_cast<double>(g->outcomes.size());
+  if (copies > 0) {
+    int held = 0;
+    for (size_t k = g->outcomes.size() - copies; k < g->outcomes.size(); ++k)
+      held += g->outcomes[k].cup_held ? 1 : 0;
+    g->copies_held_share = static_cast<double>(held) / copies;
+  }
+  const Vec3 arm = target.centroid() - g->candidate.contact_table;
+  g->com_offset_m =
+      (arm - arm.dot(g->candidate.approach_table) * g->candidate.approach_table).norm();
   for (const PullOutcome& o : g->outcomes) {
     g->mean_displacement_m += o.mean_displacement_m / n;
     g->worst_displacement_m = std::max(g->worst_displacement_m, o.mean_displacement_m);
@@ -182,6 +192,8 @@ bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b) {
   if (a.mean_toppled != b.mean_toppled) return a.mean_toppled < b.mean_toppled;
   const double da = std::round(a.score_m * 1e3), db = std::round(b.score_m * 1e3);
   if (da != db) return da < db;
+  const double ca = std::round(a.com_offset_m * 1e3), cb = std::round(b.com_offset_m * 1e3);
+  if (ca != cb) return ca < cb;
   return a.peak_load < b.peak_load;
 }
 
@@ -225,6 +237,7 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
   std::vector<std::vector<SuperquadricShape>> scenes;
   for (int h : out.hypotheses) scenes.push_back(hypotheses[h]);
   int next = static_cast<int>(hypotheses.size());
+  const int copies = config.perturbation.copies;
   for (auto& copy : perturbedCopies(scene0, config.perturbation)) {
     out.hypotheses.push_back(next++);
     scenes.push_back(std::move(copy));
@@ -259,7 +272,7 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
       RankedGrasp& g = ranked[c].emplace();
       g.candidate = cands[c];
       g.outcomes.assign(outcomes.begin() + c * H, outcomes.begin() + (c + 1) * H);
-      summarise(&g);
+      summarise(&g, copies, scene0[target]);
       if (!best || rankedBefore(g, *best)) best = &g;
     }
     if (progress && !progress(done, C * H, best)) stop = true;

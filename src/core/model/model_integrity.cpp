@@ -55,18 +55,22 @@ std::optional<ModelIntegrity> readModelIntegrity(const std::string& model_path) 
     if (!n.IsMap()) throw std::runtime_error("'integrity' must be a map");
     for (const auto& kv : n) {
       const std::string key = kv.first.as<std::string>();
-      if (key != "sha256" && key != "format" && key != "self_test")
+      if (key == "format")
+        throw std::runtime_error(
+            "integrity.format is read as format_version (restamp the card: simstack_check_model "
+            "--stamp)");
+      if (key != "sha256" && key != "format_version" && key != "self_test")
         throw std::runtime_error("unknown field integrity." + key);
     }
     m.sha256 = n["sha256"].as<std::string>();
-    m.format = n["format"].as<int>();
+    m.format_version = n["format_version"].as<int>();
     if (const YAML::Node t = n["self_test"]) {
       m.self_test_objects = t["objects"].as<int>();
       m.self_test_occupied_voxels = t["occupied_voxels"].as<int>();
     }
   } catch (const std::exception& e) {
     throw std::runtime_error(card + ": integrity: " + e.what() +
-                             " (sha256, format and self_test {objects, occupied_voxels}; "
+                             " (sha256, format_version and self_test {objects, occupied_voxels}; "
                              "simstack_check_model --stamp writes them)");
   }
   return m;
@@ -76,9 +80,9 @@ void verifyModelFile(const std::string& model_path) {
   const std::optional<ModelIntegrity> m = readModelIntegrity(model_path);
   if (!m) return;
   const std::string card = modelCardPath(model_path);
-  if (m->format != modelFormatVersion())
+  if (m->format_version != modelFormatVersion())
     throw std::runtime_error("model " + model_path + ": its card " + card + " says format " +
-                             std::to_string(m->format) + ", this build reads format " +
+                             std::to_string(m->format_version) + ", this build reads format " +
                              std::to_string(modelFormatVersion()));
   if (!std::filesystem::exists(model_path))
     throw std::runtime_error("model file not found: " + model_path);
@@ -95,7 +99,7 @@ void writeModelIntegrity(const std::string& model_path, const ModelIntegrity& m)
   YAML::Emitter e;
   e << YAML::BeginMap << YAML::Key << "integrity" << YAML::Value << YAML::BeginMap;
   e << YAML::Key << "sha256" << YAML::Value << m.sha256;
-  e << YAML::Key << "format" << YAML::Value << m.format;
+  e << YAML::Key << "format_version" << YAML::Value << m.format_version;
   if (m.self_test_objects >= 0)
     e << YAML::Key << "self_test" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
       << "objects" << YAML::Value << m.self_test_objects << YAML::Key << "occupied_voxels"

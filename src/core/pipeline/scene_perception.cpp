@@ -11,13 +11,14 @@
 #include <tuple>
 #include <utility>
 
-#include "simstack/eval/scene_metrics.h"
 #include "simstack/instances/instance_finder.h"
 #include "simstack/mesh/marching_cubes.h"
+#include "simstack/mesh/mesh_ops.h"
 #include "simstack/model/cvae_inference.h"
 #include "simstack/model/model_integrity.h"
 #include "simstack/pipeline/workspace.h"
 #include "simstack/render/depth_renderer.h"
+#include "simstack/render/visibility.h"
 #include "simstack/tsdf/network_input.h"
 #include "simstack/tsdf/projective_tsdf.h"
 
@@ -117,10 +118,10 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, int n, ui
 
 /// Each instance's points for the fitter: the views' depth points lying on its voxels (at most
 /// `n`), and `n` times the unseen share of its mesh's area in samples of the unseen part (the
-/// triangles that no ray from a view's camera meets first). The measured points outnumber
-/// the seen part's share of `n`: they are the surface itself, where the network's mesh is up
-/// to a voxel off, and the fits weigh them accordingly (docs/experiments.md). When the views
-/// hold fewer of them than that share, samples of the seen mesh make up the difference.
+/// triangles that no ray from a view's camera meets first). The measured points outnumber the seen
+/// part's share of `n`: they are the surface itself, where the network's mesh is up to a voxel off,
+/// and the fits weigh them accordingly (docs/experiments.md, "Fitting"). When the views hold fewer
+/// of them than that share, samples of the seen mesh make up the difference.
 std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Grid3<int>& labels,
                                const std::vector<MeasuredView>& views, int n, uint64_t seed,
                                std::vector<int>* measured_counts) {
@@ -818,7 +819,7 @@ ModelSelfTest checkModel(const std::string& model_path) {
 ModelIntegrity stampModel(const std::string& model_path) {
   ModelIntegrity m;
   m.sha256 = sha256OfFile(model_path);
-  m.format = modelFormatVersion();
+  m.format_version = modelFormatVersion();
   writeModelIntegrity(model_path, m);  // the hash first: the self-test loads through its check
   const ModelSelfTest t = runModelSelfTest(model_path);
   m.self_test_objects = t.objects;

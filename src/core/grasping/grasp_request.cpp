@@ -1,0 +1,130 @@
+#include "simstack/grasping/grasp_request.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace simstack {
+
+std::string number(double v) {
+  if (std::isnan(v)) return "nan";
+  std::ostringstream out;
+  out << v;
+  return out.str();
+}
+
+namespace {
+
+bool positiveFinite(double v) { return std::isfinite(v) && v > 0.0; }
+
+void addNote(std::string* notes, const std::string& note) {
+  *notes += (notes->empty() ? "" : "; ") + note;
+}
+
+/// The scene's lowest surface against the simulation's table at z = 0: throws when it lies
+/// below by more than the gap, says so when above.
+void checkTable(const std::vector<SuperquadricShape>& scene, double gap_m, std::string* notes) {
+  const double bottom = sceneBottom(scene);
+  if (std::abs(bottom) <= gap_m) return;
+  const std::string where = "the scene's lowest surface is at z = " + number(bottom) +
+                            " m in its table frame, where the simulation's table is at z = 0: ";
+  const std::string frame =
+      " (the table frame: z up, the table at z = 0; the scene's table pose places it in the "
+      "scene's frame)";
+  if (bottom < -gap_m)
+    throw std::invalid_argument(where + "its objects would stand in the table" + frame);
+  addNote(notes, where + "its objects fall before any pull" + frame);
+}
+
+}  // namespace
+
+void GraspPolicy::validate() const {
+  if (max_candidates < 1) throw std::invalid_argument("max_candidates must be >= 1");
+  if (max_candidates_limit < max_candidates)
+    throw std::invalid_argument("max_candidates_limit must be >= max_candidates");
+  if (!positiveFinite(max_pull_distance_m))
+    throw std::invalid_argument("max_pull_distance_m must be a positive number");
+  if (!positiveFinite(max_pull_speed_mps))
+    throw std::invalid_argument("max_pull_speed_mps must be a positive number");
+  if (!positiveFinite(max_pregrasp_m))
+    throw std::invalid_argument("max_pregrasp_m must be a positive number");
+  if (!(pregrasp_distance_m >= 0.0 && pregrasp_distance_m <= max_pregrasp_m))
+    throw std::invalid_argument("pregrasp_distance_m must lie in [0, " + number(max_pregrasp_m) +
+                                "] m");
+  if (!(max_scene_age_s >= 0.0) || !std::isfinite(max_scene_age_s))
+    throw std::invalid_argument("max_scene_age_s must be >= 0 (0: any age)");
+  if (!(table_gap_m >= 0.0) || !std::isfinite(table_gap_m))
+    throw std::invalid_argument("table_gap_m must be >= 0");
+}
+
+PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConfig& base,
+                             const GraspPolicy& policy) {
+  if (!positiveFinite(request.pull_distance_m) ||
+      request.pull_distance_m > policy.max_pull_distance_m)
+    throw std::invalid_argument("pull_distance_m must lie in (0, " +
+                                number(policy.max_pull_distance_m) + "] m, not " +
+                                number(request.pull_distance_m) + " (e.g. 0.1)");
+  if (!positiveFinite(request.pull_speed_mps) || request.pull_speed_mps > policy.max_pull_speed_mps)
+    throw std::invalid_argument("pull_speed_mps must lie in (0, " +
+                                number(policy.max_pull_speed_mps) + "] m/s, not " +
+                                number(request.pull_speed_mps) + " (e.g. 0.2)");
+  if (!std::isfinite(request.pregrasp_m) || request.pregrasp_m < 0.0 ||
+      request.pregrasp_m > policy.max_pregrasp_m)
+    throw std::invalid_argument("pregrasp_distance_m must lie in [0, " +
+                                number(policy.max_pregrasp_m) + "] m, not " +
+                                number(request.pregrasp_m) + " (0: the server's " +
+                                number(policy.pregrasp_distance_m) + ")");
+  if (request.scenes.empty() || request.scenes[0].empty())
+    throw std::invalid_argument("the scene has no objects");
+  if (request.target < 0 || request.target >= static_cast<int>(request.scenes[0].size()))
+    throw std::invalid_argument("target " + std::to_string(request.target) +
+                                " is not an object of the " +
+                                std::to_string(request.scenes[0].size()) + "-object scene");
+  if (request.camera_table && !request.camera_table->allFinite())
+    throw std::invalid_argument("camera_pose.position is not finite");
+  PreparedGrasps out;
+  const size_t wanted =
+      std::min<size_t>(request.hypotheses == 0 ? request.scenes.size() : size_t{request.hypotheses},
+                       GraspPolicy::kMaxHypotheses);
+  out.scenes.assign(request.scenes.begin(),
+                    request.scenes.begin() + std::min(wanted, request.scenes.size()));
+  for (size_t h = 0; h < out.scenes.size(); ++h)
+    if (const std::string why = checkScene(out.scenes[h]); !why.empty())
+      throw std::invalid_argument(
+          (h == 0 ? std::string("the scene's ")
+                  : "hypothesis " + std::to_string(h) + " (of the scene's hypotheses), ") +
+          why);
+  checkTable(out.scenes[0], policy.table_gap_m, &out.notes);
+  if (out.scenes.size() < wanted)
+    addNote(&out.notes, std::to_string(request.hypotheses) +
+                            " hypotheses asked for, the scene has " +
+                            std::to_string(out.scenes.size()));
+  out.config = base;
+  int count = request.candidates == 0
+                  ? policy.max_candidates
+                  : static_cast<int>(std::min<uint32_t>(request.candidates, 1u << 20));
+  if (count > policy.max_candidates_limit) {
+    addNote(&out.notes, std::to_string(request.candidates) +
+                            " candidates asked for, clamped to max_candidates_limit " +
+                            std::to_string(policy.max_candidates_limit));
+    count = policy.max_candidates_limit;
+  }
+  out.config.candidates.max_candidates = count;
+  out.config.pull.pull_distance_m = request.pull_distance_m;
+  out.config.pull.pull_speed_mps = request.pull_speed_mps;
+  if (request.camera_table) out.cameras.push_back(*request.camera_table);
+  out.pregrasp_m = request.pregrasp_m > 0.0 ? request.pregrasp_m : policy.pregrasp_distance_m;
+  return out;
+}
+
+std::string staleScene(double age_s, double max_age_s) {
+  if (max_age_s <= 0.0 || !(age_s > max_age_s)) return {};
+  return number(age_s) + " s old (max_scene_age_s " + number(max_age_s) + "): " +
+         (age_s > 86400.0 ? "a day or more apart: is one of this node and the scene's publisher "
+                            "on simulated time (/use_sim_time) and the other not? "
+                          : "is the perception still running? ") +
+         "Send the scene in the request, or raise ~max_scene_age_s (0: any age)";
+}
+
+}  // namespace simstack

@@ -1,0 +1,389 @@
+#include "simstack/offline/dataset/dataset.h"
+
+#include <H5Cpp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "simstack/offline/piles/mesh_catalogue.h"
+
+namespace simstack {
+
+const char* const kObjectColumns =
+    "kind(0=superquadric,1=mesh),catalogue_index,a1,a2,a3,r,s,t,x,y,z,qw,qx,qy,qz";
+// 1: the first generators (the version was not bumped when their piles changed);
+// 2: drops also settle by the displacement rule;
+// 3: a drop is abandoned once the pile sticks out of the grid's sides.
+const char* const kGeneratorVersion = "simstack-generate-3";
+namespace {
+
+constexpr int kColumns = 15;
+
+void writeAttr(H5::H5Object& obj, const std::string& name, double v) {
+  obj.createAttribute(name, H5::PredType::NATIVE_DOUBLE, H5::DataSpace())
+      .write(H5::PredType::NATIVE_DOUBLE, &v);
+}
+void writeAttr(H5::H5Object& obj, const std::string& name, int64_t v) {
+  obj.createAttribute(name, H5::PredType::NATIVE_INT64, H5::DataSpace())
+      .write(H5::PredType::NATIVE_INT64, &v);
+}
+void writeAttr(H5::H5Object& obj, const std::string& name, const std::string& v) {
+  H5::StrType type(H5::PredType::C_S1, H5T_VARIABLE);
+  obj.createAttribute(name, type, H5::DataSpace()).write(type, v);
+}
+template <typename T>
+T readAttr(const H5::H5Object& obj, const std::string& name);
+template <>
+double readAttr<double>(const H5::H5Object& obj, const std::string& name) {
+  double v = 0;
+  obj.openAttribute(name).read(H5::PredType::NATIVE_DOUBLE, &v);
+  return v;
+}
+template <>
+int64_t readAttr<int64_t>(const H5::H5Object& obj, const std::string& name) {
+  int64_t v = 0;
+  obj.openAttribute(name).read(H5::PredType::NATIVE_INT64, &v);
+  return v;
+}
+template <>
+std::string readAttr<std::string>(const H5::H5Object& obj, const std::string& name) {
+  std::string v;
+  H5::Attribute a = obj.openAttribute(name);
+  a.read(a.getStrType(), v);
+  return v;
+}
+
+H5::DataSet createArray(H5::H5File& file, const std::string& name, const H5::DataType& type,
+                        std::vector<hsize_t> dims) {
+  std::vector<hsize_t> chunk = dims;
+  chunk[0] = 1;
+  H5::DSetCreatPropList plist;
+  plist.setChunk(static_cast<int>(chunk.size()), chunk.data());
+  plist.setShuffle();
+  plist.setDeflate(4);
+  H5::DataSpace space(static_cast<int>(dims.size()), dims.data());
+  return file.createDataSet(name, type, space, plist);
+}
+
+// Writes or reads the slab of scene `index` of a dataset whose first dimension is the scene.
+void slab(const H5::DataSet& ds, int index, const H5::PredType& type, const void* data,
+          bool write) {
+  H5::DataSpace file_space = ds.getSpace();
+  const int rank = file_space.getSimpleExtentNdims();
+  std::vector<hsize_t> dims(rank), start(rank, 0), count;
+  file_space.getSimpleExtentDims(dims.data());
+  if (index < 0 || static_cast<hsize_t>(index) >= dims[0]) {
+    throw std::out_of_range("scene index " + std::to_string(index) + " outside [0, " +
+                            std::to_string(dims[0]) + ")");
+  }
+  start[0] = static_cast<hsize_t>(index);
+  count = dims;
+  count[0] = 1;
+  file_space.selectHyperslab(H5S_SELECT_SET, count.data(), start.data());
+  H5::DataSpace mem_space(rank, count.data());
+  if (write) {
+    ds.write(data, type, mem_space, file_space);
+  } else {
+    ds.read(const_cast<void*>(data), type, mem_space, file_space);
+  }
+}
+
+std::string shapeText(const std::vector<hsize_t>& dims) {
+  std::string s = "[";
+  for (size_t i = 0; i < dims.size(); ++i) s += (i ? ", " : "") + std::to_string(dims[i]);
+  return s + "]";
+}
+
+std::vector<hsize_t> shapeOf(const H5::DataSet& ds) {
+  const H5::DataSpace space = ds.getSpace();
+  std::vector<hsize_t> dims(static_cast<size_t>(std::max(0, space.getSimpleExtentNdims())));
+  if (!dims.empty()) space.getSimpleExtentDims(dims.data());
+  return dims;
+}
+
+hsize_t sceneCount(const H5::DataSet& tsdf) {
+  const std::vector<hsize_t> dims = shapeOf(tsdf);
+  if (dims.size() != 4) throw std::runtime_error("tsdf is not 4-dimensional");
+  if (dims[0] < 1 || dims[0] > static_cast<hsize_t>(std::numeric_limits<int>::max()))
+    throw std::runtime_error("tsdf holds " + std::to_string(dims[0]) + " scenes");
+  return dims[0];
+}
+
+void expectShape(const H5::DataSet& ds, const char* name, const std::vector<hsize_t>& expected) {
+  const std::vector<hsize_t> dims = shapeOf(ds);
+  if (dims != expected)
+    throw std::runtime_error(std::string(name) + " has shape " + shapeText(dims) + ", expected " +
+                             shapeText(expected) + " from the scene count and the attributes");
+}
+
+void checkAttributes(const DatasetInfo& info) {
+  if (info.resolution < 2 || info.resolution > 1024)
+    throw std::runtime_error("attribute resolution " + std::to_string(info.resolution) +
+                             " outside [2, 1024]");
+  if (!(std::isfinite(info.extent_m) && info.extent_m > 0))
+    throw std::runtime_error("attribute extent_m " + std::to_string(info.extent_m) +
+                             " is not a positive length");
+  if (!(std::isfinite(info.truncation_m) && info.truncation_m > 0))
+    throw std::runtime_error("attribute truncation_m " + std::to_string(info.truncation_m) +
+                             " is not a positive length");
+  if (info.max_objects_per_scene < 0 || info.max_objects_per_scene > 10000)
+    throw std::runtime_error("attribute max_objects_per_scene " +
+                             std::to_string(info.max_objects_per_scene) + " outside [0, 10000]");
+}
+
+std::string join(const std::vector<std::string>& v) {
+  std::string s;
+  for (size_t i = 0; i < v.size(); ++i) s += (i ? "," : "") + v[i];
+  return s;
+}
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    if (!item.empty()) out.push_back(item);
+  }
+  return out;
+}
+
+}  // namespace
+
+struct DatasetWriter::Impl {
+  std::string path;
+  DatasetInfo info;
+  std::unique_ptr<H5::H5File> file;
+  H5::DataSet tsdf, votes, labels, origin, count, objects;
+};
+
+DatasetWriter::DatasetWriter(const std::string& path, const DatasetInfo& info)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->path = path;
+  impl_->info = info;
+  if (info.num_scenes <= 0) throw std::invalid_argument("a dataset needs at least one scene");
+  try {
+    H5::Exception::dontPrint();
+    impl_->file = std::make_unique<H5::H5File>(path, H5F_ACC_TRUNC);
+    const hsize_t n = info.num_scenes, r = info.resolution, k = info.max_objects_per_scene;
+    impl_->tsdf = createArray(*impl_->file, "tsdf", H5::PredType::NATIVE_FLOAT, {n, r, r, r});
+    impl_->votes = createArray(*impl_->file, "votes", H5::PredType::NATIVE_FLOAT, {n, 3, r, r, r});
+    impl_->labels = createArray(*impl_->file, "labels", H5::PredType::NATIVE_UINT8, {n, r, r, r});
+    impl_->origin = createArray(*impl_->file, "grid_origin", H5::PredType::NATIVE_DOUBLE, {n, 3});
+    impl_->count = createArray(*impl_->file, "num_objects", H5::PredType::NATIVE_INT32, {n});
+    impl_->objects =
+        createArray(*impl_->file, "objects", H5::PredType::NATIVE_DOUBLE, {n, k, kColumns});
+    writeAttr(impl_->objects, "columns", std::string(kObjectColumns));
+    H5::Group root = impl_->file->openGroup("/");
+    writeAttr(root, "resolution", static_cast<int64_t>(info.resolution));
+    writeAttr(root, "extent_m", info.extent_m);
+    writeAttr(root, "voxel_size_m", info.extent_m / info.resolution);
+    writeAttr(root, "truncation_m", info.truncation_m);
+    writeAttr(root, "seed", static_cast<int64_t>(info.seed));
+    writeAttr(root, "min_objects", static_cast<int64_t>(info.min_objects));
+    writeAttr(root, "max_objects", static_cast<int64_t>(info.max_objects));
+    writeAttr(root, "max_objects_per_scene", static_cast<int64_t>(info.max_objects_per_scene));
+    writeAttr(root, "generator_version", std::string(kGeneratorVersion));
+    writeAttr(root, "mesh_names", join(info.mesh_names));
+    writeAttr(root, "grid_axes", std::string("[z][y][x], table frame, z up from the table"));
+  } catch (const H5::Exception& e) {
+    throw std::runtime_error("cannot create dataset " + path + ": " + e.getDetailMsg());
+  }
+}
+
+DatasetWriter::~DatasetWriter() = default;
+
+void DatasetWriter::write(int index, const Scene& scene, const GroundTruthGrids& gt) {
+  const DatasetInfo& info = impl_->info;
+  if (gt.tsdf.spec.resolution != info.resolution)
+    throw std::invalid_argument("ground truth resolution does not match the dataset");
+  if (static_cast<int>(scene.objects.size()) > info.max_objects_per_scene) {
+    throw std::invalid_argument("scene has " + std::to_string(scene.objects.size()) +
+                                " objects, the dataset holds at most " +
+                                std::to_string(info.max_objects_per_scene));
+  }
+  const int nv = gt.tsdf.spec.voxelCount();
+  std::vector<float> votes(3 * static_cast<size_t>(nv));
+  for (int i = 0; i < nv; ++i) {
+    for (int c = 0; c < 3; ++c) votes[static_cast<size_t>(c) * nv + i] = gt.votes.data[i][c];
+  }
+  std::vector<double> objects(static_cast<size_t>(info.max_objects_per_scene) * kColumns, 0.0);
+  for (size_t k = 0; k < scene.objects.size(); ++k) {
+    const auto& o = scene.objects[k];
+    double* row = &objects[k * kColumns];
+    const bool sq = o.shape->kind() == ObjectShape::Kind::kSuperquadric;
+    row[0] = sq ? 0.0 : 1.0;
+    row[1] = o.shape->catalogueIndex();
+    if (sq) {
+      for (int i = 0; i < 3; ++i) {
+        row[2 + i] = o.shape->superquadric().scale_m[i];
+        row[5 + i] = o.shape->superquadric().exponents[i];
+      }
+    }
+    const Vec3 t = o.T_table_object.translation();
+    const Quat q(o.T_table_object.linear());
+    for (int i = 0; i < 3; ++i) row[8 + i] = t[i];
+    row[11] = q.w();
+    row[12] = q.x();
+    row[13] = q.y();
+    row[14] = q.z();
+  }
+  const int32_t n = static_cast<int32_t>(scene.objects.size());
+  Vec3 origin = gt.tsdf.spec.origin_table;
+  try {
+    slab(impl_->tsdf, index, H5::PredType::NATIVE_FLOAT, gt.tsdf.data.data(), true);
+    slab(impl_->votes, index, H5::PredType::NATIVE_FLOAT, votes.data(), true);
+    slab(impl_->labels, index, H5::PredType::NATIVE_UINT8, gt.labels.data.data(), true);
+    slab(impl_->origin, index, H5::PredType::NATIVE_DOUBLE, origin.data(), true);
+    slab(impl_->count, index, H5::PredType::NATIVE_INT32, &n, true);
+    slab(impl_->objects, index, H5::PredType::NATIVE_DOUBLE, objects.data(), true);
+  } catch (const H5::Exception& e) {
+    throw std::runtime_error("cannot write scene " + std::to_string(index) + " to " + impl_->path +
+                             ": " + e.getDetailMsg());
+  }
+}
+
+struct DatasetReader::Impl {
+  std::string path;
+  DatasetInfo info;
+  std::unique_ptr<H5::H5File> file;
+  H5::DataSet tsdf, votes, labels, origin, count, objects;
+  std::vector<std::shared_ptr<const ObjectShape>> catalogue;
+  std::mutex mutex;  // one HDF5 read at a time (the trainer reads from two threads)
+};
+
+DatasetReader::DatasetReader(const std::string& path, const std::string& mesh_dir)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->path = path;
+  try {
+    H5::Exception::dontPrint();
+    impl_->file = std::make_unique<H5::H5File>(path, H5F_ACC_RDONLY);
+    H5::Group root = impl_->file->openGroup("/");
+    DatasetInfo& info = impl_->info;
+    info.resolution = static_cast<int>(readAttr<int64_t>(root, "resolution"));
+    info.extent_m = readAttr<double>(root, "extent_m");
+    info.truncation_m = readAttr<double>(root, "truncation_m");
+    info.seed = static_cast<uint64_t>(readAttr<int64_t>(root, "seed"));
+    info.min_objects = static_cast<int>(readAttr<int64_t>(root, "min_objects"));
+    info.max_objects = static_cast<int>(readAttr<int64_t>(root, "max_objects"));
+    info.max_objects_per_scene = static_cast<int>(readAttr<int64_t>(root, "max_objects_per_scene"));
+    info.generator_version = readAttr<std::string>(root, "generator_version");
+    info.mesh_names = split(readAttr<std::string>(root, "mesh_names"));
+    impl_->tsdf = impl_->file->openDataSet("tsdf");
+    impl_->votes = impl_->file->openDataSet("votes");
+    impl_->labels = impl_->file->openDataSet("labels");
+    impl_->origin = impl_->file->openDataSet("grid_origin");
+    impl_->count = impl_->file->openDataSet("num_objects");
+    impl_->objects = impl_->file->openDataSet("objects");
+    checkAttributes(info);
+    const hsize_t n = sceneCount(impl_->tsdf);
+    const hsize_t r = info.resolution, k = info.max_objects_per_scene;
+    // Every read fills a buffer sized from the attributes: a dataset of another shape would
+    // overrun it.
+    expectShape(impl_->tsdf, "tsdf", {n, r, r, r});
+    expectShape(impl_->votes, "votes", {n, 3, r, r, r});
+    expectShape(impl_->labels, "labels", {n, r, r, r});
+    expectShape(impl_->origin, "grid_origin", {n, 3});
+    expectShape(impl_->count, "num_objects", {n});
+    expectShape(impl_->objects, "objects", {n, k, kColumns});
+    info.num_scenes = static_cast<int>(n);
+  } catch (const H5::Exception& e) {
+    throw std::runtime_error("cannot read dataset " + path + ": " + e.getDetailMsg());
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error("cannot read dataset " + path + ": " + e.what());
+  }
+  if (!impl_->info.mesh_names.empty()) {
+    if (mesh_dir.empty() && !proceduralCatalogue(impl_->info.mesh_names)) {
+      throw std::runtime_error("dataset " + path +
+                               " holds mesh objects (YCB piles): reading it needs the directory "
+                               "of their meshes, which simstack_evaluate and simstack_train "
+                               "--validate-only take (--ycb DIR); training, the grasp evaluation "
+                               "and the Hough tuning take superquadric and household piles only");
+    }
+    impl_->catalogue = loadMeshCatalogue(mesh_dir, impl_->info.mesh_names);
+  }
+}
+
+DatasetReader::~DatasetReader() = default;
+
+const DatasetInfo& DatasetReader::info() const { return impl_->info; }
+
+SceneRecord DatasetReader::readScene(int index) const {
+  H5::Exception::dontPrint();  // per thread: a failed read is one exception, not a stack dump
+  const DatasetInfo& info = impl_->info;
+  SceneRecord rec;
+  int32_t n = 0;
+  Vec3 origin;
+  std::vector<double> objects(static_cast<size_t>(info.max_objects_per_scene) * kColumns);
+  std::unique_lock<std::mutex> lock(impl_->mutex);
+  try {
+    slab(impl_->count, index, H5::PredType::NATIVE_INT32, &n, false);
+    slab(impl_->origin, index, H5::PredType::NATIVE_DOUBLE, origin.data(), false);
+    slab(impl_->objects, index, H5::PredType::NATIVE_DOUBLE, objects.data(), false);
+  } catch (const H5::Exception& e) {
+    throw std::runtime_error("cannot read scene " + std::to_string(index) + " of " + impl_->path +
+                             ": " + e.getDetailMsg());
+  }
+  if (n < 0 || n > info.max_objects_per_scene) {
+    throw std::runtime_error(impl_->path + ": scene " + std::to_string(index) +
+                             " has an invalid object count " + std::to_string(n));
+  }
+  rec.grid.origin_table = origin;
+  rec.grid.resolution = info.resolution;
+  rec.grid.voxel_size_m = info.extent_m / info.resolution;
+  for (int k = 0; k < n; ++k) {
+    const double* row = &objects[static_cast<size_t>(k) * kColumns];
+    SceneObject o;
+    if (row[0] == 0.0) {
+      SuperquadricShape sq;
+      sq.scale_m = Vec3(row[2], row[3], row[4]);
+      sq.exponents = Vec3(row[5], row[6], row[7]);
+      o.shape = ObjectShape::fromSuperquadric(sq);
+    } else {
+      const int c = static_cast<int>(row[1]);
+      if (c < 0 || c >= static_cast<int>(impl_->catalogue.size())) {
+        throw std::runtime_error(impl_->path + ": scene " + std::to_string(index) + " names mesh " +
+                                 std::to_string(c) + " outside the catalogue");
+      }
+      o.shape = impl_->catalogue[c];
+    }
+    o.T_table_object = Transform::Identity();
+    o.T_table_object.linear() =
+        Quat(row[11], row[12], row[13], row[14]).normalized().toRotationMatrix();
+    o.T_table_object.translation() = Vec3(row[8], row[9], row[10]);
+    rec.scene.objects.push_back(o);
+  }
+  return rec;
+}
+
+SceneRecord DatasetReader::read(int index) const {
+  SceneRecord rec = readScene(index);
+  const int nv = rec.grid.voxelCount();
+  rec.ground_truth.tsdf = Grid3<float>(rec.grid, 0.0f);
+  rec.ground_truth.labels = Grid3<uint8_t>(rec.grid, 0);
+  rec.ground_truth.votes = Grid3<Vec3f>(rec.grid, Vec3f::Zero());
+  std::vector<float> votes(3 * static_cast<size_t>(nv));
+  std::unique_lock<std::mutex> lock(impl_->mutex);
+  try {
+    slab(impl_->tsdf, index, H5::PredType::NATIVE_FLOAT, rec.ground_truth.tsdf.data.data(), false);
+    slab(impl_->labels, index, H5::PredType::NATIVE_UINT8, rec.ground_truth.labels.data.data(),
+         false);
+    slab(impl_->votes, index, H5::PredType::NATIVE_FLOAT, votes.data(), false);
+  } catch (const H5::Exception& e) {
+    throw std::runtime_error("cannot read scene " + std::to_string(index) + " of " + impl_->path +
+                             ": " + e.getDetailMsg());
+  }
+  lock.unlock();
+  for (int i = 0; i < nv; ++i) {
+    rec.ground_truth.votes.data[i] =
+        Vec3f(votes[i], votes[static_cast<size_t>(nv) + i], votes[2 * static_cast<size_t>(nv) + i]);
+  }
+  return rec;
+}
+
+}  // namespace simstack
