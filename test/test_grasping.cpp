@@ -190,6 +190,31 @@ TEST(GraspRanking, RanksAStraightLiftFirstOnTheStack) {
   EXPECT_GT(r.grasps.front().candidate.approach_table.z(), 0.9);
 }
 
+TEST(SuctionCandidates, ThePullsThroughTheCentreOfMassAreAmongThem) {
+  // A wide box: the spread keeps the candidates whose pull passes through its centre, or a
+  // cup's radius from it, on every face in sight and in reach (not the bottom), the centres
+  // first.
+  const std::vector<SuperquadricShape> stack = twoBoxStack();
+  CandidateConfig config;
+  config.max_candidates = 32;
+  const CandidateSet set = suctionCandidates(stack, 1, defaultCameraPositions(stack), config);
+  int through = 0, near = 0;
+  for (const SuctionCandidate& c : set.candidates) {
+    const Vec3 arm = stack[1].centroid() - c.contact_table;
+    const double offset = arm.cross(c.approach_table).norm();
+    through += offset < 1e-6 ? 1 : 0;
+    near += std::abs(offset - config.cup_radius_m) < 1e-3 ? 1 : 0;
+  }
+  EXPECT_EQ(through, 5) << "the top and four sides";
+  EXPECT_GE(near, 4) << "a cup's radius around the top's middle";
+  EXPECT_EQ(set.candidates.size(), 32u);
+  config.max_candidates = 5;
+  for (const SuctionCandidate& c : suctionCandidates(stack, 1, {}, config).candidates) {
+    const Vec3 arm = stack[1].centroid() - c.contact_table;
+    EXPECT_LT(arm.cross(c.approach_table).norm(), 1e-6) << "a few candidates: the centres";
+  }
+}
+
 TEST(GraspRanking, TiesGoToThePullNearerTheCentreOfMass) {
   GraspRankingConfig config;
   config.candidates.max_candidates = 16;

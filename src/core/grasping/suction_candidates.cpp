@@ -57,13 +57,25 @@ bool seenFromAny(const DepthRenderer& renderer, int instance, const Vec3& p, con
 
 // Farthest-point spread: starts from the best seal, then adds the candidate farthest from
 // those kept, `count` in all (ties to the lower index, so the result is deterministic).
-std::vector<SuctionCandidate> spread(const std::vector<SuctionCandidate>& all, int count) {
+std::vector<SuctionCandidate> spread(const std::vector<SuctionCandidate>& all, int count,
+                                     size_t seeds) {
   std::vector<SuctionCandidate> kept;
   if (all.empty() || count <= 0) return kept;
+  std::vector<double> nearest(all.size(), kInf);
+  const auto keep = [&](size_t k) {
+    kept.push_back(all[k]);
+    for (size_t i = 0; i < all.size(); ++i)
+      nearest[i] = std::min(nearest[i], (all[i].contact_table - all[k].contact_table).norm());
+  };
+  for (size_t k = 0; k < std::min(seeds, all.size()) && static_cast<int>(kept.size()) < count; ++k)
+    keep(k);
+  if (static_cast<int>(kept.size()) >= count) return kept;
   size_t first = 0;
   for (size_t i = 1; i < all.size(); ++i)
     if (all[i].seal_score > all[first].seal_score) first = i;
-  std::vector<double> nearest(all.size(), kInf);
+  if (!kept.empty())  // on from the point farthest from the seeds
+    first = static_cast<size_t>(std::max_element(nearest.begin(), nearest.end()) - nearest.begin());
+  if (nearest[first] <= 0.0) return kept;
   size_t next = first;
   while (static_cast<int>(kept.size()) < count) {
     const Vec3 added = all[next].contact_table;
@@ -79,6 +91,31 @@ std::vector<SuctionCandidate> spread(const std::vector<SuctionCandidate>& all, i
     if (best <= 0.0) break;  // every point kept
   }
   return kept;
+}
+
+/// Surface points (object frame) whose pull along the normal passes through the centre of
+/// mass or a cup's radius from it, where the load's moment on the seal is least: on each of the
+/// six ends of the object's axes, the point on the axis and the four a cup's radius around it.
+std::vector<SurfacePoint> centredSamples(const SuperquadricShape& sq, double cup_radius_m) {
+  std::vector<Vec3> towards;  // the six axis ends first: a spread of few candidates keeps them
+  for (int axis = 0; axis < 3; ++axis)
+    for (double sign : {1.0, -1.0}) towards.push_back(sign * Vec3::Unit(axis));
+  for (int axis = 0; axis < 3; ++axis)
+    for (double sign : {1.0, -1.0}) {
+      const Vec3 end = sq.surfacePointAlong(sign * Vec3::Unit(axis));
+      for (int other = 0; other < 3; ++other)
+        if (other != axis)
+          for (double side : {1.0, -1.0})
+            towards.push_back(end + side * cup_radius_m * Vec3::Unit(other));
+    }
+  std::vector<SurfacePoint> out;
+  for (const Vec3& t : towards) {
+    SurfacePoint p;
+    p.position = sq.surfacePointAlong(t.normalized());
+    p.normal = sq.normalObject(p.position).normalized();
+    if (p.position.allFinite() && p.normal.allFinite()) out.push_back(p);
+  }
+  return out;
 }
 
 void validate(const std::vector<SuperquadricShape>& scene, int target,
@@ -249,7 +286,15 @@ CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int 
   std::mt19937_64 rng(config.seed);
   CandidateSet out;
   std::vector<SuctionCandidate> sealable;
-  for (const SurfacePoint& s : sq.sampleSurfaceObject(config.surface_samples, rng)) {
+  // The points whose pull passes through or near the centre of mass first (they seed the
+  // spread), then the random ones.
+  std::vector<SurfacePoint> samples = centredSamples(sq, config.cup_radius_m);
+  const size_t centred = samples.size();
+  for (const SurfacePoint& s : sq.sampleSurfaceObject(config.surface_samples, rng))
+    samples.push_back(s);
+  size_t seeds = 0;
+  for (size_t k = 0; k < samples.size(); ++k) {
+    const SurfacePoint& s = samples[k];
     ++out.surface_samples;
     SuctionCandidate c;
     c.contact_table = sq.T_table_object * s.position;
@@ -275,10 +320,11 @@ CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int 
       }
     }
     sealable.push_back(c);
+    if (k < centred) ++seeds;
   }
   out.sealable = static_cast<int>(sealable.size());
   for (const SuctionCandidate& c : sealable) out.measured += c.measured;
-  out.candidates = spread(sealable, config.max_candidates);
+  out.candidates = spread(sealable, config.max_candidates, seeds);
   return out;
 }
 
