@@ -37,6 +37,32 @@ SuperquadricShape box(const Vec3& half, const Vec3& centre, double yaw = 0.0) {
   return sq;
 }
 
+TEST(GraspEvaluation, EstimateErrorTurnsOnlyBetweenAxesOfAlikeLengths) {
+  SuperquadricShape truth;
+  truth.scale_m = Vec3(0.10, 0.04, 0.02);
+  truth.T_table_object.translation() = Vec3(0.1, 0.0, 0.05);
+  const auto turned = [&](const Vec3& scale, double deg) {
+    SuperquadricShape e = truth;
+    e.scale_m = scale;
+    e.T_table_object.linear() = Eigen::AngleAxisd(deg * M_PI / 180.0, Vec3::UnitZ()).matrix();
+    e.T_table_object.translation() += Vec3(0.003, -0.004, 0.001);
+    return e;
+  };
+  // A long box estimated a quarter turn off is 90 degrees off, not 0.
+  EstimateError e = estimateError(turned(truth.scale_m, 90.0), truth);
+  EXPECT_NEAR(e.rotation_deg, 90.0, 1e-6);
+  EXPECT_NEAR(e.centre_m.x(), 0.003, 1e-12);
+  EXPECT_NEAR(e.scale_ratio.maxCoeff(), 1.0, 1e-12);
+  // Its axes swapped with their lengths: the same shape, a small turn.
+  e = estimateError(turned(Vec3(0.04, 0.10, 0.02), 95.0), truth);
+  EXPECT_NEAR(e.rotation_deg, 5.0, 1e-6);
+  // A square-sided box is alike after a quarter turn about its square face's normal.
+  truth.scale_m = Vec3(0.05, 0.05, 0.02);
+  EXPECT_NEAR(estimateError(turned(truth.scale_m, 87.0), truth).rotation_deg, 3.0, 1e-6);
+  EXPECT_NEAR(estimateError(turned(Vec3(0.06, 0.05, 0.02), 7.0), truth).scale_ratio.z(), 1.2,
+              1e-12);
+}
+
 TEST(Chamfer, ZeroForIdenticalSetsAndTwiceTheShiftForAPlane) {
   Points3 a, b;
   for (int i = 0; i < 40; ++i)

@@ -195,18 +195,23 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
                   why;
     return false;
   }
-  res.header = scene->header;
-  res.header.frame_id = tf2Frame(res.header.frame_id);  // markers in rviz
-  out->T_scene_table = tableInFrame(*scene);            // throws for a bad pose (caught by serve())
-  if (!placeRequest(req, *scene, res, out)) return false;
   GraspRequest request;
-  request.scenes = graspScenes(*scene, GraspPolicy::kMaxHypotheses);  // table frame; throws
-  request.target = out->target;
   request.pull_distance_m = req.pull_distance_m;
   request.pull_speed_mps = req.pull_speed_mps;
   request.candidates = req.candidates;
   request.hypotheses = req.hypotheses;
   request.pregrasp_m = req.pregrasp_distance_m;
+  checkGraspBounds(request, config_.policy);  // before any work (throws; caught by serve())
+  res.header = scene->header;
+  res.header.frame_id = tf2Frame(res.header.frame_id);  // markers in rviz
+  out->T_scene_table = tableInFrame(*scene);            // throws for a bad pose (caught by serve())
+  if (!placeRequest(req, *scene, res, out)) return false;
+  // The scenes asked for only (table frame; throws for a bad pose).
+  request.scenes =
+      graspScenes(*scene, req.hypotheses == 0 ? GraspPolicy::kMaxHypotheses
+                                              : static_cast<int>(std::min<uint32_t>(
+                                                    req.hypotheses, GraspPolicy::kMaxHypotheses)));
+  request.target = out->target;
   if (req.use_camera_pose) {  // its position only: candidates are what is in sight from it
     const geometry_msgs::Point& p = req.camera_pose.position;
     request.camera_table = out->T_scene_table.inverse() * Vec3(p.x, p.y, p.z);

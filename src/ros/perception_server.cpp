@@ -399,15 +399,14 @@ void PerceptionServer::applySettings() {
     std::lock_guard<std::mutex> lock(mutex_);
     s.swap(pending_settings_);
     h.swap(pending_hough_);
+    if (s) node_.occupancy_min = s->occupancy_min;
   }
   if (!s && !h) return;
   PerceptionConfig c = perception_->config();
   if (s) {
-    double occupancy_min = 0.0;
+    double occupancy_min = 0.0;  // set above, with the swap
     pairLiveSettings(*s, c, occupancy_min, kApply);
     c.decompose_samples = std::min(decompose_samples_, c.samples);
-    std::lock_guard<std::mutex> lock(mutex_);
-    node_.occupancy_min = occupancy_min;
   }
   if (h) pairHoughSettings(*h, c.hough, kApply);
   try {

@@ -65,23 +65,31 @@ void addSealOptions(CLI::App& app, GraspEvaluationOptions* o, bool* superquadric
 /// Every pick, one JSON object each.
 nlohmann::json pickRows(const std::vector<PickResult>& picks) {
   nlohmann::json rows = nlohmann::json::array();
-  for (const PickResult& p : picks)
-    rows.push_back(
-        {{"scene", p.scene},
-         {"target", p.target},
-         {"method", p.method},
-         {"chooser", p.chooser},
-         {"found", p.found},
-         {"grasped", p.grasped},
-         {"mean_displacement_m", p.outcome.mean_displacement_m},
-         {"max_displacement_m", p.outcome.max_displacement_m},
-         {"toppled", p.outcome.toppled},
-         {"freed", p.outcome.target_freed},
-         {"failed", p.outcome.failed()},
-         {"centre_error_m", {p.error.centre_m.x(), p.error.centre_m.y(), p.error.centre_m.z()}},
-         {"rotation_error_deg", p.error.rotation_deg},
-         {"scale_ratio",
-          {p.error.scale_ratio.x(), p.error.scale_ratio.y(), p.error.scale_ratio.z()}}});
+  for (const PickResult& p : picks) {
+    nlohmann::json row = {{"scene", p.scene},
+                          {"target", p.target},
+                          {"method", p.method},
+                          {"chooser", p.chooser},
+                          {"found", p.found},
+                          {"grasped", p.grasped},
+                          {"mean_displacement_m", p.outcome.mean_displacement_m},
+                          {"max_displacement_m", p.outcome.max_displacement_m},
+                          {"toppled", p.outcome.toppled},
+                          {"freed", p.outcome.target_freed},
+                          {"failed", p.outcome.failed()}};
+    // The matched estimate's error; null for the oracle and for a target the method missed.
+    const bool estimated = p.found && p.method != "truth";
+    const EstimateError& e = p.error;
+    row["centre_error_m"] = estimated
+                                ? nlohmann::json{e.centre_m.x(), e.centre_m.y(), e.centre_m.z()}
+                                : nlohmann::json(nullptr);
+    row["rotation_error_deg"] =
+        estimated ? nlohmann::json(e.rotation_deg) : nlohmann::json(nullptr);
+    row["scale_ratio"] =
+        estimated ? nlohmann::json{e.scale_ratio.x(), e.scale_ratio.y(), e.scale_ratio.z()}
+                  : nlohmann::json(nullptr);
+    rows.push_back(std::move(row));
+  }
   return rows;
 }
 

@@ -23,7 +23,7 @@ namespace simstack {
 struct PerturbationConfig {
   int copies = 0;              ///< 0: none
   double position_m = 0.0127;  ///< across the table (x, y)
-  double rotation_deg = 5.9;   ///< about a random axis
+  double rotation_deg = 7.6;   ///< about a random axis
   double scale_share = 0.146;  ///< of each semi-axis
   uint64_t seed = 0;           ///< the same seed gives the same copies
   /// Throws std::invalid_argument naming the field.

@@ -55,6 +55,11 @@ struct PreparedGrasps {
   std::string notes;  ///< what the caller should be told, "; "-joined (empty when nothing)
 };
 
+/// The request's own numbers against `policy` (pull distance and speed, pre-grasp stand-off):
+/// throws std::invalid_argument saying which and the allowed range. prepareGrasps runs it
+/// first; a caller may run it before the work of converting the scene.
+void checkGraspBounds(const GraspRequest& request, const GraspPolicy& policy);
+
 /// Checks `request` against `policy` and prepares the ranking on `base`'s cup, seal, physics and
 /// threads. Throws std::invalid_argument saying what is wrong and the allowed range: a pull
 /// distance or speed out of bounds, a pre-grasp stand-off out of bounds, an unknown target, a

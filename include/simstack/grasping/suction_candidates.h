@@ -70,7 +70,7 @@ Transform pregraspPose(const Transform& tool, double distance_m);
 
 struct CandidateSet {
   std::vector<SuctionCandidate> candidates;
-  int surface_samples = 0;  ///< drawn on the target
+  int surface_samples = 0;  ///< drawn on the target (the 30 through the centre of mass too)
   int visible = 0;          ///< of them seen by a camera
   int reachable = 0;        ///< of those, approachable from above the table
   int sealable = 0;         ///< of those, where the rim seals (on the superquadric and, where

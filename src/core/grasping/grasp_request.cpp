@@ -58,8 +58,7 @@ void GraspPolicy::validate() const {
     throw std::invalid_argument("table_gap_m must be >= 0");
 }
 
-PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConfig& base,
-                             const GraspPolicy& policy) {
+void checkGraspBounds(const GraspRequest& request, const GraspPolicy& policy) {
   if (!positiveFinite(request.pull_distance_m) ||
       request.pull_distance_m > policy.max_pull_distance_m)
     throw std::invalid_argument("pull_distance_m must lie in (0, " +
@@ -75,6 +74,11 @@ PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConf
                                 number(policy.max_pregrasp_m) + "] m, not " +
                                 number(request.pregrasp_m) + " (0: the server's " +
                                 number(policy.pregrasp_distance_m) + ")");
+}
+
+PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConfig& base,
+                             const GraspPolicy& policy) {
+  checkGraspBounds(request, policy);
   if (request.scenes.empty() || request.scenes[0].empty())
     throw std::invalid_argument("the scene has no objects");
   if (request.target < 0 || request.target >= static_cast<int>(request.scenes[0].size()))

@@ -55,8 +55,9 @@ bool seenFromAny(const DepthRenderer& renderer, int instance, const Vec3& p, con
   return false;
 }
 
-// Farthest-point spread: starts from the best seal, then adds the candidate farthest from
-// those kept, `count` in all (ties to the lower index, so the result is deterministic).
+// Farthest-point spread, `count` in all: the first `seeds` candidates kept first (a repeated
+// point once), then the candidate farthest from those kept, starting from the best seal when
+// there are no seeds (ties to the lower index, so the result is deterministic).
 std::vector<SuctionCandidate> spread(const std::vector<SuctionCandidate>& all, int count,
                                      size_t seeds) {
   std::vector<SuctionCandidate> kept;
@@ -68,13 +69,15 @@ std::vector<SuctionCandidate> spread(const std::vector<SuctionCandidate>& all, i
       nearest[i] = std::min(nearest[i], (all[i].contact_table - all[k].contact_table).norm());
   };
   for (size_t k = 0; k < std::min(seeds, all.size()) && static_cast<int>(kept.size()) < count; ++k)
-    keep(k);
+    if (nearest[k] > 0.0) keep(k);
   if (static_cast<int>(kept.size()) >= count) return kept;
   size_t first = 0;
-  for (size_t i = 1; i < all.size(); ++i)
-    if (all[i].seal_score > all[first].seal_score) first = i;
-  if (!kept.empty())  // on from the point farthest from the seeds
+  if (kept.empty()) {
+    for (size_t i = 1; i < all.size(); ++i)
+      if (all[i].seal_score > all[first].seal_score) first = i;
+  } else {  // on from the point farthest from the seeds
     first = static_cast<size_t>(std::max_element(nearest.begin(), nearest.end()) - nearest.begin());
+  }
   if (nearest[first] <= 0.0) return kept;
   size_t next = first;
   while (static_cast<int>(kept.size()) < count) {

@@ -129,17 +129,35 @@ double median(std::vector<double> v) {
   return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
 
-// The 24 rotations that map the coordinate axes onto themselves (signed permutation matrices
-// of determinant 1).
-std::vector<Mat3> axisTurns() {
+// The rotations that pair the estimate's axes with the truth's as their lengths allow (signed
+// permutation matrices of determinant 1; m * e_p[i] = +-e_i pairs the estimate's axis i with
+// the truth's axis p[i]): the pairing by rank of length, and any other that only swaps true
+// axes of lengths within 20 % of each other (a superquadric looks alike after such a turn).
+std::vector<Mat3> axisTurns(const Vec3& estimate_scale, const Vec3& truth_scale) {
+  const auto byLength = [](const Vec3& v) {  // the axes, shortest first
+    std::array<int, 3> order{0, 1, 2};
+    std::sort(order.begin(), order.end(), [&](int a, int b) { return v[a] < v[b]; });
+    return order;
+  };
+  const std::array<int, 3> truth_order = byLength(truth_scale);
+  const std::array<int, 3> estimate_order = byLength(estimate_scale);
+  std::array<int, 3> estimate_rank{};
+  for (int r = 0; r < 3; ++r) estimate_rank[estimate_order[r]] = r;
   std::vector<Mat3> out;
-  const int perms[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-  for (const auto& p : perms)
+  std::array<int, 3> p{0, 1, 2};
+  do {
+    bool alike = true;
+    for (int i = 0; i < 3; ++i) {
+      const double paired = truth_scale[truth_order[estimate_rank[i]]];
+      alike = alike && std::abs(truth_scale[p[i]] / paired - 1.0) <= 0.2;
+    }
+    if (!alike) continue;
     for (int signs = 0; signs < 8; ++signs) {
       Mat3 m = Mat3::Zero();
       for (int i = 0; i < 3; ++i) m(i, p[i]) = (signs >> i) & 1 ? -1.0 : 1.0;
       if (m.determinant() > 0) out.push_back(m);
     }
+  } while (std::next_permutation(p.begin(), p.end()));
   return out;
 }
 
@@ -148,11 +166,11 @@ std::vector<Mat3> axisTurns() {
 EstimateError estimateError(const SuperquadricShape& estimate, const SuperquadricShape& truth) {
   EstimateError e;
   e.centre_m = estimate.centroid() - truth.centroid();
-  static const std::vector<Mat3> turns = axisTurns();
   const Mat3 relative =
       truth.T_table_object.linear().transpose() * estimate.T_table_object.linear();
   double best = M_PI;
-  for (const Mat3& t : turns) best = std::min(best, Eigen::AngleAxisd(relative * t).angle());
+  for (const Mat3& t : axisTurns(estimate.scale_m, truth.scale_m))
+    best = std::min(best, Eigen::AngleAxisd(relative * t).angle());
   e.rotation_deg = best * 180.0 / M_PI;
   Vec3 a = estimate.scale_m, b = truth.scale_m;
   std::sort(a.data(), a.data() + 3);

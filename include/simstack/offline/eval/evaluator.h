@@ -1,8 +1,8 @@
 #pragma once
 /// @file evaluator.h
-/// The evaluation protocol of DESIGN.md section 5 (the paper's section 4.1, Table 1) over one
+/// The evaluation protocol of docs/design.md section 6 (the paper's section 4.1, Table 1) over one
 /// interface that every evaluated method implements (the networks through ScenePerception, the
-/// classical baseline; see pipeline/evaluated_methods.h): each test scene seen from random
+/// classical baseline; see offline/eval/evaluated_methods.h): each test scene seen from random
 /// viewpoints in the paper's ranges, every method on the same rendered views, scored by
 /// visible and full Chamfer distance, expected occupancy (BCE, IoU), stability of the fitted
 /// superquadrics under physics and object counts, binned by the visible share of the surface.

@@ -26,7 +26,7 @@ double chamferDistance(const Points3& a, const Points3& b);
 std::vector<float> superquadricOccupancy(const std::vector<SuperquadricShape>& shapes,
                                          const GridSpec& grid);
 
-/// The protocol of DESIGN.md section 5: the shapes as rigid bodies of uniform density on the
+/// The protocol of docs/design.md section 6: the shapes as rigid bodies of uniform density on the
 /// table, 10,000 steps, gravity 10 m/s^2, friction 1. Rolling and spinning friction are those
 /// of the physics that settled and verified the generated piles (sleeping stays on, which the
 /// generator turns off): with the physics' default of 0.001, rounded objects of the true piles
