@@ -55,15 +55,12 @@ class GraspServer {
   void runGoal(GoalHandle goal, const std::atomic<bool>& cancelled);
   /// A request made ready for the ranking.
   struct PreparedRequest {
-    std::vector<std::vector<SuperquadricShape>> scenes;  ///< hypothesis 0 first
-    int target = -1;                                     ///< index in the scene's objects
-    GraspRankingConfig config;
-    std::vector<Vec3> cameras;
-    std_msgs::Header pose_header;                     ///< frame of the tool and pre-grasp poses
+    PreparedGrasps grasps;         ///< the ranking's input (scenes, config, cameras, pre-grasp)
+    int target = -1;               ///< index in the scene's objects
+    std_msgs::Header pose_header;  ///< frame of the tool and pre-grasp poses
     Transform T_pose_table = Transform::Identity();   ///< the table frame in pose_header's
     Transform T_scene_table = Transform::Identity();  ///< and in the scene's
     Points3 measured_target;  ///< depth points measured on the target, table frame
-    double pregrasp_distance_m = 0.0;
   };
   void onObjects(const ObjectArray::ConstPtr& msg);
   /// The request checked and turned into scenes; false with res.message set when it is bad.

@@ -217,13 +217,9 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
     request.camera_table = out->T_scene_table.inverse() * Vec3(p.x, p.y, p.z);
   }
   // Throws std::invalid_argument saying what is out of bounds (caught by serve()).
-  PreparedGrasps prepared = prepareGrasps(request, config_.ranking, config_.policy);
-  out->scenes = std::move(prepared.scenes);
-  out->config = prepared.config;
-  out->cameras = prepared.cameras;
-  out->pregrasp_distance_m = prepared.pregrasp_m;
+  out->grasps = prepareGrasps(request, config_.ranking, config_.policy);
   out->measured_target = measuredSurface(scene->objects[out->target], out->T_scene_table.inverse());
-  std::string notes = prepared.notes;
+  std::string notes = out->grasps.notes;
   if (req.hypotheses == 0 && scene->hypotheses.empty())
     notes += std::string(notes.empty() ? "" : "; ") +
              "ranked in the objects alone: the scene carries no hypotheses (the perception "
@@ -330,15 +326,15 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
       progress = [&](int done, int total, const RankedGrasp* best) {
         std::optional<Grasp> msg;
         if (best)
-          msg = graspMsg(*best, p.pose_header, p.T_pose_table, p.T_scene_table,
-                         p.pregrasp_distance_m);
+          msg =
+              graspMsg(*best, p.pose_header, p.T_pose_table, p.T_scene_table, p.grasps.pregrasp_m);
         return feedback(done, total, msg ? &*msg : nullptr);
       };
-    const GraspRanking ranking =
-        rankGrasps(p.scenes, p.target, p.cameras, p.config, progress, p.measured_target);
+    const GraspRanking ranking = rankGrasps(p.grasps.scenes, p.target, p.grasps.cameras,
+                                            p.grasps.config, progress, p.measured_target);
     for (const RankedGrasp& g : ranking.grasps)
       res.grasps.push_back(
-          graspMsg(g, p.pose_header, p.T_pose_table, p.T_scene_table, p.pregrasp_distance_m));
+          graspMsg(g, p.pose_header, p.T_pose_table, p.T_scene_table, p.grasps.pregrasp_m));
     for (const SceneDrift& d : ranking.baseline)
       res.baseline_displacement_m.push_back(static_cast<float>(d.max_displacement_m));
     res.candidates_seen = static_cast<uint32_t>(ranking.candidates.visible);

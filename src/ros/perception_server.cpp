@@ -36,13 +36,13 @@ std::string outputDirectory(const std::string& configured) {
 
 /// Each live setting (config/LiveSettings.cfg, config/HoughSettings.cfg) beside the field it
 /// sets: the one place they are paired. `f(live_field, field)` is called for each pair.
+/// (`occupancy_min`, the node's own, is set apart.)
 template <typename F>
-void pairLiveSettings(LiveSettingsConfig& live, PerceptionConfig& c, double& occupancy_min, F f) {
+void pairLiveSettings(LiveSettingsConfig& live, PerceptionConfig& c, F f) {
   f(live.samples, c.samples);
   f(live.symmetries, c.symmetries);
   f(live.min_instance_points, c.min_instance_points);
   f(live.joint_refinement, c.joint_refinement);
-  f(live.occupancy_min, occupancy_min);
 }
 template <typename F>
 void pairHoughSettings(HoughSettingsConfig& live, HoughConfig& h, F f) {
@@ -57,7 +57,8 @@ const auto kApply = [](const auto& live, auto& field) { field = live; };
 
 LiveSettingsConfig liveSettings(PerceptionConfig c, double occupancy_min) {
   LiveSettingsConfig live;
-  pairLiveSettings(live, c, occupancy_min, kShow);
+  pairLiveSettings(live, c, kShow);
+  live.occupancy_min = occupancy_min;
   return live;
 }
 
@@ -404,8 +405,7 @@ void PerceptionServer::applySettings() {
   if (!s && !h) return;
   PerceptionConfig c = perception_->config();
   if (s) {
-    double occupancy_min = 0.0;  // set above, with the swap
-    pairLiveSettings(*s, c, occupancy_min, kApply);
+    pairLiveSettings(*s, c, kApply);
     c.decompose_samples = std::min(decompose_samples_, c.samples);
   }
   if (h) pairHoughSettings(*h, c.hough, kApply);
