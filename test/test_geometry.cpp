@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <limits>
+#include <locale>
 #include <random>
 
 #include "simstack/geometry/container.h"
@@ -187,6 +188,18 @@ TEST(Container, MeshEnclosesTheSolidItsInsideTestDescribes) {
   ASSERT_TRUE(parsed.has_value());
   EXPECT_NEAR(parsed->radius_top_m, 0.08, 1e-9);
   EXPECT_NEAR(parsed->wall_m, 0.006, 1e-9);
+  {  // a host program's decimal comma changes neither the name nor its reading
+    struct Comma : std::numpunct<char> {
+      char do_decimal_point() const override { return ','; }
+    };
+    const std::locale before = std::locale::global(std::locale(std::locale::classic(), new Comma));
+    const std::string name = bowl.name();
+    const auto read = parseContainerName(name);
+    std::locale::global(before);
+    EXPECT_EQ(name, parseContainerName(bowl.name())->name());
+    ASSERT_TRUE(read.has_value()) << name;
+    EXPECT_NEAR(read->height_m, bowl.height_m, 1e-4);
+  }
   EXPECT_FALSE(parseContainerName("container 0.08 0.045").has_value());
   EXPECT_FALSE(parseContainerName("003_cracker_box").has_value());
   EXPECT_FALSE(parseContainerName("container 0.08 0.045 0.06 0.006 extra").has_value());

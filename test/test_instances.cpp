@@ -3,6 +3,7 @@
 
 #include <array>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
 #include <random>
@@ -197,7 +198,7 @@ TEST(HoughVoting, RaysStoppedWhereVotesTurnBackFindTheSameCentres) {
   const GridSpec g = GridSpec::sceneGrid(Vec2(0.1, -0.2), 0.64, 32);
   std::mt19937_64 rng(11);
   HoughConfig stop;
-  stop.reversed_vote_stop_vox = 1;
+  stop.experimental.reversed_vote_stop_vox = 1;
   for (int k = 1; k <= 8; ++k) {
     Grid3<float> tsdf;
     Grid3<Vec3f> votes;
@@ -269,6 +270,18 @@ TEST(HoughVoting, EmptySceneAndBadInput) {
   HoughConfig no_bandwidth;
   no_bandwidth.bandwidth_m = std::nan("");
   EXPECT_THROW(no_bandwidth.validate(), std::invalid_argument);
+  // A grid without a size or a place would leave every voxel with no centre: refused.
+  const std::vector<std::function<void(GridSpec&)>> bends = {
+      [](GridSpec& s) { s.voxel_size_m = 0; }, [](GridSpec& s) { s.voxel_size_m = std::nan(""); },
+      [](GridSpec& s) { s.origin_table.x() = std::nan(""); }};
+  for (const auto& bend : bends) {
+    GridSpec bad = g;
+    bend(bad);
+    Grid3<float> bad_tsdf = tsdf;
+    bad_tsdf.spec = bad;
+    EXPECT_THROW(houghInstances(bad_tsdf, Grid3<Vec3f>(bad, Vec3f(1, 0, 0))),
+                 std::invalid_argument);
+  }
 }
 
 TEST(HoughVoting, ZeroVotesDoNotCrash) {
@@ -319,10 +332,11 @@ TEST(ConvexSplit, CutsAnLAtItsSeamAndLeavesABoxWhole) {
   seg.voxel_counts = {10 * 6 * 10 + 6 * 6 * 4, 6 * 6 * 5};
   HoughConfig off;
   InstanceSegmentation untouched = seg;
-  EXPECT_EQ(splitNonConvexInstances(&untouched, off), 0);  // split_below_solidity 0: off
+  EXPECT_EQ(splitNonConvexInstances(&untouched, off),
+            0);  // experimental.split_below_solidity 0: off
   HoughConfig config;
-  config.split_below_solidity = 0.95;
-  config.split_accept_solidity = 0.95;
+  config.experimental.split_below_solidity = 0.95;
+  config.experimental.split_accept_solidity = 0.95;
   ASSERT_EQ(splitNonConvexInstances(&seg, config), 1);
   ASSERT_EQ(seg.size(), 3);
   EXPECT_EQ(seg.voxel_counts, (std::vector<int>{600, 180, 144}));  // largest first

@@ -1156,4 +1156,25 @@ TEST(CvaeConfig, TrainingFilesRejectMisspeltFieldsAndNameThem) {
   expectError("training:\n  lerning_rate: 0.1\n", "unknown field training.lerning_rate");
   expectError("trainig:\n  steps: 3\n", "unknown section 'trainig'");
   expectError("training: 3\n", "'training' must be a map");
+  // Dropped variants' settings stand under experimental: and are refused elsewhere.
+  expectError("model:\n  prior: learned\n", "write it under model.experimental");
+  expectError("training:\n  overhead_share: 0.5\n", "under training.experimental");
+  expectError("model:\n  experimental:\n    prior_kind: learned\n",
+              "unknown field model.experimental.prior_kind");
+  expectError("model:\n  experimental:\n    latent_size: 8\n",
+              "unknown field model.experimental.latent_size");
+  expectError("model:\n  experimental:\n    kl_free_nats: abc\n", "line 3,");  // the file's line
+  const std::string path = dir + "/experimental.yaml";
+  std::ofstream(path) << "model:\n  latent_size: 8\n  experimental:\n    prior: learned\n"
+                         "    kl_free_nats: 4\ntraining:\n  experimental:\n"
+                         "    overhead_share: 0.5\n";
+  CvaeConfig model;
+  TrainConfig training;
+  ASSERT_NO_THROW(loadTrainingYaml(path, &model, &training));
+  EXPECT_EQ(model.latent_size, 8);
+  EXPECT_EQ(model.prior, "learned");
+  EXPECT_DOUBLE_EQ(model.kl_free_nats, 4.0);
+  EXPECT_DOUBLE_EQ(training.overhead_share, 0.5);
+  // A model file stores every field flat; it reads back whole.
+  EXPECT_EQ(CvaeConfig::fromYaml(model.toYaml()).prior, "learned");
 }

@@ -86,7 +86,40 @@ TEST(PerceptionConfig, ShippedYamlHoldsTheDefaultsAndTyposAreErrors) {
   EXPECT_NE(refusal("symetries: 4\n").find("unknown field 'symetries'"), std::string::npos);
   EXPECT_NE(refusal("perception:\n  symmetries: 4\n").find("top level"), std::string::npos);
   EXPECT_NE(refusal("node:\n  table_frame: t\n").find("perception_node.yaml"), std::string::npos);
+  // A dropped variant's setting stands under hough.experimental; directly under hough it is
+  // refused with the place it belongs, and a misspelt one is refused by its full name.
+  EXPECT_NE(refusal("hough:\n  split_below_solidity: 0.8\n").find("under hough.experimental"),
+            std::string::npos);
+  EXPECT_NE(refusal("hough:\n  experimental:\n    split_below: 0.8\n")
+                .find("unknown field hough.experimental.split_below"),
+            std::string::npos);
+  std::ofstream(bad) << "hough:\n  refinement: 6\n  experimental:\n    split_below_solidity: 0.8\n";
+  const PerceptionConfig split = loadPerceptionYaml(bad);
+  EXPECT_EQ(split.hough.refinement, 6);
+  EXPECT_DOUBLE_EQ(split.hough.experimental.split_below_solidity, 0.8);
+  EXPECT_EQ(split.hough.experimental.split_max_rounds, HoughExperimental().split_max_rounds);
+  std::ofstream(bad) << perceptionYaml(split);  // the full dump reads back as it was
+  EXPECT_EQ(perceptionYaml(loadPerceptionYaml(bad)), perceptionYaml(split));
   std::filesystem::remove(bad);
+}
+
+TEST(PerceptionConfig, ACardSectionNamesExperimentalSettingsOnlyWhenOn) {
+  HoughConfig h;
+  h.refinement = 8;
+  EXPECT_EQ(modelCardPerceptionYaml(1, h).find("experimental"), std::string::npos);
+  h.experimental.reversed_vote_stop_vox = 2;
+  const std::string text = modelCardPerceptionYaml(1, h);
+  EXPECT_NE(text.find("experimental"), std::string::npos) << text;
+  // The section pasted into a card is read back as the setting it came from.
+  const auto dir = std::filesystem::temp_directory_path() / "simstack_card_section";
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "m.yaml") << text;
+  PerceptionConfig c;
+  c.model_path = (dir / "m.pt").string();
+  applyModelCard(&c);
+  EXPECT_EQ(c.hough.refinement, 8);
+  EXPECT_EQ(c.hough.experimental.reversed_vote_stop_vox, 2);
+  std::filesystem::remove_all(dir);
 }
 
 TEST(PerceptionConfig, ParametersAreLaidOverTheShippedFileFieldByField) {

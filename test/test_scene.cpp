@@ -48,6 +48,18 @@ TEST(Physics, BoxComesToRestOnTheTable) {
   EXPECT_LT(Quat(world.pose(0).linear()).angularDistance(Quat::Identity()), 0.01);
 }
 
+// Moving a cup that was never attached is a programmer error: the process stops and says so
+// (an internal error, not an exception a caller could take for bad input).
+TEST(PhysicsDeathTest, MovingACupNeverAttachedStopsWithTheReason) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  EXPECT_DEATH(
+      {
+        PhysicsWorld world;
+        world.moveCup(Vec3(0.0, 0.0, 0.1));
+      },
+      "simstack internal error: moveCup without attachCup");
+}
+
 TEST(ObjectShape, PhysicsHullIsCompactOnTheSurfaceAndSurvivesTinyShapes) {
   // Box-like: the snapped lattice's face points are coplanar and leave the hull.
   SuperquadricShape box;

@@ -41,6 +41,9 @@ void addSealOptions(CLI::App& app, GraspEvaluationOptions* o, bool* superquadric
                  "oracle's ranking on the true pile takes none)")
       ->capture_default_str()
       ->check(CLI::Range(0, 64));
+  app.add_flag("--best-in-truth", o->best_in_truth,
+               "also pick each estimate's candidate whose pull does best in the true pile (what "
+               "a perfect ranking of those candidates would do)");
   PerturbationConfig& p = o->ranking.perturbation;
   app.add_option("--perturb-position", p.position_m,
                  "standard deviation of a copy's shift across the table (m)")
@@ -60,6 +63,34 @@ void addSealOptions(CLI::App& app, GraspEvaluationOptions* o, bool* superquadric
   app.add_flag("--superquadric-seal", *superquadric_seal,
                "judge seals on the estimated superquadrics alone, not on the depth points "
                "measured on the target (the ranking without the measured surface)");
+}
+
+/// A "best in truth" pick's candidates: what the ranking saw on the estimate, what the pull did
+/// in the true pile.
+nlohmann::json trialRows(const std::vector<CandidateTrial>& trials) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (const CandidateTrial& t : trials) {
+    const RankedGrasp& g = t.estimate;
+    const SuctionCandidate& c = g.candidate;
+    rows.push_back(
+        {{"contact", {c.contact_table.x(), c.contact_table.y(), c.contact_table.z()}},
+         {"approach", {c.approach_table.x(), c.approach_table.y(), c.approach_table.z()}},
+         {"measured", c.measured},
+         {"rim_deviation_m", c.rim_deviation_m},
+         {"com_offset_m", g.com_offset_m},
+         {"failed_share", g.failed_share},
+         {"freed_share", g.freed_share},
+         {"toppled", g.mean_toppled},
+         {"score_m", g.score_m},
+         {"peak_load", g.peak_load},
+         {"lift_m", g.outcomes.empty() ? 0.0 : g.outcomes.front().target_lift_m},
+         {"true_failed", t.truth.failed()},
+         {"true_freed", t.truth.target_freed},
+         {"true_toppled", t.truth.toppled},
+         {"true_displacement_m", t.truth.mean_displacement_m},
+         {"true_peak_load", t.truth.peak_load}});
+  }
+  return rows;
 }
 
 /// Every pick, one JSON object each.
@@ -88,6 +119,7 @@ nlohmann::json pickRows(const std::vector<PickResult>& picks) {
     row["scale_ratio"] =
         estimated ? nlohmann::json{e.scale_ratio.x(), e.scale_ratio.y(), e.scale_ratio.z()}
                   : nlohmann::json(nullptr);
+    if (!p.trials.empty()) row["trials"] = trialRows(p.trials);
     rows.push_back(std::move(row));
   }
   return rows;
@@ -105,7 +137,8 @@ nlohmann::json runSettings(const GraspEvaluationOptions& o) {
           {"perturb_position_m", p.position_m},
           {"perturb_rotation_deg", p.rotation_deg},
           {"perturb_scale_share", p.scale_share},
-          {"true_seal", o.true_seal}};
+          {"true_seal", o.true_seal},
+          {"best_in_truth", o.best_in_truth}};
 }
 
 /// Each method's estimate error, as estimateErrorSummary gives it.

@@ -44,7 +44,7 @@ static void BM_HoughVoting(benchmark::State& state) {
   HoughConfig hc;
   hc.threads = 2;
   // Its peer: rays stopped where the votes turn back (off in the shipped configs).
-  hc.reversed_vote_stop_vox = static_cast<int>(state.range(1));
+  hc.experimental.reversed_vote_stop_vox = static_cast<int>(state.range(1));
   InstanceSegmentation seg;
   double rays = 0, shift = 0, assign = 0;
   for (auto _ : state) {

@@ -2,6 +2,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <iomanip>
+#include <locale>
 #include <sstream>
 #include <stdexcept>
 #include <vector>
@@ -85,14 +87,17 @@ TriangleMesh ContainerSpec::mesh(int segments) const {
 }
 
 std::string ContainerSpec::name() const {
-  char text[96];
-  std::snprintf(text, sizeof(text), "%s %.4f %.4f %.4f %.4f", kPrefix, radius_top_m,
-                radius_bottom_m, height_m, wall_m);
-  return text;
+  // The classic locale both ways: a host program's decimal comma must not change the names.
+  std::ostringstream text;
+  text.imbue(std::locale::classic());
+  text << kPrefix << std::fixed << std::setprecision(4) << ' ' << radius_top_m << ' '
+       << radius_bottom_m << ' ' << height_m << ' ' << wall_m;
+  return text.str();
 }
 
 std::optional<ContainerSpec> parseContainerName(const std::string& name) {
   std::istringstream in(name);
+  in.imbue(std::locale::classic());
   std::string prefix;
   ContainerSpec spec;
   if (!(in >> prefix) || prefix != kPrefix) return std::nullopt;

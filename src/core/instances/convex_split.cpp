@@ -93,7 +93,7 @@ Cut bestCut(const std::vector<Vec3i>& voxels, const GridSpec& grid, int min_voxe
 }  // namespace
 
 int splitNonConvexInstances(InstanceSegmentation* seg, const HoughConfig& config) {
-  if (config.split_below_solidity <= 0.0 || seg->size() == 0) return 0;
+  if (config.experimental.split_below_solidity <= 0.0 || seg->size() == 0) return 0;
   const GridSpec& grid = seg->labels.spec;
   struct Part {
     std::vector<Vec3i> voxels;
@@ -106,13 +106,14 @@ int splitNonConvexInstances(InstanceSegmentation* seg, const HoughConfig& config
   for (int i = 0; i < grid.voxelCount(); ++i)
     if (seg->labels.data[i] >= 0) parts[seg->labels.data[i]].voxels.push_back(grid.unravel(i));
   int splits = 0;
-  for (int round = 0; round < config.split_max_rounds; ++round) {
+  for (int round = 0; round < config.experimental.split_max_rounds; ++round) {
     std::vector<Part> next;
     bool changed = false;
     for (Part& part : parts) {
-      if (!part.settled && voxelSolidity(part.voxels, grid) < config.split_below_solidity) {
+      if (!part.settled &&
+          voxelSolidity(part.voxels, grid) < config.experimental.split_below_solidity) {
         Cut c = bestCut(part.voxels, grid, config.min_instance_voxels);
-        if (c.solidity >= config.split_accept_solidity) {
+        if (c.solidity >= config.experimental.split_accept_solidity) {
           next.push_back({std::move(c.a), true});
           next.push_back({std::move(c.b), true});
           ++splits;

@@ -1,5 +1,6 @@
 #include "simstack/instances/hough_voting.h"
 
+#include "simstack/assert.h"
 #include "simstack/instances/convex_split.h"
 
 #include <omp.h>
@@ -251,6 +252,11 @@ void checkHoughInput(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
   if (!(tsdf_m.spec == votes.spec) || tsdf_m.data.size() != votes.data.size() ||
       static_cast<int>(tsdf_m.data.size()) != tsdf_m.spec.voxelCount())
     throw std::invalid_argument("houghInstances: the TSDF and the vote field must share a grid");
+  const GridSpec& g = tsdf_m.spec;
+  if (!(std::isfinite(g.voxel_size_m) && g.voxel_size_m > 0.0) || !g.origin_table.allFinite())
+    throw std::invalid_argument(
+        "houghInstances: the grid needs a finite voxel size > 0 and a "
+        "finite origin");
   config.validate();
   if (static_cast<int64_t>(tsdf_m.spec.resolution) * config.refinement > kMaxHoughFineCells)
     throw std::invalid_argument("houghInstances: resolution x refinement too large");
@@ -327,8 +333,8 @@ FineCounts countRays(const GridSpec& g, const std::vector<int>& occupied,
       const Vec3 p = (g.unravel(occupied[k]).cast<double>() + Vec3::Constant(0.5)) * ref;
       const Vec3& d = dirs[k];
       visits[t] += marchRay<FineCount>(
-          p, d, ref, occ, r, config.outside_tolerance_vox, config.reversed_vote_stop_vox,
-          axis_tables,
+          p, d, ref, occ, r, config.outside_tolerance_vox,
+          config.experimental.reversed_vote_stop_vox, axis_tables,
           [&](int voxel) {
             const int b = block_of[voxel];
             return b >= 0 ? counts + b * block : nullptr;
@@ -437,7 +443,7 @@ void assignToCentres(const GridSpec& g, const std::vector<int>& occupied,
     }
     std::vector<int> counts(centres.size(), 0);
     for (const int n : assignment) {
-      if (n < 0) throw std::logic_error("houghInstances: a voxel was assigned to no centre");
+      SIMSTACK_ASSERT(n >= 0, "houghInstances: a voxel was assigned to no centre");
       ++counts[n];
     }
     std::vector<Vec3> kept;
@@ -483,12 +489,14 @@ void HoughConfig::validate() const {
   require(std::isfinite(min_vote_norm) && min_vote_norm >= 0, "min_vote_norm", min_vote_norm,
           "finite and >= 0");
   require(outside_tolerance_vox >= 0, "outside_tolerance_vox", outside_tolerance_vox, ">= 0");
-  require(reversed_vote_stop_vox >= 0, "reversed_vote_stop_vox", reversed_vote_stop_vox, ">= 0");
-  require(split_below_solidity >= 0 && split_below_solidity <= 1, "split_below_solidity",
-          split_below_solidity, "in [0, 1]");
-  require(split_accept_solidity > 0 && split_accept_solidity <= 1, "split_accept_solidity",
-          split_accept_solidity, "in (0, 1]");
-  require(split_max_rounds >= 0, "split_max_rounds", split_max_rounds, ">= 0");
+  const HoughExperimental& x = experimental;
+  require(x.reversed_vote_stop_vox >= 0, "experimental.reversed_vote_stop_vox",
+          x.reversed_vote_stop_vox, ">= 0");
+  require(x.split_below_solidity >= 0 && x.split_below_solidity <= 1,
+          "experimental.split_below_solidity", x.split_below_solidity, "in [0, 1]");
+  require(x.split_accept_solidity > 0 && x.split_accept_solidity <= 1,
+          "experimental.split_accept_solidity", x.split_accept_solidity, "in (0, 1]");
+  require(x.split_max_rounds >= 0, "experimental.split_max_rounds", x.split_max_rounds, ">= 0");
   require(threads >= 1, "threads", threads, ">= 1");
 }
 

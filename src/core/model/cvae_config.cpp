@@ -41,27 +41,38 @@ void cvaeFields(C& c, F&& f) {
   f("latent_size", c.latent_size);
   f("condition_size", c.condition_size);
   f("hidden_size", c.hidden_size);
-  f("norm", c.norm);
   f("latent_injection", c.latent_injection);
-  f("hidden_condition", c.hidden_condition);
   f("alpha", c.alpha);
   f("beta", c.beta);
   f("gamma", c.gamma);
   f("delta", c.delta);
   f("mmd_prior_samples", c.mmd_prior_samples);
-  f("mmd_kernel_widths", c.mmd_kernel_widths);
   f("tsdf_epsilon", c.tsdf_epsilon);
   f("occupancy_weight", c.occupancy_weight);
   f("occupancy_sharpness", c.occupancy_sharpness);
   f("iou_weight", c.iou_weight);
   f("vote_loss", c.vote_loss);
   f("vote_boundary_weight", c.vote_boundary_weight);
+  f("best_of", c.best_of);
+}
+// `model.experimental` in a training file: variants measured and not kept (docs/experiments.md,
+// "Networks and training"); the defaults are the paper's and every shipped model's.
+template <class C, class F>
+void cvaeExperimentalFields(C& c, F&& f) {
+  f("norm", c.norm);
+  f("hidden_condition", c.hidden_condition);
+  f("mmd_kernel_widths", c.mmd_kernel_widths);
   f("condition_dropout", c.condition_dropout);
   f("posterior", c.posterior);
   f("prior", c.prior);
   f("kl_weight", c.kl_weight);
   f("kl_free_nats", c.kl_free_nats);
-  f("best_of", c.best_of);
+}
+// Every field: the flat form a model file stores its network in.
+template <class C, class F>
+void cvaeAllFields(C& c, F&& f) {
+  cvaeFields(c, f);
+  cvaeExperimentalFields(c, f);
 }
 
 template <class C, class F>
@@ -80,8 +91,16 @@ void trainFields(C& c, F&& f) {
   f("image_width", c.image_width);
   f("image_height", c.image_height);
   f("sensor_noise", c.sensor_noise);
-  f("overhead_share", c.overhead_share);
   f("init_from", c.init_from);
+}
+template <class C, class F>
+void trainExperimentalFields(C& c, F&& f) {
+  f("overhead_share", c.overhead_share);
+}
+template <class C, class F>
+void trainAllFields(C& c, F&& f) {
+  trainFields(c, f);
+  trainExperimentalFields(c, f);
 }
 
 void require(bool ok, const std::string& what) {
@@ -158,7 +177,7 @@ void CvaeConfig::copyLossSettings(const CvaeConfig& o) {
 std::string CvaeConfig::toYaml() const {
   YAML::Emitter e;
   e << YAML::BeginMap;
-  cvaeFields(*this, [&](const char* key, const auto& value) {
+  cvaeAllFields(*this, [&](const char* key, const auto& value) {
     e << YAML::Key << key << YAML::Value << value;
   });
   e << YAML::EndMap;
@@ -166,23 +185,28 @@ std::string CvaeConfig::toYaml() const {
 }
 
 namespace {
-// From the node itself, not from text emitted again: a bad value's line is the file's.
-CvaeConfig cvaeFromNode(const YAML::Node& n) {
+// From the nodes themselves, not from text emitted again: a bad value's line is the file's.
+// `x` holds the experimental fields: the section's `experimental:` map in a training file, the
+// section itself in the flat form a model file stores.
+CvaeConfig cvaeFromNodes(const YAML::Node& n, const YAML::Node& x) {
   CvaeConfig c;
   cvaeFields(c, [&](const char* key, auto& value) { get(n, key, &value); });
+  cvaeExperimentalFields(c, [&](const char* key, auto& value) { get(x, key, &value); });
   c.validate();
   return c;
 }
-TrainConfig trainFromNode(const YAML::Node& n) {
+TrainConfig trainFromNodes(const YAML::Node& n, const YAML::Node& x) {
   TrainConfig c;
   trainFields(c, [&](const char* key, auto& value) { get(n, key, &value); });
+  trainExperimentalFields(c, [&](const char* key, auto& value) { get(x, key, &value); });
   c.validate();
   return c;
 }
 }  // namespace
 
 CvaeConfig CvaeConfig::fromYaml(const std::string& text) {
-  return cvaeFromNode(parse(text, "model"));
+  const YAML::Node n = parse(text, "model");
+  return cvaeFromNodes(n, n);
 }
 
 void TrainConfig::validate() const {
@@ -204,7 +228,7 @@ void TrainConfig::validate() const {
 std::string TrainConfig::toYaml() const {
   YAML::Emitter e;
   e << YAML::BeginMap;
-  trainFields(*this, [&](const char* key, const auto& value) {
+  trainAllFields(*this, [&](const char* key, const auto& value) {
     e << YAML::Key << key << YAML::Value << value;
   });
   e << YAML::EndMap;
@@ -212,7 +236,8 @@ std::string TrainConfig::toYaml() const {
 }
 
 TrainConfig TrainConfig::fromYaml(const std::string& text) {
-  return trainFromNode(parse(text, "training"));
+  const YAML::Node n = parse(text, "training");
+  return trainFromNodes(n, n);
 }
 
 std::string modelCardPath(const std::string& model_path) {
@@ -223,17 +248,37 @@ namespace {
 // A misspelt field in a file the user writes must not fall back to its default unnoticed
 // (configs stored inside older model files are parsed leniently instead).
 template <class C, class Fields>
-void rejectUnknownFields(const YAML::Node& section, const char* name, Fields fields) {
-  if (!section || section.IsNull()) return;  // every field commented out: the defaults
-  if (!section.IsMap()) throw std::invalid_argument(std::string("'") + name + "' must be a map");
+void rejectUnknownFields(const YAML::Node& section, const std::string& name, Fields fields,
+                         bool with_experimental) {
+  if (!section.IsMap()) throw std::invalid_argument("'" + name + "' must be a map");
   C defaults;
   std::set<std::string> known;
   fields(defaults, [&](const char* key, const auto&) { known.insert(key); });
+  if (with_experimental) known.insert("experimental");
   for (const auto& kv : section) {
     const std::string key = kv.first.as<std::string>();
-    if (!known.count(key))
-      throw std::invalid_argument(std::string("unknown field ") + name + "." + key);
+    if (!known.count(key)) throw std::invalid_argument("unknown field " + name + "." + key);
   }
+}
+
+/// The `experimental:` map of the section `name` of a training file, its fields checked (an
+/// empty map when there is none). A dropped variant's setting written outside it is refused
+/// with the place it belongs.
+template <class C, class Main, class Experimental>
+YAML::Node experimentalOf(const YAML::Node& section, const std::string& name, Main main,
+                          Experimental experimental) {
+  if (!section.IsMap()) throw std::invalid_argument("'" + name + "' must be a map");
+  C defaults;
+  experimental(defaults, [&](const char* key, const auto&) {
+    if (section[key])
+      throw std::invalid_argument(name + "." + key + " is a dropped variant's setting: write it " +
+                                  "under " + name + ".experimental");
+  });
+  rejectUnknownFields<C>(section, name, main, true);
+  const YAML::Node x = section["experimental"];
+  if (!x || x.IsNull()) return YAML::Node(YAML::NodeType::Map);
+  rejectUnknownFields<C>(x, name + ".experimental", experimental, false);
+  return x;
 }
 }  // namespace
 
@@ -251,13 +296,17 @@ void loadTrainingYaml(const std::string& path, CvaeConfig* model, TrainConfig* t
       if (section != "model" && section != "training")
         throw std::invalid_argument("unknown section '" + section + "' (model, training)");
     }
-    rejectUnknownFields<CvaeConfig>(n["model"], "model",
-                                    [](auto& c, auto&& f) { cvaeFields(c, f); });
-    rejectUnknownFields<TrainConfig>(n["training"], "training",
-                                     [](auto& c, auto&& f) { trainFields(c, f); });
-    *model = n["model"] && !n["model"].IsNull() ? cvaeFromNode(n["model"]) : CvaeConfig();
-    *training =
-        n["training"] && !n["training"].IsNull() ? trainFromNode(n["training"]) : TrainConfig();
+    const YAML::Node m = n["model"], t = n["training"];
+    *model = CvaeConfig();
+    if (m && !m.IsNull())
+      *model = cvaeFromNodes(m, experimentalOf<CvaeConfig>(
+                                    m, "model", [](auto& c, auto&& f) { cvaeFields(c, f); },
+                                    [](auto& c, auto&& f) { cvaeExperimentalFields(c, f); }));
+    *training = TrainConfig();
+    if (t && !t.IsNull())
+      *training = trainFromNodes(t, experimentalOf<TrainConfig>(
+                                        t, "training", [](auto& c, auto&& f) { trainFields(c, f); },
+                                        [](auto& c, auto&& f) { trainExperimentalFields(c, f); }));
   } catch (const std::exception& e) {
     throw std::runtime_error("config " + path + ": " + e.what());
   }

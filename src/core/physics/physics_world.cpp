@@ -6,6 +6,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "simstack/assert.h"
+
 namespace simstack {
 namespace {
 
@@ -243,7 +245,7 @@ void PhysicsWorld::attachCup(int index, const Vec3& contact_table, double stiffn
 
 void PhysicsWorld::moveCup(const Vec3& contact_table) {
   Impl& m = *impl_;
-  if (!m.cup) throw std::logic_error("moveCup without attachCup");
+  SIMSTACK_ASSERT(m.cup, "moveCup without attachCup");
   btTransform t = m.cup->getWorldTransform();
   t.setOrigin(btVector3(contact_table.x(), contact_table.y(), contact_table.z()));
   m.cup_state->setWorldTransform(t);

@@ -47,6 +47,10 @@ void houghFields(C& c, F&& f) {
   f("min_instance_voxels", c.min_instance_voxels);
   f("min_vote_norm", c.min_vote_norm);
   f("outside_tolerance_vox", c.outside_tolerance_vox);
+}
+// `hough.experimental`: variants measured and not kept, off by default.
+template <class C, class F>
+void houghExperimentalFields(C& c, F&& f) {
   f("reversed_vote_stop_vox", c.reversed_vote_stop_vox);
   f("split_below_solidity", c.split_below_solidity);
   f("split_accept_solidity", c.split_accept_solidity);
@@ -145,19 +149,47 @@ void readFields(const YAML::Node& n, const std::string& prefix, C* c, Fields fie
   });
 }
 
+/// The map `n` read as the section `name` ("hough", "hough.experimental"): its fields into `c`,
+/// any other key an error except the `nested` sections, which the caller reads.
 template <class C, class Fields>
-void readSection(const YAML::Node& root, const char* name, C* c, Fields fields,
-                 const std::string& path) {
-  const YAML::Node n = root[name];
-  if (!n || n.IsNull()) return;  // absent, or every field left out: the defaults
+void readMap(const YAML::Node& n, const std::string& name, C* c, Fields fields,
+             const std::string& path, const std::set<std::string>& nested = {}) {
   if (!n.IsMap()) throw std::runtime_error(path + ": '" + name + "' must be a map");
-  readFields(n, std::string(name) + ".", c, fields, path);
-  std::set<std::string> known;
+  readFields(n, name + ".", c, fields, path);
+  std::set<std::string> known = nested;
   fields(*c, [&](const char* key, auto&) { known.insert(key); });
   for (const auto& kv : n) {
     const std::string key = kv.first.as<std::string>();
     if (!known.count(key)) throw std::runtime_error(path + ": unknown field " + name + "." + key);
   }
+}
+
+template <class C, class Fields>
+void readSection(const YAML::Node& root, const char* name, C* c, Fields fields,
+                 const std::string& path) {
+  const YAML::Node n = root[name];
+  if (!n || n.IsNull()) return;  // absent, or every field left out: the defaults
+  readMap(n, name, c, fields, path);
+}
+
+/// `hough:` with its `experimental:` map. A dropped variant's setting written directly under
+/// `hough:` is refused with the place it belongs.
+void readHough(const YAML::Node& root, HoughConfig* h, const std::string& path) {
+  const YAML::Node n = root["hough"];
+  if (!n || n.IsNull()) return;
+  if (n.IsMap())
+    houghExperimentalFields(h->experimental, [&](const char* key, auto&) {
+      if (n[key])
+        throw std::runtime_error(path + ": hough." + key +
+                                 " is a dropped variant's setting: write it under "
+                                 "hough.experimental");
+    });
+  readMap(n, "hough", h, [](auto& x, auto&& f) { houghFields(x, f); }, path, {"experimental"});
+  const YAML::Node x = n["experimental"];
+  if (x && !x.IsNull())
+    readMap(
+        x, "hough.experimental", &h->experimental,
+        [](auto& c, auto&& f) { houghExperimentalFields(c, f); }, path);
 }
 
 template <class C, class Fields>
@@ -167,6 +199,27 @@ void writeSection(YAML::Emitter& e, const char* name, C& c, Fields fields) {
     e << YAML::Key << key << YAML::Value;
     emit(e, value);
   });
+  e << YAML::EndMap;
+}
+
+/// `hough:` with its fields, then `experimental:` when `with_experimental` or when any of its
+/// settings is not the default (a section to paste stays short when they are off).
+void writeHough(YAML::Emitter& e, HoughConfig& h, bool with_experimental) {
+  e << YAML::Key << "hough" << YAML::Value << YAML::BeginMap;
+  houghFields(h, [&](const char* key, const auto& value) {
+    e << YAML::Key << key << YAML::Value;
+    emit(e, value);
+  });
+  auto text = [](HoughExperimental x) {
+    YAML::Emitter t;
+    t << YAML::BeginMap;
+    writeSection(t, "experimental", x, [](auto& c, auto&& f) { houghExperimentalFields(c, f); });
+    t << YAML::EndMap;
+    return std::string(t.c_str());
+  };
+  if (with_experimental || text(h.experimental) != text(HoughExperimental()))
+    writeSection(e, "experimental", h.experimental,
+                 [](auto& x, auto&& f) { houghExperimentalFields(x, f); });
   e << YAML::EndMap;
 }
 
@@ -213,8 +266,7 @@ PerceptionConfig finishConfig(PerceptionConfig c, const YAML::Node& root, const 
     c.model_path = (std::filesystem::path(base_dir) / c.model_path).string();
   c.model_card_path = applyModelCard(&c);
   readSamples(root, "", &c, path);
-  readSection(
-      root, "hough", &c.hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
+  readHough(root, &c.hough, path);
   return c;
 }
 
@@ -271,8 +323,7 @@ std::string applyModelCard(PerceptionConfig* config) {
                                " (a model card's perception section holds samples and hough)");
   }
   readSamples(section, "perception.", config, path);
-  readSection(
-      section, "hough", &config->hough, [](auto& x, auto&& f) { houghFields(x, f); }, path);
+  readHough(section, &config->hough, path);
   return path;
 }
 
@@ -314,7 +365,7 @@ std::string modelCardPerceptionYaml(int samples, const HoughConfig& hough) {
   e.SetDoublePrecision(10);
   e << YAML::BeginMap << YAML::Key << "perception" << YAML::Value << YAML::BeginMap;
   e << YAML::Key << "samples" << YAML::Value << samples;
-  writeSection(e, "hough", h, [](auto& x, auto&& f) { houghFields(x, f); });
+  writeHough(e, h, false);
   e << YAML::EndMap << YAML::EndMap;
   return e.c_str();
 }
@@ -328,7 +379,7 @@ std::string perceptionYaml(const PerceptionConfig& config) {
     e << YAML::Key << key << YAML::Value;
     emit(e, value);
   });
-  writeSection(e, "hough", c.hough, [](auto& x, auto&& f) { houghFields(x, f); });
+  writeHough(e, c.hough, true);
   writeSection(e, "segments", c.segments, [](auto& x, auto&& f) { segmentFields(x, f); });
   writeSection(e, "surface_instances", c.surface_instances,
                [](auto& x, auto&& f) { surfaceInstanceFields(x, f); });

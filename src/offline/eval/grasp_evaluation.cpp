@@ -56,6 +56,30 @@ PullOutcome executeOnTruth(const PullSimulator& sim, const std::vector<Superquad
   return sim.pullPerceived(target, *contact, c.approach_table);
 }
 
+// The ranking's candidate whose pull does best in the true pile, by the ranking's own order
+// applied to the true outcomes: what a perfect ranking of these candidates would pick.
+// Every trial is kept in `trials`.
+const RankedGrasp* bestInTruth(const GraspRanking& r, const PullSimulator& truth_sim,
+                               const std::vector<SuperquadricShape>& truth, int target,
+                               const GraspEvaluationOptions& options, PullOutcome* outcome,
+                               std::vector<CandidateTrial>* trials) {
+  const RankedGrasp* best = nullptr;
+  RankedGrasp best_true;
+  for (const RankedGrasp& g : r.grasps) {
+    RankedGrasp t = g;
+    const PullOutcome o = executeOnTruth(truth_sim, truth, target, g.candidate, options);
+    trials->push_back({g, o});
+    t.outcomes = {o};
+    t.failed_share = o.failed() ? 1.0 : 0.0;
+    t.freed_share = o.target_freed ? 1.0 : 0.0;
+    t.mean_toppled = o.toppled;
+    t.score_m = o.mean_displacement_m;
+    t.peak_load = o.peak_load;
+    if (!best || rankedBefore(t, best_true)) best = &g, best_true = t, *outcome = o;
+  }
+  return best;
+}
+
 // The picks of every chooser for one method's estimate of one target.
 void pickOnEstimate(const std::vector<SuperquadricShape>& truth, const PullSimulator& truth_sim,
                     int scene, int target, const std::string& method,
@@ -73,11 +97,20 @@ void pickOnEstimate(const std::vector<SuperquadricShape>& truth, const PullSimul
           ? estimate.measured_surfaces[k]
           : none;
   if (k >= 0) ranking = rankGrasps(scenes, k, {}, options.ranking, {}, measured);
-  for (const std::string chooser : {"ranked", "random", "top-most"}) {
+  std::vector<std::string> choosers = {"ranked", "random", "top-most"};
+  if (options.best_in_truth) choosers.emplace_back("best in truth");
+  for (const std::string& chooser : choosers) {
     PickResult p;
     p.scene = scene, p.target = target, p.method = method, p.chooser = chooser;
     p.found = k >= 0;
     if (p.found) p.error = estimateError(estimate.superquadrics[k], truth[target]);
+    if (chooser == "best in truth") {
+      p.grasped =
+          bestInTruth(ranking, truth_sim, truth, target, options, &p.outcome, &p.trials) != nullptr;
+      if (!p.grasped) p.outcome.cup_held = false;
+      out->push_back(p);
+      continue;
+    }
     const SuctionCandidate* c = p.found ? choose(ranking, chooser, rng) : nullptr;
     p.grasped = c != nullptr;
     if (c)

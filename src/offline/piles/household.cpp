@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "simstack/assert.h"
+
 namespace simstack {
 
 std::vector<std::shared_ptr<const ObjectShape>> containerCatalogue(int count) {
@@ -28,7 +30,7 @@ std::vector<std::shared_ptr<const ObjectShape>> containerCatalogue(int count) {
     // The name keeps 0.1 mm: build from the rounded sizes, so that a dataset's name rebuilds
     // exactly this shape.
     const auto rounded = parseContainerName(c.name());
-    if (!rounded) throw std::logic_error("containerCatalogue drew an invalid container");
+    SIMSTACK_ASSERT(rounded.has_value(), "containerCatalogue drew an invalid container");
     out.push_back(ObjectShape::fromContainer(*rounded, i));
   }
   return out;

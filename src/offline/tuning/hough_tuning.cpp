@@ -23,9 +23,10 @@ bool sameSetting(const HoughConfig& a, const HoughConfig& b) {
          a.gamma == b.gamma && a.bandwidth_m == b.bandwidth_m &&
          a.min_instance_voxels == b.min_instance_voxels && a.min_vote_norm == b.min_vote_norm &&
          a.outside_tolerance_vox == b.outside_tolerance_vox &&
-         a.reversed_vote_stop_vox == b.reversed_vote_stop_vox &&
-         a.split_below_solidity == b.split_below_solidity &&
-         (a.split_below_solidity == 0 || a.split_accept_solidity == b.split_accept_solidity);
+         a.experimental.reversed_vote_stop_vox == b.experimental.reversed_vote_stop_vox &&
+         a.experimental.split_below_solidity == b.experimental.split_below_solidity &&
+         (a.experimental.split_below_solidity == 0 ||
+          a.experimental.split_accept_solidity == b.experimental.split_accept_solidity);
 }
 
 TuningView tuningView(const ScenePerception& perception, const InstanceFinder& finder,
@@ -87,9 +88,9 @@ std::vector<HoughConfig> houghCandidates(const HoughConfig& current, const Hough
               for (double below : s.split_below)
                 for (double accept : s.split_accept) {
                   HoughConfig h = first;
-                  h.reversed_vote_stop_vox = stop;
-                  h.split_below_solidity = below;
-                  h.split_accept_solidity = accept;
+                  h.experimental.reversed_vote_stop_vox = stop;
+                  h.experimental.split_below_solidity = below;
+                  h.experimental.split_accept_solidity = accept;
                   h.refinement = ref;
                   h.min_traversals = mu;
                   h.bandwidth_m = bw;
@@ -163,11 +164,12 @@ std::string houghScoreRow(const HoughScore& s) {
   std::ostringstream o;
   o << "| " << s.hough.refinement << " | " << s.hough.min_traversals << " | " << std::fixed
     << std::setprecision(3) << s.hough.bandwidth_m << " | " << s.hough.min_instance_voxels << " | "
-    << std::setprecision(1) << s.hough.min_vote_norm << " | " << s.hough.reversed_vote_stop_vox
-    << " | " << std::setprecision(2) << s.hough.split_below_solidity << " / "
-    << s.hough.split_accept_solidity << " | " << std::setprecision(1) << 100 * s.exact << " % | "
-    << 100 * s.under << " % | " << 100 * s.over << " % | " << std::setprecision(2) << s.abs_error
-    << " | " << std::setprecision(3) << s.agreement << " |";
+    << std::setprecision(1) << s.hough.min_vote_norm << " | "
+    << s.hough.experimental.reversed_vote_stop_vox << " | " << std::setprecision(2)
+    << s.hough.experimental.split_below_solidity << " / "
+    << s.hough.experimental.split_accept_solidity << " | " << std::setprecision(1) << 100 * s.exact
+    << " % | " << 100 * s.under << " % | " << 100 * s.over << " % | " << std::setprecision(2)
+    << s.abs_error << " | " << std::setprecision(3) << s.agreement << " |";
   return o.str();
 }
 

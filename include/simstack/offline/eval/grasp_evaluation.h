@@ -35,6 +35,11 @@ struct GraspEvaluationOptions {
   /// line meets it (the rim within the seal tolerance of the cup's plane, as on the estimate);
   /// false: only the pull's force and moment can break it.
   bool true_seal = false;
+  /// Adds the chooser "best in truth": every candidate the ranking kept is executed in the true
+  /// pile and the best outcome taken (by the ranking's order). It bounds what any ranking of
+  /// the same candidates could do: its gap to "ranked" is the ranking's, to the oracle the
+  /// candidates'.
+  bool best_in_truth = false;
 };
 
 /// How far a method's estimate of a target is off the true object: what the ranking's perturbed
@@ -50,15 +55,24 @@ struct EstimateError {
 /// The error of `estimate` as an estimate of `truth`.
 EstimateError estimateError(const SuperquadricShape& estimate, const SuperquadricShape& truth);
 
+/// One candidate of a ranking on an estimate, as the ranking judged it and as its pull went in
+/// the true pile.
+struct CandidateTrial {
+  RankedGrasp estimate;
+  PullOutcome truth;
+};
+
 /// One pick: a chooser's grasp on a method's scene, executed in the true pile.
 struct PickResult {
   int scene = 0, target = 0;
   std::string method;   ///< "truth" for the oracle, else the estimating method's name
-  std::string chooser;  ///< "ranked", "random", "top-most"
+  std::string chooser;  ///< "ranked", "random", "top-most", "best in truth"
   bool found = true;    ///< the method has an object matching the target
   bool grasped = true;  ///< a sealable candidate existed on its estimate of the target
   PullOutcome outcome;  ///< in the true pile (a failed pull when not found or not grasped)
   EstimateError error;  ///< of the method's object matching the target (when found)
+  /// "best in truth" only: every candidate the ranking kept, in its order.
+  std::vector<CandidateTrial> trials;
 };
 
 /// Every true object of the first scenes as a target, one random view per scene. Scenes must
