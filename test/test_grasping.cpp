@@ -234,6 +234,27 @@ TEST(GraspRanking, TiesGoToThePullNearerTheCentreOfMass) {
   EXPECT_TRUE(rankedBefore(far, near));
 }
 
+TEST(GraspRanking, AnUpwardPullRanksBeforeASidewaysOneThatDoesAsWell) {
+  RankedGrasp up, side;
+  up.outcomes.resize(1), side.outcomes.resize(1);
+  up.freed_share = side.freed_share = 1.0;
+  up.candidate.approach_table = Vec3(0.3, 0.0, 0.954).normalized();  // 0.95 up: tenth 10
+  side.candidate.approach_table = Vec3(1.0, 0.0, 0.0);
+  up.score_m = 0.02, side.score_m = 0.001;  // the sideways pull moves the others less
+  up.com_offset_m = 0.03, side.com_offset_m = 0.0;
+  EXPECT_TRUE(rankedBefore(up, side));
+  EXPECT_FALSE(rankedBefore(side, up));
+  // Within the same tenth the displacement decides, as before.
+  side.candidate.approach_table = Vec3(0.25, 0.0, 0.968).normalized();
+  EXPECT_TRUE(rankedBefore(side, up));
+  // Freeing the target and fewer topples come first.
+  side.candidate.approach_table = Vec3(1.0, 0.0, 0.0);
+  up.freed_share = 0.0;
+  EXPECT_TRUE(rankedBefore(side, up));
+  up.freed_share = 1.0, up.mean_toppled = 1.0;
+  EXPECT_TRUE(rankedBefore(side, up));
+}
+
 TEST(GraspRanking, RanksASlideOutFirstUnderABridge) {
   GraspRankingConfig config;
   config.candidates.max_candidates = 16;

@@ -62,11 +62,12 @@ struct RankedGrasp {
   /// Distance of the pull's line (through the contact along the approach) from the target's
   /// centre of mass in hypothesis 0: the arm of the moment that peels the cup.
   double com_offset_m = 0.0;
-  /// What the ranking sorts by after failures, freeing and topples: (mean + worst) / 2 of the
-  /// mean displacement, which is the paper's score for one hypothesis, compared in whole
-  /// millimetres (finer differences are within the physics' own drift); ties go to the pull
-  /// passing nearer the centre of mass (whole millimetres), then to the lower peak load: the
-  /// grasps with more margin against a wrong mass or centre.
+  /// What the ranking sorts by after failures, freeing, topples and how upward the pull is
+  /// (rankedBefore): (mean + worst) / 2 of the mean displacement, which is the paper's score
+  /// for one hypothesis, compared in whole millimetres (finer differences are within the
+  /// physics' own drift); ties go to the pull passing nearer the centre of mass (whole
+  /// millimetres), then to the lower peak load: the grasps with more margin against a wrong
+  /// mass or centre.
   double score_m = 0.0;
 
   /// The seal held through the pull in every hypothesis pulled in.
@@ -119,8 +120,8 @@ PullOutcome executeGrasp(const PullSimulator& simulator,
 using RankingProgress = std::function<bool(int done, int total, const RankedGrasp* best)>;
 
 /// Whether grasp `a` ranks before grasp `b`: fewer seal failures, then more often freed, fewer
-/// topples, less displacement (whole millimetres), a pull nearer the centre of mass (whole
-/// millimetres), lower peak load.
+/// topples, a more upward pull (the approach's z in tenths), less displacement (whole
+/// millimetres), a pull nearer the centre of mass (whole millimetres), lower peak load.
 bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b);
 
 /// `measured_target`: depth points measured on hypotheses[0][target] (table frame), where the

@@ -190,6 +190,11 @@ bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b) {
   if (a.failed_share != b.failed_share) return a.failed_share < b.failed_share;
   if (a.freed_share != b.freed_share) return a.freed_share > b.freed_share;
   if (a.mean_toppled != b.mean_toppled) return a.mean_toppled < b.mean_toppled;
+  // A pull that lifts against gravity depends least on where the estimate puts the target's
+  // neighbours and centre of mass (docs/experiments.md, "Grasp ranking").
+  const double ua = std::round(a.candidate.approach_table.z() * 10.0),
+               ub = std::round(b.candidate.approach_table.z() * 10.0);
+  if (ua != ub) return ua > ub;
   const double da = std::round(a.score_m * 1e3), db = std::round(b.score_m * 1e3);
   if (da != db) return da < db;
   const double ca = std::round(a.com_offset_m * 1e3), cb = std::round(b.com_offset_m * 1e3);
