@@ -244,7 +244,7 @@ TEST(GraspRanking, AnUpwardPullRanksBeforeASidewaysOneThatDoesAsWell) {
   up.com_offset_m = 0.03, side.com_offset_m = 0.0;
   EXPECT_TRUE(rankedBefore(up, side));
   EXPECT_FALSE(rankedBefore(side, up));
-  // Within the same tenth the displacement decides, as before.
+  // Within one tenth the displacement decides.
   side.candidate.approach_table = Vec3(0.25, 0.0, 0.968).normalized();
   EXPECT_TRUE(rankedBefore(side, up));
   // Freeing the target and fewer topples come first.

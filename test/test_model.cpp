@@ -1164,6 +1164,8 @@ TEST(CvaeConfig, TrainingFilesRejectMisspeltFieldsAndNameThem) {
   expectError("model:\n  experimental:\n    latent_size: 8\n",
               "unknown field model.experimental.latent_size");
   expectError("model:\n  experimental:\n    kl_free_nats: abc\n", "line 3,");  // the file's line
+  expectError("model:\n  experimental:\n    kl_free_nats: abc\n",
+              "field 'model.experimental.kl_free_nats'");
   const std::string path = dir + "/experimental.yaml";
   std::ofstream(path) << "model:\n  latent_size: 8\n  experimental:\n    prior: learned\n"
                          "    kl_free_nats: 4\ntraining:\n  experimental:\n"

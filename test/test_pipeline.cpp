@@ -93,6 +93,14 @@ TEST(PerceptionConfig, ShippedYamlHoldsTheDefaultsAndTyposAreErrors) {
   EXPECT_NE(refusal("hough:\n  experimental:\n    split_below: 0.8\n")
                 .find("unknown field hough.experimental.split_below"),
             std::string::npos);
+  // A section written with every field listed (as simstack_tune_hough wrote them) reads when
+  // the dropped variants' settings there hold their defaults.
+  std::ofstream(bad) << "hough:\n  refinement: 6\n  reversed_vote_stop_vox: 0\n"
+                        "  split_accept_solidity: 0.9\n";
+  EXPECT_EQ(loadPerceptionYaml(bad).hough.refinement, 6);
+  EXPECT_NE(refusal("hough:\n  reversed_vote_stop_vox: 0\n  split_max_rounds: 3\n")
+                .find("hough.reversed_vote_stop_vox, hough.split_max_rounds"),
+            std::string::npos);
   std::ofstream(bad) << "hough:\n  refinement: 6\n  experimental:\n    split_below_solidity: 0.8\n";
   const PerceptionConfig split = loadPerceptionYaml(bad);
   EXPECT_EQ(split.hough.refinement, 6);

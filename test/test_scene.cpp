@@ -51,7 +51,7 @@ TEST(Physics, BoxComesToRestOnTheTable) {
 // Moving a cup that was never attached is a programmer error: the process stops and says so
 // (an internal error, not an exception a caller could take for bad input).
 TEST(PhysicsDeathTest, MovingACupNeverAttachedStopsWithTheReason) {
-  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  ::testing::GTEST_FLAG(death_test_style) = "threadsafe";
   EXPECT_DEATH(
       {
         PhysicsWorld world;

@@ -249,14 +249,14 @@ using FineCount = uint16_t;
 
 void checkHoughInput(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
                      const HoughConfig& config) {
-  if (!(tsdf_m.spec == votes.spec) || tsdf_m.data.size() != votes.data.size() ||
-      static_cast<int>(tsdf_m.data.size()) != tsdf_m.spec.voxelCount())
-    throw std::invalid_argument("houghInstances: the TSDF and the vote field must share a grid");
+  // First: a NaN size or origin would also fail the comparison of the two grids below.
   const GridSpec& g = tsdf_m.spec;
   if (!(std::isfinite(g.voxel_size_m) && g.voxel_size_m > 0.0) || !g.origin_table.allFinite())
     throw std::invalid_argument(
-        "houghInstances: the grid needs a finite voxel size > 0 and a "
-        "finite origin");
+        "houghInstances: the grid needs a finite voxel size > 0 and a finite origin");
+  if (!(tsdf_m.spec == votes.spec) || tsdf_m.data.size() != votes.data.size() ||
+      static_cast<int>(tsdf_m.data.size()) != tsdf_m.spec.voxelCount())
+    throw std::invalid_argument("houghInstances: the TSDF and the vote field must share a grid");
   config.validate();
   if (static_cast<int64_t>(tsdf_m.spec.resolution) * config.refinement > kMaxHoughFineCells)
     throw std::invalid_argument("houghInstances: resolution x refinement too large");

@@ -11,13 +11,14 @@
 namespace simstack {
 namespace {
 
+/// `prefix` ("model.experimental.") names the field in errors.
 template <typename T>
-void get(const YAML::Node& n, const char* key, T* value) {
+void get(const YAML::Node& n, const char* key, T* value, const std::string& prefix = "") {
   if (!n[key]) return;
   try {
     *value = n[key].as<T>();
   } catch (const YAML::Exception& e) {
-    throw std::invalid_argument(std::string("field '") + key + "': " + e.what());
+    throw std::invalid_argument("field '" + prefix + key + "': " + e.what());
   }
 }
 
@@ -56,7 +57,7 @@ void cvaeFields(C& c, F&& f) {
   f("best_of", c.best_of);
 }
 // `model.experimental` in a training file: variants measured and not kept (docs/experiments.md,
-// "Networks and training"); the defaults are the paper's and every shipped model's.
+// "Hypotheses (C-VAE codes)"); the defaults are the paper's and every shipped model's.
 template <class C, class F>
 void cvaeExperimentalFields(C& c, F&& f) {
   f("norm", c.norm);
@@ -188,17 +189,19 @@ namespace {
 // From the nodes themselves, not from text emitted again: a bad value's line is the file's.
 // `x` holds the experimental fields: the section's `experimental:` map in a training file, the
 // section itself in the flat form a model file stores.
-CvaeConfig cvaeFromNodes(const YAML::Node& n, const YAML::Node& x) {
+CvaeConfig cvaeFromNodes(const YAML::Node& n, const YAML::Node& x, const std::string& prefix,
+                         const std::string& x_prefix) {
   CvaeConfig c;
-  cvaeFields(c, [&](const char* key, auto& value) { get(n, key, &value); });
-  cvaeExperimentalFields(c, [&](const char* key, auto& value) { get(x, key, &value); });
+  cvaeFields(c, [&](const char* key, auto& value) { get(n, key, &value, prefix); });
+  cvaeExperimentalFields(c, [&](const char* key, auto& value) { get(x, key, &value, x_prefix); });
   c.validate();
   return c;
 }
-TrainConfig trainFromNodes(const YAML::Node& n, const YAML::Node& x) {
+TrainConfig trainFromNodes(const YAML::Node& n, const YAML::Node& x, const std::string& prefix,
+                           const std::string& x_prefix) {
   TrainConfig c;
-  trainFields(c, [&](const char* key, auto& value) { get(n, key, &value); });
-  trainExperimentalFields(c, [&](const char* key, auto& value) { get(x, key, &value); });
+  trainFields(c, [&](const char* key, auto& value) { get(n, key, &value, prefix); });
+  trainExperimentalFields(c, [&](const char* key, auto& value) { get(x, key, &value, x_prefix); });
   c.validate();
   return c;
 }
@@ -206,7 +209,7 @@ TrainConfig trainFromNodes(const YAML::Node& n, const YAML::Node& x) {
 
 CvaeConfig CvaeConfig::fromYaml(const std::string& text) {
   const YAML::Node n = parse(text, "model");
-  return cvaeFromNodes(n, n);
+  return cvaeFromNodes(n, n, "", "");
 }
 
 void TrainConfig::validate() const {
@@ -237,7 +240,7 @@ std::string TrainConfig::toYaml() const {
 
 TrainConfig TrainConfig::fromYaml(const std::string& text) {
   const YAML::Node n = parse(text, "training");
-  return trainFromNodes(n, n);
+  return trainFromNodes(n, n, "", "");
 }
 
 std::string modelCardPath(const std::string& model_path) {
@@ -299,14 +302,18 @@ void loadTrainingYaml(const std::string& path, CvaeConfig* model, TrainConfig* t
     const YAML::Node m = n["model"], t = n["training"];
     *model = CvaeConfig();
     if (m && !m.IsNull())
-      *model = cvaeFromNodes(m, experimentalOf<CvaeConfig>(
-                                    m, "model", [](auto& c, auto&& f) { cvaeFields(c, f); },
-                                    [](auto& c, auto&& f) { cvaeExperimentalFields(c, f); }));
+      *model = cvaeFromNodes(m,
+                             experimentalOf<CvaeConfig>(
+                                 m, "model", [](auto& c, auto&& f) { cvaeFields(c, f); },
+                                 [](auto& c, auto&& f) { cvaeExperimentalFields(c, f); }),
+                             "model.", "model.experimental.");
     *training = TrainConfig();
     if (t && !t.IsNull())
-      *training = trainFromNodes(t, experimentalOf<TrainConfig>(
-                                        t, "training", [](auto& c, auto&& f) { trainFields(c, f); },
-                                        [](auto& c, auto&& f) { trainExperimentalFields(c, f); }));
+      *training = trainFromNodes(t,
+                                 experimentalOf<TrainConfig>(
+                                     t, "training", [](auto& c, auto&& f) { trainFields(c, f); },
+                                     [](auto& c, auto&& f) { trainExperimentalFields(c, f); }),
+                                 "training.", "training.experimental.");
   } catch (const std::exception& e) {
     throw std::runtime_error("config " + path + ": " + e.what());
   }

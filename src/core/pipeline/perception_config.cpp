@@ -172,26 +172,6 @@ void readSection(const YAML::Node& root, const char* name, C* c, Fields fields,
   readMap(n, name, c, fields, path);
 }
 
-/// `hough:` with its `experimental:` map. A dropped variant's setting written directly under
-/// `hough:` is refused with the place it belongs.
-void readHough(const YAML::Node& root, HoughConfig* h, const std::string& path) {
-  const YAML::Node n = root["hough"];
-  if (!n || n.IsNull()) return;
-  if (n.IsMap())
-    houghExperimentalFields(h->experimental, [&](const char* key, auto&) {
-      if (n[key])
-        throw std::runtime_error(path + ": hough." + key +
-                                 " is a dropped variant's setting: write it under "
-                                 "hough.experimental");
-    });
-  readMap(n, "hough", h, [](auto& x, auto&& f) { houghFields(x, f); }, path, {"experimental"});
-  const YAML::Node x = n["experimental"];
-  if (x && !x.IsNull())
-    readMap(
-        x, "hough.experimental", &h->experimental,
-        [](auto& c, auto&& f) { houghExperimentalFields(c, f); }, path);
-}
-
 template <class C, class Fields>
 void writeSection(YAML::Emitter& e, const char* name, C& c, Fields fields) {
   e << YAML::Key << name << YAML::Value << YAML::BeginMap;
@@ -202,6 +182,46 @@ void writeSection(YAML::Emitter& e, const char* name, C& c, Fields fields) {
   e << YAML::EndMap;
 }
 
+/// The `experimental:` map as text, to tell settings from the defaults.
+std::string experimentalText(HoughExperimental x) {
+  YAML::Emitter t;
+  t << YAML::BeginMap;
+  writeSection(t, "experimental", x, [](auto& c, auto&& f) { houghExperimentalFields(c, f); });
+  t << YAML::EndMap;
+  return t.c_str();
+}
+
+/// `hough:` with its `experimental:` map. A dropped variant's setting written directly under
+/// `hough:` is refused with the place it belongs, unless every such setting holds its default:
+/// sections that simstack_tune_hough wrote with every field listed read as they did.
+void readHough(const YAML::Node& root, HoughConfig* h, const std::string& path) {
+  const YAML::Node n = root["hough"];
+  if (!n || n.IsNull()) return;
+  std::set<std::string> allowed = {"experimental"};
+  if (n.IsMap()) {
+    HoughExperimental flat;
+    std::string named;
+    houghExperimentalFields(flat, [&](const char* key, auto&) {
+      if (!n[key]) return;
+      allowed.insert(key);
+      named += (named.empty() ? "hough." : ", hough.") + std::string(key);
+    });
+    readFields(
+        n, "hough.", &flat, [](auto& c, auto&& f) { houghExperimentalFields(c, f); }, path);
+    if (experimentalText(flat) != experimentalText(HoughExperimental()))
+      throw std::runtime_error(path + ": " + named +
+                               ": a dropped variant's setting other than its default stands "
+                               "under hough.experimental");
+  }
+  readMap(
+      n, "hough", h, [](auto& x, auto&& f) { houghFields(x, f); }, path, allowed);
+  const YAML::Node x = n["experimental"];
+  if (x && !x.IsNull())
+    readMap(
+        x, "hough.experimental", &h->experimental,
+        [](auto& c, auto&& f) { houghExperimentalFields(c, f); }, path);
+}
+
 /// `hough:` with its fields, then `experimental:` when `with_experimental` or when any of its
 /// settings is not the default (a section to paste stays short when they are off).
 void writeHough(YAML::Emitter& e, HoughConfig& h, bool with_experimental) {
@@ -210,14 +230,8 @@ void writeHough(YAML::Emitter& e, HoughConfig& h, bool with_experimental) {
     e << YAML::Key << key << YAML::Value;
     emit(e, value);
   });
-  auto text = [](HoughExperimental x) {
-    YAML::Emitter t;
-    t << YAML::BeginMap;
-    writeSection(t, "experimental", x, [](auto& c, auto&& f) { houghExperimentalFields(c, f); });
-    t << YAML::EndMap;
-    return std::string(t.c_str());
-  };
-  if (with_experimental || text(h.experimental) != text(HoughExperimental()))
+  if (with_experimental ||
+      experimentalText(h.experimental) != experimentalText(HoughExperimental()))
     writeSection(e, "experimental", h.experimental,
                  [](auto& x, auto&& f) { houghExperimentalFields(x, f); });
   e << YAML::EndMap;
