@@ -207,10 +207,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   out->T_scene_table = tableInFrame(*scene);            // throws for a bad pose (caught by serve())
   if (!placeRequest(req, *scene, res, out)) return false;
   // The scenes asked for only (table frame; throws for a bad pose).
-  request.scenes =
-      graspScenes(*scene, req.hypotheses == 0 ? GraspPolicy::kMaxHypotheses
-                                              : static_cast<int>(std::min<uint32_t>(
-                                                    req.hypotheses, GraspPolicy::kMaxHypotheses)));
+  request.scenes = graspScenes(*scene, GraspPolicy::hypothesesFor(req.hypotheses));
   request.target = out->target;
   if (req.use_camera_pose) {  // its position only: candidates are what is in sight from it
     const geometry_msgs::Point& p = req.camera_pose.position;
@@ -221,10 +218,10 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   out->measured_target = measuredSurface(scene->objects[out->target], out->T_scene_table.inverse());
   std::string notes = out->grasps.notes;
   if (req.hypotheses == 0 && scene->hypotheses.empty())
-    notes += std::string(notes.empty() ? "" : "; ") +
-             "ranked in the objects alone: the scene carries no hypotheses (the perception "
-             "publishes them with a model that has a latent code and decompose_samples above 1, "
-             "as grasps.launch does by default)";
+    addNote(&notes,
+            "ranked in the objects alone: the scene carries no hypotheses (the perception "
+            "publishes them with a model that has a latent code and decompose_samples above 1, "
+            "as grasps.launch does by default)");
   res.message = notes.empty() ? notes : notes + "; ";
   return true;
 }

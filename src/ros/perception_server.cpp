@@ -102,6 +102,7 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   if (!(period >= 0.01 && period <= 3600.0))
     throw std::runtime_error(pnh_.resolveName("diagnostic_period") + " must lie in [0.01, 3600] s");
   const PerceptionConfig config = perceptionConfigFromParams(pnh, package_dir);
+  views_.setMaxViews(node_.accumulate_views ? node_.max_views : 1);
   ready_pub_ = pnh_.advertise<std_msgs::Bool>("ready", 1, true);
   diagnostics_.setHardwareID("simstack_perception " + pnh_.getNamespace());
   diagnostics_.add("perception", this, &PerceptionServer::diagnose);
@@ -446,7 +447,6 @@ void PerceptionServer::process(const Frame& frame) {
   std::vector<DepthView> views;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    views_.setMaxViews(node_.accumulate_views ? node_.max_views : 1);
     const ViewHistory::Arrival arrival = views_.arrive(frame.image->header.stamp.toNSec());
     if (arrival.cleared > 0)
       ROS_WARN(

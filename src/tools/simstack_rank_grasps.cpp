@@ -139,7 +139,7 @@ int main(int argc, char** argv) {
     std::cout << graspTable(ranking, rows);
     if (!output.empty()) {
       writeGraspJson((fs::path(staged->path()) / "grasps.json").string(), ranking, target_id,
-                     pregrasp_m);
+                     prepared.pregrasp_m);
       writeGraspPicture((fs::path(staged->path()) / "grasps.png").string(), scene, ranking.grasps,
                         5);
       staged->commit();

@@ -119,6 +119,9 @@ PullOutcome executeGrasp(const PullSimulator& simulator,
 /// simulated, so it ends within one pull per thread.
 using RankingProgress = std::function<bool(int done, int total, const RankedGrasp* best)>;
 
+/// Appends `note` to a ranking's or a request's message; notes are joined by "; ".
+void addNote(std::string* message, const std::string& note);
+
 /// Whether grasp `a` ranks before grasp `b`: fewer seal failures, then more often freed, fewer
 /// topples, a more upward pull (the approach's z in tenths), less displacement (whole
 /// millimetres), a pull nearer the centre of mass (whole millimetres), lower peak load.

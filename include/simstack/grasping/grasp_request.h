@@ -5,6 +5,7 @@
 /// validity, that the scene rests on the simulation's table, the hypotheses used, how old a
 /// scene may be. The callers add only what their own form of the request needs (ids, frames).
 
+#include <algorithm>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -29,6 +30,11 @@ struct GraspPolicy {
   /// table pose: its objects would stand in the table), further above is said (they fall).
   double table_gap_m = 0.05;
   static constexpr int kMaxHypotheses = 64;  ///< hypotheses simulated at most
+  /// Hypotheses a request for `asked` uses at most (0: all, up to kMaxHypotheses).
+  static int hypothesesFor(uint32_t asked) {
+    return asked == 0 ? kMaxHypotheses
+                      : static_cast<int>(std::min<uint32_t>(asked, kMaxHypotheses));
+  }
   /// Throws std::invalid_argument naming the field.
   void validate() const;
 };

@@ -34,6 +34,13 @@ struct HoughExperimental {
   /// Rounds of the test: each round cuts every part not yet settled at most once, so an
   /// instance ends in at most 2^rounds parts.
   int split_max_rounds = 2;
+
+  bool operator==(const HoughExperimental& o) const {
+    return reversed_vote_stop_vox == o.reversed_vote_stop_vox &&
+           split_below_solidity == o.split_below_solidity &&
+           split_accept_solidity == o.split_accept_solidity &&
+           split_max_rounds == o.split_max_rounds;
+  }
 };
 
 struct HoughConfig {

@@ -16,11 +16,6 @@
 namespace simstack {
 namespace {
 
-/// Notes in a ranking's message are joined by "; ".
-void addNote(std::string* message, const std::string& note) {
-  *message += (message->empty() ? "" : "; ") + note;
-}
-
 /// What the caller should know of the ranked grasps as a whole: that none held (in any
 /// hypothesis, or in all of them), that none freed the target. Each grasp's shares say it too,
 /// but a list ranked best first reads as if its first grasp were a good one.
@@ -184,6 +179,10 @@ int matchObject(const SuperquadricShape& reference, const std::vector<Superquadr
     if (d <= best_d) best = static_cast<int>(i), best_d = d;
   }
   return best;
+}
+
+void addNote(std::string* message, const std::string& note) {
+  *message += (message->empty() ? "" : "; ") + note;
 }
 
 bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b) {

@@ -18,10 +18,6 @@ namespace {
 
 bool positiveFinite(double v) { return std::isfinite(v) && v > 0.0; }
 
-void addNote(std::string* notes, const std::string& note) {
-  *notes += (notes->empty() ? "" : "; ") + note;
-}
-
 /// The scene's lowest surface against the simulation's table at z = 0: throws when it lies
 /// below by more than the gap, says so when above.
 void checkTable(const std::vector<SuperquadricShape>& scene, double gap_m, std::string* notes) {
@@ -88,9 +84,7 @@ PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConf
   if (request.camera_table && !request.camera_table->allFinite())
     throw std::invalid_argument("camera_pose.position is not finite");
   PreparedGrasps out;
-  const size_t wanted =
-      std::min<size_t>(request.hypotheses == 0 ? request.scenes.size() : size_t{request.hypotheses},
-                       GraspPolicy::kMaxHypotheses);
+  const size_t wanted = GraspPolicy::hypothesesFor(request.hypotheses);
   out.scenes.assign(request.scenes.begin(),
                     request.scenes.begin() + std::min(wanted, request.scenes.size()));
   for (size_t h = 0; h < out.scenes.size(); ++h)
@@ -100,7 +94,7 @@ PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConf
                   : "hypothesis " + std::to_string(h) + " (of the scene's hypotheses), ") +
           why);
   checkTable(out.scenes[0], policy.table_gap_m, &out.notes);
-  if (out.scenes.size() < wanted)
+  if (request.hypotheses > 0 && out.scenes.size() < wanted)
     addNote(&out.notes, std::to_string(request.hypotheses) +
                             " hypotheses asked for, the scene has " +
                             std::to_string(out.scenes.size()));

@@ -172,23 +172,20 @@ void readSection(const YAML::Node& root, const char* name, C* c, Fields fields,
   readMap(n, name, c, fields, path);
 }
 
+/// The fields `fields` names, as keys and values of the map being written.
 template <class C, class Fields>
-void writeSection(YAML::Emitter& e, const char* name, C& c, Fields fields) {
-  e << YAML::Key << name << YAML::Value << YAML::BeginMap;
+void writeFields(YAML::Emitter& e, C& c, Fields fields) {
   fields(c, [&](const char* key, const auto& value) {
     e << YAML::Key << key << YAML::Value;
     emit(e, value);
   });
-  e << YAML::EndMap;
 }
 
-/// The `experimental:` map as text, to tell settings from the defaults.
-std::string experimentalText(HoughExperimental x) {
-  YAML::Emitter t;
-  t << YAML::BeginMap;
-  writeSection(t, "experimental", x, [](auto& c, auto&& f) { houghExperimentalFields(c, f); });
-  t << YAML::EndMap;
-  return t.c_str();
+template <class C, class Fields>
+void writeSection(YAML::Emitter& e, const char* name, C& c, Fields fields) {
+  e << YAML::Key << name << YAML::Value << YAML::BeginMap;
+  writeFields(e, c, fields);
+  e << YAML::EndMap;
 }
 
 /// `hough:` with its `experimental:` map. A dropped variant's setting written directly under
@@ -208,7 +205,7 @@ void readHough(const YAML::Node& root, HoughConfig* h, const std::string& path) 
     });
     readFields(
         n, "hough.", &flat, [](auto& c, auto&& f) { houghExperimentalFields(c, f); }, path);
-    if (experimentalText(flat) != experimentalText(HoughExperimental()))
+    if (!(flat == HoughExperimental()))
       throw std::runtime_error(path + ": " + named +
                                ": a dropped variant's setting other than its default stands "
                                "under hough.experimental");
@@ -226,12 +223,8 @@ void readHough(const YAML::Node& root, HoughConfig* h, const std::string& path) 
 /// settings is not the default (a section to paste stays short when they are off).
 void writeHough(YAML::Emitter& e, HoughConfig& h, bool with_experimental) {
   e << YAML::Key << "hough" << YAML::Value << YAML::BeginMap;
-  houghFields(h, [&](const char* key, const auto& value) {
-    e << YAML::Key << key << YAML::Value;
-    emit(e, value);
-  });
-  if (with_experimental ||
-      experimentalText(h.experimental) != experimentalText(HoughExperimental()))
+  writeFields(e, h, [](auto& x, auto&& f) { houghFields(x, f); });
+  if (with_experimental || !(h.experimental == HoughExperimental()))
     writeSection(e, "experimental", h.experimental,
                  [](auto& x, auto&& f) { houghExperimentalFields(x, f); });
   e << YAML::EndMap;
@@ -389,10 +382,7 @@ std::string perceptionYaml(const PerceptionConfig& config) {
   YAML::Emitter e;
   e.SetDoublePrecision(10);  // 0.05, not 0.050000000000000003
   e << YAML::BeginMap;
-  perceptionFields(c, [&](const char* key, const auto& value) {
-    e << YAML::Key << key << YAML::Value;
-    emit(e, value);
-  });
+  writeFields(e, c, [](auto& x, auto&& f) { perceptionFields(x, f); });
   writeHough(e, c.hough, true);
   writeSection(e, "segments", c.segments, [](auto& x, auto&& f) { segmentFields(x, f); });
   writeSection(e, "surface_instances", c.surface_instances,

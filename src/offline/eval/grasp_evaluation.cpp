@@ -97,13 +97,15 @@ void pickOnEstimate(const std::vector<SuperquadricShape>& truth, const PullSimul
           ? estimate.measured_surfaces[k]
           : none;
   if (k >= 0) ranking = rankGrasps(scenes, k, {}, options.ranking, {}, measured);
+  const EstimateError error =
+      k >= 0 ? estimateError(estimate.superquadrics[k], truth[target]) : EstimateError();
   std::vector<std::string> choosers = {"ranked", "random", "top-most"};
   if (options.best_in_truth) choosers.emplace_back("best in truth");
   for (const std::string& chooser : choosers) {
     PickResult p;
     p.scene = scene, p.target = target, p.method = method, p.chooser = chooser;
     p.found = k >= 0;
-    if (p.found) p.error = estimateError(estimate.superquadrics[k], truth[target]);
+    if (p.found) p.error = error;
     if (chooser == "best in truth") {
       p.grasped =
           bestInTruth(ranking, truth_sim, truth, target, options, &p.outcome, &p.trials) != nullptr;
