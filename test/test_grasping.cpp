@@ -209,10 +209,21 @@ TEST(SuctionCandidates, ThePullsThroughTheCentreOfMassAreAmongThem) {
   EXPECT_GE(near, 4) << "a cup's radius around the top's middle";
   EXPECT_EQ(set.candidates.size(), 32u);
   config.max_candidates = 5;
-  for (const SuctionCandidate& c : suctionCandidates(stack, 1, {}, config).candidates) {
+  const CandidateSet few = suctionCandidates(stack, 1, defaultCameraPositions(stack), config);
+  EXPECT_EQ(few.candidates.size(), 5u);
+  for (const SuctionCandidate& c : few.candidates) {
     const Vec3 arm = stack[1].centroid() - c.contact_table;
     EXPECT_LT(arm.cross(c.approach_table).norm(), 1e-6) << "a few candidates: the centres";
   }
+  config.max_candidates = 64;
+  int top_ring = 0;
+  for (const SuctionCandidate& c :
+       suctionCandidates(stack, 1, defaultCameraPositions(stack), config).candidates) {
+    const Vec3 arm = stack[1].centroid() - c.contact_table;
+    const double offset = arm.cross(c.approach_table).norm();
+    top_ring += c.approach_table.z() > 0.99 && std::abs(offset - 2.0 * config.cup_radius_m) < 1e-3;
+  }
+  EXPECT_EQ(top_ring, 8) << "two cup radii around the top's middle, all round";
 }
 
 TEST(GraspRanking, TiesGoToThePullNearerTheCentreOfMass) {

@@ -70,7 +70,7 @@ Transform pregraspPose(const Transform& tool, double distance_m);
 
 struct CandidateSet {
   std::vector<SuctionCandidate> candidates;
-  int surface_samples = 0;  ///< drawn on the target (the 30 through the centre of mass too)
+  int surface_samples = 0;  ///< drawn on the target (the 78 at the centre of mass too)
   int visible = 0;          ///< of them seen by a camera
   int reachable = 0;        ///< of those, approachable from above the table
   int sealable = 0;         ///< of those, where the rim seals (on the superquadric and, where
@@ -98,11 +98,12 @@ double rimDeviation(const SuperquadricShape& sq, const Vec3& contact_table,
                     double limit_m = std::numeric_limits<double>::infinity());
 
 /// Candidates on scene[target] seen from any of `camera_positions` (table frame; the other
-/// objects and the table occlude): where the pull passes through the centre of mass or a cup's
-/// radius from it (the six ends of the target's axes and four points around each), kept first,
-/// then random surface samples spread by farthest-point sampling. With `measured_table` (depth
-/// points on the target): a candidate on measured surface must seal there too (measuredSeal) and
-/// takes its normal. Throws std::invalid_argument for a bad target or config.
+/// objects and the table occlude): where the pull passes through the centre of mass or one or two
+/// cups' radii from it (the six ends of the target's axes, four points around each at one radius
+/// and eight at two), kept first, then random surface samples spread by farthest-point sampling.
+/// With `measured_table` (depth points on the target): a candidate on measured surface must seal
+/// there too (measuredSeal) and takes its normal. Throws std::invalid_argument for a bad target or
+/// config.
 CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int target,
                                const std::vector<Vec3>& camera_positions,
                                const CandidateConfig& config, const Points3& measured_table = {});

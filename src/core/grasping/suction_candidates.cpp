@@ -97,8 +97,9 @@ std::vector<SuctionCandidate> spread(const std::vector<SuctionCandidate>& all, i
 }
 
 /// Surface points (object frame) whose pull along the normal passes through the centre of
-/// mass or a cup's radius from it, where the load's moment on the seal is least: on each of the
-/// six ends of the object's axes, the point on the axis and the four a cup's radius around it.
+/// mass or near it, where the load's moment on the seal is least: on each of the six ends of the
+/// object's axes, the point on the axis, four a cup's radius around it and eight two radii
+/// around it (a face wider than the cup then offers a patch of holding grasps, not one point).
 std::vector<SurfacePoint> centredSamples(const SuperquadricShape& sq, double cup_radius_m) {
   std::vector<Vec3> towards;  // the six axis ends first: a spread of few candidates keeps them
   for (int axis = 0; axis < 3; ++axis)
@@ -110,6 +111,15 @@ std::vector<SurfacePoint> centredSamples(const SuperquadricShape& sq, double cup
         if (other != axis)
           for (double side : {1.0, -1.0})
             towards.push_back(end + side * cup_radius_m * Vec3::Unit(other));
+    }
+  for (int axis = 0; axis < 3; ++axis)
+    for (double sign : {1.0, -1.0}) {
+      const Vec3 end = sq.surfacePointAlong(sign * Vec3::Unit(axis));
+      const Vec3 u = Vec3::Unit((axis + 1) % 3), v = Vec3::Unit((axis + 2) % 3);
+      for (int k = 0; k < 8; ++k) {
+        const double phi = M_PI / 4.0 * k;
+        towards.push_back(end + 2.0 * cup_radius_m * (std::cos(phi) * u + std::sin(phi) * v));
+      }
     }
   std::vector<SurfacePoint> out;
   for (const Vec3& t : towards) {
