@@ -428,3 +428,99 @@ TEST(SurfaceInstances, DepthPointsNoInstanceExplainsBecomeObjects) {
 }
 
 }  // namespace simstack
+
+namespace simstack {
+
+/// Depth points of an upright cylinder wall (axis at `axis`, radius `r`, heights z0..z1) on the
+/// arc of angles `from`..`to` (radians), labelled `label` in `seg` (its voxels), with 1 mm noise.
+static Points3 wallPoints(InstanceSegmentation* seg, int label, const Vec2& axis, double r,
+                          double z0, double z1, double from, double to, std::mt19937* rng) {
+  std::uniform_real_distribution<double> noise(-0.001, 0.001);
+  Points3 pts;
+  for (double a = from; a <= to; a += 0.02)
+    for (double z = z0; z <= z1; z += 0.004) {
+      const Vec3 p(axis.x() + (r + noise(*rng)) * std::cos(a),
+                   axis.y() + (r + noise(*rng)) * std::sin(a), z);
+      pts.push_back(p);
+      const Vec3i c = seg->labels.spec.voxelIndex(p);
+      if (seg->labels.spec.inside(c.x(), c.y(), c.z())) {
+        int& l = seg->labels.at(c.x(), c.y(), c.z());
+        if (l < 0) ++seg->voxel_counts[label];
+        if (l < 0) l = label;
+      }
+    }
+  return pts;
+}
+
+TEST(SurfaceInstances, AnOpenContainerSeenFromOutsideAndInsideIsOneObject) {
+  const GridSpec g = GridSpec::sceneGrid(Vec2(0.0, 0.0), 0.64, 32);
+  InstanceSegmentation seg;
+  seg.labels = Grid3<int>(g, -1);
+  seg.voxel_counts = {0, 0, 0, 0, 0, 0};
+  seg.centres_table = {Vec3(0, -0.05, 0.06), Vec3(0, 0.05, 0.08),  Vec3(0.2, 0, 0.05),
+                       Vec3(0.2, 0.1, 0.05), Vec3(-0.22, 0, 0.05), Vec3(-0.18, 0, 0.05)};
+  const Vec3 camera(0.0, -1.0, 0.8);  // in front of the scene (-y), above it
+  std::mt19937 rng(3);
+  // A pot (radius 9 cm, 2 mm wall): its front outside, from the table up to its 12 cm rim, and
+  // above the front rim the inside of its far wall.
+  const Points3 outside = wallPoints(&seg, 0, Vec2(0, 0), 0.09, 0.0, 0.12, -M_PI + 0.2, -0.2, &rng);
+  Points3 points = outside;
+  const Points3 inside = wallPoints(&seg, 1, Vec2(0, 0), 0.088, 0.05, 0.12, 0.3, M_PI - 0.3, &rng);
+  points.insert(points.end(), inside.begin(), inside.end());
+  // A can beside it and a second can behind that: each shows only its front.
+  for (const auto& [label, y] : {std::pair{2, 0.0}, std::pair{3, 0.1}}) {
+    const Points3 can =
+        wallPoints(&seg, label, Vec2(0.2, y), 0.035, 0.0, 0.1, -M_PI + 0.3, -0.3, &rng);
+    points.insert(points.end(), can.begin(), can.end());
+  }
+  // A third can whose front the votes cut into its left and right halves.
+  Points3 left = wallPoints(&seg, 4, Vec2(-0.2, 0), 0.035, 0.0, 0.1, -M_PI + 0.3, -M_PI / 2, &rng);
+  const Points3 right =
+      wallPoints(&seg, 5, Vec2(-0.2, 0), 0.035, 0.0, 0.1, -M_PI / 2 + 0.02, -0.3, &rng);
+  points.insert(points.end(), left.begin(), left.end());
+  points.insert(points.end(), right.begin(), right.end());
+  const RevolutionFit pot = fitCommonRevolution(outside, inside, camera.head<2>());
+  ASSERT_TRUE(pot.valid);
+  EXPECT_LT(pot.median_residual_m, 0.002);
+  EXPECT_LT(pot.axis.norm(), 0.01);
+  EXPECT_GE(pot.arc_deg, 300);
+  EXPECT_GT(pot.inside_share, 0.3);
+
+  SurfaceInstanceConfig config;
+  InstanceSegmentation joined = seg;
+  EXPECT_EQ(joinOpenContainers(points, camera, config, &joined), 1);
+  ASSERT_EQ(joined.size(), 5);
+  const int pot_label = joined.labels.data[nearestLabelledVoxel(joined.labels, points.front())];
+  EXPECT_EQ(joined.labels.data[nearestLabelledVoxel(joined.labels, inside.front())], pot_label);
+  EXPECT_EQ(joined.voxel_counts[pot_label], seg.voxel_counts[0] + seg.voxel_counts[1]);
+  EXPECT_LT(joined.centres_table[pot_label].head<2>().norm(), 0.05);
+  int counted = 0;
+  for (int l : joined.labels.data) counted += l == 4;
+  EXPECT_EQ(counted, joined.voxel_counts[4]);  // the last label moved down by one
+  // The halves of the third can lie on one surface of revolution, seen from outside only: none of
+  // their points lies beyond the axis.
+  const RevolutionFit halves = fitCommonRevolution(left, right, camera.head<2>());
+  ASSERT_TRUE(halves.valid);
+  EXPECT_LT(halves.median_residual_m, 0.002);
+  EXPECT_EQ(halves.inside_share, 0.0);
+  // The front of a can and that of the can behind it lie near one circle, and the far one lies
+  // beyond its axis: only their cover tells them from a container's walls, as the camera sees
+  // less than half way round a convex object.
+  std::vector<Points3> cans(2);
+  for (const Vec3& p : points) {
+    const int v = nearestLabelledVoxel(seg.labels, p);
+    if (v >= 0 && (seg.labels.data[v] == 2 || seg.labels.data[v] == 3))
+      cans[seg.labels.data[v] - 2].push_back(p);
+  }
+  const RevolutionFit two = fitCommonRevolution(cans[0], cans[1], camera.head<2>());
+  ASSERT_TRUE(two.valid);
+  EXPECT_GT(two.inside_share, config.container_inside_share);
+  EXPECT_LT(two.arc_deg, 180);
+  InstanceSegmentation other = seg;
+  config.container_profile_m = 0;
+  EXPECT_EQ(joinOpenContainers(points, camera, config, &other), 0);
+  config.container_inside_share = 2;
+  EXPECT_THROW(joinOpenContainers(points, camera, config, &other), std::invalid_argument);
+}
+
+}  // namespace simstack

@@ -200,6 +200,14 @@ BENCHMARK(BM_PerceiveDefaultConfig)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
+// Its peer without the open-container test (surface_instances.container_profile_m: 0), on
+// the same frame: what the test costs where nothing joins.
+static void BM_PerceiveWithoutContainerTest(benchmark::State& state) {
+  perceiveShippedConfig(
+      state, "", [&](PerceptionConfig* pc) { pc->surface_instances.container_profile_m = 0; });
+}
+BENCHMARK(BM_PerceiveWithoutContainerTest)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // What grasps.launch runs by default: the shipped config with the C-VAE and its card, three
 // hypotheses decomposed for the grasp ranking; its peer decomposes the first alone.
 static void BM_PerceiveGraspHypotheses(benchmark::State& state) {

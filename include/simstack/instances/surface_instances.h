@@ -28,7 +28,15 @@ struct SurfaceInstanceConfig {
   /// patch (surface_segments.h) whose explained points are mostly the instance's, or, without
   /// patches, within two voxels of its voxels.
   double attach_share = 0.1;
-  void validate() const;  ///< std::invalid_argument naming the field
+  /// Two instances are one open container (a pot's front wall and the inside of its far wall, a
+  /// bowl's outside and inside) when their depth points, over the heights both reach, lie on
+  /// one upright surface of revolution within this median distance (m), surround its axis
+  /// over `container_min_arc_deg` and are in part seen from inside (`container_inside_share`):
+  /// no convex object shows the camera its far side. 0 = off.
+  double container_profile_m = 0.003;
+  double container_min_arc_deg = 240;   ///< ... their points' angular cover about the axis
+  double container_inside_share = 0.2;  ///< ... their share beyond the axis, seen from the camera
+  void validate() const;                ///< std::invalid_argument naming the field
 };
 
 /// PCL's Euclidean clustering of `points`: clusters of at least `min_points` whose points
@@ -44,5 +52,28 @@ std::vector<std::vector<int>> euclideanClusters(const Points3& points, double to
 /// of instances added. std::invalid_argument for a bad config or patch count.
 int addSurfaceInstances(const Points3& points_table, const SurfaceInstanceConfig& config,
                         InstanceSegmentation* seg, const std::vector<int>* patch = nullptr);
+
+/// How well two point sets (table frame) lie on one upright surface of revolution: the axis
+/// and one radius per `bin_m` of height fitted by linear least squares (x^2 + y^2 = 2 c . p +
+/// k_bin) to the points of the heights both sets reach, at least three points each.
+struct RevolutionFit {
+  bool valid = false;            ///< enough shared heights, a real radius in each
+  Vec2 axis = Vec2::Zero();      ///< the axis' position on the table
+  double median_residual_m = 0;  ///< median | |p - axis| - radius(height) |
+  double arc_deg = 0;  ///< angular cover of the fitted points about the axis (10-degree sectors)
+  /// Share beyond the axis from `camera_xy` by more than a fifth of their radius: seen from inside.
+  double inside_share = 0;
+  double max_radius_m = 0;
+  int points = 0;  ///< points fitted (on the shared heights)
+};
+RevolutionFit fitCommonRevolution(const Points3& a, const Points3& b, const Vec2& camera_xy,
+                                  double bin_m = 0.01);
+
+/// Joins, pair by pair (the closest fit first), instances whose depth points are one open
+/// container by the `container_*` fields (the points are given to the instance of their nearest
+/// labelled voxel; `camera_table` is the view's camera position). Labels are renumbered densely,
+/// centres are the joined voxels' means. Returns the number of joins.
+int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
+                       const SurfaceInstanceConfig& config, InstanceSegmentation* seg);
 
 }  // namespace simstack

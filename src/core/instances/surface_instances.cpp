@@ -4,7 +4,10 @@
 #include <pcl/search/kdtree.h>
 #include <pcl/segmentation/extract_clusters.h>
 
+#include <Eigen/Dense>
+
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <set>
 #include <stdexcept>
@@ -23,6 +26,11 @@ void SurfaceInstanceConfig::validate() const {
   if (min_points < 1) fail("min_points must be >= 1");
   if (!(max_base_height_m >= min_height_m)) fail("max_base_height_m must be >= min_height_m");
   if (!(attach_share > 0.0 && attach_share <= 1.0)) fail("attach_share must lie in (0, 1]");
+  if (!(container_profile_m >= 0.0)) fail("container_profile_m must be >= 0");
+  if (!(container_min_arc_deg >= 0.0 && container_min_arc_deg <= 360.0))
+    fail("container_min_arc_deg must lie in [0, 360]");
+  if (!(container_inside_share >= 0.0 && container_inside_share <= 1.0))
+    fail("container_inside_share must lie in [0, 1]");
 }
 
 namespace {
@@ -153,6 +161,161 @@ int addSurfaceInstances(const Points3& points_table, const SurfaceInstanceConfig
     seg->centres_table[label] = sum / seg->voxel_counts[label];
   }
   return added;
+}
+
+RevolutionFit fitCommonRevolution(const Points3& a, const Points3& b, const Vec2& camera_xy,
+                                  double bin_m) {
+  RevolutionFit fit;
+  if (!(bin_m > 0.0)) throw std::invalid_argument("fitCommonRevolution: bin_m must be > 0");
+  const auto bin = [&](const Vec3& p) { return static_cast<int>(std::floor(p.z() / bin_m)); };
+  std::map<int, std::pair<int, int>> counts;  // height bin -> points of a, of b
+  for (const Vec3& p : a) ++counts[bin(p)].first;
+  for (const Vec3& p : b) ++counts[bin(p)].second;
+  std::map<int, int> column;  // shared height bin -> its radius' unknown
+  for (const auto& [k, n] : counts)
+    if (n.first >= 3 && n.second >= 3) column.emplace(k, static_cast<int>(column.size()));
+  Points3 shared;
+  for (const Points3* set : {&a, &b})
+    for (const Vec3& p : *set)
+      if (column.count(bin(p))) shared.push_back(p);
+  fit.points = static_cast<int>(shared.size());
+  if (shared.size() < 3 + column.size()) return fit;
+  // Centred for conditioning: |p - c|^2 = r^2  <=>  x^2 + y^2 = 2 c . p + (r^2 - |c|^2).
+  Vec2 mean = Vec2::Zero();
+  for (const Vec3& p : shared) mean += p.head<2>();
+  mean /= static_cast<double>(shared.size());
+  // Normal equations, accumulated: each point's row is (2 q.x, 2 q.y, one-hot of its bin).
+  const int n = 2 + static_cast<int>(column.size());
+  Eigen::MatrixXd AtA = Eigen::MatrixXd::Zero(n, n);
+  Eigen::VectorXd Aty = Eigen::VectorXd::Zero(n);
+  for (const Vec3& p : shared) {
+    const Vec2 q = p.head<2>() - mean;
+    const int j = 2 + column.at(bin(p));
+    const double row[3] = {2 * q.x(), 2 * q.y(), 1.0};
+    const int col[3] = {0, 1, j};
+    for (int r = 0; r < 3; ++r) {
+      for (int t = 0; t < 3; ++t) AtA(col[r], col[t]) += row[r] * row[t];
+      Aty(col[r]) += row[r] * q.squaredNorm();
+    }
+  }
+  const Eigen::VectorXd x = AtA.colPivHouseholderQr().solve(Aty);
+  if (!x.allFinite()) return fit;
+  const Vec2 c(x(0), x(1));
+  std::vector<double> radius(column.size());
+  for (const auto& [k, j] : column) {
+    const double r2 = x(2 + j) + c.squaredNorm();
+    if (!(r2 > 0.0)) return fit;
+    radius[j] = std::sqrt(r2);
+    fit.max_radius_m = std::max(fit.max_radius_m, radius[j]);
+  }
+  fit.axis = c + mean;
+  std::vector<double> residual;
+  std::vector<bool> sector(36, false);
+  const Vec2 towards_camera = (camera_xy - fit.axis).normalized();
+  int inside = 0;
+  for (const Vec3& p : shared) {
+    const Vec2 d = p.head<2>() - fit.axis;
+    const double rho = d.norm();
+    residual.push_back(std::abs(rho - radius[column.at(bin(p))]));
+    if (rho <= 0.0) continue;
+    const double angle = std::atan2(d.y(), d.x());  // -pi..pi
+    sector[std::min(35, static_cast<int>((angle + M_PI) / (2 * M_PI) * 36))] = true;
+    // A convex object's visible side faces the camera: points beyond the axis are seen from
+    // inside.
+    if (d.dot(towards_camera) < -0.2 * rho) ++inside;
+  }
+  std::nth_element(residual.begin(), residual.begin() + residual.size() / 2, residual.end());
+  fit.median_residual_m = residual[residual.size() / 2];
+  fit.arc_deg = 10.0 * std::count(sector.begin(), sector.end(), true);
+  fit.inside_share = static_cast<double>(inside) / static_cast<double>(shared.size());
+  fit.valid = true;
+  return fit;
+}
+
+namespace {
+
+/// Per instance, the points whose nearest labelled voxel is its, at most `max_per_instance` of them
+/// evenly spaced in their order.
+std::vector<Points3> pointsByInstance(const Points3& points, const InstanceSegmentation& seg,
+                                      int max_per_instance) {
+  std::vector<Points3> out(seg.size());
+  for (const Vec3& p : points) {
+    const int v = nearestLabelledVoxel(seg.labels, p);
+    if (v >= 0 && seg.labels.data[v] < seg.size()) out[seg.labels.data[v]].push_back(p);
+  }
+  for (Points3& set : out)
+    if (static_cast<int>(set.size()) > max_per_instance) {
+      Points3 kept;
+      const double step = static_cast<double>(set.size()) / max_per_instance;
+      for (int i = 0; i < max_per_instance; ++i) kept.push_back(set[static_cast<size_t>(i * step)]);
+      set.swap(kept);
+    }
+  return out;
+}
+
+/// Instance `drop` joins `keep`; labels above `drop` move down by one.
+void joinInstances(InstanceSegmentation* seg, int keep, int drop) {
+  const int nk = seg->voxel_counts[keep], nd = seg->voxel_counts[drop];
+  if (nk + nd > 0)
+    seg->centres_table[keep] =
+        (seg->centres_table[keep] * nk + seg->centres_table[drop] * nd) / double(nk + nd);
+  seg->voxel_counts[keep] = nk + nd;
+  for (int& l : seg->labels.data) {
+    if (l == drop) l = keep;
+    if (l > drop) --l;
+  }
+  seg->centres_table.erase(seg->centres_table.begin() + drop);
+  seg->voxel_counts.erase(seg->voxel_counts.begin() + drop);
+}
+
+/// Whether two instances' points come within `gap_m` of each other on the table (bounding boxes).
+bool nearOnTable(const Points3& a, const Points3& b, double gap_m) {
+  Vec2 lo_a = Vec2::Constant(1e9), hi_a = -lo_a, lo_b = lo_a, hi_b = hi_a;
+  for (const Vec3& p : a) {
+    lo_a = lo_a.cwiseMin(p.head<2>());
+    hi_a = hi_a.cwiseMax(p.head<2>());
+  }
+  for (const Vec3& p : b) {
+    lo_b = lo_b.cwiseMin(p.head<2>());
+    hi_b = hi_b.cwiseMax(p.head<2>());
+  }
+  return (lo_a.array() <= hi_b.array() + gap_m).all() &&
+         (lo_b.array() <= hi_a.array() + gap_m).all();
+}
+
+}  // namespace
+
+int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
+                       const SurfaceInstanceConfig& config, InstanceSegmentation* seg) {
+  config.validate();
+  if (!config.enabled || config.container_profile_m <= 0.0) return 0;
+  constexpr int kMaxPoints = 1500;     // per instance: the fit's cost stays small
+  constexpr double kMaxRadiusM = 0.3;  // larger "containers" are rows of objects
+  constexpr double kMaxGapM = 0.1;     // between the bounding boxes of a pot's two walls
+  std::vector<Points3> points = pointsByInstance(points_table, *seg, kMaxPoints);
+  int joins = 0;
+  for (;;) {
+    int best_a = -1, best_b = -1;
+    double best = config.container_profile_m;
+    for (int a = 0; a < seg->size(); ++a)
+      for (int b = a + 1; b < seg->size(); ++b) {
+        if (static_cast<int>(std::min(points[a].size(), points[b].size())) < config.min_points ||
+            !nearOnTable(points[a], points[b], kMaxGapM))
+          continue;
+        const RevolutionFit f = fitCommonRevolution(points[a], points[b], camera_table.head<2>());
+        if (f.valid && f.median_residual_m <= best && f.arc_deg >= config.container_min_arc_deg &&
+            f.inside_share >= config.container_inside_share && f.max_radius_m <= kMaxRadiusM) {
+          best = f.median_residual_m;
+          best_a = a;
+          best_b = b;
+        }
+      }
+    if (best_a < 0) return joins;
+    joinInstances(seg, best_a, best_b);
+    points[best_a].insert(points[best_a].end(), points[best_b].begin(), points[best_b].end());
+    points.erase(points.begin() + best_b);
+    ++joins;
+  }
 }
 
 }  // namespace simstack

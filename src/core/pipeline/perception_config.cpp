@@ -82,6 +82,9 @@ void surfaceInstanceFields(C& c, F&& f) {
   f("cluster_tolerance_m", c.cluster_tolerance_m);
   f("min_points", c.min_points);
   f("attach_share", c.attach_share);
+  f("container_profile_m", c.container_profile_m);
+  f("container_min_arc_deg", c.container_min_arc_deg);
+  f("container_inside_share", c.container_inside_share);
 }
 template <class C, class F>
 void fitFields(C& c, F&& f) {

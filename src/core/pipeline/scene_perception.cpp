@@ -191,6 +191,8 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
     const bool patched = segments && segments->points_table.size() == points.size();
     addSurfaceInstances(points, config.surface_instances, &seg,
                         patched ? &segments->patch : nullptr);
+    joinOpenContainers(points, measured_views.front().T_table_camera.translation(),
+                       config.surface_instances, &seg);
   }
   h->labels = seg.labels;
   // An instance whose centre lies outside the workspace is not reported (its voxels are free).
