@@ -473,10 +473,10 @@ TEST(SurfaceInstances, AnOpenContainerSeenFromOutsideAndInsideIsOneObject) {
         wallPoints(&seg, label, Vec2(0.2, y), 0.035, 0.0, 0.1, -M_PI + 0.3, -0.3, &rng);
     points.insert(points.end(), can.begin(), can.end());
   }
-  // A third can whose front the votes cut into its left and right halves.
+  // A third can whose front the votes cut in two: its left half, the lower part of its right.
   Points3 left = wallPoints(&seg, 4, Vec2(-0.2, 0), 0.035, 0.0, 0.1, -M_PI + 0.3, -M_PI / 2, &rng);
   const Points3 right =
-      wallPoints(&seg, 5, Vec2(-0.2, 0), 0.035, 0.0, 0.1, -M_PI / 2 + 0.02, -0.3, &rng);
+      wallPoints(&seg, 5, Vec2(-0.2, 0), 0.035, 0.0, 0.06, -M_PI / 2 + 0.02, -0.3, &rng);
   points.insert(points.end(), left.begin(), left.end());
   points.insert(points.end(), right.begin(), right.end());
   const RevolutionFit pot = fitCommonRevolution(outside, inside, camera.head<2>());
@@ -494,9 +494,14 @@ TEST(SurfaceInstances, AnOpenContainerSeenFromOutsideAndInsideIsOneObject) {
   EXPECT_EQ(joined.labels.data[nearestLabelledVoxel(joined.labels, inside.front())], pot_label);
   EXPECT_EQ(joined.voxel_counts[pot_label], seg.voxel_counts[0] + seg.voxel_counts[1]);
   EXPECT_LT(joined.centres_table[pot_label].head<2>().norm(), 0.05);
+  ASSERT_NE(seg.voxel_counts[4], seg.voxel_counts[5]);
   int counted = 0;
-  for (int l : joined.labels.data) counted += l == 4;
-  EXPECT_EQ(counted, joined.voxel_counts[4]);  // the last label moved down by one
+  for (int l : joined.labels.data) {
+    EXPECT_LT(l, joined.size());
+    counted += l == 4;
+  }
+  EXPECT_EQ(counted, seg.voxel_counts[5]);  // the last label moved down by one
+  EXPECT_EQ(counted, joined.voxel_counts[4]);
   // The halves of the third can lie on one surface of revolution, seen from outside only: none of
   // their points lies beyond the axis.
   const RevolutionFit halves = fitCommonRevolution(left, right, camera.head<2>());
@@ -521,6 +526,40 @@ TEST(SurfaceInstances, AnOpenContainerSeenFromOutsideAndInsideIsOneObject) {
   EXPECT_EQ(joinOpenContainers(points, camera, config, &other), 0);
   config.container_inside_share = 2;
   EXPECT_THROW(joinOpenContainers(points, camera, config, &other), std::invalid_argument);
+}
+
+/// Joins of the two halves of one wall (labels 0 and 1, angles from..mid and mid..to) under
+/// `config`, seen from `camera`.
+static int joinsOfHalves(double r, double from, double mid, double to, const Vec3& camera,
+                         const SurfaceInstanceConfig& config) {
+  InstanceSegmentation seg;
+  seg.labels = Grid3<int>(GridSpec::sceneGrid(Vec2(0.0, 0.0), 0.64, 32), -1);
+  seg.voxel_counts = {0, 0};
+  seg.centres_table = {Vec3::Zero(), Vec3::Zero()};
+  std::mt19937 rng(5);
+  Points3 points = wallPoints(&seg, 0, Vec2(0, 0), r, 0.0, 0.12, from, mid, &rng);
+  const Points3 second = wallPoints(&seg, 1, Vec2(0, 0), r, 0.0, 0.12, mid + 0.02, to, &rng);
+  points.insert(points.end(), second.begin(), second.end());
+  return joinOpenContainers(points, camera, config, &seg);
+}
+
+TEST(SurfaceInstances, AContainerMustGoRoundItsAxisAndBeSeenFromInside) {
+  const Vec3 camera(0.0, -1.0, 0.8);  // the camera looks along +y
+  SurfaceInstanceConfig config;
+  // The inside of a far wall cut in two: on one surface, all beyond the axis, but 140 degrees
+  // round it.
+  const double far_from = 0.35, far_to = M_PI - 0.35;
+  EXPECT_EQ(joinsOfHalves(0.09, far_from, M_PI / 2, far_to, camera, config), 0);
+  SurfaceInstanceConfig any_arc = config;
+  any_arc.container_min_arc_deg = 0;
+  EXPECT_EQ(joinsOfHalves(0.09, far_from, M_PI / 2, far_to, camera, any_arc), 1);
+  // A wall 250 degrees round, centred on the camera's side: the arc is there, but only its ends
+  // (a seventh of it) lie beyond the axis.
+  const double near_from = -M_PI / 2 - 2.18, near_to = -M_PI / 2 + 2.18;
+  EXPECT_EQ(joinsOfHalves(0.09, near_from, -M_PI / 2, near_to, camera, config), 0);
+  SurfaceInstanceConfig any_side = config;
+  any_side.container_inside_share = 0;
+  EXPECT_EQ(joinsOfHalves(0.09, near_from, -M_PI / 2, near_to, camera, any_side), 1);
 }
 
 }  // namespace simstack

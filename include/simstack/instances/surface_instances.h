@@ -71,8 +71,8 @@ RevolutionFit fitCommonRevolution(const Points3& a, const Points3& b, const Vec2
 
 /// Joins, pair by pair (the closest fit first), instances whose depth points are one open
 /// container by the `container_*` fields (the points are given to the instance of their nearest
-/// labelled voxel; `camera_table` is the view's camera position). Labels are renumbered densely,
-/// centres are the joined voxels' means. Returns the number of joins.
+/// labelled voxel; `camera_table` is the view's camera position). Labels are renumbered densely;
+/// a joined centre is the two centres' mean weighted by their voxels. Returns the number of joins.
 int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
                        const SurfaceInstanceConfig& config, InstanceSegmentation* seg);
 
