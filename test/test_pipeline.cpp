@@ -467,6 +467,49 @@ TEST(ScenePerception, PerceivesARenderedPile) {
   }
 }
 
+TEST(PerceptionConfig, TheClutterProfileIsTheDefaultWithItsThreeInstanceSettings) {
+  const std::string dir = SIMSTACK_SOURCE_DIR;
+  const PerceptionConfig clutter = loadPerceptionYaml(dir + "/config/perception_clutter.yaml", dir);
+  PerceptionConfig expected = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
+  EXPECT_EQ(clutter.model_path, expected.model_path);
+  EXPECT_LT(clutter.hough.bandwidth_m, expected.hough.bandwidth_m);
+  EXPECT_GT(clutter.segments.max_unseen_points, expected.segments.max_unseen_points);
+  expected.hough.bandwidth_m = 0.03;
+  expected.hough.min_instance_voxels = 15;
+  expected.segments.max_unseen_points = 100;
+  EXPECT_EQ(perceptionYaml(clutter), perceptionYaml(expected));
+}
+
+// Piles of 5-8 objects of 5-15 cm (more, and smaller, than training's 3-4 of 5-30 cm): with the
+// default radius the centres of small neighbours merge; the clutter profile keeps them apart.
+TEST(ScenePerception, TheClutterProfileCountsSmallNeighboursTheDefaultMerges) {
+  const std::string dir = SIMSTACK_SOURCE_DIR;
+  const ScenePerception standard(loadPerceptionYaml(dir + "/config/perception.yaml", dir));
+  const ScenePerception clutter(loadPerceptionYaml(dir + "/config/perception_clutter.yaml", dir));
+  PileConfig crowded;
+  crowded.min_objects = 5;
+  crowded.max_objects = 8;
+  crowded.max_size_m = 0.15;
+  const PileGenerator generator(crowded);
+  int standard_error = 0, clutter_error = 0, standard_under = 0;
+  for (uint64_t seed = 1; seed <= 6; ++seed) {
+    RenderedPile p;
+    p.scene = generator.generate(seed).scene;
+    const Vec3 centre = p.scene.surfaceCentroid();
+    p.T_table_camera = lookAt(centre + Vec3(0.55, -0.35, 0.55), Vec3(centre.x(), centre.y(), 0.05));
+    p.view = DepthRenderer(p.scene).render(p.camera, p.T_table_camera);
+    const DepthView view{p.view.depth, p.camera, p.T_table_camera};
+    const int objects = static_cast<int>(p.scene.objects.size());
+    const int a = static_cast<int>(standard.perceive(view).instances().size()) - objects;
+    const int b = static_cast<int>(clutter.perceive(view).instances().size()) - objects;
+    standard_error += std::abs(a);
+    clutter_error += std::abs(b);
+    standard_under += a < 0;
+  }
+  EXPECT_GE(standard_under, 3) << "the premise: the default merges neighbours in most piles";
+  EXPECT_LT(clutter_error, standard_error);
+}
+
 /// Index of the instance whose superquadric centre is nearest to `p` (-1 when none).
 int nearestInstance(const SceneEstimate& est, const Vec3& p) {
   int best = -1;
