@@ -48,6 +48,11 @@ RenderedPile renderPile(uint64_t seed, const PileConfig& piles = PileConfig()) {
   return p;
 }
 
+PerceptionConfig shippedConfig(const std::string& name = "perception") {
+  const std::string dir = SIMSTACK_SOURCE_DIR;
+  return loadPerceptionYaml(dir + "/config/" + name + ".yaml", dir);
+}
+
 TEST(PerceptionConfig, ShippedYamlHoldsTheDefaultsAndTyposAreErrors) {
   const std::string dir = SIMSTACK_SOURCE_DIR;
   const PerceptionConfig c = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
@@ -468,9 +473,8 @@ TEST(ScenePerception, PerceivesARenderedPile) {
 }
 
 TEST(PerceptionConfig, TheClutterProfileIsTheDefaultWithItsThreeInstanceSettings) {
-  const std::string dir = SIMSTACK_SOURCE_DIR;
-  const PerceptionConfig clutter = loadPerceptionYaml(dir + "/config/perception_clutter.yaml", dir);
-  PerceptionConfig expected = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
+  const PerceptionConfig clutter = shippedConfig("perception_clutter");
+  PerceptionConfig expected = shippedConfig();
   EXPECT_EQ(clutter.model_path, expected.model_path);
   EXPECT_LT(clutter.hough.bandwidth_m, expected.hough.bandwidth_m);
   EXPECT_GT(clutter.segments.max_unseen_points, expected.segments.max_unseen_points);
@@ -483,12 +487,11 @@ TEST(PerceptionConfig, TheClutterProfileIsTheDefaultWithItsThreeInstanceSettings
 // Piles of 5-8 objects of 5-15 cm (more, and smaller, than training's 3-4 of 5-30 cm): with the
 // default radius the centres of small neighbours merge; the clutter profile keeps them apart.
 TEST(ScenePerception, TheClutterProfileCountsSmallNeighboursTheDefaultMerges) {
-  const std::string dir = SIMSTACK_SOURCE_DIR;
-  const PerceptionConfig standard_config = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
+  const PerceptionConfig standard_config = shippedConfig();
   ASSERT_TRUE(std::filesystem::exists(standard_config.model_path))
       << standard_config.model_path << " is missing (the models are in git)";
   const ScenePerception standard(standard_config);
-  const ScenePerception clutter(loadPerceptionYaml(dir + "/config/perception_clutter.yaml", dir));
+  const ScenePerception clutter(shippedConfig("perception_clutter"));
   PileConfig crowded;
   crowded.min_objects = 5;
   crowded.max_objects = 8;
@@ -904,11 +907,6 @@ TEST(ScenePerception, TwoViewsFuse) {
 // the data. The default config (the fc model) on them.
 std::string learnScene(int n) {
   return std::string(SIMSTACK_SHARED_DATA) + "/real/mosd_learn/learn" + std::to_string(n) + ".pcd";
-}
-
-PerceptionConfig shippedConfig() {
-  const std::string dir = SIMSTACK_SOURCE_DIR;
-  return loadPerceptionYaml(dir + "/config/perception.yaml", dir);
 }
 
 TEST(RealScenes, ACupSeenThroughItsOpeningIsOneObject) {
