@@ -235,6 +235,12 @@ expect "train on a scrambled dataset" "scrambled.h5" "$bin/simstack_train" --dat
 expect "evaluate with intrinsics in metres" "invalid camera intrinsics" "$bin/simstack_evaluate" \
   --dataset "$dir/two.h5" --scenes 1 --views 1 --intrinsics 0.5,0.5,320,240 \
   --output "$dir/intrinsics.json" --no-classical --no-stability
+expect "evaluate --sensor without --noise" "requires --noise" "$bin/simstack_evaluate" \
+  --dataset "$dir/two.h5" --scenes 1 --sensor realsense --output "$dir/sensor.json"
+expect "grasps --sensor with --no-noise" "excludes" "$bin/simstack_evaluate_grasps" \
+  --dataset "$dir/two.h5" --scenes 1 --no-noise --sensor realsense --output "$dir/grasps.json"
+expect "evaluate --sensor kinect2" "kinect2" "$bin/simstack_evaluate" --dataset "$dir/two.h5" \
+  --scenes 1 --noise --sensor kinect2 --output "$dir/sensor.json"
 
 # Grasp evaluation: more hypotheses than the model has distinct samples.
 expect "grasps --hypotheses 3 with fc" "no latent code" "$bin/simstack_evaluate_grasps" \

@@ -1114,6 +1114,11 @@ TEST(CvaeConfig, RoundTripsThroughYaml) {
   TrainConfig t;
   t.init_from = "models/some model.pt";
   EXPECT_EQ(TrainConfig::fromYaml(t.toYaml()).init_from, t.init_from);
+  t.sensor_model = "realsense";
+  EXPECT_EQ(TrainConfig::fromYaml(t.toYaml()).sensor_model, "realsense");
+  EXPECT_NO_THROW(t.validate());
+  t.sensor_model = "kinect2";
+  EXPECT_THROW(t.validate(), std::invalid_argument);
   // Fields absent keep their defaults (model files older than a field).
   EXPECT_EQ(CvaeConfig::fromYaml("resolution: 16").mmd_kernel_widths, std::vector<double>{1.0});
   EXPECT_THROW(CvaeConfig::fromYaml("mmd_kernel_widths: []"), std::invalid_argument);

@@ -94,6 +94,113 @@ TEST(DepthRenderer, NoiseIsSeededAndDropsPixels) {
   EXPECT_LT(rms, 0.005);
 }
 
+namespace {
+/// A camera `height_m` above the table point (0, 0), looking straight down, its x along the
+/// table's x.
+Transform overheadCamera(double height_m) {
+  Transform T = Transform::Identity();
+  T.linear() << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+  T.translation() = Vec3(0.0, 0.0, height_m);
+  return T;
+}
+}  // namespace
+
+TEST(DepthRenderer, SecondEyeShadowsTheTableBesideABox) {
+  // A 10 cm cube (exponents 20) on the table, the camera 0.5 m above its centre, the second eye
+  // 0.1 m along the camera's x. A table point (x, 0, 0) left of the cube is seen by the camera
+  // for x < -0.0625 m and hidden from the second eye for x > -0.0875 m (the segment to (0.1, 0,
+  // 0.5) meets the face x = -0.05 below the top at z = 0.1).
+  SuperquadricShape sq;
+  sq.scale_m = Vec3::Constant(0.05);
+  sq.exponents = Vec3::Constant(20.0);
+  SceneObject cube;
+  cube.shape = ObjectShape::fromSuperquadric(sq);
+  cube.T_table_object.translation() = Vec3(0.0, 0.0, 0.05);
+  const DepthRenderer renderer(Scene{{cube}});
+  const PinholeCamera camera = test::centredCamera(640, 480, 525.0);
+  const Transform T = overheadCamera(0.5);
+  SensorNoiseConfig shadow;
+  shadow.shadow_baseline_m = 0.1;
+  const RenderResult clean = renderer.render(camera, T);
+  const RenderResult shadowed = renderer.render(camera, T, shadow);
+  int in_band = 0, band_missing = 0, outside = 0, outside_missing = 0, clean_missing = 0;
+  for (int v = 0; v < camera.height; ++v) {
+    for (int u = 0; u < camera.width; ++u) {
+      if (clean.instances.at(u, v) != 0) continue;  // table pixels only
+      const Vec3 d = T.linear() * camera.ray(u, v);
+      const Vec3 hit = T.translation() + (-T.translation().z() / d.z()) * d;
+      if (std::abs(hit.y()) > 0.03) continue;
+      const bool missing = shadowed.depth.at(u, v) == 0.0f;
+      clean_missing += clean.depth.at(u, v) == 0.0f;
+      if (hit.x() > -0.084 && hit.x() < -0.066) {
+        ++in_band;
+        band_missing += missing;
+      } else if ((hit.x() < -0.091 && hit.x() > -0.2) || (hit.x() > 0.06 && hit.x() < 0.2)) {
+        ++outside;
+        outside_missing += missing;
+      }
+    }
+  }
+  EXPECT_EQ(clean_missing, 0);
+  ASSERT_GT(in_band, 200);
+  EXPECT_EQ(band_missing, in_band);
+  ASSERT_GT(outside, 2000);
+  EXPECT_EQ(outside_missing, 0);
+  // The cube's top face is seen by both eyes.
+  int top = 0, top_missing = 0;
+  for (size_t i = 0; i < clean.instances.pixels.size(); ++i) {
+    if (clean.instances.pixels[i] != 1) continue;
+    ++top;
+    top_missing += shadowed.depth.pixels[i] == 0.0f;
+  }
+  ASSERT_GT(top, 1000);
+  EXPECT_LT(top_missing, top / 100);
+}
+
+TEST(DepthRenderer, StereoNoiseGrowsWithTheSquareOfTheDepth) {
+  const DepthRenderer renderer(Scene{});
+  const PinholeCamera camera = test::centredCamera(640, 480, 525.0);
+  SensorNoiseConfig stereo;
+  stereo.sigma_stereo_per_m = 0.0025;
+  stereo.seed = 3;
+  for (const double height : {0.6, 1.0}) {
+    const RenderResult r = renderer.render(camera, overheadCamera(height), stereo);
+    double sum_sq = 0.0;
+    int n = 0;
+    for (const float z : r.depth.pixels) {
+      if (z <= 0.0f) continue;
+      sum_sq += (z - height) * (z - height);
+      ++n;
+    }
+    ASSERT_GT(n, 100000);
+    // sigma = 0.0025 z^2: 0.9 mm at 0.6 m, 2.5 mm at 1 m.
+    EXPECT_NEAR(std::sqrt(sum_sq / n), 0.0025 * height * height, 0.03 * 0.0025 * height * height)
+        << "at " << height << " m";
+  }
+}
+
+TEST(DepthRenderer, RealSensePresetHasAMinimumRange) {
+  const DepthRenderer renderer(Scene{});
+  const PinholeCamera camera = test::wideCamera();
+  auto returned = [&](double height) {
+    const RenderResult r =
+        renderer.render(camera, overheadCamera(height), SensorNoiseConfig::realsense(1));
+    int n = 0;
+    for (const float z : r.depth.pixels) n += z > 0.0f;
+    return n;
+  };
+  EXPECT_EQ(returned(0.25), 0);
+  EXPECT_GT(returned(0.5), camera.width * camera.height / 2);
+  EXPECT_EQ(parseSensorModel("realsense"), SensorModel::realsense);
+  EXPECT_STREQ(sensorModelName(parseSensorModel("kinect")), "kinect");
+  try {
+    parseSensorModel("kinect2");
+    FAIL() << "accepted sensor kinect2";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("kinect2"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Viewpoints, WithinThePapersRanges) {
   std::mt19937_64 rng(8);
   const Vec3 centre(0.1, -0.1, 0.1);

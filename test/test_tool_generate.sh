@@ -68,4 +68,13 @@ print("household layout ok")
 PY
 if "$tool" --scenes 1 --seed 1 --output "$dir/x.h5" --household 1.5 2> "$dir/err.txt"; then echo "accepted --household 1.5"; exit 1; fi
 grep -q "household" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
+# Views with a RealSense's noise; --sensor without --noise is refused.
+"$tool" --scenes 1 --seed 3 --resolution 16 --output "$dir/rs.h5" --views 1 --noise --sensor realsense > /dev/null
+test -s "$dir/rs_views/scene_000000_view_0_depth.png"
+if "$tool" --scenes 1 --seed 3 --resolution 16 --output "$dir/x.h5" --sensor realsense 2> "$dir/err.txt"; then
+  echo "accepted --sensor without --noise"; exit 1; fi
+grep -q "noise" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
+if "$tool" --scenes 1 --seed 3 --resolution 16 --output "$dir/x.h5" --noise --sensor kinect2 2> "$dir/err.txt"; then
+  echo "accepted --sensor kinect2"; exit 1; fi
+grep -q "kinect2" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
 echo "simstack_generate ok"

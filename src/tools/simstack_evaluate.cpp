@@ -10,6 +10,7 @@
 #include "cli_checks.h"
 #include "perception_options.h"
 #include "progress.h"
+#include "sensor_option.h"
 #include "simstack/io/staged_output.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/offline/eval/evaluated_methods.h"
@@ -115,15 +116,17 @@ void runRealScenes(const std::vector<PerceptionConfig>& configs, bool classical,
 
 }  // namespace
 
+constexpr const char* kDescription =
+    "Evaluate trained models and the classical baseline on a test dataset (docs/design.md "
+    "section 6): every scene from random viewpoints in the paper's ranges, S latent samples "
+    "per view (1 for the FC baselines); writes JSON and prints the table.";
+
 int main(int argc, char** argv) {
   std::string dataset, output, summary, mesh_dir, real_dir, intrinsics;
   EvaluationOptions o;
   bool no_classical = false, no_stability = false;
   int refine_iterations = 0;
-  CLI::App app{
-      "Evaluate trained models and the classical baseline on a test dataset (docs/design.md "
-      "section 6): every scene from random viewpoints in the paper's ranges, S latent samples "
-      "per view (1 for the FC baselines); writes JSON and prints the table."};
+  CLI::App app{kDescription};
   const PerceptionOptions perception(app, {true, false, false});
   app.add_option("--dataset", dataset, "test dataset (a seed never used for training)")
       ->check(CLI::ExistingFile);
@@ -143,7 +146,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(16, 4096));
   app.add_option("--intrinsics", intrinsics,
                  "fx,fy,cx,cy (pixels) of another camera for the --width x --height views, "
-                 "instead of the scaled Kinect: its field of view (the noise stays Kinect-like)");
+                 "instead of the scaled Kinect: its field of view (the noise is --sensor's)");
   app.add_option("--views", o.views, "viewpoints per scene")
       ->capture_default_str()
       ->check(FinitePositive);
@@ -154,7 +157,9 @@ int main(int argc, char** argv) {
       ->check(SeedNumber);
   app.add_option("--ycb", mesh_dir, "mesh directory for YCB datasets")
       ->check(CLI::ExistingDirectory);
-  app.add_flag("--noise", o.noise, "Kinect-like sensor noise in the rendered views");
+  CLI::Option* noise_flag =
+      app.add_flag("--noise", o.noise, "sensor noise in the rendered views (--sensor's)");
+  addSensorOption(app, &o.sensor, "with --noise, ")->needs(noise_flag);
   app.add_flag("--overhead", o.overhead,
                "views from above, as on a pick station (elevation 60-89 degrees, 0.6-1.0 m "
                "away) instead of the paper's ranges");

@@ -9,6 +9,7 @@
 #include "cli_checks.h"
 #include "perception_options.h"
 #include "progress.h"
+#include "sensor_option.h"
 #include "simstack/io/staged_output.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/offline/eval/evaluated_methods.h"
@@ -130,6 +131,7 @@ nlohmann::json runSettings(const GraspEvaluationOptions& o) {
   const PerturbationConfig& p = o.ranking.perturbation;
   return {{"candidates", o.ranking.candidates.max_candidates},
           {"noise", o.noise},
+          {"sensor", o.noise ? sensorModelName(o.sensor) : ""},
           {"seed", o.seed},
           {"hypotheses", o.hypotheses},
           {"measured_seal", o.measured_seal},
@@ -193,7 +195,9 @@ int main(int argc, char** argv) {
   app.add_option("--seed", o.seed, "viewpoints, noise and the random chooser")
       ->capture_default_str()
       ->check(SeedNumber);
-  app.add_flag("--no-noise", no_noise, "clean rendered views instead of Kinect-like noise");
+  CLI::Option* no_noise_flag =
+      app.add_flag("--no-noise", no_noise, "clean rendered views instead of --sensor's noise");
+  addSensorOption(app, &o.sensor, "")->excludes(no_noise_flag);
   app.add_flag("--no-classical", no_classical, "skip the classical baseline");
   bool superquadric_seal = false;
   addSealOptions(app, &o, &superquadric_seal);

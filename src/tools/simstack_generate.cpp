@@ -7,6 +7,7 @@
 
 #include "cli_checks.h"
 #include "progress.h"
+#include "sensor_option.h"
 #include "simstack/offline/dataset/dataset_generation.h"
 
 using namespace simstack;
@@ -92,7 +93,9 @@ int main(int argc, char** argv) {
   app.add_option("--views-dir", o.views_dir, "where views go (default: <output stem>_views/)");
   app.add_flag("--pictures", o.pictures,
                "also write colour depth and shaded PNG pictures of each view");
-  app.add_flag("--noise", o.noise, "Kinect-like noise and missing pixels in the rendered views");
+  CLI::Option* noise_flag = app.add_flag(
+      "--noise", o.noise, "sensor noise and missing pixels in the rendered views (--sensor's)");
+  addSensorOption(app, &o.sensor, "with --noise, ")->needs(noise_flag);
   app.add_option("--extent", o.extent_m, "scene grid side in metres")
       ->check(FinitePositive)
       ->capture_default_str();

@@ -152,7 +152,9 @@ struct TrainConfig {
   int validation_samples = 8;  ///< latent codes per validation view (hypotheses S)
   int image_width = 320;       ///< rendered training views (intrinsics scale with it)
   int image_height = 240;
-  bool sensor_noise = true;  ///< Kinect-like noise in training views
+  bool sensor_noise = true;  ///< sensor noise in training views
+  /// Whose noise: "kinect" or "realsense" (SensorNoiseConfig's presets).
+  std::string sensor_model = "kinect";
   /// Share of training views from above (ViewpointRange::overhead(), as on pick stations); the
   /// rest in the paper's ranges.
   double overhead_share = 0.0;

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <memory>
 #include <random>
+#include <string>
 
 #include "simstack/geometry/image.h"
 #include "simstack/geometry/pinhole_camera.h"
@@ -13,12 +14,27 @@
 
 namespace simstack {
 
+/// The sensors whose noise the tools can imitate (SensorNoiseConfig's presets).
+enum class SensorModel { kinect, realsense };
+/// "kinect" or "realsense"; anything else throws std::invalid_argument naming the choices.
+SensorModel parseSensorModel(const std::string& name);
+const char* sensorModelName(SensorModel model);
+
 /// Sensor imperfections. The defaults are a clean sensor.
 struct SensorNoiseConfig {
-  /// Axial noise sigma(z) = sigma_base_m + sigma_quadratic_per_m * (z - 0.4 m)^2, the Kinect
-  /// model of Nguyen et al. (2012) with 0.0012 and 0.0019; 0 disables.
+  /// Axial noise sigma(z) = sigma_base_m + sigma_quadratic_per_m * (z - 0.4 m)^2
+  ///   + sigma_stereo_per_m * z^2: the first two the Kinect model of Nguyen et al. (2012) with
+  /// 0.0012 and 0.0019, the last a stereo camera's (subpixel disparity error times
+  /// z^2 / (focal length x baseline)); 0 disables each.
   double sigma_base_m = 0.0;
   double sigma_quadratic_per_m = 0.0;
+  double sigma_stereo_per_m = 0.0;
+  /// A second eye this far along the camera's +x axis (a stereo pair's other imager or a
+  /// structured-light projector) must see the surface too, else the pixel is missing: the
+  /// band of holes beside every depth edge. 0 disables.
+  double shadow_baseline_m = 0.0;
+  /// Surfaces nearer than this return nothing (a stereo camera's minimum range); 0 disables.
+  double min_depth_m = 0.0;
   /// Probability that a pixel is missing (depth 0).
   double dropout_probability = 0.0;
   /// Pixels seen at a larger angle between ray and surface normal are missing (degrees;
@@ -28,6 +44,11 @@ struct SensorNoiseConfig {
 
   /// The Kinect-like preset used by the tools' --noise flag.
   static SensorNoiseConfig kinect(uint64_t seed);
+  /// A RealSense D435-like preset at 1280x720 (--sensor realsense): stereo noise of a
+  /// 0.08 px disparity error at 640 px focal length and 50 mm baseline, the right imager's
+  /// shadows, 0.28 m minimum range, more speckle holes than the Kinect's.
+  static SensorNoiseConfig realsense(uint64_t seed);
+  static SensorNoiseConfig preset(SensorModel model, uint64_t seed);
 };
 
 struct RenderConfig {

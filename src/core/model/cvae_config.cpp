@@ -92,6 +92,7 @@ void trainFields(C& c, F&& f) {
   f("image_width", c.image_width);
   f("image_height", c.image_height);
   f("sensor_noise", c.sensor_noise);
+  f("sensor_model", c.sensor_model);
   f("init_from", c.init_from);
 }
 template <class C, class F>
@@ -226,6 +227,8 @@ void TrainConfig::validate() const {
   require(validation_samples >= 2, "validation_samples must be >= 2");
   require(image_width >= 16 && image_height >= 16, "image size must be at least 16x16");
   require(overhead_share >= 0.0 && overhead_share <= 1.0, "overhead_share must lie in [0, 1]");
+  require(sensor_model == "kinect" || sensor_model == "realsense",
+          "sensor_model must be kinect or realsense");
 }
 
 std::string TrainConfig::toYaml() const {

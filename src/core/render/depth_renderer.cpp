@@ -20,6 +20,34 @@ SensorNoiseConfig SensorNoiseConfig::kinect(uint64_t seed) {
   return c;
 }
 
+SensorNoiseConfig SensorNoiseConfig::realsense(uint64_t seed) {
+  SensorNoiseConfig c;
+  // D435 at 1280x720: sigma(z) = z^2 * 0.08 px / (640 px * 0.05 m), 2.5 mm at 1 m, over a
+  // 0.5 mm floor; its minimum range at that resolution is 0.28 m.
+  c.sigma_base_m = 0.0005;
+  c.sigma_stereo_per_m = 0.08 / (640.0 * 0.05);
+  c.shadow_baseline_m = 0.05;
+  c.min_depth_m = 0.28;
+  c.dropout_probability = 0.02;
+  c.max_incidence_deg = 75.0;
+  c.seed = seed;
+  return c;
+}
+
+SensorNoiseConfig SensorNoiseConfig::preset(SensorModel model, uint64_t seed) {
+  return model == SensorModel::realsense ? realsense(seed) : kinect(seed);
+}
+
+SensorModel parseSensorModel(const std::string& name) {
+  if (name == "kinect") return SensorModel::kinect;
+  if (name == "realsense") return SensorModel::realsense;
+  throw std::invalid_argument("sensor model '" + name + "': choose kinect or realsense");
+}
+
+const char* sensorModelName(SensorModel model) {
+  return model == SensorModel::realsense ? "realsense" : "kinect";
+}
+
 struct DepthRenderer::Impl {
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
@@ -142,7 +170,10 @@ RenderResult DepthRenderer::render(const PinholeCamera& camera, const Transform&
   const Vec3 org = T_table_camera.translation();
   const double cos_max = std::cos(noise.max_incidence_deg * M_PI / 180.0);
   const bool noisy = noise.sigma_base_m > 0.0 || noise.sigma_quadratic_per_m > 0.0 ||
-                     noise.dropout_probability > 0.0 || noise.max_incidence_deg < 90.0;
+                     noise.sigma_stereo_per_m > 0.0 || noise.dropout_probability > 0.0 ||
+                     noise.max_incidence_deg < 90.0 || noise.min_depth_m > 0.0;
+  // The shadowing eye, in the table frame.
+  const Vec3 second_eye = org + R * Vec3(noise.shadow_baseline_m, 0.0, 0.0);
 #pragma omp parallel for schedule(dynamic, 8)
   for (int v = 0; v < camera.height; ++v) {
     // One generator per row keeps noise identical for any thread count.
@@ -163,10 +194,21 @@ RenderResult DepthRenderer::render(const PinholeCamera& camera, const Transform&
       double depth = t;
       if (noisy) {
         const double cos_inc = -n.dot(dir_f.normalized());
-        if (cos_inc < cos_max || uni(rng) < noise.dropout_probability) continue;
-        const double sigma =
-            noise.sigma_base_m + noise.sigma_quadratic_per_m * (depth - 0.4) * (depth - 0.4);
+        if (cos_inc < cos_max || uni(rng) < noise.dropout_probability || depth < noise.min_depth_m)
+          continue;
+        const double sigma = noise.sigma_base_m +
+                             noise.sigma_quadratic_per_m * (depth - 0.4) * (depth - 0.4) +
+                             noise.sigma_stereo_per_m * depth * depth;
         depth += sigma * gauss(rng);
+      }
+      if (noise.shadow_baseline_m > 0.0) {
+        // Lifted off the surface along its normal so the shadow ray does not hit its start.
+        const Vec3 hit = org + static_cast<double>(t) * dir + 1e-4 * n.cast<double>();
+        const Vec3 to_eye = second_eye - hit;
+        const double reach = to_eye.norm();
+        if (std::isfinite(
+                impl_->intersect(hit, to_eye / reach, static_cast<float>(reach), nullptr, nullptr)))
+          continue;
       }
       out.depth.at(u, v) = static_cast<float>(depth);
       out.instances.at(u, v) = static_cast<uint8_t>(instance);

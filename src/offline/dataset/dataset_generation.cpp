@@ -52,7 +52,7 @@ void writeViews(const GenerationOptions& o, const fs::path& dir, int index, cons
     view.camera = camera;
     view.T_table_camera = sampleViewpoint(centre, ViewpointRange(), rng);
     const SensorNoiseConfig noise =
-        o.noise ? SensorNoiseConfig::kinect(seed + v) : SensorNoiseConfig();
+        o.noise ? SensorNoiseConfig::preset(o.sensor, seed + v) : SensorNoiseConfig();
     const RenderResult r = renderer.render(camera, view.T_table_camera, noise);
     char stem[64];
     std::snprintf(stem, sizeof(stem), "scene_%06d_view_%d", index, v);

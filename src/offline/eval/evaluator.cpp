@@ -103,9 +103,9 @@ void evaluateView(const SceneRecord& rec, int k, int v, const SceneTruth& scene,
       sampleViewpoint(rec.scene.surfaceCentroid(),
                       options.overhead ? ViewpointRange::overhead() : ViewpointRange(), rng);
   const uint64_t view_seed = rng();
-  const RenderResult r =
-      renderer.render(camera, vt.T_table_camera,
-                      options.noise ? SensorNoiseConfig::kinect(view_seed) : SensorNoiseConfig());
+  const RenderResult r = renderer.render(
+      camera, vt.T_table_camera,
+      options.noise ? SensorNoiseConfig::preset(options.sensor, view_seed) : SensorNoiseConfig());
   std::vector<bool> seen = visibleTriangles(scene.mesh, camera, vt.T_table_camera);
   vt.visible = samplePoints(subMesh(scene.mesh, seen), options.chamfer_points, rng);
   vt.views = {DepthView{r.depth, camera, vt.T_table_camera}};
@@ -117,12 +117,13 @@ void evaluateView(const SceneRecord& rec, int k, int v, const SceneTruth& scene,
     const Transform T = Eigen::Translation3d(centre) * Eigen::AngleAxisd(angle, Vec3::UnitZ()) *
                         Eigen::Translation3d(-centre) * vt.T_table_camera;
     const uint64_t noise_seed = view_seed ^ (0x9e3779b97f4a7c15ull * static_cast<uint64_t>(j));
-    vt.views.push_back(DepthView{
-        renderer
-            .render(camera, T,
-                    options.noise ? SensorNoiseConfig::kinect(noise_seed) : SensorNoiseConfig())
-            .depth,
-        camera, T});
+    vt.views.push_back(
+        DepthView{renderer
+                      .render(camera, T,
+                              options.noise ? SensorNoiseConfig::preset(options.sensor, noise_seed)
+                                            : SensorNoiseConfig())
+                      .depth,
+                  camera, T});
     const std::vector<bool> also = visibleTriangles(scene.mesh, camera, T);
     for (size_t t = 0; t < seen.size(); ++t) seen[t] = seen[t] || also[t];
   }
@@ -239,6 +240,7 @@ json resultsJson(const EvaluationResults& r, bool with_views) {
     out["image"] = std::to_string(o.width) + "x" + std::to_string(o.height);
   }
   out["noise"] = o.noise;
+  if (o.noise) out["sensor"] = sensorModelName(o.sensor);
   out["overhead"] = o.overhead;
   out["views_per_estimate"] = o.views_per_estimate;
   out["chamfer_points"] = o.chamfer_points;

@@ -132,9 +132,9 @@ std::vector<PickResult> evaluateScene(const SceneRecord& rec, int index,
   const Transform T_table_camera =
       sampleViewpoint(rec.scene.surfaceCentroid(), ViewpointRange(), rng);
   const DepthRenderer renderer(rec.scene);
-  const RenderResult r =
-      renderer.render(camera, T_table_camera,
-                      options.noise ? SensorNoiseConfig::kinect(rng()) : SensorNoiseConfig());
+  const RenderResult r = renderer.render(
+      camera, T_table_camera,
+      options.noise ? SensorNoiseConfig::preset(options.sensor, rng()) : SensorNoiseConfig());
   const DepthView view{r.depth, camera, T_table_camera};
   std::vector<MethodEstimate> estimates;
   for (EvaluatedMethod* m : methods)

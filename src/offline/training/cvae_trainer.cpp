@@ -459,7 +459,8 @@ TrainingReport CvaeTrainer::validateModel(const std::string& dataset_path,
   torch::set_num_threads(training.threads);
   torch::manual_seed(training.seed);
   const TrainingSampleBuilder builder(mc, scaledKinect(training.image_width, training.image_height),
-                                      training.sensor_noise, training.overhead_share);
+                                      training.sensor_noise, training.overhead_share,
+                                      parseSensorModel(training.sensor_model));
   TrainingReport report;
   impl.validate(model, builder, &report);
   return report;
@@ -727,7 +728,8 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
                              " or more continues the run (fewer would rewind it)");
 
   const TrainingSampleBuilder builder(mc, scaledKinect(tc.image_width, tc.image_height),
-                                      tc.sensor_noise, tc.overhead_share);
+                                      tc.sensor_noise, tc.overhead_share,
+                                      parseSensorModel(tc.sensor_model));
   TrainingLog log(out / "train_log.csv", resume && start > 0, start);
   // One file holds the network, the optimizer's state and the step, written beside its place
   // and renamed into it: a run stopped by an error or a kill resumes from the previous

@@ -11,8 +11,13 @@
 namespace simstack {
 
 TrainingSampleBuilder::TrainingSampleBuilder(const CvaeConfig& config, const PinholeCamera& camera,
-                                             bool sensor_noise, double overhead_share)
-    : config_(config), camera_(camera), noise_(sensor_noise), overhead_share_(overhead_share) {
+                                             bool sensor_noise, double overhead_share,
+                                             SensorModel sensor)
+    : config_(config),
+      camera_(camera),
+      noise_(sensor_noise),
+      overhead_share_(overhead_share),
+      sensor_(sensor) {
   config_.validate();
   camera_.validate();
 }
@@ -38,9 +43,9 @@ TrainingSample TrainingSampleBuilder::build(const SceneRecord& rec, const Transf
         std::to_string(config_.resolution) + "^3, " + std::to_string(config_.extent_m) + " m)");
   }
   const DepthRenderer renderer(rec.scene);
-  const RenderResult view =
-      renderer.render(camera_, T_table_camera,
-                      noise_ ? SensorNoiseConfig::kinect(noise_seed) : SensorNoiseConfig());
+  const RenderResult view = renderer.render(
+      camera_, T_table_camera,
+      noise_ ? SensorNoiseConfig::preset(sensor_, noise_seed) : SensorNoiseConfig());
   // Re-centre on what the camera sees, snapped to the stored lattice so GT shifts exactly.
   const double voxel = stored.voxel_size_m;
   const Vec2 stored_centre =

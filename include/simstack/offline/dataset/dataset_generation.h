@@ -10,6 +10,8 @@
 #include <functional>
 #include <string>
 
+#include "simstack/render/depth_renderer.h"
+
 namespace simstack {
 
 struct GenerationOptions {
@@ -26,7 +28,8 @@ struct GenerationOptions {
   int views = 0;          ///< rendered views per scene
   std::string views_dir;  ///< "" = <output stem>_views/
   bool pictures = false;  ///< colour depth and shaded ground-truth PNGs per view
-  bool noise = false;     ///< Kinect-like noise in the rendered views
+  bool noise = false;     ///< sensor noise and missing pixels in the rendered views
+  SensorModel sensor = SensorModel::kinect;  ///< whose noise (SensorNoiseConfig::preset)
   double extent_m = 0.64;
   double truncation_vox = 3.0;
   double max_tilt_deg = 180.0;

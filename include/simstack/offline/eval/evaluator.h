@@ -23,6 +23,7 @@
 #include "simstack/geometry/triangle_mesh.h"
 #include "simstack/geometry/voxel_grid.h"
 #include "simstack/offline/dataset/dataset.h"
+#include "simstack/render/depth_renderer.h"
 
 namespace simstack {
 
@@ -78,10 +79,11 @@ struct EvaluationOptions {
   /// The rendered camera instead of a Kinect scaled to width x height (another sensor's
   /// intrinsics; the sensor noise stays Kinect-like).
   std::optional<PinholeCamera> camera;
-  bool noise = false;         ///< Kinect-like sensor noise
-  bool stability = true;      ///< the physics stability test
-  int chamfer_points = 1000;  ///< surface samples per Chamfer set
-  bool overhead = false;      ///< views from above (ViewpointRange::overhead())
+  bool noise = false;                        ///< sensor noise in the rendered views
+  SensorModel sensor = SensorModel::kinect;  ///< whose noise (SensorNoiseConfig::preset)
+  bool stability = true;                     ///< the physics stability test
+  int chamfer_points = 1000;                 ///< surface samples per Chamfer set
+  bool overhead = false;                     ///< views from above (ViewpointRange::overhead())
   /// Posed views per estimate (the paper's multi-view experiment): the first drawn as in the
   /// single-view protocol (the same view and noise), the others that viewpoint turned about
   /// the vertical through the pile's centre by 360 / views_per_estimate degrees each. Visible

@@ -19,11 +19,12 @@
 namespace simstack {
 
 struct GraspEvaluationOptions {
-  int scenes = 0;                 ///< the first N scenes (0 = all)
-  uint64_t seed = 7;              ///< viewpoints, sensor noise and the random chooser
-  int width = 640, height = 480;  ///< rendered view (a scaled Kinect)
-  bool noise = true;              ///< Kinect-like sensor noise
-  GraspRankingConfig ranking;     ///< candidates, cup and pull (shared by every chooser)
+  int scenes = 0;                            ///< the first N scenes (0 = all)
+  uint64_t seed = 7;                         ///< viewpoints, sensor noise and the random chooser
+  int width = 640, height = 480;             ///< rendered view (a scaled Kinect)
+  bool noise = true;                         ///< sensor noise in the rendered view
+  SensorModel sensor = SensorModel::kinect;  ///< whose noise (SensorNoiseConfig::preset)
+  GraspRankingConfig ranking;                ///< candidates, cup and pull (shared by every chooser)
   /// Hypotheses the ranking simulates each candidate in: the estimate, then up to H - 1 of a
   /// method's further decomposed hypotheses (MethodEstimate::further_superquadrics).
   int hypotheses = 1;

@@ -11,6 +11,7 @@
 #include "simstack/geometry/pinhole_camera.h"
 #include "simstack/model/cvae_config.h"
 #include "simstack/offline/dataset/dataset.h"
+#include "simstack/render/depth_renderer.h"
 
 namespace simstack {
 
@@ -32,9 +33,10 @@ std::vector<float> voteBoundaryWeights(const std::vector<uint8_t>& labels, int r
 
 class TrainingSampleBuilder {
  public:
-  /// `overhead_share` of the random viewpoints come from above (ViewpointRange::overhead()).
+  /// `overhead_share` of the random viewpoints come from above (ViewpointRange::overhead());
+  /// with `sensor_noise`, views have `sensor`'s noise.
   TrainingSampleBuilder(const CvaeConfig& config, const PinholeCamera& camera, bool sensor_noise,
-                        double overhead_share = 0.0);
+                        double overhead_share = 0.0, SensorModel sensor = SensorModel::kinect);
   /// A random viewpoint in the paper's ranges (or from above, see the constructor).
   TrainingSample build(const SceneRecord& record, std::mt19937_64& rng) const;
   /// A given viewpoint.
@@ -47,6 +49,7 @@ class TrainingSampleBuilder {
   PinholeCamera camera_;
   bool noise_;
   double overhead_share_;
+  SensorModel sensor_;
 };
 
 }  // namespace simstack
