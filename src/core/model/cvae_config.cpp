@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "simstack/io/yaml_file.h"
+#include "simstack/render/depth_renderer.h"
 
 namespace simstack {
 namespace {
@@ -227,8 +228,7 @@ void TrainConfig::validate() const {
   require(validation_samples >= 2, "validation_samples must be >= 2");
   require(image_width >= 16 && image_height >= 16, "image size must be at least 16x16");
   require(overhead_share >= 0.0 && overhead_share <= 1.0, "overhead_share must lie in [0, 1]");
-  require(sensor_model == "kinect" || sensor_model == "realsense",
-          "sensor_model must be kinect or realsense");
+  parseSensorModel(sensor_model);  // throws naming the value and the choices
 }
 
 std::string TrainConfig::toYaml() const {

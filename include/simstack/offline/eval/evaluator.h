@@ -77,7 +77,7 @@ struct EvaluationOptions {
   uint64_t seed = 7;              ///< viewpoints and Chamfer samples
   int width = 640, height = 480;  ///< rendered image (a scaled Kinect)
   /// The rendered camera instead of a Kinect scaled to width x height (another sensor's
-  /// intrinsics; the sensor noise stays Kinect-like).
+  /// intrinsics; the noise is `sensor`'s).
   std::optional<PinholeCamera> camera;
   bool noise = false;                        ///< sensor noise in the rendered views
   SensorModel sensor = SensorModel::kinect;  ///< whose noise (SensorNoiseConfig::preset)
