@@ -5,6 +5,8 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <utility>
+#include <vector>
 
 #include <H5Cpp.h>
 
@@ -102,6 +104,56 @@ TEST(Dataset, HouseholdPilesRebuildTheirContainersWithoutAMeshDirectory) {
     EXPECT_EQ(rec.scene.objects[k].shape->name(), scene.objects[k].shape->name());
   EXPECT_EQ(computeGroundTruth(rec.scene, g, info.truncation_m).tsdf.data, gt.tsdf.data);
   std::filesystem::remove(path);
+}
+
+// Several files read as one: scenes interleaved in proportion to the files' sizes, so the
+// tail of the mix (a training's validation scenes) holds each file's last scenes.
+TEST(Dataset, AMixInterleavesItsFilesInProportionAndRefusesOtherGrids) {
+  const auto dir = std::filesystem::temp_directory_path();
+  const std::string a = (dir / "simstack_test_mix_a.h5").string();
+  const std::string b = (dir / "simstack_test_mix_b.h5").string();
+  const std::string c = (dir / "simstack_test_mix_c.h5").string();
+  const PileGenerator gen{PileConfig()};
+  const auto write = [&](const std::string& path, DatasetInfo info, uint64_t first_seed) {
+    DatasetWriter writer(path, info);
+    for (int i = 0; i < info.num_scenes; ++i) {
+      const Scene s = gen.generate(first_seed + i).scene;
+      const GridSpec g =
+          GridSpec::sceneGrid(s.surfaceCentroid().head<2>(), info.extent_m, info.resolution);
+      writer.write(i, s, computeGroundTruth(s, g, info.truncation_m));
+    }
+  };
+  write(a, smallInfo(2), 200);
+  write(b, smallInfo(4), 300);
+  DatasetInfo coarse = smallInfo(1);
+  coarse.resolution = 8;
+  write(c, coarse, 400);
+
+  const DatasetMix mix({a, b});
+  ASSERT_EQ(mix.size(), 6);
+  EXPECT_EQ(mix.name(), a + " + " + b);
+  const std::vector<std::pair<int, int>> order = {{0, 0}, {1, 0}, {1, 1}, {0, 1}, {1, 2}, {1, 3}};
+  for (int i = 0; i < 6; ++i) {
+    EXPECT_EQ(mix.locate(i), order[i]) << "scene " << i;
+    const auto [k, j] = order[i];
+    EXPECT_EQ(mix.read(i).ground_truth.tsdf.data, mix.file(k).read(j).ground_truth.tsdf.data);
+  }
+  // The last three: one of a's two scenes, two of b's four.
+  EXPECT_EQ(mix.locate(3).first + mix.locate(4).first + mix.locate(5).first, 2);
+  EXPECT_THROW(mix.read(6), std::out_of_range);
+  // One file is itself, scene for scene.
+  const DatasetMix one({b});
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(one.locate(i), std::make_pair(0, i));
+  // Files of other grids cannot be one training's: the message names the odd file.
+  try {
+    DatasetMix({a, c});
+    ADD_FAILURE() << "a mix of 16^3 and 8^3 grids was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("dataset " + c + " has 8^3 grids"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(DatasetMix({}), std::invalid_argument);
+  for (const auto& p : {a, b, c}) std::filesystem::remove(p);
 }
 
 TEST(Dataset, ClearErrorsNameTheFile) {

@@ -92,15 +92,16 @@ TEST(TrainingSample, GridFollowsTheVisiblePile) {
 
 namespace {
 // A small dataset of generated piles at R = 16 (the tiny config's grid).
-std::string tinyDataset(int scenes, int min_objects = 3) {
-  const std::string path = tempPath("simstack_test_train.h5");
+std::string tinyDataset(int scenes, int min_objects = 3, uint64_t seed = 5,
+                        const std::string& name = "simstack_test_train.h5") {
+  const std::string path = tempPath(name);
   DatasetInfo info;
   info.num_scenes = scenes;
   info.min_objects = min_objects;
   info.resolution = 16;
   info.extent_m = 0.64;
   info.truncation_m = tiny().truncation_m();
-  info.seed = 5;
+  info.seed = seed;
   DatasetWriter writer(path, info);
   const PileGenerator gen{PileConfig()};
   for (int i = 0; i < scenes; ++i) {
@@ -456,6 +457,38 @@ TEST(CvaeTrainer, AResumeThatWouldRewindOrMixARunIsRefused) {
     ADD_FAILURE() << "5 validation scenes of 4 were accepted";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("give --validation-scenes 4 or fewer"), std::string::npos)
+        << e.what();
+  }
+}
+
+// Several datasets train as one: the card names them all, and the run resumes on that mix only.
+TEST(CvaeTrainer, TrainsOnSeveralDatasetsReadAsOne) {
+  const TrainingScratch scratch("simstack_train_mix");
+  const std::string second = tinyDataset(2, 3, 6, "simstack_test_train_crowded.h5");
+  const RemoveAtExit cleanup{{second}};
+  const std::string& run = scratch.dirs[0];
+  TrainConfig tc = scratch.tc;
+  tc.validation_scenes = 2;  // the mix's last two: one scene of each file
+  const TrainingReport r = CvaeTrainer({scratch.data, second}, tiny(), tc, run, "test").run(false);
+  EXPECT_EQ(r.steps, 4);
+  const YAML::Node provenance = loadYamlFile(run + "/model.yaml", "model card")["provenance"];
+  EXPECT_EQ(provenance["dataset"].as<std::string>(), scratch.data + " + " + second);
+  EXPECT_EQ(provenance["dataset_seed"].as<std::string>(), "5 + 6");
+  EXPECT_EQ(provenance["dataset_scenes"].as<std::string>(), "3 + 2");
+  // The same validation from the model file, given the same files.
+  EXPECT_EQ(
+      CvaeTrainer::validateModel({scratch.data, second}, run + "/model.pt", tc).validation_bce,
+      r.validation_bce);
+  // Resumed on one of its two files: refused, the message naming the run's two tags.
+  tc.steps = 6;
+  try {
+    CvaeTrainer(scratch.data, tiny(), tc, run, "test").run(true);
+    ADD_FAILURE() << "a run on two datasets resumed on one";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("seed 5, 3 scenes of 3-4 objects, generator " +
+                                         std::string(kGeneratorVersion) +
+                                         " + seed 6, 2 scenes of 3-4 objects"),
+              std::string::npos)
         << e.what();
   }
 }

@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <string>
+#include <vector>
 
 #include "cli_checks.h"
 #include "progress.h"
@@ -58,7 +60,8 @@ void printTrained(const std::string& architecture, const std::string& output,
 
 /// The command line; zero and empty mean "as the config says".
 struct Options {
-  std::string dataset, config_path, output;
+  std::vector<std::string> datasets;
+  std::string config_path, output;
   bool resume = false;
   int threads = 0;
   std::string architecture;
@@ -68,8 +71,12 @@ struct Options {
 };
 
 void addOptions(CLI::App& app, Options& o) {
-  app.add_option("--dataset", o.dataset, "HDF5 dataset from simstack_generate")
+  app.add_option("--dataset", o.datasets,
+                 "HDF5 dataset from simstack_generate; repeated, the files are read as one, "
+                 "interleaved in proportion to their sizes (the validation scenes come from "
+                 "the end of each)")
       ->required()
+      ->take_all()
       ->check(CLI::ExistingFile);
   app.add_option("--config", o.config_path,
                  "YAML with `model:` and `training:` sections (see config/train_r32.yaml)")
@@ -143,8 +150,11 @@ int main(int argc, char** argv) {
     if (o.validation_views > 0) training.validation_views = o.validation_views;
     if (o.validation_samples > 0) training.validation_samples = o.validation_samples;
     if (!o.validate_only.empty()) {
-      printValidation(o.validate_only, o.dataset, training,
-                      CvaeTrainer::validateModel(o.dataset, o.validate_only, training, o.mesh_dir));
+      std::string named;
+      for (const std::string& d : o.datasets) named += (named.empty() ? "" : " + ") + d;
+      printValidation(
+          o.validate_only, named, training,
+          CvaeTrainer::validateModel(o.datasets, o.validate_only, training, o.mesh_dir));
       return 0;
     }
     // A forgotten --resume must not start over in a run's directory (its checkpoint lost).
@@ -155,7 +165,7 @@ int main(int argc, char** argv) {
                                "(or removing it) starts afresh");
     std::string command;
     for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
-    CvaeTrainer trainer(o.dataset, model, training, o.output, command);
+    CvaeTrainer trainer(o.datasets, model, training, o.output, command);
     if (!trainer.note().empty()) std::printf("note: %s\n", trainer.note().c_str());
     std::unique_ptr<ProgressBar> bar;
     bool validated = false;  // in this process: until then there is no IoU to show

@@ -386,4 +386,50 @@ SceneRecord DatasetReader::read(int index) const {
   return rec;
 }
 
+DatasetMix::DatasetMix(const std::vector<std::string>& paths, const std::string& mesh_dir)
+    : paths_(paths) {
+  if (paths.empty()) throw std::invalid_argument("a dataset mix needs at least one file");
+  for (const std::string& p : paths) {
+    readers_.push_back(std::make_unique<DatasetReader>(p, mesh_dir));
+    const DatasetInfo& a = readers_.front()->info();
+    const DatasetInfo& b = readers_.back()->info();
+    if (a.resolution != b.resolution || std::abs(a.extent_m - b.extent_m) > 1e-9 ||
+        std::abs(a.truncation_m - b.truncation_m) > 1e-9) {
+      std::ostringstream msg;
+      msg << "dataset " << p << " has " << b.resolution << "^3 grids over " << b.extent_m
+          << " m truncated at " << b.truncation_m << " m; " << paths.front() << " has "
+          << a.resolution << "^3 over " << a.extent_m << " m truncated at " << a.truncation_m
+          << " m: the files of one training must share their grids";
+      throw std::runtime_error(msg.str());
+    }
+  }
+  std::vector<int64_t> taken(readers_.size(), 0);
+  int64_t total = 0;
+  for (const auto& r : readers_) total += r->size();
+  order_.reserve(static_cast<size_t>(total));
+  for (int64_t i = 0; i < total; ++i) {
+    int best = -1;
+    for (int k = 0; k < static_cast<int>(readers_.size()); ++k) {
+      const int64_t n = readers_[k]->size();
+      if (taken[k] >= n) continue;
+      // taken_k / n_k < taken_best / n_best, in integers
+      if (best < 0 || taken[k] * readers_[best]->size() < taken[best] * n) best = k;
+    }
+    order_.emplace_back(best, static_cast<int>(taken[best]++));
+  }
+}
+
+DatasetMix::~DatasetMix() = default;
+
+std::string DatasetMix::name() const {
+  std::string out;
+  for (const std::string& p : paths_) out += (out.empty() ? "" : " + ") + p;
+  return out;
+}
+
+SceneRecord DatasetMix::read(int index) const {
+  const auto [k, i] = locate(index);
+  return readers_[k]->read(i);
+}
+
 }  // namespace simstack

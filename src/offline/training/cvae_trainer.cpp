@@ -84,9 +84,9 @@ Batch toBatch(const std::vector<TrainingSample>& samples, int r) {
 /// only on the seed, so a resumed run sees the data an uninterrupted one would have.
 class BatchQueue {
  public:
-  BatchQueue(const TrainConfig& tc, const TrainingSampleBuilder& builder,
-             const DatasetReader& reader, int train_scenes, int resolution, int64_t start)
-      : worker_([=, &builder, &reader] {
+  BatchQueue(const TrainConfig& tc, const TrainingSampleBuilder& builder, const DatasetMix& data,
+             int train_scenes, int resolution, int64_t start)
+      : worker_([=, &builder, &data] {
           omp_set_num_threads(1);
           for (int64_t step = start; step < tc.steps; ++step) {
             std::vector<TrainingSample> samples;
@@ -95,7 +95,7 @@ class BatchQueue {
               for (int i = 0; i < tc.batch_size; ++i) {
                 std::mt19937_64 rng(mix(tc.seed, static_cast<uint64_t>(step) * 1024 + i));
                 std::uniform_int_distribution<int> pick(0, train_scenes - 1);
-                samples.push_back(builder.build(reader.read(pick(rng)), rng));
+                samples.push_back(builder.build(data.read(pick(rng)), rng));
               }
               batch = toBatch(samples, resolution);
             } catch (const std::exception& e) {
@@ -334,14 +334,21 @@ std::string differingLines(const std::string& checkpoint, const std::string& con
   return out.empty() ? "their YAML differs in length" : out;
 }
 
-/// The data a run trains on as a checkpoint records it (one line): a resume on other data is
-/// refused, since a resumed run sees the data an uninterrupted one would have. The generator's
-/// size range is not in a dataset's attributes, so it cannot be compared.
-std::string datasetTag(const DatasetInfo& info) {
-  return "seed " + std::to_string(info.seed) + ", " + std::to_string(info.num_scenes) +
-         " scenes of " + std::to_string(info.min_objects) + "-" + std::to_string(info.max_objects) +
-         " objects, generator " +
-         (info.generator_version.empty() ? "unknown" : info.generator_version);
+/// The data a run trains on as a checkpoint records it (one line; the files' tags joined by
+/// " + " for a mix): a resume on other data is refused, since a resumed run sees the data an
+/// uninterrupted one would have. The generator's size range is not in a dataset's attributes,
+/// so it cannot be compared.
+std::string datasetTag(const DatasetMix& data) {
+  std::string out;
+  for (int k = 0; k < data.files(); ++k) {
+    const DatasetInfo& info = data.file(k).info();
+    out += (k ? " + " : "") +
+           ("seed " + std::to_string(info.seed) + ", " + std::to_string(info.num_scenes) +
+            " scenes of " + std::to_string(info.min_objects) + "-" +
+            std::to_string(info.max_objects) + " objects, generator " +
+            (info.generator_version.empty() ? "unknown" : info.generator_version));
+  }
+  return out;
 }
 
 /// The checkpoint format this trainer writes and resumes: the network, the optimizer's state
@@ -350,10 +357,10 @@ constexpr int kCheckpointFormatVersion = 1;
 
 /// A checkpoint's metadata: its format, its dataset tag and the model the run was warm-started
 /// from.
-std::string checkpointMetadata(const DatasetInfo& info, const std::string& init_from) {
+std::string checkpointMetadata(const DatasetMix& data, const std::string& init_from) {
   YAML::Emitter e;
   e << YAML::BeginMap << YAML::Key << "format_version" << YAML::Value << kCheckpointFormatVersion
-    << YAML::Key << "dataset" << YAML::Value << datasetTag(info) << YAML::Key << "init_from"
+    << YAML::Key << "dataset" << YAML::Value << datasetTag(data) << YAML::Key << "init_from"
     << YAML::Value << init_from << YAML::EndMap;
   return e.c_str();
 }
@@ -377,10 +384,10 @@ double learningRate(const TrainConfig& tc, int64_t step) {
 }
 
 struct CvaeTrainer::Impl {
-  std::string dataset_path, output_dir, command_line;
+  std::string output_dir, command_line;
   CvaeConfig model_config;
   TrainConfig config;
-  std::unique_ptr<DatasetReader> reader;
+  std::unique_ptr<DatasetMix> data;
   int train_scenes = 0;
   std::string card_perception;  // the card's perception: section, read before training
   std::string note;             // what the trainer chose for the user (CvaeTrainer::note)
@@ -397,36 +404,38 @@ struct CvaeTrainer::Impl {
                        bool posterior_measured) const;
 };
 
-CvaeTrainer::CvaeTrainer(const std::string& dataset_path, const CvaeConfig& model,
+CvaeTrainer::CvaeTrainer(const std::vector<std::string>& dataset_paths, const CvaeConfig& model,
                          const TrainConfig& training, const std::string& output_dir,
                          const std::string& command_line)
     : impl_(std::make_unique<Impl>()) {
   model.validate();
   training.validate();
-  impl_->dataset_path = dataset_path;
   impl_->output_dir = output_dir;
   impl_->command_line = command_line;
   impl_->model_config = model;
   impl_->config = training;
   impl_->card_perception = cardPerceptionSection(training.init_from, model.hasLatentCode());
-  impl_->reader = std::make_unique<DatasetReader>(dataset_path);
-  const DatasetInfo& info = impl_->reader->info();
-  checkDatasetFitsModel(info, model, dataset_path, "the model config");
+  impl_->data = std::make_unique<DatasetMix>(dataset_paths);
+  const DatasetMix& data = *impl_->data;
+  for (int k = 0; k < data.files(); ++k)
+    checkDatasetFitsModel(data.file(k).info(), model, data.path(k), "the model config");
+  const int scenes = data.size();
+  const std::string named = (data.files() > 1 ? "datasets " : "dataset ") + data.name();
   // A dataset smaller than the validation asked for (a newcomer's first run on a few dozen
   // piles): a quarter of it validates, and the note says so.
-  if (info.num_scenes < 2)
-    throw std::runtime_error("dataset " + dataset_path + " has " + std::to_string(info.num_scenes) +
+  if (scenes < 2)
+    throw std::runtime_error(named + " has " + std::to_string(scenes) +
                              " scene: training needs at least 2 (one to train on, one to "
                              "validate on); generate more scenes");
-  if (training.validation_scenes >= info.num_scenes) {
-    impl_->config.validation_scenes = std::max(1, info.num_scenes / 4);
+  if (training.validation_scenes >= scenes) {
+    impl_->config.validation_scenes = std::max(1, scenes / 4);
     impl_->note =
-        "dataset " + dataset_path + " holds " + std::to_string(info.num_scenes) +
+        named + " holds " + std::to_string(scenes) +
         " scenes, not more than validation_scenes = " + std::to_string(training.validation_scenes) +
         ": its last " + std::to_string(impl_->config.validation_scenes) +
         " are the validation (--validation-scenes chooses)";
   }
-  impl_->train_scenes = info.num_scenes - impl_->config.validation_scenes;
+  impl_->train_scenes = scenes - impl_->config.validation_scenes;
   std::error_code ec;
   fs::create_directories(output_dir, ec);
   if (ec)
@@ -437,7 +446,7 @@ CvaeTrainer::~CvaeTrainer() = default;
 
 const std::string& CvaeTrainer::note() const { return impl_->note; }
 
-TrainingReport CvaeTrainer::validateModel(const std::string& dataset_path,
+TrainingReport CvaeTrainer::validateModel(const std::vector<std::string>& dataset_paths,
                                           const std::string& model_path,
                                           const TrainConfig& training,
                                           const std::string& mesh_dir) {
@@ -446,16 +455,18 @@ TrainingReport CvaeTrainer::validateModel(const std::string& dataset_path,
   Impl impl;
   impl.model_config = model->config();
   impl.config = training;
-  impl.reader = std::make_unique<DatasetReader>(dataset_path, mesh_dir);
-  const DatasetInfo& info = impl.reader->info();
+  impl.data = std::make_unique<DatasetMix>(dataset_paths, mesh_dir);
+  const DatasetMix& data = *impl.data;
   const CvaeConfig& mc = impl.model_config;
-  checkDatasetFitsModel(info, mc, dataset_path, "model " + model_path);
-  if (training.validation_scenes > info.num_scenes)
-    throw std::runtime_error(
-        "dataset " + dataset_path + " has " + std::to_string(info.num_scenes) +
-        " scenes, fewer than validation_scenes = " + std::to_string(training.validation_scenes) +
-        ": give --validation-scenes " + std::to_string(info.num_scenes) + " or fewer");
-  impl.train_scenes = info.num_scenes - training.validation_scenes;
+  for (int k = 0; k < data.files(); ++k)
+    checkDatasetFitsModel(data.file(k).info(), mc, data.path(k), "model " + model_path);
+  const int scenes = data.size();
+  if (training.validation_scenes > scenes)
+    throw std::runtime_error((data.files() > 1 ? "datasets " : "dataset ") + data.name() + " has " +
+                             std::to_string(scenes) + " scenes, fewer than validation_scenes = " +
+                             std::to_string(training.validation_scenes) +
+                             ": give --validation-scenes " + std::to_string(scenes) + " or fewer");
+  impl.train_scenes = scenes - training.validation_scenes;
   torch::set_num_threads(training.threads);
   torch::manual_seed(training.seed);
   const TrainingSampleBuilder builder(mc, scaledKinect(training.image_width, training.image_height),
@@ -582,14 +593,14 @@ void CvaeTrainer::Impl::validate(Cvae& model, const TrainingSampleBuilder& build
                                  TrainingReport* report) const {
   model->eval();
   torch::NoGradGuard no_grad;
-  const int n = reader->size();
+  const int n = data->size();
   ValidationSums sums;
   std::vector<double> scene_iou;
   for (int k = train_scenes; k < n; ++k) {
     // One stream per scene, its views drawn in turn: the first view is the one a single-view
     // validation drew.
     std::mt19937_64 rng(mix(kValidationSeed ^ 0xA11DA7Eull, static_cast<uint64_t>(k)));
-    const SceneRecord record = reader->read(k);
+    const SceneRecord record = data->read(k);
     double scene_sum = 0;
     for (int v = 0; v < config.validation_views; ++v) {
       const uint64_t code_seed = mix(mix(kValidationSeed ^ 0xC0DE5ull, static_cast<uint64_t>(k)),
@@ -627,9 +638,20 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
   YAML::Emitter meta;
   meta << YAML::BeginMap;
   meta << YAML::Key << "command" << YAML::Value << command_line;
-  meta << YAML::Key << "dataset" << YAML::Value << dataset_path;
-  meta << YAML::Key << "dataset_seed" << YAML::Value << reader->info().seed;
-  meta << YAML::Key << "dataset_scenes" << YAML::Value << reader->size();
+  // A mix is named by its files joined by " + ", and so are their seeds and sizes.
+  std::string seeds, sizes;
+  for (int k = 0; k < data->files(); ++k) {
+    seeds += (k ? " + " : "") + std::to_string(data->file(k).info().seed);
+    sizes += (k ? " + " : "") + std::to_string(data->file(k).size());
+  }
+  meta << YAML::Key << "dataset" << YAML::Value << data->name();
+  if (data->files() == 1) {
+    meta << YAML::Key << "dataset_seed" << YAML::Value << data->file(0).info().seed;
+    meta << YAML::Key << "dataset_scenes" << YAML::Value << data->size();
+  } else {
+    meta << YAML::Key << "dataset_seed" << YAML::Value << seeds;
+    meta << YAML::Key << "dataset_scenes" << YAML::Value << sizes;
+  }
   meta << YAML::Key << "validation_scenes" << YAML::Value << config.validation_scenes;
   meta << YAML::Key << "validation_views" << YAML::Value << config.validation_views;
   meta << YAML::Key << "validation_samples" << YAML::Value << config.validation_samples;
@@ -682,7 +704,7 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
 
 std::string CvaeTrainer::Impl::resumeFrom(const std::string& metadata, const fs::path& out) {
   const fs::path checkpoint = out / "checkpoint.pt";
-  const std::string now = datasetTag(reader->info());
+  const std::string now = datasetTag(*data);
   const std::string format = metadataField(metadata, "format_version");
   if (format != std::to_string(kCheckpointFormatVersion))
     throw std::runtime_error(
@@ -693,7 +715,7 @@ std::string CvaeTrainer::Impl::resumeFrom(const std::string& metadata, const fs:
   const std::string was = metadataField(metadata, "dataset");
   if (!was.empty() && was != now)
     throw std::runtime_error("checkpoint " + checkpoint.string() + " was trained on a dataset of " +
-                             was + "; " + dataset_path + " holds " + now +
+                             was + "; " + data->name() + " holds " + now +
                              ": resume on the run's own dataset, or warm-start a new run from "
                              "the checkpoint (--init-from) to train on this one");
   const std::string parent =
@@ -737,7 +759,7 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   // people and scripts.
   auto save_checkpoint = [&](int64_t step) {
     log.flush();
-    saveCvae(checkpoint.string(), model, checkpointMetadata(impl_->reader->info(), init_from),
+    saveCvae(checkpoint.string(), model, checkpointMetadata(*impl_->data, init_from),
              [&](torch::serialize::OutputArchive& archive) {
                torch::serialize::OutputArchive adam;
                optimizer.save(adam);
@@ -759,13 +781,13 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   int64_t trained = 0;
   model->train();
   {
-    BatchQueue batches(tc, builder, *impl_->reader, impl_->train_scenes, mc.resolution, start);
+    BatchQueue batches(tc, builder, *impl_->data, impl_->train_scenes, mc.resolution, start);
     for (int64_t step = start; step < tc.steps; ++step) {
       Batch batch;
       try {
         batch = batches.next();
       } catch (const std::runtime_error& e) {
-        throw std::runtime_error("building training samples from " + impl_->dataset_path +
+        throw std::runtime_error("building training samples from " + impl_->data->name() +
                                  " failed: " + e.what());
       }
       for (auto& group : optimizer.param_groups())

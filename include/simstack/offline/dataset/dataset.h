@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "simstack/offline/dataset/ground_truth.h"
@@ -77,6 +78,35 @@ class DatasetReader {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+};
+
+/// Several datasets read as one, to train on piles of several kinds (the paper's 3-4 objects
+/// beside crowded or household piles). The scenes are interleaved in proportion to the files'
+/// sizes: position i holds the next scene of the file furthest behind its share (least
+/// taken / size; the earlier file on a tie), so every tail of the mix, the trainer's
+/// validation scenes, holds the last scenes of each file in that proportion. One file reads
+/// as itself, scene for scene.
+class DatasetMix {
+ public:
+  /// Opens the files (DatasetReader's `mesh_dir` for each). Throws std::runtime_error naming
+  /// the file that cannot be read or whose grids (resolution, extent, truncation) differ
+  /// from the first file's, and std::invalid_argument for an empty list.
+  explicit DatasetMix(const std::vector<std::string>& paths, const std::string& mesh_dir = "");
+  ~DatasetMix();
+  int size() const { return static_cast<int>(order_.size()); }
+  int files() const { return static_cast<int>(readers_.size()); }
+  const DatasetReader& file(int k) const { return *readers_.at(k); }
+  const std::string& path(int k) const { return paths_.at(k); }
+  /// The paths joined by " + " (the mix as messages and model cards name it).
+  std::string name() const;
+  /// Where scene `index` of the mix lives: the file and the scene's index in it.
+  std::pair<int, int> locate(int index) const { return order_.at(index); }
+  SceneRecord read(int index) const;
+
+ private:
+  std::vector<std::string> paths_;
+  std::vector<std::unique_ptr<DatasetReader>> readers_;
+  std::vector<std::pair<int, int>> order_;
 };
 
 }  // namespace simstack

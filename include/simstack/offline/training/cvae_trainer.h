@@ -10,6 +10,7 @@
 #include <limits>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "simstack/model/cvae_config.h"
 
@@ -64,10 +65,17 @@ double learningRate(const TrainConfig& training, int64_t step);
 
 class CvaeTrainer {
  public:
-  /// Throws std::runtime_error naming the dataset or output directory when they are unusable
-  /// or the dataset does not match the model config.
+  /// Trains on one dataset or on several read as one (DatasetMix: interleaved in proportion
+  /// to their sizes, so the validation scenes come from every file). Throws
+  /// std::runtime_error naming the dataset or output directory when they are unusable or a
+  /// dataset does not match the model config.
+  CvaeTrainer(const std::vector<std::string>& dataset_paths, const CvaeConfig& model,
+              const TrainConfig& training, const std::string& output_dir,
+              const std::string& command_line);
   CvaeTrainer(const std::string& dataset_path, const CvaeConfig& model, const TrainConfig& training,
-              const std::string& output_dir, const std::string& command_line);
+              const std::string& output_dir, const std::string& command_line)
+      : CvaeTrainer(std::vector<std::string>{dataset_path}, model, training, output_dir,
+                    command_line) {}
   ~CvaeTrainer();
   /// What the trainer chose for the user ("" when nothing): a dataset that holds no more scenes
   /// than training.validation_scenes is validated on its last quarter instead.
@@ -82,9 +90,14 @@ class CvaeTrainer {
   /// the validation_* fields of the report. `mesh_dir` holds the meshes of a dataset of mesh
   /// piles (YCB; "" for superquadric piles). Throws std::runtime_error naming the file that is
   /// unusable or does not match the other.
-  static TrainingReport validateModel(const std::string& dataset_path,
+  static TrainingReport validateModel(const std::vector<std::string>& dataset_paths,
                                       const std::string& model_path, const TrainConfig& training,
                                       const std::string& mesh_dir = "");
+  static TrainingReport validateModel(const std::string& dataset_path,
+                                      const std::string& model_path, const TrainConfig& training,
+                                      const std::string& mesh_dir = "") {
+    return validateModel(std::vector<std::string>{dataset_path}, model_path, training, mesh_dir);
+  }
 
  private:
   struct Impl;
