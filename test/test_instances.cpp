@@ -13,6 +13,7 @@
 #include "simstack/instances/hough_voting.h"
 #include "simstack/instances/surface_instances.h"
 #include "simstack/instances/surface_segments.h"
+#include "simstack/render/depth_renderer.h"
 
 namespace simstack {
 namespace {
@@ -560,6 +561,91 @@ TEST(SurfaceInstances, AContainerMustGoRoundItsAxisAndBeSeenFromInside) {
   SurfaceInstanceConfig any_side = config;
   any_side.container_inside_share = 0;
   EXPECT_EQ(joinsOfHalves(0.09, near_from, -M_PI / 2, near_to, camera, any_side), 1);
+}
+
+/// A box (superquadric of exponent 10) of half extents `half` at `centre`.
+static SceneObject boxAt(const Vec3& half, const Vec3& centre) {
+  SuperquadricShape sq;
+  sq.scale_m = half;
+  sq.exponents = Vec3::Constant(10.0);
+  SceneObject o;
+  o.shape = ObjectShape::fromSuperquadric(sq);
+  o.T_table_object.translation() = centre;
+  return o;
+}
+
+/// Joins by joinOccludedPieces of `scene` seen from (0, -0.8, 0.45): its depth points (every
+/// second pixel, 5 mm above the table and higher) labelled on a 32^3 grid, each point's voxel
+/// taking the label `label_of` gives it (object index, table-frame point). `joined_label`
+/// receives, after the joins, the labels of the points at `probes`.
+static int occludedJoins(const Scene& scene, const std::function<int(int, const Vec3&)>& label_of,
+                         int labels, const SurfaceInstanceConfig& config,
+                         const std::vector<Vec3>& probes = {},
+                         std::vector<int>* joined_label = nullptr) {
+  const PinholeCamera camera = scaledKinect(640, 480);
+  const Transform T_table_camera = lookAt(Vec3(0.0, -0.8, 0.45), Vec3(0.0, 0.0, 0.06));
+  const RenderResult view = DepthRenderer(scene).render(camera, T_table_camera);
+  InstanceSegmentation seg;
+  seg.labels = Grid3<int>(GridSpec::sceneGrid(Vec2(0.0, 0.0), 0.64, 32), -1);
+  seg.voxel_counts.assign(labels, 0);
+  seg.centres_table.assign(labels, Vec3::Zero());
+  Points3 points;
+  for (int v = 0; v < camera.height; v += 2)
+    for (int u = 0; u < camera.width; u += 2) {
+      const float d = view.depth.at(u, v);
+      const int object = view.instances.at(u, v);
+      if (!(d > 0.0f) || object == 0 || object == kNoSurface) continue;
+      const Vec3 p = T_table_camera * camera.backproject(u, v, d);
+      if (p.z() < 0.005) continue;
+      points.push_back(p);
+      const int label = label_of(object - 1, p);
+      const Vec3i i = seg.labels.spec.voxelIndex(p);
+      if (label >= 0 && seg.labels.at(i.x(), i.y(), i.z()) < 0) {
+        seg.labels.at(i.x(), i.y(), i.z()) = label;
+        ++seg.voxel_counts[label];
+      }
+    }
+  const int joins = joinOccludedPieces(points, camera, T_table_camera, 2, config, &seg);
+  if (joined_label)
+    for (const Vec3& p : probes)
+      joined_label->push_back(seg.labels.data[nearestLabelledVoxel(seg.labels, p)]);
+  return joins;
+}
+
+TEST(SurfaceInstances, AnObjectSeenOnBothSidesOfANearerOneIsOne) {
+  // A long box behind a thin post: the post hides the box's middle, and the votes made its two
+  // visible ends two instances.
+  const Scene behind{{boxAt({0.12, 0.04, 0.05}, {0.0, 0.05, 0.05}),
+                      boxAt({0.015, 0.015, 0.1}, {0.0, -0.06, 0.1})}};
+  const auto halves = [](int object, const Vec3& p) { return object == 1 ? 2 : p.x() < 0 ? 0 : 1; };
+  const SurfaceInstanceConfig config;
+  std::vector<int> after;
+  EXPECT_EQ(
+      occludedJoins(behind, halves, 3, config,
+                    {Vec3(-0.1, 0.01, 0.05), Vec3(0.1, 0.01, 0.05), Vec3(0, -0.075, 0.1)}, &after),
+      1);
+  ASSERT_EQ(after.size(), 3u);
+  EXPECT_EQ(after[0], after[1]);
+  EXPECT_NE(after[0], after[2]);
+  SurfaceInstanceConfig off = config;
+  off.occluded_plane_m = 0;
+  EXPECT_EQ(occludedJoins(behind, halves, 3, off), 0);
+  // Two boxes of one height side by side: the table is seen between their coplanar faces.
+  const Scene apart{{boxAt({0.05, 0.04, 0.05}, {-0.08, 0.05, 0.05}),
+                     boxAt({0.05, 0.04, 0.05}, {0.08, 0.05, 0.05})}};
+  const auto each = [](int object, const Vec3&) { return object; };
+  EXPECT_EQ(occludedJoins(apart, each, 2, config), 0);
+  // ... and with a post standing between them, as far back: nothing nearer hides the gap.
+  Scene between = apart;
+  between.objects.push_back(boxAt({0.015, 0.015, 0.1}, {0.0, 0.05, 0.1}));
+  EXPECT_EQ(occludedJoins(between, each, 3, config), 0);
+  // ... but with the post in front of the gap, they are one box's ends to the rule as well.
+  Scene hidden = apart;
+  hidden.objects.push_back(boxAt({0.04, 0.015, 0.1}, {0.0, -0.06, 0.1}));
+  EXPECT_EQ(occludedJoins(hidden, each, 3, config), 1);
+  SurfaceInstanceConfig bad = config;
+  bad.occluded_share = 0;
+  EXPECT_THROW(occludedJoins(behind, halves, 3, bad), std::invalid_argument);
 }
 
 }  // namespace simstack

@@ -8,6 +8,7 @@
 
 #include <vector>
 
+#include "simstack/geometry/pinhole_camera.h"
 #include "simstack/geometry/voxel_grid.h"
 #include "simstack/instances/hough_voting.h"
 
@@ -36,7 +37,19 @@ struct SurfaceInstanceConfig {
   double container_profile_m = 0.003;
   double container_min_arc_deg = 240;   ///< ... their points' angular cover about the axis
   double container_inside_share = 0.2;  ///< ... their share beyond the axis, seen from the camera
-  void validate() const;                ///< std::invalid_argument naming the field
+  /// Two instances are the two sides of one object seen past a nearer one (a box behind a
+  /// bottle) when their largest planar faces (RANSAC inliers within this distance, m) lie on
+  /// one plane (70 % of each face's points on the plane through both, normals within 20
+  /// degrees) and, between their nearest points, 1-30 cm apart, the depth is nearer to the
+  /// camera than that plane by `occluded_margin_m` for `occluded_share` of the way where there
+  /// is depth, at most 40 % of it missing (the camera's shadow beside the hiding surface).
+  /// Where the plane goes on, or the table or something behind is seen through the gap, they
+  /// are two objects; so too when the way lies mostly (60 %) in a third instance's voxels.
+  /// 0 = off.
+  double occluded_plane_m = 0.006;
+  double occluded_margin_m = 0.015;  ///< ... how much nearer the hiding surface is
+  double occluded_share = 0.8;       ///< ... share of the gap it hides
+  void validate() const;             ///< std::invalid_argument naming the field
 };
 
 /// PCL's Euclidean clustering of `points`: clusters of at least `min_points` whose points
@@ -74,6 +87,16 @@ RevolutionFit fitCommonRevolution(const Points3& a, const Points3& b, const Vec2
 /// labelled voxel; `camera_table` is the view's camera position). Labels are renumbered densely;
 /// a joined centre is the two centres' mean weighted by their voxels. Returns the number of joins.
 int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
+                       const SurfaceInstanceConfig& config, InstanceSegmentation* seg);
+
+/// Joins, pair by pair (the best-fitting plane first), instances that are one object's faces
+/// seen on both sides of a nearer one, by the `occluded_*` fields: the points are given to the
+/// instance of their nearest labelled voxel, each instance's largest plane is found by PCL's
+/// RANSAC, and the gap between two coplanar faces is looked at through `camera` placed at
+/// `T_table_camera`, in the depth of `points_table` (stride-subsampled points are spread over
+/// `stride` x `stride` pixels). Returns the number of joins.
+int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
+                       const Transform& T_table_camera, int stride,
                        const SurfaceInstanceConfig& config, InstanceSegmentation* seg);
 
 }  // namespace simstack

@@ -1,13 +1,18 @@
 #include "simstack/instances/surface_instances.h"
 
+#include <pcl/ModelCoefficients.h>
 #include <pcl/point_types.h>
+#include <pcl/sample_consensus/method_types.h>
+#include <pcl/sample_consensus/model_types.h>
 #include <pcl/search/kdtree.h>
 #include <pcl/segmentation/extract_clusters.h>
+#include <pcl/segmentation/sac_segmentation.h>
 
 #include <Eigen/Dense>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <set>
 #include <stdexcept>
@@ -31,6 +36,9 @@ void SurfaceInstanceConfig::validate() const {
     fail("container_min_arc_deg must lie in [0, 360]");
   if (!(container_inside_share >= 0.0 && container_inside_share <= 1.0))
     fail("container_inside_share must lie in [0, 1]");
+  if (!(occluded_plane_m >= 0.0)) fail("occluded_plane_m must be >= 0");
+  if (!(occluded_margin_m > 0.0)) fail("occluded_margin_m must be > 0");
+  if (!(occluded_share > 0.0 && occluded_share <= 1.0)) fail("occluded_share must lie in (0, 1]");
 }
 
 namespace {
@@ -283,6 +291,134 @@ bool nearOnTable(const Points3& a, const Points3& b, double gap_m) {
          (lo_b.array() <= hi_a.array() + gap_m).all();
 }
 
+/// An instance's largest planar face: the plane n . p = d (table frame) and its points (the
+/// indices of the points given).
+struct Face {
+  bool valid = false;
+  Vec3 normal = Vec3::UnitZ();
+  double offset = 0;
+  Points3 points;
+  std::vector<int> indices;
+};
+
+/// The largest plane through `points` by PCL's RANSAC (inliers within `threshold_m`), a face
+/// when it holds at least `min_points` and a third of them.
+Face largestFace(const Points3& points, double threshold_m, int min_points) {
+  Face face;
+  if (static_cast<int>(points.size()) < std::max(3, min_points)) return face;
+  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+  for (const Vec3& p : points) cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  pcl::SACSegmentation<pcl::PointXYZ> sac;
+  sac.setOptimizeCoefficients(true);
+  sac.setModelType(pcl::SACMODEL_PLANE);
+  sac.setMethodType(pcl::SAC_RANSAC);
+  sac.setDistanceThreshold(threshold_m);
+  sac.setMaxIterations(200);
+  sac.setInputCloud(cloud);
+  pcl::PointIndices inliers;
+  pcl::ModelCoefficients c;
+  sac.segment(inliers, c);
+  const int n = static_cast<int>(inliers.indices.size());
+  if (c.values.size() != 4 || n < min_points || 3 * n < static_cast<int>(points.size()))
+    return face;
+  const Vec3 normal(c.values[0], c.values[1], c.values[2]);
+  if (!(normal.norm() > 0)) return face;
+  face.valid = true;
+  face.normal = normal.normalized();
+  face.offset = -c.values[3] / normal.norm();
+  for (int i : inliers.indices) face.points.push_back(points[i]);
+  face.indices = inliers.indices;
+  return face;
+}
+
+/// How well two faces lie on one plane: the smaller of the shares of each face's points that
+/// are inliers of the largest plane through both (a plane fitted to both, not one face's
+/// plane extrapolated across the gap, where a few degrees of tilt would miss the other).
+double commonPlaneShare(const Face& a, const Face& b, double threshold_m) {
+  Points3 both = a.points;
+  both.insert(both.end(), b.points.begin(), b.points.end());
+  const Face common = largestFace(both, threshold_m, 0);
+  if (!common.valid) return 0;
+  const int na = static_cast<int>(a.points.size());
+  int in_a = 0, in_b = 0;
+  for (int i : common.indices) (i < na ? in_a : in_b) += 1;
+  return std::min(static_cast<double>(in_a) / na, static_cast<double>(in_b) / b.points.size());
+}
+
+/// The camera depth (z, m) of the points per pixel, the nearest where several fall; each point
+/// covers a `stride` x `stride` block (the points are every stride-th pixel's). 0 = none.
+std::vector<float> depthOfPoints(const Points3& points_table, const PinholeCamera& camera,
+                                 const Transform& T_camera_table, int stride) {
+  std::vector<float> depth(static_cast<size_t>(camera.width) * camera.height, 0.0f);
+  const int half = std::max(1, stride) / 2;
+  for (const Vec3& p : points_table) {
+    const Vec3 c = T_camera_table * p;
+    double u = 0, v = 0;
+    if (!camera.project(c, &u, &v)) continue;
+    const int cu = static_cast<int>(std::lround(u)), cv = static_cast<int>(std::lround(v));
+    for (int y = cv - half; y <= cv + half; ++y)
+      for (int x = cu - half; x <= cu + half; ++x) {
+        if (x < 0 || y < 0 || x >= camera.width || y >= camera.height) continue;
+        float& d = depth[static_cast<size_t>(y) * camera.width + x];
+        if (d == 0.0f || c.z() < d) d = static_cast<float>(c.z());
+      }
+  }
+  return depth;
+}
+
+/// What lies between two coplanar faces, looked at along the segment joining their nearest
+/// points (every 4 mm): the share of it that a surface nearer to the camera than the segment
+/// by `margin_m` hides, and the share inside voxels of an instance other than `a` and `b`.
+struct Gap {
+  double length_m = 0;
+  double hidden = 0, other = 0, none = 0;
+};
+Gap lookIntoGap(const Face& fa, const Face& fb, int a, int b, const Grid3<int>& labels,
+                const std::vector<float>& depth, const PinholeCamera& camera,
+                const Transform& T_camera_table, double margin_m) {
+  constexpr size_t kMaxPoints = 400;  // per face in the nearest-pair search
+  const size_t sa = std::max<size_t>(1, fa.points.size() / kMaxPoints);
+  const size_t sb = std::max<size_t>(1, fb.points.size() / kMaxPoints);
+  Vec3 pa = fa.points.front(), pb = fb.points.front();
+  double best = std::numeric_limits<double>::infinity();
+  for (size_t i = 0; i < fa.points.size(); i += sa)
+    for (size_t j = 0; j < fb.points.size(); j += sb) {
+      const double d = (fa.points[i] - fb.points[j]).squaredNorm();
+      if (d < best) {
+        best = d;
+        pa = fa.points[i];
+        pb = fb.points[j];
+      }
+    }
+  Gap gap;
+  gap.length_m = std::sqrt(best);
+  const int steps = static_cast<int>(std::ceil(gap.length_m / 0.004));
+  int samples = 0, hidden = 0, other = 0, none = 0;
+  for (int i = 1; i < steps; ++i) {
+    const Vec3 q = pa + (pb - pa) * (static_cast<double>(i) / steps);
+    ++samples;
+    if (labels.spec.containsPoint(q)) {
+      const Vec3i idx = labels.spec.voxelIndex(q);
+      const int l = labels.at(idx.x(), idx.y(), idx.z());
+      other += l >= 0 && l != a && l != b;
+    }
+    const Vec3 c = T_camera_table * q;
+    double u = 0, v = 0;
+    if (!camera.project(c, &u, &v)) continue;
+    const int x = static_cast<int>(std::lround(u)), y = static_cast<int>(std::lround(v));
+    if (x < 0 || y < 0 || x >= camera.width || y >= camera.height) continue;
+    const float d = depth[static_cast<size_t>(y) * camera.width + x];
+    hidden += d > 0.0f && d < c.z() - margin_m;
+    none += d == 0.0f;
+  }
+  if (samples > 0) {
+    gap.hidden = static_cast<double>(hidden) / samples;
+    gap.other = static_cast<double>(other) / samples;
+    gap.none = static_cast<double>(none) / samples;
+  }
+  return gap;
+}
+
 }  // namespace
 
 int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
@@ -314,6 +450,57 @@ int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
     joinInstances(seg, best_a, best_b);
     points[best_a].insert(points[best_a].end(), points[best_b].begin(), points[best_b].end());
     points.erase(points.begin() + best_b);
+    ++joins;
+  }
+}
+
+int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
+                       const Transform& T_table_camera, int stride,
+                       const SurfaceInstanceConfig& config, InstanceSegmentation* seg) {
+  config.validate();
+  if (!config.enabled || config.occluded_plane_m <= 0.0 || seg->size() < 2) return 0;
+  constexpr int kMaxPoints = 1500;         // per instance: RANSAC's cost stays small
+  constexpr double kMinGapM = 0.01;        // nearer faces touch: nothing hides a gap between them
+  constexpr double kMaxGapM = 0.3;         // a face hidden over more is not one object's
+  constexpr double kMaxAngleDeg = 20.0;    // between the faces' normals
+  constexpr double kMaxOtherShare = 0.6;   // of the gap inside a third instance: it stands between
+  constexpr double kMaxHoleShare = 0.4;    // of the gap with no depth: the camera's shadow beside
+                                           // the hiding surface; more is the table seen through
+  constexpr double kMinCommonShare = 0.7;  // of each face's points on the plane through both
+  const Transform T_camera_table = T_table_camera.inverse();
+  const std::vector<float> depth = depthOfPoints(points_table, camera, T_camera_table, stride);
+  std::vector<Points3> points = pointsByInstance(points_table, *seg, kMaxPoints);
+  std::vector<Face> faces;
+  for (const Points3& p : points)
+    faces.push_back(largestFace(p, config.occluded_plane_m, config.min_points));
+  const double min_cos = std::cos(kMaxAngleDeg * M_PI / 180.0);
+  int joins = 0;
+  for (;;) {
+    int best_a = -1, best_b = -1;
+    double best = kMinCommonShare;
+    for (int a = 0; a < seg->size(); ++a)
+      for (int b = a + 1; b < seg->size(); ++b) {
+        const Face& fa = faces[a];
+        const Face& fb = faces[b];
+        if (!fa.valid || !fb.valid || std::abs(fa.normal.dot(fb.normal)) < min_cos) continue;
+        const Gap gap = lookIntoGap(fa, fb, a, b, seg->labels, depth, camera, T_camera_table,
+                                    config.occluded_margin_m);
+        // Hidden: `occluded_share` of the way where there is depth.
+        if (gap.length_m < kMinGapM || gap.length_m > kMaxGapM || gap.none > kMaxHoleShare ||
+            gap.hidden < config.occluded_share * (1.0 - gap.none) || gap.other > kMaxOtherShare)
+          continue;
+        const double common = commonPlaneShare(fa, fb, config.occluded_plane_m);
+        if (common < best) continue;
+        best = common;
+        best_a = a;
+        best_b = b;
+      }
+    if (best_a < 0) return joins;
+    joinInstances(seg, best_a, best_b);
+    points[best_a].insert(points[best_a].end(), points[best_b].begin(), points[best_b].end());
+    points.erase(points.begin() + best_b);
+    faces.erase(faces.begin() + best_b);
+    faces[best_a] = largestFace(points[best_a], config.occluded_plane_m, config.min_points);
     ++joins;
   }
 }

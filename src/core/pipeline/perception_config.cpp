@@ -85,6 +85,9 @@ void surfaceInstanceFields(C& c, F&& f) {
   f("container_profile_m", c.container_profile_m);
   f("container_min_arc_deg", c.container_min_arc_deg);
   f("container_inside_share", c.container_inside_share);
+  f("occluded_plane_m", c.occluded_plane_m);
+  f("occluded_margin_m", c.occluded_margin_m);
+  f("occluded_share", c.occluded_share);
 }
 template <class C, class F>
 void fitFields(C& c, F&& f) {

@@ -193,6 +193,8 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
                         patched ? &segments->patch : nullptr);
     joinOpenContainers(points, measured_views.front().T_table_camera.translation(),
                        config.surface_instances, &seg);
+    joinOccludedPieces(points, measured_views.front().camera, measured_views.front().T_table_camera,
+                       std::max(1, config.segments.pixel_stride), config.surface_instances, &seg);
   }
   h->labels = seg.labels;
   // An instance whose centre lies outside the workspace is not reported (its voxels are free).
