@@ -276,6 +276,15 @@ void joinInstances(InstanceSegmentation* seg, int keep, int drop) {
   seg->voxel_counts.erase(seg->voxel_counts.begin() + drop);
 }
 
+/// joinInstances, the instances' point sets (pointsByInstance) joined alike.
+void joinInstancesAndPoints(InstanceSegmentation* seg, std::vector<Points3>* points, int keep,
+                            int drop) {
+  joinInstances(seg, keep, drop);
+  Points3& kept = (*points)[keep];
+  kept.insert(kept.end(), (*points)[drop].begin(), (*points)[drop].end());
+  points->erase(points->begin() + drop);
+}
+
 /// Whether two instances' points come within `gap_m` of each other on the table (bounding boxes).
 bool nearOnTable(const Points3& a, const Points3& b, double gap_m) {
   Vec2 lo_a = Vec2::Constant(1e9), hi_a = -lo_a, lo_b = lo_a, hi_b = hi_a;
@@ -447,9 +456,7 @@ int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
         }
       }
     if (best_a < 0) return joins;
-    joinInstances(seg, best_a, best_b);
-    points[best_a].insert(points[best_a].end(), points[best_b].begin(), points[best_b].end());
-    points.erase(points.begin() + best_b);
+    joinInstancesAndPoints(seg, &points, best_a, best_b);
     ++joins;
   }
 }
@@ -496,9 +503,7 @@ int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
         best_b = b;
       }
     if (best_a < 0) return joins;
-    joinInstances(seg, best_a, best_b);
-    points[best_a].insert(points[best_a].end(), points[best_b].begin(), points[best_b].end());
-    points.erase(points.begin() + best_b);
+    joinInstancesAndPoints(seg, &points, best_a, best_b);
     faces.erase(faces.begin() + best_b);
     faces[best_a] = largestFace(points[best_a], config.occluded_plane_m, config.min_points);
     ++joins;
