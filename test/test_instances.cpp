@@ -618,7 +618,8 @@ TEST(SurfaceInstances, AnObjectSeenOnBothSidesOfANearerOneIsOne) {
   const Scene behind{{boxAt({0.12, 0.04, 0.05}, {0.0, 0.05, 0.05}),
                       boxAt({0.015, 0.015, 0.1}, {0.0, -0.06, 0.1})}};
   const auto halves = [](int object, const Vec3& p) { return object == 1 ? 2 : p.x() < 0 ? 0 : 1; };
-  const SurfaceInstanceConfig config;
+  SurfaceInstanceConfig config;
+  config.occluded_plane_m = 0.006;
   std::vector<int> after;
   EXPECT_EQ(
       occludedJoins(behind, halves, 3, config,
@@ -643,6 +644,15 @@ TEST(SurfaceInstances, AnObjectSeenOnBothSidesOfANearerOneIsOne) {
   Scene hidden = apart;
   hidden.objects.push_back(boxAt({0.04, 0.015, 0.1}, {0.0, -0.06, 0.1}));
   EXPECT_EQ(occludedJoins(hidden, each, 3, config), 1);
+  // ... unless their sides across the gap do not line up: boxes of two heights, their fronts
+  // on one plane.
+  const Scene uneven{{boxAt({0.05, 0.04, 0.05}, {-0.08, 0.05, 0.05}),
+                      boxAt({0.05, 0.04, 0.035}, {0.08, 0.05, 0.035}),
+                      boxAt({0.04, 0.015, 0.1}, {0.0, -0.06, 0.1})}};
+  EXPECT_EQ(occludedJoins(uneven, each, 3, config), 0);
+  SurfaceInstanceConfig any_edge = config;
+  any_edge.occluded_edge_m = 1.0;
+  EXPECT_EQ(occludedJoins(uneven, each, 3, any_edge), 1);
   SurfaceInstanceConfig bad = config;
   bad.occluded_share = 0;
   EXPECT_THROW(occludedJoins(behind, halves, 3, bad), std::invalid_argument);

@@ -45,11 +45,15 @@ struct SurfaceInstanceConfig {
   /// is depth, at most 40 % of it missing (the camera's shadow beside the hiding surface).
   /// Where the plane goes on, or the table or something behind is seen through the gap, they
   /// are two objects; so too when the way lies mostly (60 %) in a third instance's voxels.
-  /// 0 = off.
-  double occluded_plane_m = 0.006;
+  /// 0 = off (the default: with `fc`, which completes such objects whole itself, it joined
+  /// only separate objects; 0.006 with networks that part small neighbours).
+  double occluded_plane_m = 0.0;
   double occluded_margin_m = 0.015;  ///< ... how much nearer the hiding surface is
   double occluded_share = 0.8;       ///< ... share of the gap it hides
-  void validate() const;             ///< std::invalid_argument naming the field
+  /// ... and the faces' sides along the gap line up within this (m): across the gap, in the
+  /// plane, their points' 5th and 95th percentiles differ by at most this much.
+  double occluded_edge_m = 0.015;
+  void validate() const;  ///< std::invalid_argument naming the field
 };
 
 /// PCL's Euclidean clustering of `points`: clusters of at least `min_points` whose points

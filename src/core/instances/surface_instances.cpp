@@ -39,6 +39,7 @@ void SurfaceInstanceConfig::validate() const {
   if (!(occluded_plane_m >= 0.0)) fail("occluded_plane_m must be >= 0");
   if (!(occluded_margin_m > 0.0)) fail("occluded_margin_m must be > 0");
   if (!(occluded_share > 0.0 && occluded_share <= 1.0)) fail("occluded_share must lie in (0, 1]");
+  if (!(occluded_edge_m > 0.0)) fail("occluded_edge_m must be > 0");
 }
 
 namespace {
@@ -381,7 +382,17 @@ std::vector<float> depthOfPoints(const Points3& points_table, const PinholeCamer
 struct Gap {
   double length_m = 0;
   double hidden = 0, other = 0, none = 0;
+  /// How far the faces' sides across the gap are apart: along the plane's direction normal to
+  /// the gap, the larger difference of the faces' 5th and of their 95th percentiles (m).
+  double edge_offset_m = 0;
 };
+
+/// The `share` quantile of `values` (taken by value: reordered).
+double quantile(std::vector<double> values, double share) {
+  const size_t k = std::min(values.size() - 1, static_cast<size_t>(share * values.size()));
+  std::nth_element(values.begin(), values.begin() + k, values.end());
+  return values[k];
+}
 Gap lookIntoGap(const Face& fa, const Face& fb, int a, int b, const Grid3<int>& labels,
                 const std::vector<float>& depth, const PinholeCamera& camera,
                 const Transform& T_camera_table, double margin_m) {
@@ -419,6 +430,17 @@ Gap lookIntoGap(const Face& fa, const Face& fb, int a, int b, const Grid3<int>& 
     const float d = depth[static_cast<size_t>(y) * camera.width + x];
     hidden += d > 0.0f && d < c.z() - margin_m;
     none += d == 0.0f;
+  }
+  // One face cut by a nearer object: its two pieces' sides along the gap line up (a box top's
+  // front and back edges); two objects' faces of one height seldom do.
+  const Vec3 along = (pb - pa) - fa.normal * fa.normal.dot(pb - pa);
+  if (along.norm() > 1e-9) {
+    const Vec3 across = fa.normal.cross(along.normalized());
+    std::vector<double> wa, wb;
+    for (const Vec3& p : fa.points) wa.push_back(across.dot(p));
+    for (const Vec3& p : fb.points) wb.push_back(across.dot(p));
+    gap.edge_offset_m = std::max(std::abs(quantile(wa, 0.05) - quantile(wb, 0.05)),
+                                 std::abs(quantile(wa, 0.95) - quantile(wb, 0.95)));
   }
   if (samples > 0) {
     gap.hidden = static_cast<double>(hidden) / samples;
@@ -494,7 +516,8 @@ int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
                                     config.occluded_margin_m);
         // Hidden: `occluded_share` of the way where there is depth.
         if (gap.length_m < kMinGapM || gap.length_m > kMaxGapM || gap.none > kMaxHoleShare ||
-            gap.hidden < config.occluded_share * (1.0 - gap.none) || gap.other > kMaxOtherShare)
+            gap.hidden < config.occluded_share * (1.0 - gap.none) || gap.other > kMaxOtherShare ||
+            gap.edge_offset_m > config.occluded_edge_m)
           continue;
         const double common = commonPlaneShare(fa, fb, config.occluded_plane_m);
         if (common < best) continue;

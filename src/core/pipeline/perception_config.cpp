@@ -88,6 +88,7 @@ void surfaceInstanceFields(C& c, F&& f) {
   f("occluded_plane_m", c.occluded_plane_m);
   f("occluded_margin_m", c.occluded_margin_m);
   f("occluded_share", c.occluded_share);
+  f("occluded_edge_m", c.occluded_edge_m);
 }
 template <class C, class F>
 void fitFields(C& c, F&& f) {
