@@ -607,8 +607,10 @@ static int occludedJoins(const Scene& scene, const std::function<int(int, const 
     }
   const int joins = joinOccludedPieces(points, camera, T_table_camera, 2, config, &seg);
   if (joined_label)
-    for (const Vec3& p : probes)
-      joined_label->push_back(seg.labels.data[nearestLabelledVoxel(seg.labels, p)]);
+    for (const Vec3& p : probes) {
+      const int v = nearestLabelledVoxel(seg.labels, p);
+      joined_label->push_back(v >= 0 ? seg.labels.data[v] : -1);
+    }
   return joins;
 }
 
@@ -626,6 +628,7 @@ TEST(SurfaceInstances, AnObjectSeenOnBothSidesOfANearerOneIsOne) {
                     {Vec3(-0.1, 0.01, 0.05), Vec3(0.1, 0.01, 0.05), Vec3(0, -0.075, 0.1)}, &after),
       1);
   ASSERT_EQ(after.size(), 3u);
+  EXPECT_GE(after[0], 0) << "a probe found no labelled voxel";
   EXPECT_EQ(after[0], after[1]);
   EXPECT_NE(after[0], after[2]);
   SurfaceInstanceConfig off = config;
@@ -644,7 +647,7 @@ TEST(SurfaceInstances, AnObjectSeenOnBothSidesOfANearerOneIsOne) {
   Scene hidden = apart;
   hidden.objects.push_back(boxAt({0.04, 0.015, 0.1}, {0.0, -0.06, 0.1}));
   EXPECT_EQ(occludedJoins(hidden, each, 3, config), 1);
-  // ... unless their sides across the gap do not line up: boxes of two heights, their fronts
+  // ... unless their sides along the gap do not line up: boxes of two heights, their fronts
   // on one plane.
   const Scene uneven{{boxAt({0.05, 0.04, 0.05}, {-0.08, 0.05, 0.05}),
                       boxAt({0.05, 0.04, 0.035}, {0.08, 0.05, 0.035}),

@@ -309,6 +309,7 @@ struct Face {
   double offset = 0;
   Points3 points;
   std::vector<int> indices;
+  Vec3 lo = Vec3::Zero(), hi = Vec3::Zero();  ///< the points' bounding box
 };
 
 /// The largest plane through `points` by PCL's RANSAC (inliers within `threshold_m`), a face
@@ -338,6 +339,11 @@ Face largestFace(const Points3& points, double threshold_m, int min_points) {
   face.offset = -c.values[3] / normal.norm();
   for (int i : inliers.indices) face.points.push_back(points[i]);
   face.indices = inliers.indices;
+  face.lo = face.hi = face.points.front();
+  for (const Vec3& p : face.points) {
+    face.lo = face.lo.cwiseMin(p);
+    face.hi = face.hi.cwiseMax(p);
+  }
   return face;
 }
 
@@ -355,8 +361,14 @@ double commonPlaneShare(const Face& a, const Face& b, double threshold_m) {
   return std::min(static_cast<double>(in_a) / na, static_cast<double>(in_b) / b.points.size());
 }
 
+/// Whether (u, v) lies within `margin` pixels of the camera's image (false for NaN).
+bool nearImage(const PinholeCamera& camera, double u, double v, double margin) {
+  return u >= -margin && v >= -margin && u <= camera.width + margin && v <= camera.height + margin;
+}
+
 /// The camera depth (z, m) of the points per pixel, the nearest where several fall; each point
-/// covers a `stride` x `stride` block (the points are every stride-th pixel's). 0 = none.
+/// covers the pixels within stride / 2 of its own (3 x 3 at stride 2: the points are every
+/// stride-th pixel's, and the blocks close the gaps between them). 0 = none.
 std::vector<float> depthOfPoints(const Points3& points_table, const PinholeCamera& camera,
                                  const Transform& T_camera_table, int stride) {
   std::vector<float> depth(static_cast<size_t>(camera.width) * camera.height, 0.0f);
@@ -364,7 +376,7 @@ std::vector<float> depthOfPoints(const Points3& points_table, const PinholeCamer
   for (const Vec3& p : points_table) {
     const Vec3 c = T_camera_table * p;
     double u = 0, v = 0;
-    if (!camera.project(c, &u, &v)) continue;
+    if (!camera.project(c, &u, &v) || !nearImage(camera, u, v, half + 1)) continue;
     const int cu = static_cast<int>(std::lround(u)), cv = static_cast<int>(std::lround(v));
     for (int y = cv - half; y <= cv + half; ++y)
       for (int x = cu - half; x <= cu + half; ++x) {
@@ -382,7 +394,7 @@ std::vector<float> depthOfPoints(const Points3& points_table, const PinholeCamer
 struct Gap {
   double length_m = 0;
   double hidden = 0, other = 0, none = 0;
-  /// How far the faces' sides across the gap are apart: along the plane's direction normal to
+  /// How far the faces' sides along the gap are apart: along the plane's direction normal to
   /// the gap, the larger difference of the faces' 5th and of their 95th percentiles (m).
   double edge_offset_m = 0;
 };
@@ -413,7 +425,7 @@ Gap lookIntoGap(const Face& fa, const Face& fb, int a, int b, const Grid3<int>& 
   Gap gap;
   gap.length_m = std::sqrt(best);
   const int steps = static_cast<int>(std::ceil(gap.length_m / 0.004));
-  int samples = 0, hidden = 0, other = 0, none = 0;
+  int samples = 0, in_view = 0, hidden = 0, other = 0, none = 0;
   for (int i = 1; i < steps; ++i) {
     const Vec3 q = pa + (pb - pa) * (static_cast<double>(i) / steps);
     ++samples;
@@ -424,9 +436,10 @@ Gap lookIntoGap(const Face& fa, const Face& fb, int a, int b, const Grid3<int>& 
     }
     const Vec3 c = T_camera_table * q;
     double u = 0, v = 0;
-    if (!camera.project(c, &u, &v)) continue;
+    if (!camera.project(c, &u, &v) || !nearImage(camera, u, v, 1.0)) continue;
     const int x = static_cast<int>(std::lround(u)), y = static_cast<int>(std::lround(v));
     if (x < 0 || y < 0 || x >= camera.width || y >= camera.height) continue;
+    ++in_view;  // the shares of hidden and missing depth are of the way the image shows
     const float d = depth[static_cast<size_t>(y) * camera.width + x];
     hidden += d > 0.0f && d < c.z() - margin_m;
     none += d == 0.0f;
@@ -442,10 +455,11 @@ Gap lookIntoGap(const Face& fa, const Face& fb, int a, int b, const Grid3<int>& 
     gap.edge_offset_m = std::max(std::abs(quantile(wa, 0.05) - quantile(wb, 0.05)),
                                  std::abs(quantile(wa, 0.95) - quantile(wb, 0.95)));
   }
-  if (samples > 0) {
-    gap.hidden = static_cast<double>(hidden) / samples;
-    gap.other = static_cast<double>(other) / samples;
-    gap.none = static_cast<double>(none) / samples;
+  if (samples > 0) gap.other = static_cast<double>(other) / samples;
+  gap.none = 1.0;  // nothing of the way in view: no evidence that anything hides it
+  if (in_view > 0) {
+    gap.hidden = static_cast<double>(hidden) / in_view;
+    gap.none = static_cast<double>(none) / in_view;
   }
   return gap;
 }
@@ -487,7 +501,9 @@ int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
                        const Transform& T_table_camera, int stride,
                        const SurfaceInstanceConfig& config, InstanceSegmentation* seg) {
   config.validate();
-  if (!config.enabled || config.occluded_plane_m <= 0.0 || seg->size() < 2) return 0;
+  if (!config.enabled || config.occluded_plane_m <= 0.0 || seg->size() < 2 || camera.width <= 0 ||
+      camera.height <= 0)
+    return 0;
   constexpr int kMaxPoints = 1500;         // per instance: RANSAC's cost stays small
   constexpr double kMinGapM = 0.01;        // nearer faces touch: nothing hides a gap between them
   constexpr double kMaxGapM = 0.3;         // a face hidden over more is not one object's
@@ -512,6 +528,8 @@ int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
         const Face& fa = faces[a];
         const Face& fb = faces[b];
         if (!fa.valid || !fb.valid || std::abs(fa.normal.dot(fb.normal)) < min_cos) continue;
+        // The boxes' distance bounds the nearest points' from below: far apart, no gap test.
+        if ((fb.lo - fa.hi).cwiseMax(fa.lo - fb.hi).cwiseMax(0.0).norm() > kMaxGapM) continue;
         const Gap gap = lookIntoGap(fa, fb, a, b, seg->labels, depth, camera, T_camera_table,
                                     config.occluded_margin_m);
         // Hidden: `occluded_share` of the way where there is depth.

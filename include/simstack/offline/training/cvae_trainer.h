@@ -68,7 +68,7 @@ class CvaeTrainer {
   /// Trains on one dataset or on several read as one (DatasetMix: interleaved in proportion
   /// to their sizes, so the validation scenes come from every file). Throws
   /// std::runtime_error naming the dataset or output directory when they are unusable or a
-  /// dataset does not match the model config.
+  /// dataset does not match the model config, std::invalid_argument for no dataset.
   CvaeTrainer(const std::vector<std::string>& dataset_paths, const CvaeConfig& model,
               const TrainConfig& training, const std::string& output_dir,
               const std::string& command_line);
