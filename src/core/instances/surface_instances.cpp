@@ -17,6 +17,7 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "simstack/instances/surface_segments.h"
 
@@ -50,13 +51,18 @@ int labelNear(const Grid3<int>& labels, const Vec3& p, int reach) {
   return v < 0 ? -1 : labels.data[v];
 }
 
+/// The `share` quantile of `values` (taken by value: reordered).
+double quantile(std::vector<double> values, double share) {
+  const size_t k = std::min(values.size() - 1, static_cast<size_t>(share * values.size()));
+  std::nth_element(values.begin(), values.begin() + k, values.end());
+  return values[k];
+}
+
 /// The `share` quantile of the points' heights.
 double heightQuantile(const Points3& points, const std::vector<int>& which, double share) {
   std::vector<double> z;
   for (int i : which) z.push_back(points[i].z());
-  const size_t k = std::min(z.size() - 1, static_cast<size_t>(share * z.size()));
-  std::nth_element(z.begin(), z.begin() + k, z.end());
-  return z[k];
+  return quantile(std::move(z), share);
 }
 
 }  // namespace
@@ -399,12 +405,6 @@ struct Gap {
   double edge_offset_m = 0;
 };
 
-/// The `share` quantile of `values` (taken by value: reordered).
-double quantile(std::vector<double> values, double share) {
-  const size_t k = std::min(values.size() - 1, static_cast<size_t>(share * values.size()));
-  std::nth_element(values.begin(), values.begin() + k, values.end());
-  return values[k];
-}
 Gap lookIntoGap(const Face& fa, const Face& fb, int a, int b, const Grid3<int>& labels,
                 const std::vector<float>& depth, const PinholeCamera& camera,
                 const Transform& T_camera_table, double margin_m) {
