@@ -221,8 +221,8 @@ grep -q "its last 1 are the validation" "$dir/out.txt" ||
   { echo "FAIL train on a small dataset: no note in:"; cat "$dir/out.txt"; fail=1; }
 expect "train again into a run without --resume" "holds a training run" "$bin/simstack_train" \
   --dataset "$dir/two.h5" --config "$train_config" --output "$dir/run_done" --steps 2
-expect "train with --ycb" "--ycb is for --validate-only" "$bin/simstack_train" --dataset "$dir/two.h5" \
-  --config "$train_config" --output "$dir/run_ycb" --ycb "$dir"
+expect "train with a missing --ycb directory" "$dir/no_meshes" "$bin/simstack_train" \
+  --dataset "$dir/two.h5" --config "$train_config" --output "$dir/run_ycb" --ycb "$dir/no_meshes"
 head -c 3000 "$dir/d.h5" > "$dir/cut.h5"
 expect "train on a truncated dataset" "cut.h5" "$bin/simstack_train" --dataset "$dir/cut.h5" \
   --config "$train_config" --output "$dir/run2"

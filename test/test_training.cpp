@@ -194,24 +194,26 @@ TEST(CvaeTrainer, ValidatesAModelFileAsARunDoes) {
   EXPECT_THROW(CvaeTrainer::validateModel(data, a + "/model.pt", v), std::invalid_argument);
 }
 
-TEST(CvaeTrainerYcb, ValidatesYcbPilesGivenTheirMeshes) {
+TEST(CvaeTrainerYcb, TrainsAndValidatesOnYcbPilesGivenTheirMeshes) {
   const std::string dir = std::string(SIMSTACK_SHARED_DATA) + "/ycb";
   if (!fs::exists(dir + "/003_cracker_box/nontextured.stl"))
     GTEST_SKIP() << "YCB meshes not found in " << dir << " (see ../shared/data/README.md)";
   const std::string data = tinyDataset(3);
   const std::string ycb = tempPath("simstack_test_validate_ycb.h5");
   const std::string a = tempPath("simstack_train_validate_ycb");
-  const RemoveAtExit cleanup{{a, data, ycb}};
+  const std::string b = tempPath("simstack_train_on_ycb");
+  const RemoveAtExit cleanup{{a, b, data, ycb}};
   fs::remove_all(a);
+  fs::remove_all(b);
   {
     DatasetInfo info;
-    info.num_scenes = 2;
+    info.num_scenes = 3;
     info.resolution = 16;
     info.extent_m = 0.64;
     info.truncation_m = tiny().truncation_m();
-    info.mesh_names = ycbObjectNames();
+    info.mesh_names = {"003_cracker_box", "005_tomato_soup_can", "061_foam_brick"};
     DatasetWriter writer(ycb, info);
-    const PileGenerator gen(PileConfig(), loadMeshCatalogue(dir));
+    const PileGenerator gen(PileConfig(), loadMeshCatalogue(dir, info.mesh_names));
     for (int i = 0; i < info.num_scenes; ++i) {
       const Scene s = gen.generate(40 + i).scene;
       const GridSpec g = GridSpec::sceneGrid(s.surfaceCentroid().head<2>(), info.extent_m, 16);
@@ -228,15 +230,30 @@ TEST(CvaeTrainerYcb, ValidatesYcbPilesGivenTheirMeshes) {
     CvaeTrainer::validateModel(ycb, a + "/model.pt", v);
     ADD_FAILURE() << "a YCB dataset was validated without its meshes";
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("--validate-only take (--ycb DIR)"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("simstack_train take (--ycb DIR)"), std::string::npos)
         << e.what();
   }
+  EXPECT_THROW(CvaeTrainer({data, ycb}, tiny(), tc, b, "test"), std::runtime_error);
   const TrainingReport r = CvaeTrainer::validateModel(ycb, a + "/model.pt", v, dir);
   EXPECT_GE(r.validation_iou, 0.0);
   EXPECT_LE(r.validation_iou, 1.0);
   EXPECT_GT(r.validation_bce, 0.0);
   // The mesh piles are other piles than the superquadric ones: another score.
   EXPECT_NE(CvaeTrainer::validateModel(data, a + "/model.pt", v).validation_bce, r.validation_bce);
+
+  // Given the meshes, mesh piles train beside superquadric ones (three scenes each,
+  // interleaved: the last, the run's validation, is a mesh pile), and the run's validation is
+  // the one --validate-only gives for its model file.
+  TrainConfig t = tinyTraining(2);
+  t.validation_scenes = 1;
+  t.validation_views = 1;
+  const TrainingReport trained = CvaeTrainer({data, ycb}, tiny(), t, b, "test", dir).run(false);
+  EXPECT_EQ(trained.steps, 2);
+  EXPECT_EQ(CvaeTrainer::validateModel({data, ycb}, b + "/model.pt", t, dir).validation_bce,
+            trained.validation_bce);
+  EXPECT_EQ(
+      loadYamlFile(b + "/model.yaml", "model card")["provenance"]["dataset"].as<std::string>(),
+      data + " + " + ycb);
 }
 
 TEST(CvaeTrainer, DeterministicResumableAndLogged) {

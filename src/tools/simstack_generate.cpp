@@ -79,6 +79,11 @@ int main(int argc, char** argv) {
   app.add_option("--ycb", o.ycb_dir,
                  "directory of YCB meshes (<dir>/<object>/nontextured.stl): mesh piles instead of "
                  "superquadrics");
+  app.add_option("--ycb-objects", o.ycb_objects,
+                 "with --ycb: the objects drawn, NAME[,NAME...] (subdirectories of --ycb; default "
+                 "the paper's ten)")
+      ->delimiter(',')
+      ->needs("--ycb");
   app.add_option("--household", o.household_share,
                  "share of the objects drawn from household shapes: bowls and cups (concave "
                  "meshes), flat, thin and small superquadrics; 0 = the paper's piles")

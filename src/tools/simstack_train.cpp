@@ -112,8 +112,8 @@ void addOptions(CLI::App& app, Options& o) {
                  "does (training.validation_scenes x validation_views) and exit; no training")
       ->check(CLI::ExistingFile);
   app.add_option("--ycb", o.mesh_dir,
-                 "with --validate-only: the mesh directory of a YCB dataset (training takes "
-                 "superquadric and household piles only)")
+                 "the mesh directory of YCB datasets (<dir>/<object>/nontextured.stl), for "
+                 "training or --validate-only on mesh piles")
       ->check(CLI::ExistingDirectory);
 }
 
@@ -129,11 +129,6 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   if (o.output.empty() && o.validate_only.empty()) {
     std::cerr << "simstack_train: error: --output is required (unless --validate-only)\n";
-    return 2;
-  }
-  if (!o.mesh_dir.empty() && o.validate_only.empty()) {
-    std::cerr << "simstack_train: error: --ycb is for --validate-only (training takes "
-                 "superquadric and household piles only)\n";
     return 2;
   }
 
@@ -165,7 +160,7 @@ int main(int argc, char** argv) {
                                "(or removing it) starts afresh");
     std::string command;
     for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
-    CvaeTrainer trainer(o.datasets, model, training, o.output, command);
+    CvaeTrainer trainer(o.datasets, model, training, o.output, command, o.mesh_dir);
     if (!trainer.note().empty()) std::printf("note: %s\n", trainer.note().c_str());
     std::unique_ptr<ProgressBar> bar;
     bool validated = false;  // in this process: until then there is no IoU to show

@@ -13,6 +13,7 @@
 #include <mutex>
 #include <optional>
 #include <random>
+#include <set>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -90,6 +91,8 @@ std::unique_ptr<PileGenerator> makeGenerator(const GenerationOptions& o, Dataset
     config.drop_radius_m = kLooseDropRadius_m;
   }
   if (o.ycb_dir.empty()) {
+    if (!o.ycb_objects.empty())
+      throw std::invalid_argument("--ycb-objects names meshes of --ycb's directory: give --ycb");
     auto generator = std::make_unique<PileGenerator>(config);
     for (const auto& shape : generator->catalogue()) info->mesh_names.push_back(shape->name());
     return generator;
@@ -98,8 +101,16 @@ std::unique_ptr<PileGenerator> makeGenerator(const GenerationOptions& o, Dataset
     throw std::invalid_argument("--household draws into superquadric piles: not with --ycb");
   if (!fs::is_directory(o.ycb_dir))
     throw std::runtime_error("--ycb: not a directory: " + o.ycb_dir);
-  info->mesh_names = ycbObjectNames();
-  return std::make_unique<PileGenerator>(config, loadMeshCatalogue(o.ycb_dir));
+  info->mesh_names = o.ycb_objects.empty() ? ycbObjectNames() : o.ycb_objects;
+  std::set<std::string> seen;
+  for (const std::string& name : info->mesh_names) {
+    if (name.empty() || name.find_first_of("/,") != std::string::npos || name == "." ||
+        name == "..")
+      throw std::invalid_argument("--ycb-objects: '" + name + "' is not an object directory name");
+    if (!seen.insert(name).second)
+      throw std::invalid_argument("--ycb-objects: " + name + " is named twice");
+  }
+  return std::make_unique<PileGenerator>(config, loadMeshCatalogue(o.ycb_dir, info->mesh_names));
 }
 
 DatasetInfo datasetInfo(const GenerationOptions& o) {

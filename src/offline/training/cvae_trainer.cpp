@@ -406,7 +406,7 @@ struct CvaeTrainer::Impl {
 
 CvaeTrainer::CvaeTrainer(const std::vector<std::string>& dataset_paths, const CvaeConfig& model,
                          const TrainConfig& training, const std::string& output_dir,
-                         const std::string& command_line)
+                         const std::string& command_line, const std::string& mesh_dir)
     : impl_(std::make_unique<Impl>()) {
   model.validate();
   training.validate();
@@ -415,7 +415,7 @@ CvaeTrainer::CvaeTrainer(const std::vector<std::string>& dataset_paths, const Cv
   impl_->model_config = model;
   impl_->config = training;
   impl_->card_perception = cardPerceptionSection(training.init_from, model.hasLatentCode());
-  impl_->data = std::make_unique<DatasetMix>(dataset_paths);
+  impl_->data = std::make_unique<DatasetMix>(dataset_paths, mesh_dir);
   const DatasetMix& data = *impl_->data;
   for (int k = 0; k < data.files(); ++k)
     checkDatasetFitsModel(data.file(k).info(), model, data.path(k), "the model config");

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "simstack/render/depth_renderer.h"
 
@@ -21,6 +22,9 @@ struct GenerationOptions {
   std::string output;  ///< the HDF5 file
   int min_objects = 3, max_objects = 4;
   std::string ycb_dir;  ///< mesh piles of <dir>/<object>/nontextured.stl ("" = superquadrics)
+  /// The objects of `ycb_dir` drawn into the piles (empty: ycbObjectNames(), the paper's ten);
+  /// a subset leaves the others out of training piles, to be met first in evaluation.
+  std::vector<std::string> ycb_objects;
   /// Share of the objects drawn from household shapes (household.h); superquadric piles only.
   double household_share = 0.0;
   /// Drops scattered 15 cm about the pile's centre and piles kept when not one stack.

@@ -66,12 +66,14 @@ double learningRate(const TrainConfig& training, int64_t step);
 class CvaeTrainer {
  public:
   /// Trains on one dataset or on several read as one (DatasetMix: interleaved in proportion
-  /// to their sizes, so the validation scenes come from every file). Throws
-  /// std::runtime_error naming the dataset or output directory when they are unusable or a
-  /// dataset does not match the model config, std::invalid_argument for no dataset.
+  /// to their sizes, so the validation scenes come from every file). `mesh_dir` holds the
+  /// meshes of datasets of mesh piles (YCB: <dir>/<name>/nontextured.stl; "" when every file
+  /// is of superquadric or household piles). Throws std::runtime_error naming the dataset or
+  /// output directory when they are unusable or a dataset does not match the model config,
+  /// std::invalid_argument for no dataset.
   CvaeTrainer(const std::vector<std::string>& dataset_paths, const CvaeConfig& model,
               const TrainConfig& training, const std::string& output_dir,
-              const std::string& command_line);
+              const std::string& command_line, const std::string& mesh_dir = "");
   CvaeTrainer(const std::string& dataset_path, const CvaeConfig& model, const TrainConfig& training,
               const std::string& output_dir, const std::string& command_line)
       : CvaeTrainer(std::vector<std::string>{dataset_path}, model, training, output_dir,
