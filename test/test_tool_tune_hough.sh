@@ -68,4 +68,19 @@ if "$tune" --dataset "$dir/val.h5" --dataset "$dir/bad.h5" --output "$dir/x.yaml
   echo "accepted a corrupt second dataset"; exit 1; fi
 grep -q "bad.h5" "$dir/e3" || { cat "$dir/e3"; exit 1; }
 if grep -q "running the network" "$dir/o3" "$dir/e3"; then echo "ran the network before checking"; exit 1; fi
+# YCB piles are read given their meshes, and without them the message names the option.
+ycb=${3:-}
+if [ -n "$ycb" ] && [ -s "$ycb/003_cracker_box/nontextured.stl" ]; then
+  "$generate" --scenes 2 --seed 11 --ycb "$ycb" --ycb-objects 003_cracker_box,005_tomato_soup_can \
+    --output "$dir/ycb.h5" > /dev/null
+  "$tune" --dataset "$dir/ycb.h5" --ycb "$ycb" --views 1 --threads 1 --refinement 5 --min-traversals 3 \
+    --bandwidth 0.05 --min-instance-voxels 10 --min-vote-norm 0 --output "$dir/ycb.yaml" \
+    > "$dir/ycb.txt" 2> "$dir/err.txt" || { echo "simstack_tune_hough on YCB piles failed:"; cat "$dir/err.txt"; exit 1; }
+  grep -q "^2 views, model" "$dir/ycb.txt" || { cat "$dir/ycb.txt"; exit 1; }
+  if "$tune" --dataset "$dir/ycb.h5" --output "$dir/x.yaml" > /dev/null 2> "$dir/e4"; then
+    echo "read YCB piles without their meshes"; exit 1; fi
+  grep -q -- "--ycb DIR" "$dir/e4" || { cat "$dir/e4"; exit 1; }
+else
+  echo "YCB meshes not found in '$ycb': the --ycb checks are skipped (see ../shared/data/README.md)"
+fi
 echo "simstack_tune_hough ok"

@@ -230,7 +230,7 @@ TEST(CvaeTrainerYcb, TrainsAndValidatesOnYcbPilesGivenTheirMeshes) {
     CvaeTrainer::validateModel(ycb, a + "/model.pt", v);
     ADD_FAILURE() << "a YCB dataset was validated without its meshes";
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("simstack_train take (--ycb DIR)"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("simstack_tune_hough take (--ycb DIR)"), std::string::npos)
         << e.what();
   }
   EXPECT_THROW(CvaeTrainer({data, ycb}, tiny(), tc, b, "test"), std::runtime_error);

@@ -26,12 +26,13 @@ namespace {
 
 /// The views of every dataset in turn; `ends[d]` is where dataset d's views end.
 std::vector<TuningView> pooledViews(const std::vector<std::string>& datasets,
-                                    const PerceptionConfig& pc, int scenes, int views_per_scene,
-                                    uint64_t seed, bool noise, std::vector<size_t>* ends) {
+                                    const std::string& mesh_dir, const PerceptionConfig& pc,
+                                    int scenes, int views_per_scene, uint64_t seed, bool noise,
+                                    std::vector<size_t>* ends) {
   // Every file opened first, so that a bad one is named before any network runs.
   std::vector<std::unique_ptr<DatasetReader>> readers;
   for (const std::string& dataset : datasets)
-    readers.push_back(std::make_unique<DatasetReader>(dataset));
+    readers.push_back(std::make_unique<DatasetReader>(dataset, mesh_dir));
   std::vector<TuningView> views;
   for (size_t d = 0; d < datasets.size(); ++d) {
     const DatasetReader& reader = *readers[d];
@@ -126,7 +127,7 @@ void addSweepOptions(CLI::App& app, HoughSweep& sweep) {
 
 int main(int argc, char** argv) {
   std::vector<std::string> datasets;
-  std::string output;
+  std::string output, mesh_dir;
   int views_per_scene = 2, scenes = 0, top = 10;
   uint64_t seed = 7;
   bool noise = false;
@@ -143,6 +144,10 @@ int main(int argc, char** argv) {
   app.add_option("--dataset", datasets, "validation piles (simstack_generate); repeatable")
       ->required()
       ->check(CLI::ExistingFile);
+  app.add_option(
+         "--ycb", mesh_dir,
+         "the mesh directory of YCB datasets among --dataset (<dir>/<object>/nontextured.stl)")
+      ->check(CLI::ExistingDirectory);
   app.add_option("--output", output, "YAML with the model card's perception: section")
       ->required()
       ->check(WritablePath);
@@ -170,7 +175,7 @@ int main(int argc, char** argv) {
     for (const HoughConfig& c : candidates) c.validate();
     std::vector<size_t> ends;  // each dataset's views end here
     const std::vector<TuningView> views =
-        pooledViews(datasets, pc, scenes, views_per_scene, seed, noise, &ends);
+        pooledViews(datasets, mesh_dir, pc, scenes, views_per_scene, seed, noise, &ends);
     ProgressBar bar2("scoring " + std::to_string(candidates.size()) + " settings",
                      static_cast<long>(candidates.size()));
     std::vector<HoughScore> scores = scoreHoughSettings(

@@ -301,8 +301,8 @@ DatasetReader::DatasetReader(const std::string& path, const std::string& mesh_di
     if (mesh_dir.empty() && !proceduralCatalogue(impl_->info.mesh_names)) {
       throw std::runtime_error("dataset " + path +
                                " holds mesh objects (YCB piles): reading it needs the directory "
-                               "of their meshes, which simstack_evaluate and simstack_train take "
-                               "(--ycb DIR); the grasp evaluation and the Hough tuning take "
+                               "of their meshes, which simstack_evaluate, simstack_train and "
+                               "simstack_tune_hough take (--ycb DIR); the grasp evaluation takes "
                                "superquadric and household piles only");
     }
     impl_->catalogue = loadMeshCatalogue(mesh_dir, impl_->info.mesh_names);
