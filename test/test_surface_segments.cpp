@@ -4,6 +4,7 @@
 
 #include <functional>
 #include <map>
+#include <set>
 
 #include "simstack/instances/surface_segments.h"
 #include "simstack/offline/dataset/ground_truth.h"
@@ -348,6 +349,64 @@ TEST(RegroupAlongSurfaceSegments, KeepsTwoObjectsOnOnePatchApartByTheirVotes) {
                std::invalid_argument);
 }
 
+// A tall box in front of a lower one, touching, seen over the first towards the second: the
+// lower top shows past the taller one's edge, 3 cm below it, so the two tops' points meet in
+// the image across a depth step. The hidden space between them keeps their hull out of sight.
+View step() {
+  return look(
+      {box({0.08, 0.04, 0.05}, {0, -0.05, 0.05}), box({0.08, 0.04, 0.035}, {0, 0.03, 0.035})},
+      {0, -0.6, 0.5}, {0, 0, 0.05});
+}
+
+// The pairs of patches (a < b) whose main objects are 1 and 2, by majority of their points.
+std::set<std::pair<int, int>> patchPairsBetweenObjects(const View& v) {
+  std::vector<std::map<int, int>> hits(v.segments.patches);
+  const std::vector<int> objects = pointObjects(v);
+  for (size_t i = 0; i < objects.size(); ++i)
+    if (v.segments.patch[i] >= 0) ++hits[v.segments.patch[i]][objects[i]];
+  std::vector<int> object_of(v.segments.patches, 0);
+  for (int p = 0; p < v.segments.patches; ++p) {
+    int most = 0;
+    for (const auto& [k, n] : hits[p])
+      if (n > most) most = n, object_of[p] = k;
+  }
+  std::set<std::pair<int, int>> out;
+  for (int a = 0; a < v.segments.patches; ++a)
+    for (int b = a + 1; b < v.segments.patches; ++b)
+      if (object_of[a] != object_of[b] && object_of[a] > 0 && object_of[b] > 0) out.insert({a, b});
+  return out;
+}
+
+TEST(RegroupAlongSurfaceSegments, KeepsApartObjectsOneSeenPastTheOthersEdge) {
+  View v = step();
+  const GroundTruthGrids gt = truthOf(v);
+  const InstanceSegmentation merged = instancesFrom(gt.labels, {-1, 0, 0});
+  // With depth steps: the tops meet at a separating edge, and the merged instance is split.
+  const auto between = patchPairsBetweenObjects(v);
+  ASSERT_FALSE(between.empty());
+  const std::set<std::pair<int, int>> separating(v.segments.concave_edges.begin(),
+                                                 v.segments.concave_edges.end());
+  bool stepped = false;
+  for (const auto& pair : between) stepped |= separating.count(pair) > 0;
+  EXPECT_TRUE(stepped);
+  const InstanceSegmentation out =
+      regroupAlongSurfaceSegments(v.segments, SurfaceSegmentConfig(), 5, merged);
+  ASSERT_EQ(out.size(), 2);
+  EXPECT_GT(segmentationAgreement(truthLabels(gt.labels), out.labels.data).agreement, 0.95);
+  // Without them nothing tells the two apart: no concave edge, and the hull is out of sight.
+  SurfaceSegmentConfig off;
+  off.depth_jump_ratio = 0.0;
+  v.segments = segmentVisibleSurface(v.render.depth, v.camera, v.T_table_camera, 0.01, off);
+  const auto between_off = patchPairsBetweenObjects(v);
+  for (const auto& pair : v.segments.concave_edges) EXPECT_EQ(between_off.count(pair), 0u);
+  EXPECT_EQ(regroupAlongSurfaceSegments(v.segments, off, 5, merged).size(), 1);
+  // A ratio above the step seen (about 7 % of the depth here) finds no step.
+  SurfaceSegmentConfig coarse;
+  coarse.depth_jump_ratio = 0.2;
+  v.segments = segmentVisibleSurface(v.render.depth, v.camera, v.T_table_camera, 0.01, coarse);
+  EXPECT_EQ(regroupAlongSurfaceSegments(v.segments, coarse, 5, merged).size(), 1);
+}
+
 TEST(SurfaceSegments, TheSameViewGivesTheSamePatches) {
   const View v = occlusion();
   for (int i = 0; i < 5; ++i) {
@@ -379,6 +438,9 @@ TEST(SurfaceSegments, EmptyViewsAndBadSettings) {
       [](SurfaceSegmentConfig* c) { c->max_unseen_points = -1; },
       [](SurfaceSegmentConfig* c) { c->apart_vote_divergence = 1.5; },
       [](SurfaceSegmentConfig* c) { c->min_boundary_faces = 0; },
+      [](SurfaceSegmentConfig* c) { c->depth_jump_ratio = -0.01; },
+      [](SurfaceSegmentConfig* c) { c->depth_jump_share = 0.0; },
+      [](SurfaceSegmentConfig* c) { c->depth_jump_share = 1.5; },
   };
   for (size_t i = 0; i < out_of_range.size(); ++i) {
     bad = SurfaceSegmentConfig();

@@ -208,6 +208,14 @@ static void BM_PerceiveWithoutContainerTest(benchmark::State& state) {
 }
 BENCHMARK(BM_PerceiveWithoutContainerTest)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// Its peer without the depth steps (segments.depth_jump_ratio: 0), on the same frame: what
+// finding the steps and cutting the patches at them costs.
+static void BM_PerceiveWithoutDepthSteps(benchmark::State& state) {
+  perceiveShippedConfig(state, "",
+                        [&](PerceptionConfig* pc) { pc->segments.depth_jump_ratio = 0; });
+}
+BENCHMARK(BM_PerceiveWithoutDepthSteps)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // Its peer with the occluded-sides test on (surface_instances.occluded_plane_m: 0.006; off in
 // the shipped config): what the test costs where nothing joins.
 static void BM_PerceiveWithOccludedTest(benchmark::State& state) {

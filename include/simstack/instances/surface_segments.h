@@ -62,6 +62,14 @@ struct SurfaceSegmentConfig {
   /// visible voxels meet within this distance (m): one object seen from inside (a cup's rim
   /// and inside), not one object resting on another. 0 = off.
   double same_centre_m = 0.01;
+  /// Two neighbouring points (at the stride) lie on two surfaces, one in front of the other,
+  /// when their depths differ by more than this share of the nearer one (0 = off). A convex
+  /// object never hides part of itself, so its visible surface has no such step.
+  double depth_jump_ratio = 0.015;
+  /// Supervoxels, and then patches, whose neighbouring points in the image are apart by a depth
+  /// step in at least this share of the pairs are kept apart: the supervoxels take no part in
+  /// each other's convexity, and the patches meet at a separating edge as at a concave one.
+  double depth_jump_share = 0.5;
   void validate() const;  ///< std::invalid_argument naming the field
 };
 
@@ -74,7 +82,9 @@ struct SurfaceSegments {
   std::vector<int> pixel;  ///< per point: its pixel, v * width + u
   std::vector<int> patch;  ///< per point: its patch, -1 = in no patch (too small)
   int patches = 0;
-  std::vector<std::pair<int, int>> concave_edges;  ///< patch pairs (a < b) that meet at an edge
+  /// Patch pairs (a < b) that meet at a concave edge or, with `depth_jump_ratio`, at a depth
+  /// step.
+  std::vector<std::pair<int, int>> concave_edges;
 };
 
 /// Patches of one depth view (std::invalid_argument when the image and camera disagree).

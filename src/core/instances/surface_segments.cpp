@@ -41,6 +41,9 @@ void SurfaceSegmentConfig::validate() const {
     fail("apart_vote_divergence must lie in [-1, 1]");
   if (min_boundary_faces < 1) fail("min_boundary_faces must be >= 1");
   if (!(same_centre_m >= 0.0)) fail("same_centre_m must be >= 0");
+  if (!(depth_jump_ratio >= 0.0)) fail("depth_jump_ratio must be >= 0");
+  if (!(depth_jump_share > 0.0 && depth_jump_share <= 1.0))
+    fail("depth_jump_share must lie in (0, 1]");
 }
 
 namespace {
@@ -48,6 +51,114 @@ bool insideBox(const GridSpec& grid, const Vec3& p) {
   const Vec3 q = (p - grid.origin_table) / grid.extent_m();
   return (q.array() >= 0.0).all() && (q.array() <= 1.0).all();
 }
+
+/// The points of a segmented view by pixel, for walking the image at the stride, with each
+/// point's depth along the optical axis.
+class ImageNeighbours {
+ public:
+  ImageNeighbours(const SurfaceSegments& s, std::vector<float> depth, const SurfaceSegmentConfig& c)
+      : s_(s),
+        depth_(std::move(depth)),
+        ratio_(c.depth_jump_ratio),
+        stride_(c.pixel_stride),
+        point_at_(static_cast<size_t>(s.depth.width) * s.depth.height, -1) {
+    for (size_t i = 0; i < s.pixel.size(); ++i) point_at_[s.pixel[i]] = static_cast<int>(i);
+  }
+  /// Calls f(j) for the points one stride right of and below point i (`both_ways`: left of and
+  /// above it too).
+  template <class F>
+  void forNeighbours(int i, bool both_ways, F&& f) const {
+    const int w = s_.depth.width, u = s_.pixel[i] % w, v = s_.pixel[i] / w;
+    const std::pair<int, int> next[4] = {
+        {u + stride_, v}, {u, v + stride_}, {u - stride_, v}, {u, v - stride_}};
+    for (int k = 0; k < (both_ways ? 4 : 2); ++k) {
+      const auto [nu, nv] = next[k];
+      if (nu < 0 || nv < 0 || nu >= w || nv >= s_.depth.height) continue;
+      const int j = point_at_[nv * w + nu];
+      if (j >= 0) f(j);
+    }
+  }
+  /// Whether points i and j lie on two surfaces, one seen past the other's edge.
+  bool stepped(int i, int j) const {
+    return std::fabs(depth_[i] - depth_[j]) > ratio_ * std::min(depth_[i], depth_[j]);
+  }
+
+ private:
+  const SurfaceSegments& s_;
+  std::vector<float> depth_;
+  double ratio_;
+  int stride_;
+  std::vector<int> point_at_;
+};
+
+/// Label pairs whose points neighbour in the image mostly across a depth step
+/// (`depth_jump_share` of the pairs): `label` per point, `skip` = none.
+template <class Label>
+std::set<std::pair<Label, Label>> steppedPairs(const ImageNeighbours& image,
+                                               const std::vector<Label>& label, Label skip,
+                                               double share) {
+  std::map<std::pair<Label, Label>, std::pair<int, int>> pairs;  // (neighbours, steps)
+  for (size_t i = 0; i < label.size(); ++i) {
+    if (label[i] == skip) continue;
+    image.forNeighbours(static_cast<int>(i), false, [&](int j) {
+      if (label[j] == skip || label[j] == label[i]) return;
+      auto& [neighbours, steps] = pairs[std::minmax(label[i], label[j])];
+      ++neighbours;
+      steps += image.stepped(static_cast<int>(i), j);
+    });
+  }
+  std::set<std::pair<Label, Label>> out;
+  for (const auto& [key, count] : pairs)
+    if (count.second >= share * count.first) out.insert(key);
+  return out;
+}
+
+/// Supervoxel adjacency without the pairs across depth steps: their surfaces take no part in
+/// each other's convexity.
+void cutSteppedAdjacency(const ImageNeighbours& image,
+                         const pcl::PointCloud<pcl::PointXYZL>& labelled, double share,
+                         std::multimap<std::uint32_t, std::uint32_t>* adjacency) {
+  std::vector<std::uint32_t> voxel_of(labelled.size());
+  for (size_t i = 0; i < voxel_of.size(); ++i) voxel_of[i] = labelled.points[i].label;
+  const auto stepped = steppedPairs<std::uint32_t>(image, voxel_of, 0u, share);
+  for (auto it = adjacency->begin(); it != adjacency->end();)
+    it = stepped.count(std::minmax(it->first, it->second)) ? adjacency->erase(it) : std::next(it);
+}
+
+/// Cuts each patch into the parts its points form through neighbours in the image with no depth
+/// step between them: a supervoxel can straddle two objects where one hides the other. The
+/// largest part keeps the patch's number; other parts of at least `min_points` become new
+/// patches, smaller ones leave every patch.
+void splitAtSteps(const ImageNeighbours& image, int min_points, SurfaceSegments* s) {
+  const int n = static_cast<int>(s->patch.size());
+  std::vector<int> part(n, -1);
+  std::vector<std::vector<int>> parts;
+  for (int seed = 0; seed < n; ++seed) {
+    if (s->patch[seed] < 0 || part[seed] >= 0) continue;
+    std::vector<int> members{seed};
+    part[seed] = static_cast<int>(parts.size());
+    for (size_t k = 0; k < members.size(); ++k) {
+      const int i = members[k];
+      image.forNeighbours(i, true, [&](int j) {
+        if (part[j] >= 0 || s->patch[j] != s->patch[seed] || image.stepped(i, j)) return;
+        part[j] = part[seed];
+        members.push_back(j);
+      });
+    }
+    parts.push_back(std::move(members));
+  }
+  std::vector<int> largest(s->patches, -1);
+  for (size_t p = 0; p < parts.size(); ++p) {
+    int& best = largest[s->patch[parts[p].front()]];
+    if (best < 0 || parts[p].size() > parts[best].size()) best = static_cast<int>(p);
+  }
+  for (size_t p = 0; p < parts.size(); ++p) {
+    if (largest[s->patch[parts[p].front()]] == static_cast<int>(p)) continue;
+    const int to = parts[p].size() >= static_cast<size_t>(min_points) ? s->patches++ : -1;
+    for (int i : parts[p]) s->patch[i] = to;
+  }
+}
+
 }  // namespace
 
 SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCamera& camera,
@@ -95,6 +206,14 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
   if (clusters.empty()) return out;
   std::multimap<std::uint32_t, std::uint32_t> adjacency;
   supervoxels.getSupervoxelAdjacency(adjacency);
+  std::optional<ImageNeighbours> image;  // with depth steps
+  if (config.depth_jump_ratio > 0.0) {
+    std::vector<float> depth_along(cloud->size());
+    for (size_t i = 0; i < depth_along.size(); ++i) depth_along[i] = cloud->points[i].z;
+    image.emplace(out, std::move(depth_along), config);
+    cutSteppedAdjacency(*image, *supervoxels.getLabeledCloud(), config.depth_jump_share,
+                        &adjacency);
+  }
 
   pcl::LCCPSegmentation<pcl::PointXYZ> lccp;
   lccp.setConcavityToleranceThreshold(static_cast<float>(config.concavity_tolerance_deg));
@@ -136,6 +255,12 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
       if (ib != index.end() && ib->second != ia->second)
         concave.insert(std::minmax(ia->second, ib->second));
     }
+  }
+  if (image) {
+    // Patches meeting across depth steps are apart as at a concave edge.
+    splitAtSteps(*image, config.min_segment_points, &out);
+    for (const auto& edge : steppedPairs<int>(*image, out.patch, -1, config.depth_jump_share))
+      concave.insert(edge);
   }
   out.concave_edges.assign(concave.begin(), concave.end());
   return out;

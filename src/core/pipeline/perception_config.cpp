@@ -73,6 +73,8 @@ void segmentFields(C& c, F&& f) {
   f("max_free_share", c.max_free_share);
   f("hull_samples", c.hull_samples);
   f("same_centre_m", c.same_centre_m);
+  f("depth_jump_ratio", c.depth_jump_ratio);
+  f("depth_jump_share", c.depth_jump_share);
 }
 template <class C, class F>
 void surfaceInstanceFields(C& c, F&& f) {
