@@ -52,13 +52,14 @@ bool insideBox(const GridSpec& grid, const Vec3& p) {
   return (q.array() >= 0.0).all() && (q.array() <= 1.0).all();
 }
 
-/// The points of a segmented view by pixel, for walking the image at the stride, with each
-/// point's depth along the optical axis.
+/// The points of a segmented view by pixel, for walking the image at the stride; `camera_points`
+/// are the same points in the camera frame (z: depth along the optical axis).
 class ImageNeighbours {
  public:
-  ImageNeighbours(const SurfaceSegments& s, std::vector<float> depth, const SurfaceSegmentConfig& c)
+  ImageNeighbours(const SurfaceSegments& s, const pcl::PointCloud<pcl::PointXYZ>& camera_points,
+                  const SurfaceSegmentConfig& c)
       : s_(s),
-        depth_(std::move(depth)),
+        points_(camera_points),
         ratio_(c.depth_jump_ratio),
         stride_(c.pixel_stride),
         point_at_(static_cast<size_t>(s.depth.width) * s.depth.height, -1) {
@@ -80,12 +81,13 @@ class ImageNeighbours {
   }
   /// Whether points i and j lie on two surfaces, one seen past the other's edge.
   bool stepped(int i, int j) const {
-    return std::fabs(depth_[i] - depth_[j]) > ratio_ * std::min(depth_[i], depth_[j]);
+    const float a = points_[i].z, b = points_[j].z;
+    return std::fabs(a - b) > ratio_ * std::min(a, b);
   }
 
  private:
   const SurfaceSegments& s_;
-  std::vector<float> depth_;
+  const pcl::PointCloud<pcl::PointXYZ>& points_;
   double ratio_;
   int stride_;
   std::vector<int> point_at_;
@@ -206,13 +208,12 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
   if (clusters.empty()) return out;
   std::multimap<std::uint32_t, std::uint32_t> adjacency;
   supervoxels.getSupervoxelAdjacency(adjacency);
+  // The points' supervoxels here, their LCCP segments once relabelled below.
+  pcl::PointCloud<pcl::PointXYZL>::Ptr labelled = supervoxels.getLabeledCloud();
   std::optional<ImageNeighbours> image;  // with depth steps
   if (config.depth_jump_ratio > 0.0) {
-    std::vector<float> depth_along(cloud->size());
-    for (size_t i = 0; i < depth_along.size(); ++i) depth_along[i] = cloud->points[i].z;
-    image.emplace(out, std::move(depth_along), config);
-    cutSteppedAdjacency(*image, *supervoxels.getLabeledCloud(), config.depth_jump_share,
-                        &adjacency);
+    image.emplace(out, *cloud, config);
+    cutSteppedAdjacency(*image, *labelled, config.depth_jump_share, &adjacency);
   }
 
   pcl::LCCPSegmentation<pcl::PointXYZ> lccp;
@@ -226,7 +227,6 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
   lccp.setMinSegmentSize(3);
   lccp.setInputSupervoxels(clusters, adjacency);
   lccp.segment();
-  pcl::PointCloud<pcl::PointXYZL>::Ptr labelled = supervoxels.getLabeledCloud();
   lccp.relabelCloud(*labelled);
 
   // Patches: LCCP segments with enough points, renumbered from 0.
