@@ -617,6 +617,20 @@ TEST(Evaluator, TheTruthScoresPerfectlyAndNothingScoresNothing) {
     EXPECT_DOUBLE_EQ(row.at("iou"), 0.0);
     EXPECT_DOUBLE_EQ(row.at("count_exact"), 0.0);
   }
+  for (const Row& row : r.methods[0].rows) {  // the truth counts every object, seen or not
+    EXPECT_GE(row.at("objects_seen"), 1.0);
+    EXPECT_LE(row.at("objects_seen"), row.at("objects"));
+    EXPECT_EQ(row.at("count_exact_seen") == 1.0, row.at("objects_seen") == row.at("objects"));
+  }
+  // No object fills the whole image: none is seen, and only a count of none is exact.
+  options.seen_pixels = options.width * options.height + 1;
+  KnownAnswer truth_again("truth", reader, true), nothing_again("nothing", reader, false);
+  const EvaluationResults none = evaluateDataset(reader, {&truth_again, &nothing_again}, options);
+  for (const Row& row : none.methods[0].rows) {
+    EXPECT_DOUBLE_EQ(row.at("objects_seen"), 0.0);
+    EXPECT_DOUBLE_EQ(row.at("count_exact_seen"), 0.0);
+  }
+  for (const Row& row : none.methods[1].rows) EXPECT_DOUBLE_EQ(row.at("count_exact_seen"), 1.0);
   const nlohmann::json j = resultsJson(r, false);
   EXPECT_DOUBLE_EQ(j["methods"]["truth"]["iou"]["mean"].get<double>(), 1.0);
   EXPECT_EQ(j["methods"]["truth"]["iou"]["n"].get<int>(), 4);

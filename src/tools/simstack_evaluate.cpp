@@ -179,6 +179,11 @@ int main(int argc, char** argv) {
   app.add_option("--chamfer-points", o.chamfer_points, "surface samples per Chamfer set")
       ->capture_default_str()
       ->check(FinitePositive);
+  app.add_option("--seen-pixels", o.seen_pixels,
+                 "a true object counts as seen from this many valid pixels of the view "
+                 "(count_exact_seen in the summary: the count against the objects seen)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
   if (dataset.empty() == real_dir.empty()) {

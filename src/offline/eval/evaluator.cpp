@@ -19,8 +19,8 @@ using nlohmann::json;
 
 const std::vector<double> kBinEdges = {0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 1.01};
 const std::vector<std::string> kMetrics = {
-    "chamfer_visible_m", "chamfer_full_m", "chamfer_full_sq_m", "iou",        "bce",
-    "displacement_m",    "stable",         "count_error",       "count_exact"};
+    "chamfer_visible_m", "chamfer_full_m", "chamfer_full_sq_m", "iou",         "bce",
+    "displacement_m",    "stable",         "count_error",       "count_exact", "count_exact_seen"};
 
 double mean(const std::vector<double>& v) {
   double s = 0;
@@ -53,6 +53,7 @@ struct ViewTruth {
   Transform T_table_camera;
   Points3 visible;  ///< samples of the visible true surface
   double visible_ratio = 0;
+  int objects_seen = 0;  ///< true objects with at least EvaluationOptions::seen_pixels
 };
 
 /// The scores of one method's estimate of one view.
@@ -83,11 +84,24 @@ void scoreEstimate(const MethodEstimate& est, const SceneRecord& rec, const Scen
   (*row)["count"] = shapes.size();
   (*row)["count_error"] = std::abs(static_cast<double>(shapes.size()) - objects);
   (*row)["count_exact"] = shapes.size() == rec.scene.objects.size();
+  (*row)["count_exact_seen"] = static_cast<int>(shapes.size()) == vt.objects_seen;
   if (options.stability && !shapes.empty()) {
     const StabilityResult st = simulateStability(shapes);
     (*row)["displacement_m"] = st.mean_displacement_m;
     (*row)["stable"] = st.stable;
   }
+}
+
+/// The true objects that at least `min_pixels` pixels of the rendered view see with a valid
+/// depth (after the noise's dropouts).
+int objectsSeen(const RenderResult& r, int objects, int min_pixels) {
+  std::vector<int> pixels(static_cast<size_t>(objects) + 1, 0);
+  for (size_t i = 0; i < r.instances.pixels.size(); ++i) {
+    const int id = r.instances.pixels[i];
+    if (id >= 1 && id <= objects && validDepth(r.depth.pixels[i])) ++pixels[id];
+  }
+  return static_cast<int>(
+      std::count_if(pixels.begin() + 1, pixels.end(), [&](int n) { return n >= min_pixels; }));
 }
 
 /// Every method on view `v` of scene `k`. Separate random streams per scene, per view and per
@@ -109,6 +123,7 @@ void evaluateView(const SceneRecord& rec, int k, int v, const SceneTruth& scene,
   std::vector<bool> seen = visibleTriangles(scene.mesh, camera, vt.T_table_camera);
   vt.visible = samplePoints(subMesh(scene.mesh, seen), options.chamfer_points, rng);
   vt.views = {DepthView{r.depth, camera, vt.T_table_camera}};
+  vt.objects_seen = objectsSeen(r, static_cast<int>(rec.scene.objects.size()), options.seen_pixels);
   // The further views turn the first about the vertical through the pile's centre; their
   // noise has its own stream, so the first view is the single-view protocol's.
   const Vec3 centre = rec.scene.surfaceCentroid();
@@ -137,7 +152,8 @@ void evaluateView(const SceneRecord& rec, int k, int v, const SceneTruth& scene,
     Row row{{"scene", k},
             {"view", v},
             {"visible_ratio", vt.visible_ratio},
-            {"objects", static_cast<double>(rec.scene.objects.size())}};
+            {"objects", static_cast<double>(rec.scene.objects.size())},
+            {"objects_seen", static_cast<double>(vt.objects_seen)}};
     const MethodEstimate est = methods[i]->estimateViews(vt.views, have_gt ? &grid : nullptr,
                                                          rec.scene.surfaceCentroid().head<2>());
     if (!have_gt) {  // the first method's grid is the ground truth's
@@ -244,6 +260,7 @@ json resultsJson(const EvaluationResults& r, bool with_views) {
   out["overhead"] = o.overhead;
   out["views_per_estimate"] = o.views_per_estimate;
   out["chamfer_points"] = o.chamfer_points;
+  out["seen_pixels"] = o.seen_pixels;
   if (!r.truth_stable.empty())
     out["ground_truth"] = {{"stable", mean(r.truth_stable)},
                            {"displacement_m", mean(r.truth_displacement_m)}};

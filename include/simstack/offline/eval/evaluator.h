@@ -83,7 +83,11 @@ struct EvaluationOptions {
   SensorModel sensor = SensorModel::kinect;  ///< whose noise (SensorNoiseConfig::preset)
   bool stability = true;                     ///< the physics stability test
   int chamfer_points = 1000;                 ///< surface samples per Chamfer set
-  bool overhead = false;                     ///< views from above (ViewpointRange::overhead())
+  /// A true object counts as seen when this many pixels of the protocol's view see it with a
+  /// valid depth: `count_exact_seen` compares the count with the objects seen (an object behind
+  /// others may show a handful of pixels, or none).
+  int seen_pixels = 100;
+  bool overhead = false;  ///< views from above (ViewpointRange::overhead())
   /// Posed views per estimate (the paper's multi-view experiment): the first drawn as in the
   /// single-view protocol (the same view and noise), the others that viewpoint turned about
   /// the vertical through the pile's centre by 360 / views_per_estimate degrees each. Visible
@@ -95,7 +99,8 @@ using Row = std::map<std::string, double>;
 struct MethodResults {
   std::string name;
   MethodInfo info;
-  std::vector<Row> rows;  ///< one per view: scene, view, visible_ratio, objects, the metrics
+  std::vector<Row>
+      rows;  ///< one per view: scene, view, visible_ratio, objects, objects_seen, the metrics
 };
 struct EvaluationResults {
   EvaluationOptions options;
