@@ -114,6 +114,40 @@ void runRealScenes(const std::vector<PerceptionConfig>& configs, bool classical,
             << scenes << " scenes; results: " << output << "\n";
 }
 
+/// The options of the rendered views and their scores (`o`), and the intrinsics' text.
+void addViewOptions(CLI::App& app, EvaluationOptions* o, std::string* intrinsics) {
+  app.add_option("--width", o->width,
+                 "rendered view width (pixels; the protocol's 640): fx scales with the width, fy "
+                 "with the height, so keep 4:3 for square pixels")
+      ->capture_default_str()
+      ->check(CLI::Range(16, 4096));
+  app.add_option("--height", o->height, "rendered view height (the protocol's 480)")
+      ->capture_default_str()
+      ->check(CLI::Range(16, 4096));
+  app.add_option("--intrinsics", *intrinsics,
+                 "fx,fy,cx,cy (pixels) of another camera for the --width x --height views, "
+                 "instead of the scaled Kinect: its field of view (the noise is --sensor's)");
+  app.add_option("--views", o->views, "viewpoints per scene")
+      ->capture_default_str()
+      ->check(FinitePositive);
+  app.add_option("--scenes", o->scenes, "evaluate only the first N scenes (0 = all)")
+      ->check(FiniteNonNegative);
+  app.add_option("--seed", o->seed, "viewpoint and Chamfer-sample seed")
+      ->capture_default_str()
+      ->check(SeedNumber);
+  CLI::Option* noise_flag =
+      app.add_flag("--noise", o->noise, "sensor noise in the rendered views (--sensor's)");
+  addSensorOption(app, &o->sensor, "with --noise, ")->needs(noise_flag);
+  app.add_option("--chamfer-points", o->chamfer_points, "surface samples per Chamfer set")
+      ->capture_default_str()
+      ->check(FinitePositive);
+  app.add_option("--seen-pixels", o->seen_pixels,
+                 "a true object counts as seen from this many valid pixels of the view "
+                 "(count_exact_seen in the summary: the count against the objects seen)")
+      ->capture_default_str()
+      ->check(FiniteNonNegative);
+}
+
 }  // namespace
 
 constexpr const char* kDescription =
@@ -136,30 +170,9 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingDirectory);
   app.add_option("--output", output, "results JSON (every view)")->required()->check(WritablePath);
   app.add_option("--summary", summary, "also a small JSON: per method its means and bins");
-  app.add_option("--width", o.width,
-                 "rendered view width (pixels; the protocol's 640): fx scales with the width, fy "
-                 "with the height, so keep 4:3 for square pixels")
-      ->capture_default_str()
-      ->check(CLI::Range(16, 4096));
-  app.add_option("--height", o.height, "rendered view height (the protocol's 480)")
-      ->capture_default_str()
-      ->check(CLI::Range(16, 4096));
-  app.add_option("--intrinsics", intrinsics,
-                 "fx,fy,cx,cy (pixels) of another camera for the --width x --height views, "
-                 "instead of the scaled Kinect: its field of view (the noise is --sensor's)");
-  app.add_option("--views", o.views, "viewpoints per scene")
-      ->capture_default_str()
-      ->check(FinitePositive);
-  app.add_option("--scenes", o.scenes, "evaluate only the first N scenes (0 = all)")
-      ->check(FiniteNonNegative);
-  app.add_option("--seed", o.seed, "viewpoint and Chamfer-sample seed")
-      ->capture_default_str()
-      ->check(SeedNumber);
+  addViewOptions(app, &o, &intrinsics);
   app.add_option("--ycb", mesh_dir, "mesh directory for YCB datasets")
       ->check(CLI::ExistingDirectory);
-  CLI::Option* noise_flag =
-      app.add_flag("--noise", o.noise, "sensor noise in the rendered views (--sensor's)");
-  addSensorOption(app, &o.sensor, "with --noise, ")->needs(noise_flag);
   app.add_flag("--overhead", o.overhead,
                "views from above, as on a pick station (elevation 60-89 degrees, 0.6-1.0 m "
                "away) instead of the paper's ranges");
@@ -176,14 +189,6 @@ int main(int argc, char** argv) {
       ->check(FinitePositive);
   app.add_flag("--no-classical", no_classical, "skip the classical baseline");
   app.add_flag("--no-stability", no_stability, "skip the physics stability test");
-  app.add_option("--chamfer-points", o.chamfer_points, "surface samples per Chamfer set")
-      ->capture_default_str()
-      ->check(FinitePositive);
-  app.add_option("--seen-pixels", o.seen_pixels,
-                 "a true object counts as seen from this many valid pixels of the view "
-                 "(count_exact_seen in the summary: the count against the objects seen)")
-      ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
   if (dataset.empty() == real_dir.empty()) {
