@@ -99,8 +99,8 @@ using Row = std::map<std::string, double>;
 struct MethodResults {
   std::string name;
   MethodInfo info;
-  std::vector<Row>
-      rows;  ///< one per view: scene, view, visible_ratio, objects, objects_seen, the metrics
+  /// One per view: scene, view, visible_ratio, objects, objects_seen, the metrics.
+  std::vector<Row> rows;
 };
 struct EvaluationResults {
   EvaluationOptions options;
