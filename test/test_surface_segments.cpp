@@ -407,6 +407,97 @@ TEST(RegroupAlongSurfaceSegments, KeepsApartObjectsOneSeenPastTheOthersEdge) {
   EXPECT_EQ(regroupAlongSurfaceSegments(v.segments, coarse, 5, merged).size(), 1);
 }
 
+// A surface folded along the image's middle column, seen by the default camera: X = x z
+// and z = 1 - slope |X| (m). For slope > 0 the middle is farthest (a valley), for slope < 0
+// nearest (a ridge).
+DepthImage foldedSurface(const PinholeCamera& camera, double slope) {
+  DepthImage depth(camera.width, camera.height, 0.0f);
+  for (int v = 0; v < camera.height; ++v)
+    for (int u = 0; u < camera.width; ++u)
+      depth.at(u, v) = static_cast<float>(1.0 / (1.0 + slope * std::fabs(camera.ray(u, v).x())));
+  return depth;
+}
+
+int creasePixels(const Image<uint8_t>& creases, int u_min, int u_max) {
+  int n = 0;
+  for (int v = 0; v < creases.height; ++v)
+    for (int u = u_min; u <= u_max; ++u) n += creases.at(u, v);
+  return n;
+}
+
+TEST(ConcaveCreases, MarkAValleyNotARidgeNorAPlane) {
+  const PinholeCamera camera;
+  SurfaceSegmentConfig c;
+  c.crease_angle_deg = 20;
+  const int middle = static_cast<int>(camera.cx),
+            reach = c.crease_offset_px / 2 + c.crease_window_px;
+  // Faces at 45 degrees to the optical axis meet in the middle, 90 degrees apart.
+  const Image<uint8_t> valley = concaveCreases(foldedSurface(camera, 1.0), camera, c);
+  ASSERT_EQ(valley.width, camera.width);
+  ASSERT_EQ(valley.height, camera.height);
+  const int near_fold = creasePixels(valley, middle - reach, middle + reach);
+  EXPECT_GE(near_fold, camera.height - 2 * c.crease_window_px);     // each row crosses it
+  EXPECT_EQ(creasePixels(valley, 0, camera.width - 1), near_fold);  // and nothing else
+  // A ridge at the same angle and a tilted plane: no valley anywhere.
+  EXPECT_EQ(
+      creasePixels(concaveCreases(foldedSurface(camera, -0.5), camera, c), 0, camera.width - 1), 0);
+  DepthImage plane(camera.width, camera.height, 0.0f);
+  for (int v = 0; v < camera.height; ++v)
+    for (int u = 0; u < camera.width; ++u)
+      plane.at(u, v) = static_cast<float>(1.0 / (1.0 + 0.6 * camera.ray(u, v).x()));
+  EXPECT_EQ(creasePixels(concaveCreases(plane, camera, c), 0, camera.width - 1), 0);
+  // A fold gentler than the angle is no crease; and 0 turns the test off.
+  EXPECT_EQ(
+      creasePixels(concaveCreases(foldedSurface(camera, 0.1), camera, c), 0, camera.width - 1), 0);
+  c.crease_angle_deg = 0;
+  EXPECT_EQ(
+      creasePixels(concaveCreases(foldedSurface(camera, 1.0), camera, c), 0, camera.width - 1), 0);
+}
+
+// Two boxes of one height lying side by side, touching: from above their tops are one flat
+// face but for a narrow groove.
+View sideBySide() {
+  return look(
+      {box({0.07, 0.025, 0.02}, {0, -0.026, 0.02}), box({0.07, 0.025, 0.02}, {0, 0.026, 0.02})},
+      {0.35, -0.15, 0.6}, {0, 0, 0.02});
+}
+
+TEST(SurfaceSegments, CreasesCutTwoTouchingObjectsApart) {
+  View v = sideBySide();
+  SurfaceSegmentConfig c;
+  c.crease_angle_deg = 20;
+  v.segments = segmentVisibleSurface(v.render.depth, v.camera, v.T_table_camera, 0.01, c);
+  const std::vector<int> objects = pointObjects(v);
+  std::vector<std::map<int, int>> hits(v.segments.patches);
+  for (size_t i = 0; i < objects.size(); ++i)
+    if (v.segments.patch[i] >= 0) ++hits[v.segments.patch[i]][objects[i]];
+  for (const auto& h : hits) {
+    int total = 0, most = 0;
+    for (const auto& [k, n] : h) total += n, most = std::max(most, n);
+    EXPECT_GE(most, 0.95 * total) << "a patch spans two objects";
+  }
+  const auto between = patchPairsBetweenObjects(v);
+  ASSERT_FALSE(between.empty());
+  const std::set<std::pair<int, int>> apart(v.segments.concave_edges.begin(),
+                                            v.segments.concave_edges.end());
+  for (const auto& pair : between) EXPECT_EQ(apart.count(pair), 1u);
+  // The merged instance is split along them; without creases one patch spans both boxes
+  // (LCCP's supervoxels are wider than the groove) and it stays whole.
+  const GroundTruthGrids gt = truthOf(v);
+  const InstanceSegmentation merged = instancesFrom(gt.labels, {-1, 0, 0});
+  EXPECT_EQ(regroupAlongSurfaceSegments(v.segments, c, 5, merged).size(), 2);
+  const SurfaceSegmentConfig off;  // as shipped
+  ASSERT_EQ(off.crease_angle_deg, 0.0);
+  v.segments = segmentVisibleSurface(v.render.depth, v.camera, v.T_table_camera, 0.01, off);
+  bool spans_both = false;
+  std::vector<std::map<int, int>> off_hits(v.segments.patches);
+  for (size_t i = 0; i < objects.size(); ++i)
+    if (v.segments.patch[i] >= 0) ++off_hits[v.segments.patch[i]][objects[i]];
+  for (auto& h : off_hits) spans_both |= h[1] > 200 && h[2] > 200;
+  EXPECT_TRUE(spans_both);
+  EXPECT_EQ(regroupAlongSurfaceSegments(v.segments, off, 5, merged).size(), 1);
+}
+
 TEST(SurfaceSegments, TheSameViewGivesTheSamePatches) {
   const View v = occlusion();
   for (int i = 0; i < 5; ++i) {
@@ -441,6 +532,9 @@ TEST(SurfaceSegments, EmptyViewsAndBadSettings) {
       [](SurfaceSegmentConfig* c) { c->depth_jump_ratio = -0.01; },
       [](SurfaceSegmentConfig* c) { c->depth_jump_share = 0.0; },
       [](SurfaceSegmentConfig* c) { c->depth_jump_share = 1.5; },
+      [](SurfaceSegmentConfig* c) { c->crease_angle_deg = 90; },
+      [](SurfaceSegmentConfig* c) { c->crease_window_px = 4; },
+      [](SurfaceSegmentConfig* c) { c->crease_offset_px = 1; },
   };
   for (size_t i = 0; i < out_of_range.size(); ++i) {
     bad = SurfaceSegmentConfig();

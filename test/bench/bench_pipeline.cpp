@@ -216,6 +216,14 @@ static void BM_PerceiveWithoutDepthSteps(benchmark::State& state) {
 }
 BENCHMARK(BM_PerceiveWithoutDepthSteps)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// Its peer with the creases on (segments.crease_angle_deg: 20; off in the shipped config), on
+// the same frame: what finding the valleys of the depth image and cutting the patches costs.
+static void BM_PerceiveWithCreases(benchmark::State& state) {
+  perceiveShippedConfig(state, "",
+                        [&](PerceptionConfig* pc) { pc->segments.crease_angle_deg = 20; });
+}
+BENCHMARK(BM_PerceiveWithCreases)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // Its peer with the occluded-sides test on (surface_instances.occluded_plane_m: 0.006; off in
 // the shipped config): what the test costs where nothing joins.
 static void BM_PerceiveWithOccludedTest(benchmark::State& state) {

@@ -70,7 +70,15 @@ struct SurfaceSegmentConfig {
   /// step in at least this share of the pairs are kept apart: the supervoxels take no part in
   /// each other's convexity, and the patches meet at a separating edge as at a concave one.
   double depth_jump_share = 0.5;
-  void validate() const;  ///< std::invalid_argument naming the field
+  /// Concave creases of the depth image (concaveCreases) cut patches: two objects that touch
+  /// meet in a valley, which a convex object's surface never has; LCCP's supervoxels, several
+  /// centimetres wide, average a narrow valley away. The parts of a patch a crease cuts meet
+  /// at a concave edge. 0 = off: objects that are not convex (a mug, a bowl, a tool) have
+  /// valleys of their own.
+  double crease_angle_deg = 0.0;
+  int crease_window_px = 7;  ///< side of the square window the surface is averaged over
+  int crease_offset_px = 6;  ///< the two normals compared lie this far apart in the image
+  void validate() const;     ///< std::invalid_argument naming the field
 };
 
 /// The observed surface above the table, cut into convex patches, with the view it came from.
@@ -94,6 +102,17 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
                                       const Transform& T_table_camera, double min_height_m,
                                       const SurfaceSegmentConfig& config,
                                       const GridSpec* grid = nullptr);
+
+/// Pixels on a concave crease of the depth image's surface (1; 0 elsewhere and where depth is
+/// missing). The surface is the camera-frame points averaged over `crease_window_px` squares;
+/// two pixels `crease_offset_px` apart along a row, a column or a diagonal whose normals differ
+/// by more than `crease_angle_deg`, and turn towards each other (a valley, not a ridge), mark
+/// the pixel between them. With `depth_jump_ratio`, a window whose mean lies farther than this
+/// share of the depth from its pixel straddles a depth step; it averages two surfaces into a
+/// slope that is on neither, and its pixel has no normal. Returns an image of zeros when
+/// `crease_angle_deg` is 0.
+Image<uint8_t> concaveCreases(const DepthImage& depth, const PinholeCamera& camera,
+                              const SurfaceSegmentConfig& config);
 
 /// Linear index of the labelled voxel (label >= 0) nearest to a table-frame point among the
 /// point's voxel and those within `reach` voxels along each axis (by default the 26 around it),

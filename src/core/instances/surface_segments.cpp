@@ -44,6 +44,88 @@ void SurfaceSegmentConfig::validate() const {
   if (!(depth_jump_ratio >= 0.0)) fail("depth_jump_ratio must be >= 0");
   if (!(depth_jump_share > 0.0 && depth_jump_share <= 1.0))
     fail("depth_jump_share must lie in (0, 1]");
+  if (!(crease_angle_deg >= 0.0 && crease_angle_deg < 90.0))
+    fail("crease_angle_deg must lie in [0, 90)");
+  if (crease_window_px < 3 || crease_window_px % 2 == 0)
+    fail("crease_window_px must be odd and >= 3");
+  if (crease_offset_px < 2) fail("crease_offset_px must be >= 2");
+}
+
+Image<uint8_t> concaveCreases(const DepthImage& depth, const PinholeCamera& camera,
+                              const SurfaceSegmentConfig& config) {
+  config.validate();
+  const int w = depth.width, h = depth.height;
+  Image<uint8_t> out(w, h, 0);
+  if (config.crease_angle_deg <= 0.0 || w == 0 || h == 0) return out;
+  // Summed-area tables of the valid camera-frame points and of their count.
+  const size_t W = static_cast<size_t>(w) + 1;
+  std::vector<Vec3> sum(W * (h + 1), Vec3::Zero());
+  std::vector<int> count(W * (h + 1), 0);
+  for (int v = 0; v < h; ++v)
+    for (int u = 0; u < w; ++u) {
+      const float d = depth.at(u, v);
+      const bool valid = validDepth(d);
+      const size_t i = (v + 1) * W + u + 1;
+      sum[i] = (valid ? camera.backproject(u, v, d) : Vec3::Zero()) + sum[i - W] + sum[i - 1] -
+               sum[i - W - 1];
+      count[i] = valid + count[i - W] + count[i - 1] - count[i - W - 1];
+    }
+  // The averaged surface where at least half of a full window is measured (and, with depth
+  // steps, where it stays on the pixel's own surface).
+  const double ratio = config.depth_jump_ratio;
+  const int r = config.crease_window_px / 2;
+  std::vector<Vec3> mean(static_cast<size_t>(w) * h, Vec3::Zero());
+  std::vector<char> has_mean(mean.size(), 0);
+  for (int v = 0; v < h; ++v)
+    for (int u = 0; u < w; ++u) {
+      if (!validDepth(depth.at(u, v))) continue;
+      const int u0 = std::max(u - r, 0), u1 = std::min(u + r, w - 1) + 1;
+      const int v0 = std::max(v - r, 0), v1 = std::min(v + r, h - 1) + 1;
+      const int n =
+          count[v1 * W + u1] - count[v0 * W + u1] - count[v1 * W + u0] + count[v0 * W + u0];
+      if (2 * n < config.crease_window_px * config.crease_window_px) continue;
+      const Vec3 m =
+          (sum[v1 * W + u1] - sum[v0 * W + u1] - sum[v1 * W + u0] + sum[v0 * W + u0]) / n;
+      // A window across a depth step averages two surfaces into a slope that is on neither.
+      if (ratio > 0.0 && std::fabs(m.z() - depth.at(u, v)) > ratio * depth.at(u, v)) continue;
+      mean[v * w + u] = m;
+      has_mean[v * w + u] = 1;
+    }
+  // Normals of the averaged surface, turned towards the camera.
+  std::vector<Vec3> normal(mean.size(), Vec3::Zero());
+  std::vector<char> has_normal(mean.size(), 0);
+  for (int v = 1; v + 1 < h; ++v)
+    for (int u = 1; u + 1 < w; ++u) {
+      const int i = v * w + u;
+      if (!has_mean[i] || !has_mean[i - 1] || !has_mean[i + 1] || !has_mean[i - w] ||
+          !has_mean[i + w])
+        continue;
+      Vec3 n = (mean[i + 1] - mean[i - 1]).cross(mean[i + w] - mean[i - w]);
+      const double norm = n.norm();
+      if (!(norm > 0.0)) continue;
+      n /= norm;
+      normal[i] = n.dot(mean[i]) > 0.0 ? -n : n;
+      has_normal[i] = 1;
+    }
+  const double cos_angle = std::cos(config.crease_angle_deg * M_PI / 180.0);
+  const int k = config.crease_offset_px;
+  const std::pair<int, int> steps[4] = {{k, 0}, {0, k}, {k, k}, {k, -k}};
+  for (int v = 0; v < h; ++v)
+    for (int u = 0; u < w; ++u) {
+      const int a = v * w + u;
+      if (!has_normal[a]) continue;
+      for (const auto& [du, dv] : steps) {
+        const int bu = u + du, bv = v + dv;
+        if (bu < 0 || bv < 0 || bu >= w || bv >= h || !has_normal[bv * w + bu]) continue;
+        const int b = bv * w + bu;
+        // A valley: the normals differ, and along the way from one to the other they turn
+        // towards each other (on a ridge they turn apart).
+        if (normal[a].dot(normal[b]) < cos_angle &&
+            (normal[a] - normal[b]).dot(mean[a] - mean[b]) < 0.0)
+          out.at(u + du / 2, v + dv / 2) = 1;
+      }
+    }
+  return out;
 }
 
 namespace {
@@ -56,14 +138,20 @@ bool insideBox(const GridSpec& grid, const Vec3& p) {
 /// are the same points in the camera frame (z: depth along the optical axis).
 class ImageNeighbours {
  public:
+  /// `creases`: concaveCreases of the view (empty: none).
   ImageNeighbours(const SurfaceSegments& s, const pcl::PointCloud<pcl::PointXYZ>& camera_points,
-                  const SurfaceSegmentConfig& c)
+                  const SurfaceSegmentConfig& c, const Image<uint8_t>& creases)
       : s_(s),
         points_(camera_points),
         ratio_(c.depth_jump_ratio),
         stride_(c.pixel_stride),
-        point_at_(static_cast<size_t>(s.depth.width) * s.depth.height, -1) {
-    for (size_t i = 0; i < s.pixel.size(); ++i) point_at_[s.pixel[i]] = static_cast<int>(i);
+        point_at_(static_cast<size_t>(s.depth.width) * s.depth.height, -1),
+        on_crease_(s.pixel.size(), 0) {
+    for (size_t i = 0; i < s.pixel.size(); ++i) {
+      point_at_[s.pixel[i]] = static_cast<int>(i);
+      if (!creases.empty()) on_crease_[i] = creases.pixels[s.pixel[i]];
+    }
+    creases_ = !creases.empty();
   }
   /// Calls f(j) for the points one stride right of and below point i (`both_ways`: left of and
   /// above it too).
@@ -82,8 +170,10 @@ class ImageNeighbours {
   /// Whether points i and j lie on two surfaces, one seen past the other's edge.
   bool stepped(int i, int j) const {
     const float a = points_[i].z, b = points_[j].z;
-    return std::fabs(a - b) > ratio_ * std::min(a, b);
+    return ratio_ > 0.0 && std::fabs(a - b) > ratio_ * std::min(a, b);
   }
+  bool onCrease(int i) const { return on_crease_[i] != 0; }
+  bool creases() const { return creases_; }
 
  private:
   const SurfaceSegments& s_;
@@ -91,6 +181,8 @@ class ImageNeighbours {
   double ratio_;
   int stride_;
   std::vector<int> point_at_;
+  std::vector<char> on_crease_;
+  bool creases_ = false;
 };
 
 /// Label pairs whose points neighbour in the image mostly across a depth step
@@ -128,19 +220,23 @@ void cutSteppedAdjacency(const ImageNeighbours& image,
 }
 
 /// Cuts each patch into the parts its points form through neighbours in the image with no depth
-/// step between them: a supervoxel can straddle two objects where one hides the other. The
-/// largest part keeps the patch's number; other parts of at least `min_points` become new
-/// patches, smaller ones leave every patch.
-void splitAtSteps(const ImageNeighbours& image, int min_points, SurfaceSegments* s) {
+/// step between them: a supervoxel can straddle two objects where one hides the other. With
+/// creases, a part grows no further across a crease point; the creases are then shared out
+/// among the parts, and the parts of one patch meet at a concave edge (added to `concave`). The
+/// largest part keeps the patch's number; other parts of at least `min_points` become new patches,
+/// smaller ones leave every patch.
+void splitPatches(const ImageNeighbours& image, int min_points, SurfaceSegments* s,
+                  std::set<std::pair<int, int>>* concave) {
   const int n = static_cast<int>(s->patch.size());
   std::vector<int> part(n, -1);
   std::vector<std::vector<int>> parts;
   for (int seed = 0; seed < n; ++seed) {
-    if (s->patch[seed] < 0 || part[seed] >= 0) continue;
+    if (s->patch[seed] < 0 || part[seed] >= 0 || image.onCrease(seed)) continue;
     std::vector<int> members{seed};
     part[seed] = static_cast<int>(parts.size());
     for (size_t k = 0; k < members.size(); ++k) {
       const int i = members[k];
+      if (image.onCrease(i)) continue;  // reached, but the part grows no further across it
       image.forNeighbours(i, true, [&](int j) {
         if (part[j] >= 0 || s->patch[j] != s->patch[seed] || image.stepped(i, j)) return;
         part[j] = part[seed];
@@ -149,16 +245,45 @@ void splitAtSteps(const ImageNeighbours& image, int min_points, SurfaceSegments*
     }
     parts.push_back(std::move(members));
   }
+  if (image.creases()) {
+    // The rest of each crease goes to the nearest part of its patch, all parts growing at once:
+    // parts cut by a crease meet in its middle, where the depth steps between them are judged.
+    std::deque<int> front;
+    for (int i = 0; i < n; ++i)
+      if (part[i] >= 0) front.push_back(i);
+    while (!front.empty()) {
+      const int i = front.front();
+      front.pop_front();
+      image.forNeighbours(i, true, [&](int j) {
+        if (part[j] >= 0 || s->patch[j] != s->patch[i] || image.stepped(i, j)) return;
+        part[j] = part[i];
+        parts[part[i]].push_back(j);
+        front.push_back(j);
+      });
+    }
+  }
+  for (int i = 0; i < n; ++i)
+    if (part[i] < 0) s->patch[i] = -1;  // crease points no part reached
   std::vector<int> largest(s->patches, -1);
   for (size_t p = 0; p < parts.size(); ++p) {
     int& best = largest[s->patch[parts[p].front()]];
     if (best < 0 || parts[p].size() > parts[best].size()) best = static_cast<int>(p);
   }
+  std::map<int, std::vector<int>> pieces;  // per patch: the patches its parts became
   for (size_t p = 0; p < parts.size(); ++p) {
-    if (largest[s->patch[parts[p].front()]] == static_cast<int>(p)) continue;
+    const int from = s->patch[parts[p].front()];
+    if (largest[from] == static_cast<int>(p)) {
+      pieces[from].push_back(from);
+      continue;
+    }
     const int to = parts[p].size() >= static_cast<size_t>(min_points) ? s->patches++ : -1;
     for (int i : parts[p]) s->patch[i] = to;
+    if (to >= 0) pieces[from].push_back(to);
   }
+  if (!image.creases()) return;
+  for (const auto& [from, list] : pieces)
+    for (size_t a = 0; a < list.size(); ++a)
+      for (size_t b = a + 1; b < list.size(); ++b) concave->insert(std::minmax(list[a], list[b]));
 }
 
 }  // namespace
@@ -210,11 +335,13 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
   supervoxels.getSupervoxelAdjacency(adjacency);
   // The points' supervoxels here, their LCCP segments once relabelled below.
   pcl::PointCloud<pcl::PointXYZL>::Ptr labelled = supervoxels.getLabeledCloud();
-  std::optional<ImageNeighbours> image;  // with depth steps
-  if (config.depth_jump_ratio > 0.0) {
-    image.emplace(out, *cloud, config);
+  std::optional<ImageNeighbours> image;  // with depth steps or creases
+  if (config.depth_jump_ratio > 0.0 || config.crease_angle_deg > 0.0)
+    image.emplace(
+        out, *cloud, config,
+        config.crease_angle_deg > 0.0 ? concaveCreases(depth, camera, config) : Image<uint8_t>());
+  if (config.depth_jump_ratio > 0.0)
     cutSteppedAdjacency(*image, *labelled, config.depth_jump_share, &adjacency);
-  }
 
   pcl::LCCPSegmentation<pcl::PointXYZ> lccp;
   lccp.setConcavityToleranceThreshold(static_cast<float>(config.concavity_tolerance_deg));
@@ -257,10 +384,11 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
     }
   }
   if (image) {
+    splitPatches(*image, config.min_segment_points, &out, &concave);
     // Patches meeting across depth steps are apart as at a concave edge.
-    splitAtSteps(*image, config.min_segment_points, &out);
-    for (const auto& edge : steppedPairs<int>(*image, out.patch, -1, config.depth_jump_share))
-      concave.insert(edge);
+    if (config.depth_jump_ratio > 0.0)
+      for (const auto& edge : steppedPairs<int>(*image, out.patch, -1, config.depth_jump_share))
+        concave.insert(edge);
   }
   out.concave_edges.assign(concave.begin(), concave.end());
   return out;

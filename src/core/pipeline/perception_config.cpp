@@ -75,6 +75,9 @@ void segmentFields(C& c, F&& f) {
   f("same_centre_m", c.same_centre_m);
   f("depth_jump_ratio", c.depth_jump_ratio);
   f("depth_jump_share", c.depth_jump_share);
+  f("crease_angle_deg", c.crease_angle_deg);
+  f("crease_window_px", c.crease_window_px);
+  f("crease_offset_px", c.crease_offset_px);
 }
 template <class C, class F>
 void surfaceInstanceFields(C& c, F&& f) {
