@@ -146,12 +146,12 @@ class ImageNeighbours {
         ratio_(c.depth_jump_ratio),
         stride_(c.pixel_stride),
         point_at_(static_cast<size_t>(s.depth.width) * s.depth.height, -1),
-        on_crease_(s.pixel.size(), 0) {
+        on_crease_(s.pixel.size(), 0),
+        creases_(!creases.empty()) {
     for (size_t i = 0; i < s.pixel.size(); ++i) {
       point_at_[s.pixel[i]] = static_cast<int>(i);
-      if (!creases.empty()) on_crease_[i] = creases.pixels[s.pixel[i]];
+      if (creases_) on_crease_[i] = creases.pixels[s.pixel[i]];
     }
-    creases_ = !creases.empty();
   }
   /// Calls f(j) for the points one stride right of and below point i (`both_ways`: left of and
   /// above it too).
@@ -182,7 +182,7 @@ class ImageNeighbours {
   int stride_;
   std::vector<int> point_at_;
   std::vector<char> on_crease_;
-  bool creases_ = false;
+  bool creases_;
 };
 
 /// Label pairs whose points neighbour in the image mostly across a depth step
