@@ -317,3 +317,40 @@ TEST(Conversions, OutputsAreWrittenInTheFrameTheTableIsPlacedIn) {
   EXPECT_NEAR(markers.markers[1].pose.position.x, 0.4, 1e-9);
   EXPECT_NEAR(markers.markers[2].pose.position.z, 0.73 + 0.05 + 0.03, 1e-9);  // above it
 }
+
+// A hand-built Object whose surface cloud does not hold what measured_points says, or whose
+// fields do not fit its point_step, is refused rather than read out of bounds.
+TEST(Conversions, MalformedSurfaceCloudsAreRefused) {
+  Object object;
+  object.id = 3;
+  object.measured_points = 2;
+  sensor_msgs::PointCloud2& cloud = object.surface;
+  cloud.width = 2;
+  cloud.height = 1;
+  for (const char* name : {"x", "y", "z"}) {
+    sensor_msgs::PointField f;
+    f.name = name;
+    f.offset = static_cast<uint32_t>(4 * cloud.fields.size());
+    f.datatype = sensor_msgs::PointField::FLOAT32;
+    f.count = 1;
+    cloud.fields.push_back(f);
+  }
+  const Transform I = Transform::Identity();
+  EXPECT_THROW(measuredSurface(object, I), std::invalid_argument);  // point_step 0, no data
+  cloud.point_step = 12;
+  EXPECT_THROW(measuredSurface(object, I), std::invalid_argument);  // no data
+  cloud.data.assign(24, 0);
+  EXPECT_EQ(measuredSurface(object, I).size(), 2u);  // two points at the origin
+  cloud.point_step = 8;                              // z beyond the point
+  cloud.data.assign(16, 0);
+  EXPECT_THROW(measuredSurface(object, I), std::invalid_argument);
+  cloud.point_step = 12;
+  cloud.data.assign(24, 0);
+  cloud.fields[1].datatype = sensor_msgs::PointField::FLOAT64;
+  EXPECT_THROW(measuredSurface(object, I), std::invalid_argument);
+  cloud.fields.pop_back();  // no z
+  cloud.fields[1].datatype = sensor_msgs::PointField::FLOAT32;
+  EXPECT_THROW(measuredSurface(object, I), std::invalid_argument);
+  object.measured_points = 0;  // nothing measured: nothing read
+  EXPECT_TRUE(measuredSurface(object, I).empty());
+}

@@ -63,6 +63,23 @@ grep -q "differ from those of .*view_0.yaml" "$dir/e_vi" || { cat "$dir/e_vi"; e
 if "$reconstruct" --depth "${view}_depth.png" --output "$dir/out_x" > /dev/null 2> "$dir/e_ni"; then
   echo "accepted a depth without intrinsics"; exit 1; fi
 grep -q "intrinsics is needed for .*depth.png" "$dir/e_ni" || { cat "$dir/e_ni"; exit 1; }
+# A view file's depth_scale_m is the PNG's unit: the same depth in tenths of a millimetre is
+# perceived as the millimetre PNG; a --depth-scale that disagrees, and an unknown key, are refused.
+convert "${view}_depth.png" -evaluate multiply 10 -depth 16 "$dir/tenths.png"
+{ cat "$view.yaml"; echo "depth_scale_m: 0.0001"; } | grep -v "^depth_scale_m: 0.001$" > "$dir/tenths.yaml"
+"$reconstruct" --depth "$dir/tenths.png" --table-pose "$dir/tenths.yaml" --output "$dir/out_t" \
+  > "$dir/log_t.txt"
+cmp -s <(grep -o "[0-9]* objects in" "$dir/log.txt") <(grep -o "[0-9]* objects in" "$dir/log_t.txt") ||
+  { echo "the view file's depth_scale_m gave another result"; cat "$dir/log_t.txt"; exit 1; }
+if "$reconstruct" --depth "$dir/tenths.png" --table-pose "$dir/tenths.yaml" --depth-scale 0.001 \
+  --output "$dir/out_x" > /dev/null 2> "$dir/e_ds"; then
+  echo "accepted a --depth-scale that differs from the view file's"; exit 1; fi
+grep -q "depth-scale 0.001000 differs from .*tenths.yaml's depth_scale_m" "$dir/e_ds" || { cat "$dir/e_ds"; exit 1; }
+{ cat "$view.yaml"; echo "depth_scale: 0.001"; } > "$dir/typo.yaml"
+if "$reconstruct" --depth "${view}_depth.png" --table-pose "$dir/typo.yaml" --output "$dir/out_x" \
+  > /dev/null 2> "$dir/e_typo"; then
+  echo "accepted a view file with an unknown key"; exit 1; fi
+grep -q "typo.yaml: unknown key 'depth_scale'" "$dir/e_typo" || { cat "$dir/e_typo"; exit 1; }
 # An unorganized PCD of the same view (the valid pixels' points, one row) is placed on the
 # pixels of the intrinsics and perceived as the PNG; other intrinsics are refused, naming a point.
 /usr/bin/python3 - "$dir" 640 480 > "$dir/loose.pcd" <<'PY'

@@ -2,6 +2,7 @@
 
 #include <sensor_msgs/point_cloud2_iterator.h>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -73,15 +74,25 @@ Points3 measuredSurface(const Object& object, const Transform& T_table_frame) {
     throw std::invalid_argument(what + " holds " + std::to_string(n) + " points (" +
                                 std::to_string(cloud.data.size()) + " bytes), not the " +
                                 std::to_string(object.measured_points) + " measured_points says");
+  // The iterators read raw bytes at each field's offset: the layout is checked first, so that
+  // a malformed cloud is refused rather than read out of bounds.
+  for (const char* name : {"x", "y", "z"}) {
+    const auto field =
+        std::find_if(cloud.fields.begin(), cloud.fields.end(),
+                     [&](const sensor_msgs::PointField& f) { return f.name == name; });
+    if (field == cloud.fields.end())
+      throw std::invalid_argument(what + " has no field \"" + name + "\"");
+    if (field->datatype != sensor_msgs::PointField::FLOAT32 || field->count < 1 ||
+        static_cast<size_t>(field->offset) + sizeof(float) > cloud.point_step)
+      throw std::invalid_argument(what + ": field \"" + name +
+                                  "\" is not a FLOAT32 inside point_step " +
+                                  std::to_string(cloud.point_step));
+  }
   Points3 out;
-  try {
-    sensor_msgs::PointCloud2ConstIterator<float> x(cloud, "x"), y(cloud, "y"), z(cloud, "z");
-    for (size_t i = 0; i < object.measured_points; ++i, ++x, ++y, ++z) {
-      const Vec3 p(*x, *y, *z);
-      if (p.allFinite()) out.push_back(T_table_frame * p);
-    }
-  } catch (const std::runtime_error& e) {  // no such field
-    throw std::invalid_argument(what + ": " + e.what());
+  sensor_msgs::PointCloud2ConstIterator<float> x(cloud, "x"), y(cloud, "y"), z(cloud, "z");
+  for (size_t i = 0; i < object.measured_points; ++i, ++x, ++y, ++z) {
+    const Vec3 p(*x, *y, *z);
+    if (p.allFinite()) out.push_back(T_table_frame * p);
   }
   return out;
 }

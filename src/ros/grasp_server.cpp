@@ -141,6 +141,15 @@ bool GraspServer::placeRequest(const RankGrasps::Request& req, const ObjectArray
     if (scene.objects[k].id == req.target_id) *target = static_cast<int>(k);
     ids += (k ? ", " : "") + std::to_string(scene.objects[k].id);
   }
+  const geometry_msgs::Point& q = req.target_point.point;
+  if (req.target_point.header.frame_id.empty() && (q.x != 0.0 || q.y != 0.0 || q.z != 0.0)) {
+    // Without a frame the point means nothing; ranking target_id instead would pick an object
+    // the caller did not name.
+    res.message =
+        "target_point has no header.frame_id: give the point's frame, or leave the point at 0 to "
+        "choose the target by target_id";
+    return false;
+  }
   if (!req.target_point.header.frame_id.empty()) {
     if (!nearestToPoint(req.target_point, scene, target, &res.message)) return false;
   } else if (*target < 0) {

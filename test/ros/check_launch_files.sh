@@ -54,6 +54,16 @@ expect "grasps.launch: 3 hypotheses from the C-VAE" 'perception/model: .*/simsta
   dump "$launch/grasps.launch"
 expect "grasps.launch hypotheses:=1: the config's model" 'perception/model: models/simstack_r32_fc.pt$' \
   dump "$launch/grasps.launch" hypotheses:=1
+# Another config keeps its own model and decompose_samples: the clutter profile's `fc` draws one
+# scene, and 3 hypotheses would stop it at start.
+expect "grasps.launch config:=clutter: its model" 'perception/model: models/simstack_r32_fc.pt$' \
+  dump "$launch/grasps.launch" config:="$source_dir/config/perception_clutter.yaml"
+if dump "$launch/grasps.launch" config:="$source_dir/config/perception_clutter.yaml" |
+  grep -q 'perception/decompose_samples'; then
+  echo "FAILED: grasps.launch config:=clutter sets decompose_samples"; status=1
+else
+  echo "ok: grasps.launch config:=clutter leaves decompose_samples to the config"
+fi
 expect "replay.launch decompose_samples:=3: the C-VAE" 'perception/model: .*/simstack_r32.pt$' \
   dump "$launch/replay.launch" decompose_samples:=3
 expect "grasps.launch image_transport:=compressedDepth reaches the node" \

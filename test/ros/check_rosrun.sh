@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # `rosrun simstack <node>` from a shell that sourced the devel space of the README's build
 # finds the package's nodes and tools (rosrun skips <package>/build/ itself; the build links
-# them from <package>/.rosrun), and `rosrun simstack perception_node` starts and says ready.
+# them from <package>/.rosrun), `rosrun simstack perception_node` starts and says ready, and when
+# it stops it takes the live settings it wrote back off the parameter server again (they would
+# override the config at the next start) while keeping what was set before it.
 # Usage: check_rosrun.sh BUILD_DIR
 set -e
 root=$(cd "$(dirname "$0")/../.." && pwd)
@@ -19,6 +21,7 @@ done
 rosrun simstack simstack_generate --help > /dev/null
 echo "rosrun simstack simstack_generate --help: exit 0"
 ros_session_start
+rosparam set /camera/perception/tf_timeout_s 0.5  # set before the start: kept
 ros_session_spawn "$ROS_HOME/node.log" rosrun simstack perception_node __ns:=camera
 if ! timeout 120 rostopic echo -n 1 /camera/perception/ready 2> /dev/null | grep -q "data: True"; then
   echo "rosrun simstack perception_node did not say ready within 120 s; its log:"
@@ -26,3 +29,14 @@ if ! timeout 120 rostopic echo -n 1 /camera/perception/ready 2> /dev/null | grep
   exit 1
 fi
 echo "rosrun simstack perception_node: ready"
+node_pid=${ROS_SESSION_PIDS[-1]}
+rosparam get /camera/perception/samples > /dev/null ||
+  { echo "the node wrote no ~samples back (dynamic_reconfigure)"; exit 1; }
+ros_session_kill "$node_pid"
+left=$(rosparam list /camera/perception)
+if [ "$left" != "/camera/perception/tf_timeout_s" ]; then
+  echo "after the node stopped, the parameter server holds under ~:"; echo "$left"
+  tail -20 "$ROS_HOME/node.log"
+  exit 1
+fi
+echo "rosrun simstack perception_node: stopped, its written-back settings removed, the user's kept"

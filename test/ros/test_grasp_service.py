@@ -112,6 +112,16 @@ class GraspService(unittest.TestCase):
         nowhere = copy.deepcopy(self.scene)
         nowhere.header.frame_id = ""
         self.expect_rejected(request(scene=nowhere), "frame_id")
+        frameless = request()
+        frameless.target_point.point.x = 0.1
+        self.expect_rejected(frameless, "target_point has no header.frame_id")
+        # A hand-built object whose surface cloud lacks the points measured_points announces.
+        hollow = copy.deepcopy(self.scene)
+        seen = max(hollow.objects, key=lambda o: o.measured_points)
+        self.assertGreater(seen.measured_points, 0)
+        seen.surface.point_step = 0
+        seen.surface.data = b""
+        self.expect_rejected(request(scene=hollow, target_id=seen.id), "surface cloud")
         res = self.rank(request())
         self.assertTrue(res.success, res.message)
         self.assertGreater(len(res.grasps), 0)

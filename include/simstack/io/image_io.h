@@ -54,7 +54,8 @@ Eigen::Vector3f instanceColour(int k);
 struct ViewDescription {
   PinholeCamera camera;
   Transform T_table_camera = Transform::Identity();
-  double depth_scale_m = 0.001;
+  /// Metres per unit of the 16-bit depth PNG the file describes; absent: millimetres.
+  std::optional<double> depth_scale_m;
 };
 void writeViewYaml(const std::string& path, const ViewDescription& view);
 ViewDescription readViewYaml(const std::string& path);

@@ -7,6 +7,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <set>
 #include <string>
 
 namespace simstack {
@@ -17,6 +18,11 @@ YAML::Node loadYamlFile(const std::string& path, const std::string& what);
 /// The same for text; `source` names it in the error.
 YAML::Node parseYamlText(const std::string& text, const std::string& what,
                          const std::string& source);
+
+/// Throws std::runtime_error "<path>: unknown key '<key>' in <where>" for the first key of `map`
+/// that is none of `known`: a misspelt field is an error, not a default silently kept.
+void requireKnownKeys(const YAML::Node& map, const std::set<std::string>& known,
+                      const std::string& where, const std::string& path);
 
 /// `text` (YAML with comments) with its top-level section `key` (the line `key:` down to the
 /// next top-level key, less the comments and blank lines just above that, plus the comments

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <set>
 #include <stdexcept>
 #include <utility>
 
@@ -242,7 +243,7 @@ void writeViewYaml(const std::string& path, const ViewDescription& view) {
       << "fx" << YAML::Value << view.camera.fx << YAML::Key << "fy" << YAML::Value << view.camera.fy
       << YAML::Key << "cx" << YAML::Value << view.camera.cx << YAML::Key << "cy" << YAML::Value
       << view.camera.cy << YAML::EndMap;
-  out << YAML::Key << "depth_scale_m" << YAML::Value << view.depth_scale_m;
+  if (view.depth_scale_m) out << YAML::Key << "depth_scale_m" << YAML::Value << *view.depth_scale_m;
   out << YAML::Key << "T_table_camera" << YAML::Value << YAML::BeginMap;
   out << YAML::Key << "translation" << YAML::Value << YAML::Flow << YAML::BeginSeq << t.x() << t.y()
       << t.z() << YAML::EndSeq;
@@ -260,6 +261,12 @@ void writeViewYaml(const std::string& path, const ViewDescription& view) {
 ViewDescription readViewYaml(const std::string& path) {
   ViewDescription view;
   const YAML::Node n = loadYamlFile(path, "view description");
+  requireKnownKeys(n, {"width", "height", "intrinsics", "depth_scale_m", "T_table_camera"},
+                   "the view description", path);
+  if (n["intrinsics"].IsMap())
+    requireKnownKeys(n["intrinsics"], {"fx", "fy", "cx", "cy"}, "intrinsics", path);
+  if (n["T_table_camera"].IsMap())
+    requireKnownKeys(n["T_table_camera"], {"translation", "rotation_xyzw"}, "T_table_camera", path);
   try {
     view.camera.width = n["width"].as<int>();
     view.camera.height = n["height"].as<int>();
@@ -267,7 +274,11 @@ ViewDescription readViewYaml(const std::string& path) {
     view.camera.fy = n["intrinsics"]["fy"].as<double>();
     view.camera.cx = n["intrinsics"]["cx"].as<double>();
     view.camera.cy = n["intrinsics"]["cy"].as<double>();
-    if (n["depth_scale_m"]) view.depth_scale_m = n["depth_scale_m"].as<double>();
+    if (n["depth_scale_m"]) {
+      view.depth_scale_m = n["depth_scale_m"].as<double>();
+      if (!(*view.depth_scale_m > 0.0 && std::isfinite(*view.depth_scale_m)))
+        throw std::runtime_error("depth_scale_m must be a positive number of metres per unit");
+    }
     const auto t = n["T_table_camera"]["translation"].as<std::vector<double>>();
     const auto q = n["T_table_camera"]["rotation_xyzw"].as<std::vector<double>>();
     if (t.size() != 3 || q.size() != 4)

@@ -38,16 +38,6 @@ std::vector<double> seq(const YAML::Node& n, size_t size, const std::string& wha
   return v;
 }
 
-/// Throws naming the key of `map` that is none of `known`.
-void requireKnownKeys(const YAML::Node& map, const std::set<std::string>& known,
-                      const std::string& where, const std::string& path) {
-  for (const auto& kv : map) {
-    const std::string key = kv.first.as<std::string>();
-    if (!known.count(key))
-      throw std::runtime_error(path + ": unknown key '" + key + "' in " + where);
-  }
-}
-
 }  // namespace
 
 void writeSuperquadricsYaml(const std::string& path, const std::vector<SuperquadricShape>& shapes,

@@ -118,4 +118,13 @@ void writeTopLevelSection(const std::string& path, const std::string& key,
   staged.commit();
 }
 
+void requireKnownKeys(const YAML::Node& map, const std::set<std::string>& known,
+                      const std::string& where, const std::string& path) {
+  for (const auto& kv : map) {
+    const std::string key = kv.first.as<std::string>();
+    if (!known.count(key))
+      throw std::runtime_error(path + ": unknown key '" + key + "' in " + where);
+  }
+}
+
 }  // namespace simstack

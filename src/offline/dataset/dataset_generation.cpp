@@ -52,6 +52,7 @@ void writeViews(const GenerationOptions& o, const fs::path& dir, int index, cons
     ViewDescription view;
     view.camera = camera;
     view.T_table_camera = sampleViewpoint(centre, ViewpointRange(), rng);
+    view.depth_scale_m = 0.001;  // writeDepthPng's millimetres
     const SensorNoiseConfig noise =
         o.noise ? SensorNoiseConfig::preset(o.sensor, seed + v) : SensorNoiseConfig();
     const RenderResult r = renderer.render(camera, view.T_table_camera, noise);
