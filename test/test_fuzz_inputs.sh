@@ -169,6 +169,10 @@ expect "decompose_samples: 10 with fc" "no latent code" "$reconstruct" --config 
 sed "s|model: models/|model: $pkg/models/|" "$pkg/config/perception.yaml" > "$dir/gamma.yaml"
 printf 'hough:\n  gamma: .nan\n' >> "$dir/gamma.yaml"
 expect "hough gamma .nan" "hough.gamma" "$reconstruct" --config "$dir/gamma.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
+sed "s|lambda_dist: [0-9.]*|lambda_dist: .inf|; s|model: models/|model: $pkg/models/|" \
+  "$pkg/config/perception.yaml" > "$dir/inf.yaml"
+expect "fitting lambda_dist .inf" "fitting.lambda_dist: .inf is not a finite number" "$reconstruct" \
+  --config "$dir/inf.yaml" --depth "$good" --intrinsics $K --output "$dir/o"
 sed "s|threads: 2 |threads: 1000|; s|model: models/|model: $pkg/models/|" "$pkg/config/perception.yaml" > "$dir/threads.yaml"
 succeed "threads: 1000 in a config (capped)" "$reconstruct" --config "$dir/threads.yaml" --depth "$good" --intrinsics $K --output "$dir/othreads"
 
@@ -221,6 +225,11 @@ grep -q "its last 1 are the validation" "$dir/out.txt" ||
   { echo "FAIL train on a small dataset: no note in:"; cat "$dir/out.txt"; fail=1; }
 expect "train again into a run without --resume" "holds a training run" "$bin/simstack_train" \
   --dataset "$dir/two.h5" --config "$train_config" --output "$dir/run_done" --steps 2
+mkdir -p "$dir/theirs" && touch "$dir/theirs/precious.txt"
+expect "train into a directory of other files" "holds no training run" "$bin/simstack_train" \
+  --dataset "$dir/two.h5" --config "$train_config" --output "$dir/theirs" --steps 2
+expect "train into the working directory" "working directory" "$bin/simstack_train" \
+  --dataset "$dir/two.h5" --config "$train_config" --output . --steps 2
 expect "train with a missing --ycb directory" "$dir/no_meshes" "$bin/simstack_train" \
   --dataset "$dir/two.h5" --config "$train_config" --output "$dir/run_ycb" --ycb "$dir/no_meshes"
 head -c 3000 "$dir/d.h5" > "$dir/cut.h5"
@@ -286,6 +295,21 @@ sed 's/^\(  steps:\).*/\1 abc/' "$train_config" > "$dir/steps.yaml"
 line=$(grep -n "steps: abc" "$dir/steps.yaml" | cut -d: -f1)
 expect "training config steps: abc" "line $line," "$bin/simstack_train" --dataset "$dir/two.h5" \
   --config "$dir/steps.yaml" --output "$dir/run_steps"
+
+# simstack_make_bag: values CLI11's ranges let through (nan), empty or equal frames, and a
+# failed run leaves no bag.
+for option in --distance --elevation --interval; do
+  expect "make_bag $option nan" "not a finite number" "$bin/simstack_make_bag" \
+    --output "$dir/nan.bag" "$option" nan
+done
+expect "make_bag with one frame for the table and the camera" "must differ" \
+  "$bin/simstack_make_bag" --output "$dir/same.bag" --table-frame cam --camera-frame cam
+[ ! -e "$dir/nan.bag" ] && [ ! -e "$dir/same.bag" ] || { echo "FAIL make_bag left a bag"; fail=1; }
+# An existing device, pipe or socket is not replaced by an output file.
+mkfifo "$dir/pipe"
+expect "generate --output naming a pipe" "not a regular file" "$bin/simstack_generate" \
+  --scenes 1 --seed 1 --output "$dir/pipe"
+[ -p "$dir/pipe" ] || { echo "FAIL generate replaced a pipe"; fail=1; }
 
 [ $fail -eq 0 ] && echo "fuzz corpus: every case handled"
 exit $fail

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <random>
 #include <tuple>
@@ -25,6 +26,7 @@
 #include "simstack/offline/piles/pile_generator.h"
 #include "simstack/offline/training/cvae_trainer.h"
 #include "simstack/offline/training/training_sample.h"
+#include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/tsdf/network_input.h"
 #include "simstack/tsdf/projective_tsdf.h"
@@ -843,6 +845,23 @@ TEST(Cvae, DamagedModelFilesAreRefusedByTheCheckThatFails) {
   // A card that names its version by the field's former name is told how to restamp it.
   std::ofstream(modelCardPath(path)) << "integrity:\n  sha256: " << m.sha256 << "\n  format: 1\n";
   EXPECT_NE(message(path).find("simstack_check_model --stamp"), std::string::npos) << message(path);
+  fs::remove(path);
+  fs::remove(modelCardPath(path));
+}
+
+// A file that is no model is not stamped: its card stays as it was, or is not created.
+TEST(ModelIntegrity, StampingADamagedFileLeavesTheCardAlone) {
+  const std::string path = tempPath("simstack_not_a_model.pt");
+  std::ofstream(path) << "not a model\n";
+  fs::remove(modelCardPath(path));
+  EXPECT_THROW(stampModel(path), std::runtime_error);
+  EXPECT_FALSE(fs::exists(modelCardPath(path)));
+  const std::string card = "samples: 3  # the user's card\n";
+  std::ofstream(modelCardPath(path)) << card;
+  EXPECT_THROW(stampModel(path), std::runtime_error);
+  std::ifstream in(modelCardPath(path));
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()),
+            card);
   fs::remove(path);
   fs::remove(modelCardPath(path));
 }

@@ -48,6 +48,9 @@ expect_error "nan.yaml" --scene "$dir/nan.yaml" --target 7
 sed 's/exponents: \[20, 20, 20\], position: \[0, 0, 0.06\]/exponents: [0.5, 20, 20], position: [0, 0, 0.06]/' \
   "$dir/stack.yaml" > "$dir/low.yaml"
 expect_error "exponents" --scene "$dir/low.yaml" --target 7
+# An object beyond a workcell's reach (Embree refuses rays from 1e30 m) is named, not simulated.
+sed 's/position: \[0, 0, 0.06\]/position: [1e30, 0, 0.06]/' "$dir/stack.yaml" > "$dir/far.yaml"
+expect_error "m from the table's origin" --scene "$dir/far.yaml" --target 7
 expect_error "nope.yaml" --scene "$dir/nope.yaml" --target 0
 expect_error "pull-distance" --scene "$dir/stack.yaml" --target 7 --pull-distance 0
 echo "tool_rank_grasps ok"

@@ -47,6 +47,16 @@ grep -q "the model's setting ($dir/m.yaml)" "$dir/m.log" ||
   { echo "the pasted section was not read as the model's setting"; cat "$dir/m.log"; exit 1; }
 grep -q "paste its perception: section into $dir/m.yaml" "$dir/m.log" || { cat "$dir/m.log"; exit 1; }
 cmp -s "$dir/m.yaml" "$dir/m.orig" || { echo "the tool changed a model card"; exit 1; }
+# A model named by the config, not by --model, is an input too: an --output naming it or its
+# card is refused before the work.
+echo "model: $dir/m.pt" > "$dir/own.yaml"
+for target in m.pt m.yaml; do
+  if "$tune" --config "$dir/own.yaml" --dataset "$dir/val.h5" --output "$dir/$target" \
+    > /dev/null 2> "$dir/e_own"; then
+    echo "--output replaced the config's model file $target"; exit 1; fi
+  grep -q "is the input file .*$target" "$dir/e_own" || { cat "$dir/e_own"; exit 1; }
+done
+cmp -s "$dir/m.yaml" "$dir/m.orig" || { echo "the tool changed a model card"; exit 1; }
 # Several validation sets pool their views and each is scored on its own.
 "$generate" --scenes 2 --seed 10 --objects 5:6 --sizes 0.05:0.15 --output "$dir/val58.h5" > /dev/null
 "$tune" --dataset "$dir/val.h5" --dataset "$dir/val58.h5" --views 1 --threads 1 --refinement 5 \

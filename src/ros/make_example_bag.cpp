@@ -15,6 +15,8 @@
 #include <cstring>
 #include <iostream>
 
+#include "cli_checks.h"
+#include "simstack/io/staged_output.h"
 #include "simstack/offline/piles/pile_generator.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack_ros/conversions.h"
@@ -31,10 +33,10 @@ int main(int argc, char** argv) {
   CLI::App app{
       "Write a rosbag of one generated pile seen from a ring of viewpoints: depth images "
       "(16UC1, mm), camera_info and tf table -> camera, to replay into the perception node."};
-  app.add_option("--output", output, "bag file")->required();
+  app.add_option("--output", output, "bag file")->required()->check(WritablePath);
   app.add_option("--seed", seed, "pile seed (simstack_generate's scene seeds)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);  // "-1" would wrap to 2^64 - 1
+      ->check(SeedNumber);
   app.add_option("--views", views, "viewpoints on the ring")
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
@@ -43,12 +45,15 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 100));
   app.add_option("--interval", interval_s, "seconds between frames")
       ->capture_default_str()
+      ->check(FinitePositive)
       ->check(CLI::Range(0.01, 10.0));
   app.add_option("--distance", distance_m, "camera distance from the pile's centre (m)")
       ->capture_default_str()
+      ->check(FinitePositive)
       ->check(CLI::Range(0.3, 3.0));
   app.add_option("--elevation", elevation_deg, "camera elevation above the table (degrees)")
       ->capture_default_str()
+      ->check(FinitePositive)
       ->check(CLI::Range(5.0, 90.0));
   app.add_option("--camera", camera_ns, "camera namespace of the topics")->capture_default_str();
   app.add_option("--table-frame", table_frame, "tf frame of the table")->capture_default_str();
@@ -56,12 +61,19 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--noise,!--no-noise", noise, "Kinect-like sensor noise (on by default)");
   CLI11_PARSE(app, argc, argv);
+  if (camera_ns.empty() || table_frame.empty() || camera_frame.empty() ||
+      table_frame == camera_frame) {
+    std::cerr << "simstack_make_bag: error: --camera, --table-frame and --camera-frame must not "
+                 "be empty, and the table and camera frames must differ\n";
+    return 105;  // as CLI11's refusals of an option's value
+  }
   try {
     const Scene scene = PileGenerator(PileConfig()).generate(seed).scene;
     const DepthRenderer renderer(scene);
     const Vec3 centre = scene.surfaceCentroid();
     const PinholeCamera camera;
-    rosbag::Bag bag(output, rosbag::bagmode::Write);
+    StagedFile staged(output);  // an earlier bag stays whole until this one is
+    rosbag::Bag bag(staged.path(), rosbag::bagmode::Write);
     bag.setCompression(rosbag::compression::BZ2);
     const double elevation = elevation_deg * M_PI / 180.0;
     int frame = 0;
@@ -93,6 +105,7 @@ int main(int argc, char** argv) {
       }
     }
     bag.close();
+    staged.commit();
     std::cout << "wrote " << frame << " frames (" << views << " viewpoints, "
               << scene.objects.size() << " objects, seed " << seed << ") to " << output << "\n";
     return 0;

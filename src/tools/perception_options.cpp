@@ -53,7 +53,12 @@ PerceptionOptions::PerceptionOptions(CLI::App& app, Which which) {
 
 std::vector<std::string> PerceptionOptions::inputFiles() const {
   std::vector<std::string> files{config_path_};
-  for (const std::string& m : models_) {
+  std::vector<std::string> models = models_;
+  if (models.empty()) {  // the config's own model, which an --output could replace as well
+    const std::string model = loadPerceptionYaml(config_path_, packageDir(), "").model_path;
+    if (!model.empty()) models.push_back(model);
+  }
+  for (const std::string& m : models) {
     files.push_back(m);
     files.push_back(modelCardPath(m));
   }

@@ -50,8 +50,8 @@ class PerceptionOptions {
   std::vector<PerceptionConfig> configs() const;
   /// The first of configs().
   PerceptionConfig config() const { return configs().front(); }
-  /// The files named by --config and --model (with the models' cards), for outputs to be
-  /// checked against.
+  /// The files named by --config and --model, or without --model the config's own model, with
+  /// the models' cards: for outputs to be checked against.
   std::vector<std::string> inputFiles() const;
 
  private:

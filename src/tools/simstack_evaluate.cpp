@@ -140,7 +140,8 @@ void addViewOptions(CLI::App& app, EvaluationOptions* o, std::string* intrinsics
   addSensorOption(app, &o->sensor, "with --noise, ")->needs(noise_flag);
   app.add_option("--chamfer-points", o->chamfer_points, "surface samples per Chamfer set")
       ->capture_default_str()
-      ->check(FinitePositive);
+      ->check(FinitePositive)
+      ->check(CLI::Range(1, 1000000));
   app.add_option("--seen-pixels", o->seen_pixels,
                  "a true object counts as seen from this many valid pixels of the view "
                  "(count_exact_seen in the summary: the count against the objects seen)")

@@ -158,6 +158,18 @@ int main(int argc, char** argv) {
       throw std::runtime_error(o.output +
                                " holds a training run: --resume continues it; another --output "
                                "(or removing it) starts afresh");
+    // A run writes its files into --output beside whatever is there: the user's files, or the
+    // working directory, are not a place for them.
+    std::error_code ec;
+    if (pathHolds(o.output, std::filesystem::current_path(ec).string()))
+      throw std::runtime_error(o.output +
+                               " is the working directory or holds it: name a directory inside "
+                               "it, e.g. ./run");
+    if (!o.resume && std::filesystem::is_directory(o.output) &&
+        !std::filesystem::is_empty(o.output, ec))
+      throw std::runtime_error(o.output +
+                               " is not empty and holds no training run: choose another "
+                               "directory, or empty it");
     std::string command;
     for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
     CvaeTrainer trainer(o.datasets, model, training, o.output, command, o.mesh_dir);

@@ -141,9 +141,13 @@ double sceneBottom(const std::vector<SuperquadricShape>& scene);
 /// Objects in a scene the grasp simulation accepts at most (a pile's labels are 8-bit).
 constexpr size_t kMaxGraspSceneObjects = 255;
 
+/// Farthest an object of a simulated scene may lie from the table frame's origin (m).
+constexpr double kMaxGraspSceneReachM = 100.0;
+
 /// A scene that the grasp simulation accepts: at most kMaxGraspSceneObjects objects, finite
-/// poses with unit rotations, semi-axes in (0, 1] m and exponents in [1, 200]. Empty string
-/// when valid, else what is wrong, naming the object by its index.
+/// poses with unit rotations within kMaxGraspSceneReachM of the origin, semi-axes in (0, 1] m
+/// and exponents in [1, 200]. Empty string when valid, else what is wrong, naming the object by
+/// its index.
 std::string checkScene(const std::vector<SuperquadricShape>& scene);
 
 }  // namespace simstack

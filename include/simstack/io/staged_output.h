@@ -40,7 +40,8 @@ class StagedDirectory {
   bool committed_ = false;
 };
 
-/// One file: commit() renames it onto the target.
+/// One file: commit() renames it onto the target. A target that exists and is not a regular
+/// file (a directory, a device, a pipe) is refused at construction.
 class StagedFile {
  public:
   explicit StagedFile(const std::string& target);

@@ -178,7 +178,8 @@ ModelSelfTest runModelSelfTest(const std::string& model_path);
 ModelSelfTest checkModel(const std::string& model_path);
 /// Records the model file's SHA-256, format and self-test in its card's `integrity:` section
 /// (after training, or after replacing the file on purpose) and returns them; the weights must
-/// be finite. std::runtime_error naming the file when it cannot be read or the card written.
+/// be finite. std::runtime_error naming the file when it cannot be read, fails to load or the
+/// card cannot be written; the card is then left as it was.
 ModelIntegrity stampModel(const std::string& model_path);
 
 }  // namespace simstack

@@ -162,6 +162,12 @@ std::string checkScene(const std::vector<SuperquadricShape>& scene) {
         (sq.exponents.array() > 200.0).any())
       return name + "exponents must be finite and in [1, 200]";
     if (!sq.T_table_object.matrix().allFinite()) return name + "pose is not finite";
+    // Beyond a workcell's reach the physics and the ray casts lose their precision (Embree
+    // refuses a ray from 1e30 m).
+    const double from_origin = sq.T_table_object.translation().norm();
+    if (from_origin > kMaxGraspSceneReachM)
+      return name + "lies " + std::to_string(from_origin) + " m from the table's origin; at most " +
+             std::to_string(static_cast<int>(kMaxGraspSceneReachM)) + " m is simulated";
     const Mat3 R = sq.T_table_object.linear();
     if (!(R.transpose() * R).isIdentity(1e-6) || !(std::abs(R.determinant() - 1.0) < 1e-6))
       return name + "orientation is not a rotation";

@@ -261,6 +261,9 @@ void writeViewYaml(const std::string& path, const ViewDescription& view) {
 ViewDescription readViewYaml(const std::string& path) {
   ViewDescription view;
   const YAML::Node n = loadYamlFile(path, "view description");
+  if (!n.IsMap())
+    throw std::runtime_error("cannot read view description " + path +
+                             ": it holds no map of width, height, intrinsics and T_table_camera");
   requireKnownKeys(n, {"width", "height", "intrinsics", "depth_scale_m", "T_table_camera"},
                    "the view description", path);
   if (n["intrinsics"].IsMap())

@@ -130,6 +130,13 @@ void StagedDirectory::commit() {
 StagedFile::StagedFile(const std::string& target) {
   const fs::path t = parentOf(target);
   if (fs::is_directory(t)) throw std::runtime_error(target + " is a directory");
+  // The rename would put a regular file in place of a device, a pipe or a socket.
+  std::error_code ec;
+  const fs::file_status status = fs::status(t, ec);
+  if (!ec && fs::exists(status) && !fs::is_regular_file(status))
+    throw std::runtime_error(target +
+                             " exists and is not a regular file (a device, a pipe or a "
+                             "socket): give the path of a file");
   target_ = t.string();
   staged_ = target_ + ".partial-" + std::to_string(getpid());
   std::ofstream probe(staged_);  // an unwritable place fails now, not after the work

@@ -2,9 +2,11 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
 #include <filesystem>
 #include <set>
 #include <stdexcept>
+#include <type_traits>
 
 #include "simstack/io/yaml_file.h"
 #include "simstack/render/depth_renderer.h"
@@ -21,6 +23,10 @@ void get(const YAML::Node& n, const char* key, T* value, const std::string& pref
   } catch (const YAML::Exception& e) {
     throw std::invalid_argument("field '" + prefix + key + "': " + e.what());
   }
+  if constexpr (std::is_same_v<T, double>)
+    if (!std::isfinite(*value))
+      throw std::invalid_argument("field '" + prefix + key + "': " + n[key].Scalar() +
+                                  " is not a finite number");
 }
 
 YAML::Node parse(const std::string& text, const std::string& section) {

@@ -4,9 +4,11 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <filesystem>
 #include <set>
 #include <stdexcept>
+#include <type_traits>
 
 #include "simstack/io/yaml_file.h"
 
@@ -153,11 +155,18 @@ void readFields(const YAML::Node& n, const std::string& prefix, C* c, Fields fie
                 const std::string& path) {
   fields(*c, [&](const char* key, auto& value) {
     if (!n[key]) return;
+    using Value = std::remove_reference_t<decltype(value)>;
     try {
-      value = n[key].as<std::remove_reference_t<decltype(value)>>();
+      value = n[key].as<Value>();
     } catch (const YAML::Exception& e) {
       throw std::runtime_error(path + ": " + prefix + key + ": " + e.what());
     }
+    // No number field means anything at infinity or NaN (the workspace's box, a list, may
+    // be unbounded).
+    if constexpr (std::is_same_v<Value, double>)
+      if (!std::isfinite(value))
+        throw std::runtime_error(path + ": " + prefix + key + ": " + n[key].Scalar() +
+                                 " is not a finite number");
   });
 }
 

@@ -3,8 +3,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <limits>
 #include <map>
+#include <optional>
 #include <random>
 #include <stdexcept>
 #include <thread>
@@ -430,8 +434,11 @@ void validate(const PerceptionConfig& config, bool latent) {
     throw std::invalid_argument("decompose_samples must lie in [0, " +
                                 std::to_string(most_decomposed) + (latent ? " (samples)" : "") +
                                 "], not " + std::to_string(config.decompose_samples));
-  if (config.points_per_instance < 10)
-    throw std::invalid_argument("points_per_instance must be >= 10");
+  // Each instance's points are sampled, fitted and published: a million would hold a frame for
+  // minutes and could exhaust the memory.
+  if (config.points_per_instance < 10 || config.points_per_instance > 100000)
+    throw std::invalid_argument("points_per_instance must lie in [10, 100000], not " +
+                                std::to_string(config.points_per_instance));
   if (config.min_instance_points < 0)
     throw std::invalid_argument("min_instance_points must be >= 0, not " +
                                 std::to_string(config.min_instance_points));
@@ -821,14 +828,33 @@ ModelSelfTest checkModel(const std::string& model_path) {
 }
 
 ModelIntegrity stampModel(const std::string& model_path) {
+  // The card keeps what it had until the model has loaded and passed its self-test: a damaged
+  // or foreign file is not stamped as good.
+  const std::string card = modelCardPath(model_path);
+  if (std::filesystem::is_directory(card))
+    throw std::runtime_error(card + " (the card of " + model_path + ") is a directory");
+  std::optional<std::string> before;
+  if (std::ifstream in{card, std::ios::binary})
+    before = std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
   ModelIntegrity m;
   m.sha256 = sha256OfFile(model_path);
   m.format_version = modelFormatVersion();
-  writeModelIntegrity(model_path, m);  // the hash first: the self-test loads through its check
-  const ModelSelfTest t = runModelSelfTest(model_path);
-  m.self_test_objects = t.objects;
-  m.self_test_occupied_voxels = t.occupied_voxels;
-  writeModelIntegrity(model_path, m);
+  try {
+    writeModelIntegrity(model_path, m);  // the hash first: the self-test loads through its check
+    const ModelSelfTest t = runModelSelfTest(model_path);
+    m.self_test_objects = t.objects;
+    m.self_test_occupied_voxels = t.occupied_voxels;
+    writeModelIntegrity(model_path, m);
+  } catch (...) {
+    std::error_code ec;
+    if (!before) {
+      std::filesystem::remove(card, ec);
+    } else {
+      std::ofstream out(card, std::ios::binary | std::ios::trunc);
+      out << *before;
+    }
+    throw;
+  }
   return m;
 }
 
