@@ -5,6 +5,7 @@
 #include <pcl/segmentation/lccp_segmentation.h>
 #include <pcl/segmentation/supervoxel_clustering.h>
 #include <Eigen/Eigenvalues>
+#include <opencv2/imgproc.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -57,35 +58,34 @@ Image<uint8_t> concaveCreases(const DepthImage& depth, const PinholeCamera& came
   const int w = depth.width, h = depth.height;
   Image<uint8_t> out(w, h, 0);
   if (config.crease_angle_deg <= 0.0 || w == 0 || h == 0) return out;
-  // Summed-area tables of the valid camera-frame points and of their count.
-  const size_t W = static_cast<size_t>(w) + 1;
-  std::vector<Vec3> sum(W * (h + 1), Vec3::Zero());
-  std::vector<int> count(W * (h + 1), 0);
+  // Sums of the valid camera-frame points and their count over each window (OpenCV's box
+  // filter; beyond the image counts as missing).
+  cv::Mat points(h, w, CV_64FC3, cv::Scalar::all(0.0)), valid(h, w, CV_64F, cv::Scalar(0.0));
   for (int v = 0; v < h; ++v)
     for (int u = 0; u < w; ++u) {
       const float d = depth.at(u, v);
-      const bool valid = validDepth(d);
-      const size_t i = (v + 1) * W + u + 1;
-      sum[i] = (valid ? camera.backproject(u, v, d) : Vec3::Zero()) + sum[i - W] + sum[i - 1] -
-               sum[i - W - 1];
-      count[i] = valid + count[i - W] + count[i - 1] - count[i - W - 1];
+      if (!validDepth(d)) continue;
+      const Vec3 p = camera.backproject(u, v, d);
+      points.at<cv::Vec3d>(v, u) = cv::Vec3d(p.x(), p.y(), p.z());
+      valid.at<double>(v, u) = 1.0;
     }
+  const int side = config.crease_window_px;
+  cv::Mat sums, counts;
+  cv::boxFilter(points, sums, -1, cv::Size(side, side), cv::Point(-1, -1), false,
+                cv::BORDER_CONSTANT);
+  cv::boxFilter(valid, counts, -1, cv::Size(side, side), cv::Point(-1, -1), false,
+                cv::BORDER_CONSTANT);
   // The averaged surface where at least half of a full window is measured (and, with depth
   // steps, where it stays on the pixel's own surface).
   const double ratio = config.depth_jump_ratio;
-  const int r = config.crease_window_px / 2;
   std::vector<Vec3> mean(static_cast<size_t>(w) * h, Vec3::Zero());
   std::vector<char> has_mean(mean.size(), 0);
   for (int v = 0; v < h; ++v)
     for (int u = 0; u < w; ++u) {
-      if (!validDepth(depth.at(u, v))) continue;
-      const int u0 = std::max(u - r, 0), u1 = std::min(u + r, w - 1) + 1;
-      const int v0 = std::max(v - r, 0), v1 = std::min(v + r, h - 1) + 1;
-      const int n =
-          count[v1 * W + u1] - count[v0 * W + u1] - count[v1 * W + u0] + count[v0 * W + u0];
-      if (2 * n < config.crease_window_px * config.crease_window_px) continue;
-      const Vec3 m =
-          (sum[v1 * W + u1] - sum[v0 * W + u1] - sum[v1 * W + u0] + sum[v0 * W + u0]) / n;
+      const double n = counts.at<double>(v, u);
+      if (!validDepth(depth.at(u, v)) || 2.0 * n < side * side) continue;
+      const cv::Vec3d sum = sums.at<cv::Vec3d>(v, u);
+      const Vec3 m = Vec3(sum[0], sum[1], sum[2]) / n;
       // A window across a depth step averages two surfaces into a slope that is on neither.
       if (ratio > 0.0 && std::fabs(m.z() - depth.at(u, v)) > ratio * depth.at(u, v)) continue;
       mean[v * w + u] = m;
