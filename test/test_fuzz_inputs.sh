@@ -78,6 +78,8 @@ data[16:24] = struct.pack(">II", 100000, 100000)
 open(sys.argv[2], "wb").write(data)
 PY
 expect "PNG header claiming 100000x100000" "100000x100000" "$reconstruct" --depth "$dir/claims_huge.png" --intrinsics $K --output "$dir/o"
+expect "mask PNG header claiming 100000x100000" "claims_huge.png: 100000x100000" "$reconstruct" \
+  --depth "$good" --intrinsics $K --mask "$dir/claims_huge.png" --output "$dir/o"
 
 # Peak memory (maximum resident set, kB) of a run, whatever it ends with.
 peak_kb() {

@@ -28,6 +28,8 @@ DepthImage readDepthImage(const std::string& path,
                           std::optional<double> depth_scale_m = std::nullopt);
 /// 8-bit PNG of an instance mask.
 void writeMaskPng(const std::string& path, const InstanceImage& mask);
+/// Reads one; std::runtime_error naming the file for anything but a one-channel 8-bit image and
+/// for a side over kMaxDepthImageSide (checked from the header, before decoding).
 InstanceImage readMaskPng(const std::string& path);
 /// 16-bit PNG of pixel labels: 0 none, k + 1 instance k (`instances` -1 none, k >= 0).
 /// std::invalid_argument for an instance above 65534.

@@ -134,7 +134,19 @@ void writeLabelsPng(const std::string& path, const Image<int>& instances) {
 }
 
 InstanceImage readMaskPng(const std::string& path) {
-  const cv::Mat m = cv::imread(path, cv::IMREAD_UNCHANGED);
+  // As large as a depth image at most: the mask is compared with one pixel for pixel.
+  const auto [width, height] = declaredSize(path);
+  if (width > static_cast<uint32_t>(kMaxDepthImageSide) ||
+      height > static_cast<uint32_t>(kMaxDepthImageSide))
+    throw std::runtime_error(path + ": " + std::to_string(width) + "x" + std::to_string(height) +
+                             " is larger than a mask can be here (" +
+                             std::to_string(kMaxDepthImageSide) + " pixels a side)");
+  cv::Mat m;
+  try {
+    m = cv::imread(path, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    throw std::runtime_error("cannot read an 8-bit mask from " + path + ": " + e.what());
+  }
   if (m.empty() || m.type() != CV_8UC1)
     throw std::runtime_error("cannot read an 8-bit mask from " + path);
   InstanceImage mask(m.cols, m.rows, 0);
