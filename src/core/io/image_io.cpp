@@ -76,16 +76,21 @@ std::pair<uint32_t, uint32_t> declaredSize(const std::string& path) {
   return {width, height};
 }
 
-}  // namespace
-
-DepthImage readDepthImage(const std::string& path, std::optional<double> depth_scale) {
-  const double depth_scale_m = depth_scale.value_or(0.001);
+/// Throws naming the file when its header declares a side over kMaxDepthImageSide.
+void requireDeclaredSide(const std::string& path, const std::string& what) {
   const auto [width, height] = declaredSize(path);
   if (width > static_cast<uint32_t>(kMaxDepthImageSide) ||
       height > static_cast<uint32_t>(kMaxDepthImageSide))
     throw std::runtime_error(path + ": " + std::to_string(width) + "x" + std::to_string(height) +
-                             " is larger than a depth image can be here (" +
+                             " is larger than " + what + " can be here (" +
                              std::to_string(kMaxDepthImageSide) + " pixels a side)");
+}
+
+}  // namespace
+
+DepthImage readDepthImage(const std::string& path, std::optional<double> depth_scale) {
+  const double depth_scale_m = depth_scale.value_or(0.001);
+  requireDeclaredSide(path, "a depth image");
   const cv::Mat m = cv::imread(path, cv::IMREAD_UNCHANGED);
   if (m.empty()) throw std::runtime_error("cannot read a depth image from " + path);
   if (m.channels() != 1)
@@ -134,13 +139,7 @@ void writeLabelsPng(const std::string& path, const Image<int>& instances) {
 }
 
 InstanceImage readMaskPng(const std::string& path) {
-  // As large as a depth image at most: the mask is compared with one pixel for pixel.
-  const auto [width, height] = declaredSize(path);
-  if (width > static_cast<uint32_t>(kMaxDepthImageSide) ||
-      height > static_cast<uint32_t>(kMaxDepthImageSide))
-    throw std::runtime_error(path + ": " + std::to_string(width) + "x" + std::to_string(height) +
-                             " is larger than a mask can be here (" +
-                             std::to_string(kMaxDepthImageSide) + " pixels a side)");
+  requireDeclaredSide(path, "a mask");  // it is compared with a depth image pixel for pixel
   cv::Mat m;
   try {
     m = cv::imread(path, cv::IMREAD_UNCHANGED);
