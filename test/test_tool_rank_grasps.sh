@@ -53,4 +53,7 @@ sed 's/position: \[0, 0, 0.06\]/position: [1e30, 0, 0.06]/' "$dir/stack.yaml" > 
 expect_error "m from the table's origin" --scene "$dir/far.yaml" --target 7
 expect_error "nope.yaml" --scene "$dir/nope.yaml" --target 0
 expect_error "pull-distance" --scene "$dir/stack.yaml" --target 7 --pull-distance 0
+# CLI11's ranges let nan through: the option is named, not the scene file.
+expect_error "--pull-distance: 'nan' is not a finite number" --scene "$dir/stack.yaml" --target 7 \
+  --pull-distance nan
 echo "tool_rank_grasps ok"

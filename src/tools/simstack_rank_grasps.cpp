@@ -74,15 +74,19 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 1024));
   app.add_option("--pull-distance", config.pull.pull_distance_m, "metres along the approach")
       ->capture_default_str()
+      ->check(FinitePositive)
       ->check(CLI::Range(1e-3, 1.0));
   app.add_option("--pull-speed", config.pull.pull_speed_mps, "metres per second")
       ->capture_default_str()
+      ->check(FinitePositive)
       ->check(CLI::Range(1e-3, 2.0));
   app.add_option("--max-force", config.pull.max_force_n, "newtons the seal holds")
       ->capture_default_str()
+      ->check(FinitePositive)
       ->check(CLI::Range(0.1, 1000.0));
   app.add_option("--cup-radius", config.candidates.cup_radius_m, "metres")
       ->capture_default_str()
+      ->check(FinitePositive)
       ->check(CLI::Range(0.002, 0.1));
   app.add_option("--threads", config.threads, "threads simulating pulls (0: all cores)")
       ->capture_default_str()
@@ -103,6 +107,7 @@ int main(int argc, char** argv) {
   app.add_option("--pregrasp-distance", pregrasp_m,
                  "metres the pre-grasp pose in grasps.json stands back from the contact")
       ->capture_default_str()
+      ->check(FiniteNonNegative)
       ->check(CLI::Range(0.0, 1.0));
   app.add_option("--output", output, "directory for grasps.json and grasps.png (created)")
       ->check(WritablePath);
