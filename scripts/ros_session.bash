@@ -81,6 +81,14 @@ ros_session_wait_topic() {  # ros_session_wait_topic TOPIC SECONDS
   timeout "$2" rostopic echo -n 1 --noarr "$1" > /dev/null 2>&1
 }
 
+# rviz now and then aborts while it starts under software GL (a heap corruption inside rviz
+# itself). Prints the launch log's line saying so when it did.
+ros_session_rviz_died() {  # ros_session_rviz_died LAUNCH_LOG
+  local line
+  line=$(grep -m1 "simstack_rviz-[0-9]*\] process has died" "$1") || return 1
+  printf '%s\n' "$line" | sed 's/\x1b\[[0-9;]*m//g'  # without roslaunch's colours
+}
+
 ros_session_screenshot() {  # ros_session_screenshot FILE.png
   xwd -root -silent | convert xwd:- "$1"
 }

@@ -12,19 +12,34 @@ ROS_SESSION_REMOVE_HOME=1
 ros_session_start
 ros_session_xvfb
 # Played once: after the last frame its markers stay in rviz (a looping bag makes rviz reset
-# whenever simulated time jumps back).
-ros_session_spawn "$ROS_HOME/replay.log" roslaunch simstack replay.launch rviz:=true
-if ! ros_session_wait_topic /camera/perception/markers 120; then
-  echo "no markers within 120 s"; tail -30 "$ROS_HOME/replay.log"; exit 1
-fi
-sleep 12  # the rest of the bag; rviz draws with software GL
+# whenever simulated time jumps back). An rviz that aborts while it starts (rviz's own fault, see
+# ros_session_rviz_died) gets the whole replay again, at most three times, each one reported.
+replay() {
+  local attempt died
+  for attempt in 1 2 3; do
+    ros_session_spawn "$ROS_HOME/replay.log" roslaunch simstack replay.launch rviz:=true
+    local launch=${ROS_SESSION_PIDS[-1]}
+    if ! ros_session_wait_topic /camera/perception/markers 120; then
+      echo "no markers within 120 s"; tail -30 "$ROS_HOME/replay.log"; return 1
+    fi
+    sleep 12  # the rest of the bag; rviz draws with software GL
+    died=$(ros_session_rviz_died "$ROS_HOME/replay.log") || return 0
+    echo "rviz aborted in replay $attempt: $died"
+    ros_session_kill "$launch"
+  done
+  echo "rviz aborted in three replays"; return 1
+}
+replay
 shot=$ROS_HOME/rviz.png
 check() {
 /usr/bin/python3 - "$shot" <<'PY'
 import sys
 import matplotlib.image as mpimg
 import numpy as np
-img = mpimg.imread(sys.argv[1])[:, :, :3]
+img = mpimg.imread(sys.argv[1])
+if img.ndim != 3:
+    sys.exit("the screenshot has no colour at all: no rviz window on the display")
+img = img[:, :, :3]
 if img.dtype != np.float32:
     img = img.astype(np.float32) / 255.0
 # The render area (right of the panels); the objects' colours (io/image_io.cpp instanceColour)
