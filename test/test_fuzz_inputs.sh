@@ -267,11 +267,21 @@ expect "evaluate --output naming its --dataset" "is the input file" "$bin/simsta
 cmp -s "$dir/two.h5" "$dir/keep.h5" || { echo "FAIL evaluate: the dataset was replaced"; fail=1; }
 expect "evaluate --summary naming --output" "is the input file" "$bin/simstack_evaluate" \
   --dataset "$dir/keep.h5" --output "$dir/same.json" --summary "$dir/same.json" --scenes 1
+expect "evaluate --summary empty" "path is empty" "$bin/simstack_evaluate" \
+  --dataset "$dir/keep.h5" --output "$dir/s.json" --summary "" --scenes 1
+expect "generate --views-dir empty" "path is empty" "$bin/simstack_generate" --scenes 1 \
+  --views 1 --views-dir "" --output "$dir/v.h5"
+expect "generate --extent 1e30" "extent" "$bin/simstack_generate" --scenes 1 --extent 1e30 \
+  --output "$dir/v.h5"
 expect "tune_hough --output naming its --dataset" "is the input file" "$bin/simstack_tune_hough" \
   --dataset "$dir/keep.h5" --output "$dir/keep.h5"
 expect "evaluate_grasps --output naming the model's card" "is the input file" \
   "$bin/simstack_evaluate_grasps" --dataset "$dir/keep.h5" --model "$dir/bad_card.pt" \
   --output "$dir/bad_card.yaml"
+mkdir -p "$dir/dircard/m.yaml"
+cp "$pkg/models/simstack_r32_fc.pt" "$dir/dircard/m.pt"
+expect "check_model with a directory as card" "it is a directory" "$bin/simstack_check_model" \
+  "$dir/dircard/m.pt"
 expect "tune_hough --refinement 100" "refinement" "$bin/simstack_tune_hough" \
   --dataset "$dir/keep.h5" --output "$dir/hough.yaml" --refinement 100
 expect "tune_hough --bandwidth nan" "bandwidth" "$bin/simstack_tune_hough" \

@@ -170,7 +170,8 @@ int main(int argc, char** argv) {
                  "P/R/F, %75 and object counts, overall and by mOSD category")
       ->check(CLI::ExistingDirectory);
   app.add_option("--output", output, "results JSON (every view)")->required()->check(WritablePath);
-  app.add_option("--summary", summary, "also a small JSON: per method its means and bins");
+  app.add_option("--summary", summary, "also a small JSON: per method its means and bins")
+      ->check(WritablePath);
   addViewOptions(app, &o, &intrinsics);
   app.add_option("--ycb", mesh_dir, "mesh directory for YCB datasets")
       ->check(CLI::ExistingDirectory);

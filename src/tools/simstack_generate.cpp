@@ -95,14 +95,15 @@ int main(int argc, char** argv) {
                "one stack (real tables)");
   app.add_option("--views", o.views, "rendered views per scene written beside the dataset")
       ->check(FiniteNonNegative);
-  app.add_option("--views-dir", o.views_dir, "where views go (default: <output stem>_views/)");
+  app.add_option("--views-dir", o.views_dir, "where views go (default: <output stem>_views/)")
+      ->check(WritablePath);
   app.add_flag("--pictures", o.pictures,
                "also write colour depth and shaded PNG pictures of each view");
   CLI::Option* noise_flag = app.add_flag(
       "--noise", o.noise, "sensor noise and missing pixels in the rendered views (--sensor's)");
   addSensorOption(app, &o.sensor, "with --noise, ")->needs(noise_flag);
-  app.add_option("--extent", o.extent_m, "scene grid side in metres")
-      ->check(FinitePositive)
+  app.add_option("--extent", o.extent_m, "scene grid side in metres (at most 10)")
+      ->check(FinitePositive & CLI::Range(0.0, 10.0))
       ->capture_default_str();
   app.add_option("--truncation-vox", o.truncation_vox, "TSDF truncation in voxels (at most 64)")
       ->check(FinitePositive & CLI::Range(0.0, 64.0))

@@ -1,5 +1,6 @@
 #include "simstack/io/yaml_file.h"
 
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <map>
@@ -55,6 +56,11 @@ YAML::Node checked(const std::string& what, const std::string& source, Parse par
 }  // namespace
 
 YAML::Node loadYamlFile(const std::string& path, const std::string& what) {
+  // A directory opens as a stream and fails only on reading, with libstdc++'s own words.
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw std::runtime_error("cannot read " + what + " " + path +
+                             ": it is a directory, not a YAML file");
   return checked(what, path, [&] { return YAML::LoadFile(path); });
 }
 
