@@ -9,6 +9,7 @@
 #include <pcl/segmentation/sac_segmentation.h>
 
 #include <Eigen/Dense>
+#include <opencv2/imgproc.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -377,20 +378,29 @@ bool nearImage(const PinholeCamera& camera, double u, double v, double margin) {
 /// stride-th pixel's, and the blocks close the gaps between them). 0 = none.
 std::vector<float> depthOfPoints(const Points3& points_table, const PinholeCamera& camera,
                                  const Transform& T_camera_table, int stride) {
-  std::vector<float> depth(static_cast<size_t>(camera.width) * camera.height, 0.0f);
-  const int half = std::max(1, stride) / 2;
+  // Each point's depth at its own pixel (the nearest where several fall), on an image padded by
+  // `half` so that points just outside still cover the pixels inside; a minimum filter over
+  // the blocks then spreads them. "None" is the largest float until the end.
+  const int half = std::max(1, stride) / 2, w = camera.width, h = camera.height;
+  constexpr float kNone = std::numeric_limits<float>::max();
+  cv::Mat1f centres(h + 2 * half, w + 2 * half, kNone);
   for (const Vec3& p : points_table) {
     const Vec3 c = T_camera_table * p;
     double u = 0, v = 0;
     if (!camera.project(c, &u, &v) || !nearImage(camera, u, v, half + 1)) continue;
-    const int cu = static_cast<int>(std::lround(u)), cv = static_cast<int>(std::lround(v));
-    for (int y = cv - half; y <= cv + half; ++y)
-      for (int x = cu - half; x <= cu + half; ++x) {
-        if (x < 0 || y < 0 || x >= camera.width || y >= camera.height) continue;
-        float& d = depth[static_cast<size_t>(y) * camera.width + x];
-        if (d == 0.0f || c.z() < d) d = static_cast<float>(c.z());
-      }
+    const long x = std::lround(u) + half, y = std::lround(v) + half;
+    if (x < 0 || y < 0 || x >= centres.cols || y >= centres.rows) continue;  // no block inside
+    float& d = centres(static_cast<int>(y), static_cast<int>(x));
+    d = std::min(d, static_cast<float>(c.z()));
   }
+  cv::Mat1f spread;
+  cv::erode(centres, spread, cv::Mat1b(2 * half + 1, 2 * half + 1, uchar{1}));
+  std::vector<float> depth(static_cast<size_t>(w) * h, 0.0f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float d = spread(y + half, x + half);
+      if (d != kNone) depth[static_cast<size_t>(y) * w + x] = d;
+    }
   return depth;
 }
 

@@ -15,6 +15,8 @@
 #include <tuple>
 #include <utility>
 
+#include <opencv2/imgproc.hpp>
+
 #include "simstack/instances/instance_finder.h"
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/mesh/mesh_ops.h"
@@ -274,21 +276,17 @@ void markTruncated(SceneHypothesis* h, const DepthView& given, const DepthView& 
   if (h->instances.empty() || static_cast<int>(labels.data.size()) != labels.spec.voxelCount())
     return;
   const int w = used.depth.width, ht = used.depth.height, b = kTruncationBorderPx;
-  Image<uint8_t> left_out(w, ht, 0);
+  cv::Mat1b left_out(ht, w, uchar{0});
   bool any_left_out = false;
-  for (size_t i = 0; i < left_out.pixels.size(); ++i)
+  for (int i = 0; i < w * ht; ++i)
     if (validDepth(given.depth.pixels[i]) && !validDepth(used.depth.pixels[i])) {
-      left_out.pixels[i] = 1;
+      left_out(i / w, i % w) = 1;
       any_left_out = true;
     }
-  const auto nextToLeftOut = [&](int u, int v) {
-    for (int dv = -1; dv <= 1; ++dv)
-      for (int du = -1; du <= 1; ++du) {
-        const int x = u + du, y = v + dv;
-        if (x >= 0 && y >= 0 && x < w && y < ht && left_out.at(x, y)) return true;
-      }
-    return false;
-  };
+  // The pixels left out and their 8 neighbours (outside the image counts as not left out).
+  cv::Mat1b near_left_out;
+  if (any_left_out) cv::dilate(left_out, near_left_out, cv::Mat());
+  const auto nextToLeftOut = [&](int u, int v) { return near_left_out(v, u) != 0; };
   const auto mark = [&](int u, int v) {
     const float d = used.depth.at(u, v);
     if (!validDepth(d)) return;
