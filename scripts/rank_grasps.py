@@ -63,7 +63,11 @@ def main():
                         help="scene hypotheses (1: objects alone; 0: all the scene carries)")
     parser.add_argument("--camera", default="camera", help="namespace of the perception and grasp nodes")
     parser.add_argument("--rows", type=int, default=10, help="grasps printed")
-    parser.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the service")
+    parser.add_argument("--timeout", type=float, default=30.0,
+                        help="seconds to wait for the master, the scene and the grasp server "
+                             "(not for the ranking)")
+    parser.add_argument("--result-timeout", type=float, default=None,
+                        help="seconds the ranking may take before it is cancelled (default: no bound)")
     parser.add_argument("--max-age", type=float, default=None,
                         help="with --target top: refuse a scene older than this (s; 0: any age; "
                              "default: the server's ~max_scene_age_s, which it applies to "
@@ -82,6 +86,8 @@ def main():
             parser.error("--%s must lie in [0, 4294967295], not %d" % (name, getattr(args, name)))
     if not args.timeout > 0:
         parser.error("--timeout must be > 0 s")
+    if args.result_timeout is not None and not args.result_timeout > 0:
+        parser.error("--result-timeout must be > 0 s")
     if args.max_age is not None and not args.max_age >= 0:
         parser.error("--max-age must be >= 0 s")
     if args.json:  # fail before the ranking, not after it
@@ -113,7 +119,8 @@ def main():
         res = grasp_client.rank_grasps(scene, target, args.camera, args.candidates,
                                        args.pull_distance, args.pull_speed, args.hypotheses,
                                        args.timeout, args.frame, args.pregrasp,
-                                       feedback=progress if args.progress else None)
+                                       feedback=progress if args.progress else None,
+                                       result_timeout=args.result_timeout)
     except grasp_client.GraspServiceError as e:
         sys.exit("rank_grasps: %s" % e)
     print("object %d: %s (%d pulls in %d %s, %.2f s)" % (

@@ -44,9 +44,10 @@ class GraspServer {
   /// Called after each pull with the pulls done, their total and the best finished grasp so
   /// far (nullptr before one); false stops the ranking.
   using GraspFeedback = std::function<bool(int done, int total, const Grasp* best)>;
-  /// One ranking at a time, for the service and the action alike.
+  /// One ranking at a time, for the service and the action alike; a goal `cancelled` while it
+  /// waited for the ranking before it is not started.
   void serve(const RankGrasps::Request& req, RankGrasps::Response& res,
-             const GraspFeedback& feedback);
+             const GraspFeedback& feedback, const std::atomic<bool>* cancelled = nullptr);
   using GoalHandle = actionlib::ActionServer<RankGraspsAction>::GoalHandle;
   /// The action's goal: accepted, then ranked on a thread of its own (one ranking at a time,
   /// with the service's), with feedback; a cancel stops the pulls.
@@ -82,7 +83,8 @@ class GraspServer {
   GraspServerConfig config_;
   tf2_ros::Buffer tf_buffer_;
   tf2_ros::TransformListener tf_listener_;
-  ros::CallbackQueue scene_queue_;  ///< objects_topic only, served by scene_spinner_
+  ros::CallbackQueue scene_queue_;   ///< objects_topic only, served by scene_spinner_
+  ros::CallbackQueue action_queue_;  ///< the action's goals and cancels, by action_spinner_
   ros::Subscriber objects_sub_;
   ros::Publisher markers_pub_;
   ros::ServiceServer rank_srv_;
@@ -97,7 +99,7 @@ class GraspServer {
   std::mutex latest_mutex_;
   ObjectArray::ConstPtr latest_;  ///< the newest scene on objects_topic
   std::mutex rank_mutex_;         ///< one ranking at a time (each uses the configured threads)
-  std::unique_ptr<ros::AsyncSpinner> scene_spinner_;
+  std::unique_ptr<ros::AsyncSpinner> scene_spinner_, action_spinner_;
 };
 
 }  // namespace simstack

@@ -17,6 +17,7 @@ pull held.
 Object ids stay with their objects from frame to frame, so an id chosen from one scene names
 the same object in the next while it stays where it was.
 """
+import math
 import threading
 import time
 
@@ -66,29 +67,107 @@ def latest_scene(camera="camera", timeout=10.0, max_age=None):
     return scene
 
 
+def _rotate(q, v):
+    """v turned by the unit quaternion q (a geometry_msgs/Quaternion)."""
+    u = (q.x, q.y, q.z)
+    t = [2.0 * (u[1] * v[2] - u[2] * v[1]), 2.0 * (u[2] * v[0] - u[0] * v[2]),
+         2.0 * (u[0] * v[1] - u[1] * v[0])]
+    return [v[i] + q.w * t[i] + (u[(i + 1) % 3] * t[(i + 2) % 3] - u[(i + 2) % 3] * t[(i + 1) % 3])
+            for i in range(3)]
+
+
+def _height_above_table(scene, point):
+    """The height (m) above the table of `point` (a geometry_msgs/Point in the scene's frame),
+    through scene.table_in_frame (all zero, as in a message made by hand: the identity)."""
+    t, q = scene.table_in_frame.position, scene.table_in_frame.orientation
+    if (q.w, q.x, q.y, q.z) == (0.0, 0.0, 0.0, 0.0):
+        return point.z - t.z
+    inverse = type(q)(w=q.w, x=-q.x, y=-q.y, z=-q.z)
+    return _rotate(inverse, [point.x - t.x, point.y - t.y, point.z - t.z])[2]
+
+
 def top_object(scene):
-    """The id of the object whose centre is highest: on a pile, one nothing rests on."""
+    """The id of the object whose centre is highest above the table (whatever the scene's
+    frame): on a pile, one nothing rests on."""
     if not scene.objects:
         raise GraspServiceError("the scene has no objects")
-    return max(scene.objects, key=lambda o: o.superquadric.pose.position.z).id
+    return max(scene.objects,
+               key=lambda o: _height_above_table(scene, o.superquadric.pose.position)).id
+
+
+def _check_count(name, value):
+    """A uint32 field of the goal: a whole number in [0, 2^32)."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2 ** 32:
+        raise GraspServiceError("%s must be a whole number >= 0, not %r" % (name, value))
+
+
+def _check_number(name, value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise GraspServiceError("%s must be a finite number, not %r" % (name, value))
+
+
+# The goals in progress, cancelled on the server when rospy shuts down (its own Ctrl-C handler
+# ends the wait before a KeyboardInterrupt could).
+_active_lock = threading.Lock()
+_active = set()
+_hook_added = False
+
+
+def _cancel_and_wait(client, seconds=2.0):
+    """Cancels the client's goal and waits (wall clock) for the server to end it, so that the
+    cancel has reached the server before the caller goes on or exits."""
+    client.cancel_goal()
+    deadline = time.time() + seconds
+    while client.simple_state != actionlib.SimpleGoalState.DONE and time.time() < deadline:
+        time.sleep(0.02)
+
+
+def _cancel_active():
+    with _active_lock:
+        clients = list(_active)
+    for client in clients:
+        _cancel_and_wait(client)
+
+
+def _track(client):
+    global _hook_added
+    with _active_lock:
+        if not _hook_added:
+            rospy.on_shutdown(_cancel_active)  # run before rospy closes its topics
+            _hook_added = True
+        _active.add(client)
 
 
 def rank_grasps(scene, target_id, camera="camera", candidates=0, pull_distance_m=0.10,
                 pull_speed_mps=0.20, hypotheses=0, timeout=30.0, target_frame="",
-                pregrasp_distance_m=0.0, target_point=None, feedback=None):
+                pregrasp_distance_m=0.0, target_point=None, feedback=None, result_timeout=None):
     """Ranks grasps through the action /<camera>/grasps/rank_grasps_action on `target_id` of
     `scene` (an ObjectArray; None: the server's latest, which it refuses when older than its
     ~max_scene_age_s) and returns the result (the fields of the service's response). `timeout`
-    bounds the wait for the server, not the ranking: a request simulates candidates x
-    hypotheses pulls (64 x 3 by default: about 0.5 s on a 4-object pile, docs/benchmarks.md;
-    slower or longer pulls take longer in proportion). `feedback(done, total, best)` is called
-    after each pull (`best`: the best grasp whose every pull is done, or None). `target_frame`
-    (any tf frame) is the frame of the grasps' tool and pre-grasp poses ("": the scene's);
-    `target_point` (a geometry_msgs/PointStamped) names the target instead of `target_id`: the
-    object whose surface is nearest it. Raises GraspServiceError with the server's message when
-    it refuses the request; KeyboardInterrupt cancels the ranking on the server."""
+    bounds the wait for the server; `result_timeout` (seconds of wall time, None: no bound)
+    the ranking itself, which is then cancelled: a request simulates candidates x hypotheses
+    pulls (64 x 3 by default: about 0.5 s on a 4-object pile, docs/benchmarks.md; slower or
+    longer pulls take longer in proportion). `feedback(done, total, best)` is called after each
+    pull (`best`: the best grasp whose every pull is done, or None); an exception it raises
+    cancels the ranking and is raised here. `target_frame` (any tf frame) is the frame of the
+    grasps' tool and pre-grasp poses ("": the scene's); `target_point` (a
+    geometry_msgs/PointStamped) names the target instead of `target_id` (which may then be
+    None): the object whose surface is nearest it. Raises GraspServiceError with the server's
+    message when it refuses the request, and when the server goes away, the ranking outlasts
+    `result_timeout`, or rospy shuts down (Ctrl-C) before it ends; in the last two cases and on
+    a KeyboardInterrupt the ranking is cancelled on the server first."""
+    if target_id is None and target_point is None:
+        raise GraspServiceError("give a target_id, or a target_point")
+    _check_count("target_id", 0 if target_id is None else target_id)
+    _check_count("candidates", candidates)
+    _check_count("hypotheses", hypotheses)
+    for name, value in (("pull_distance_m", pull_distance_m), ("pull_speed_mps", pull_speed_mps),
+                        ("pregrasp_distance_m", pregrasp_distance_m), ("timeout", timeout)):
+        _check_number(name, value)
+    if result_timeout is not None:
+        _check_number("result_timeout", result_timeout)
     name = "/%s/grasps/rank_grasps_action" % camera
-    goal = RankGraspsGoal(target_id=target_id, candidates=candidates,
+    goal = RankGraspsGoal(target_id=0 if target_id is None else target_id, candidates=candidates,
                           pull_distance_m=pull_distance_m, pull_speed_mps=pull_speed_mps,
                           hypotheses=hypotheses, target_frame=target_frame,
                           pregrasp_distance_m=pregrasp_distance_m)
@@ -97,26 +176,66 @@ def rank_grasps(scene, target_id, camera="camera", candidates=0, pull_distance_m
     if scene is not None:
         goal.scene = scene
     client = actionlib.SimpleActionClient(name, RankGraspsAction)
-    # On the wall clock: actionlib's own timeout reads ROS time, which under a looping or
-    # paused bag may never reach it.
+    try:
+        return _run_goal(client, name, goal, timeout, result_timeout, feedback)
+    finally:
+        with _active_lock:
+            _active.discard(client)
+        client.action_client.stop()  # its topics' callbacks would otherwise stay for good
+
+
+def _run_goal(client, name, goal, timeout, result_timeout, feedback):
+    # On the wall clock: actionlib's own timeouts read ROS time, which under a looping or paused
+    # bag may never reach them.
     waiting = threading.Thread(target=client.wait_for_server, daemon=True)
     waiting.start()
     waiting.join(timeout)
     if waiting.is_alive():
         raise GraspServiceError("no grasp server at %s within %g s (is grasps.launch running?)" % (
             name, timeout))
+    failures = []
 
     def on_feedback(f):
-        if feedback is not None:
+        if feedback is None or failures:
+            return
+        try:
             feedback(f.pulls_done, f.pulls_total, f.best if f.has_best else None)
+        except BaseException as e:  # rospy would only log it
+            failures.append(e)
 
+    _track(client)
     client.send_goal(goal, feedback_cb=on_feedback)
+    start = time.time()
+    gone_since = None
     try:
-        client.wait_for_result()
+        while client.simple_state != actionlib.SimpleGoalState.DONE:
+            if failures:
+                raise failures[0]
+            if rospy.is_shutdown():
+                raise GraspServiceError("%s: rospy shut down (Ctrl-C?) before the ranking ended; "
+                                        "it was cancelled on the server" % name)
+            if result_timeout is not None and time.time() - start > result_timeout:
+                raise GraspServiceError("%s: no result within %g s; the ranking was cancelled" % (
+                    name, result_timeout))
+            if client.action_client.pub_goal.get_num_connections() == 0:
+                gone_since = gone_since or time.time()
+                if time.time() - gone_since > 2.0:
+                    raise GraspServiceError("%s: the grasp server went away during the ranking" %
+                                            name)
+            else:
+                gone_since = None
+            time.sleep(0.02)
     except BaseException:
-        client.cancel_goal()
+        if not rospy.is_shutdown():
+            _cancel_and_wait(client)
         raise
+    if failures:
+        raise failures[0]
     res = client.get_result()
+    if rospy.core.is_shutdown_requested():  # cancelled by _cancel_active
+        raise GraspServiceError("%s: rospy shut down (Ctrl-C?) before the ranking ended; it was "
+                                "cancelled on the server%s" % (
+                                    name, "" if res is None else ": " + res.message))
     if res is None:
         raise GraspServiceError("%s: no result (the server stopped?)" % name)
     if not res.success:

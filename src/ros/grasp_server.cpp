@@ -50,17 +50,24 @@ GraspServer::GraspServer(ros::NodeHandle nh, ros::NodeHandle pnh)
   markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("grasps", 1, true);
   rank_srv_ = pnh_.advertiseService("rank_grasps", &GraspServer::rank, this);
   // A plain ActionServer: SimpleActionServer recalls a goal stamped before the last one, and
-  // under a looping bag's clock every goal after the first loop would be.
+  // under a looping bag's clock every goal after the first loop would be. Its goals and
+  // cancels come on a queue and thread of their own: service requests waiting for the ranking
+  // in progress hold the global queue's threads, and a cancel must not wait behind them.
+  ros::NodeHandle action_nh(pnh_);
+  action_nh.setCallbackQueue(&action_queue_);
   action_ = std::make_unique<actionlib::ActionServer<RankGraspsAction>>(
-      pnh_, "rank_grasps_action", [this](GoalHandle goal) { onGoal(goal); },
+      action_nh, "rank_grasps_action", [this](GoalHandle goal) { onGoal(goal); },
       [this](GoalHandle goal) { onCancel(goal); }, false);
   action_->start();
+  action_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &action_queue_);
+  action_spinner_->start();
   ROS_INFO("simstack grasp_server: scenes from %s, ~rank_grasps ready (%d candidates, %d threads)",
            nh_.resolveName(config_.objects_topic).c_str(), config_.policy.max_candidates,
            config_.ranking.threads);
 }
 
 GraspServer::~GraspServer() {
+  action_spinner_->stop();  // no goal starts, and no cancel comes, past this line
   {
     std::lock_guard<std::mutex> lock(goals_mutex_);
     for (auto& [id, cancelled] : cancelled_) *cancelled = true;
@@ -287,17 +294,21 @@ void GraspServer::runGoal(GoalHandle goal, const std::atomic<bool>& cancelled) {
   req.camera_pose = g.camera_pose;
   req.hypotheses = g.hypotheses;
   RankGrasps::Response res;
-  serve(req, res, [&](int done, int total, const Grasp* best) {
-    RankGraspsFeedback feedback;
-    feedback.pulls_done = static_cast<uint32_t>(done);
-    feedback.pulls_total = static_cast<uint32_t>(total);
-    feedback.has_best = best != nullptr;
-    if (best) feedback.best = *best;
-    goal.publishFeedback(feedback);
-    return !cancelled && ros::ok();
-  });
+  serve(
+      req, res,
+      [&](int done, int total, const Grasp* best) {
+        RankGraspsFeedback feedback;
+        feedback.pulls_done = static_cast<uint32_t>(done);
+        feedback.pulls_total = static_cast<uint32_t>(total);
+        feedback.has_best = best != nullptr;
+        if (best) feedback.best = *best;
+        goal.publishFeedback(feedback);
+        return !cancelled && ros::ok();
+      },
+      &cancelled);
+  const bool was_cancelled = cancelled;  // read once: a cancel may still come
   RankGraspsResult result;
-  result.success = res.success;
+  result.success = res.success && !was_cancelled;  // cancelled after the last pull: none either
   result.message = res.message;
   result.header = res.header;
   result.target_id = res.target_id;
@@ -308,7 +319,7 @@ void GraspServer::runGoal(GoalHandle goal, const std::atomic<bool>& cancelled) {
   result.baseline_displacement_m = res.baseline_displacement_m;
   result.pulls = res.pulls;
   result.time_s = res.time_s;
-  if (cancelled)
+  if (was_cancelled)
     goal.setCanceled(result, res.message);
   else if (res.success)
     goal.setSucceeded(result, res.message);
@@ -317,10 +328,14 @@ void GraspServer::runGoal(GoalHandle goal, const std::atomic<bool>& cancelled) {
 }
 
 void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& res,
-                        const GraspFeedback& feedback) {
+                        const GraspFeedback& feedback, const std::atomic<bool>* cancelled) {
   std::lock_guard<std::mutex> lock(rank_mutex_);
   const auto start = std::chrono::steady_clock::now();
   res.success = false;
+  if (cancelled && *cancelled) {
+    res.message = "cancelled while it waited for the ranking before it";
+    return;
+  }
   try {
     PreparedRequest p;
     if (!prepare(req, res, &p)) {

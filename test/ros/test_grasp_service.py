@@ -3,15 +3,19 @@
 import copy
 import math
 import os
+import signal
 import subprocess
 import threading
 import time
 import unittest
 
+import actionlib
 import rospkg
 import rospy
 import rostest
-from simstack.msg import ObjectArray, Object, SceneSample
+from actionlib_msgs.msg import GoalStatus
+from simstack.msg import (ObjectArray, Object, RankGraspsAction, RankGraspsActionResult,
+                          RankGraspsGoal, SceneSample)
 from simstack.srv import RankGrasps, RankGraspsRequest
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -254,20 +258,32 @@ class GraspService(unittest.TestCase):
             answers[name] = busy(req)
 
         # Slow pulls (50 s simulated each: several seconds in all), on a scene carried in the
-        # request; the waiting request comes well after it has started.
-        slow = threading.Thread(target=ask, args=("slow", request(
-            scene=first, candidates=256, pull_distance_m=0.5, pull_speed_mps=0.01)))
-        slow.start()
-        time.sleep(1.5)
+        # goal, through the action: its first feedback says it has started, and the waiting
+        # request comes after that.
+        slow = actionlib.SimpleActionClient("/camera/busy_grasps/rank_grasps_action",
+                                            RankGraspsAction)
+        connect = threading.Thread(target=slow.wait_for_server, daemon=True)  # on the wall clock
+        connect.start()
+        connect.join(60)
+        self.assertFalse(connect.is_alive(), "no action server on busy_grasps")
+        started = threading.Event()
+        slow.send_goal(RankGraspsGoal(scene=first, target_id=first.objects[0].id, candidates=256,
+                                      pull_distance_m=0.5, pull_speed_mps=0.01),
+                       feedback_cb=lambda f: started.set())
+        self.assertTrue(started.wait(120), "the slow ranking gave no feedback")
         waiting = threading.Thread(target=ask, args=("waiting", request(
             target_id=later.objects[0].id, candidates=4)))
         waiting.start()
         time.sleep(0.5)
         pub.publish(later)
         time.sleep(1.0)
-        still_ranking = slow.is_alive()
-        slow.join(240)
+        still_ranking = slow.simple_state != actionlib.SimpleGoalState.DONE
+        deadline = time.time() + 240
+        while slow.simple_state != actionlib.SimpleGoalState.DONE and time.time() < deadline:
+            time.sleep(0.05)
         waiting.join(240)
+        answers["slow"] = slow.get_result()
+        self.assertIsNotNone(answers["slow"], "the slow ranking gave no result")
         self.assertTrue(still_ranking, "the slow ranking ended before the new scene came (%.1f s)"
                         % answers["slow"].time_s)
         self.assertTrue(answers["slow"].success, answers["slow"].message)
@@ -296,11 +312,11 @@ class GraspService(unittest.TestCase):
         pub.publish(stale)
         # The default is the server's own limit, read from its parameter.
         rospy.set_param("/stale/grasps/max_scene_age_s", 0.5)
-        code, out = self.script("--target", "top", "--camera", "stale", "--timeout", "5")
+        code, out = self.script("--target", "top", "--camera", "stale", "--timeout", "30")
         self.assertNotEqual(code, 0, out)
         self.assertIn("s old (max age 0.5 s)", out)
         code, out = self.script("--target", "top", "--camera", "stale", "--max-age", "0",
-                                "--timeout", "5")
+                                "--timeout", "15")
         self.assertIn("/stale/grasps/rank_grasps", out)  # past the check, no server there
 
 
@@ -318,6 +334,70 @@ class GraspService(unittest.TestCase):
             grasp_client.rank_grasps(scene, 99)
         with self.assertRaisesRegex(grasp_client.GraspServiceError, "no scene on /nowhere"):
             grasp_client.latest_scene("nowhere", timeout=1.0)
+
+    def test_9c_the_client_checks_its_arguments_and_picks_the_top_above_the_table(self):
+        from simstack import grasp_client
+        scene = grasp_client.latest_scene(max_age=0)
+        target = scene.objects[0].id
+        for bad in (dict(target_id=-1), dict(target_id=None), dict(target_id=1.5),
+                    dict(target_id=target, candidates=-2),
+                    dict(target_id=target, pull_distance_m=float("nan")),
+                    dict(target_id=target, result_timeout=float("inf"))):
+            with self.assertRaises(grasp_client.GraspServiceError, msg=str(bad)):
+                grasp_client.rank_grasps(scene, **bad)
+        # A frame whose z is not up: the table turned a quarter about x, so that the table's
+        # up is the frame's -y. Object 7 is higher in the frame's z, object 8 above the table.
+        tilted = ObjectArray()
+        tilted.header.frame_id = "camera_like"
+        tilted.table_in_frame.orientation.w = math.sqrt(0.5)
+        tilted.table_in_frame.orientation.x = math.sqrt(0.5)
+        for oid, y, z in ((7, -0.05, 0.9), (8, -0.20, 0.5)):
+            o = Object(id=oid)
+            o.superquadric.pose.position.y = y
+            o.superquadric.pose.position.z = z
+            tilted.objects.append(o)
+        self.assertEqual(grasp_client.top_object(tilted), 8)
+
+    def action_results(self):
+        """The grasp server's action results as they come (a list that grows)."""
+        results = []
+        sub = rospy.Subscriber("/camera/grasps/rank_grasps_action/result", RankGraspsActionResult,
+                               results.append)
+        self.addCleanup(sub.unregister)
+        time.sleep(1.0)  # connected before the goal
+        return results
+
+    def wait_for_preempted(self, results):
+        deadline = time.time() + 60
+        while time.time() < deadline:
+            if any(r.status.status == GoalStatus.PREEMPTED for r in results):
+                return
+            time.sleep(0.05)
+        self.fail("no goal ended as cancelled: %s" % [r.status.status for r in results])
+
+    def test_9d_an_abandoned_ranking_is_cancelled_on_the_server(self):
+        from simstack import grasp_client
+        scene = grasp_client.latest_scene(max_age=0)
+        target = grasp_client.top_object(scene)
+        # A bound on the ranking's wall time.
+        results = self.action_results()
+        with self.assertRaisesRegex(grasp_client.GraspServiceError,
+                                    "no result within 0.5 s; the ranking was cancelled"):
+            grasp_client.rank_grasps(scene, target, candidates=256, result_timeout=0.5)
+        self.wait_for_preempted(results)
+        # Ctrl-C in the script (rospy's own SIGINT handler ends the wait).
+        results = self.action_results()
+        path = os.path.join(rospkg.RosPack().get_path("simstack"), "scripts", "rank_grasps.py")
+        proc = subprocess.Popen([path, "--target", "top", "--max-age", "0", "--candidates",
+                                 "256", "--progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)
+        first = proc.stderr.readline()  # a tenth of the pulls done
+        self.assertIn("pulls", first)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+        self.assertNotEqual(proc.returncode, 0, out + err)
+        self.assertIn("cancelled on the server", err)
+        self.wait_for_preempted(results)
 
 if __name__ == "__main__":
     rostest.rosrun("simstack", "grasp_service", GraspService)
