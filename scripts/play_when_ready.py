@@ -2,6 +2,7 @@
 """Plays a bag into the perception once it is ready (launch/replay.launch): waits for the
 latched `ready` topic of the perception node to say true, then runs `rosbag play` with the
 remaining arguments, so that no frame of the bag reaches the node before it can perceive it.
+Remappings after -- (camera/depth/image_rect:=camera/depth/image_rect_raw) go to rosbag play.
 
     play_when_ready.py --ready /camera/perception/ready [--timeout 300] -- --clock my.bag
 """
@@ -15,15 +16,18 @@ from std_msgs.msg import Bool
 
 
 def main():
-    argv = rospy.myargv()[1:]  # without roslaunch's __name:= and __log:=
+    argv = sys.argv[1:]
     if "--" not in argv:
         sys.exit("play_when_ready: give the rosbag play arguments after --")
     split = argv.index("--")
+    # rosbag play's own, remappings included; roslaunch's __name:= and __log:= are this node's.
+    play_args = [a for a in argv[split + 1:] if not a.startswith("__")]
+    own = rospy.myargv(argv[:split])
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--ready", required=True, help="the perception's latched ready topic")
     parser.add_argument("--timeout", type=float, default=300.0,
                         help="seconds (wall clock) to wait for it before giving up")
-    args = parser.parse_args(argv[:split])
+    args = parser.parse_args(own)
     rospy.init_node("play_when_ready", anonymous=True, disable_signals=True)
     rospy.loginfo("play_when_ready: waiting for %s", args.ready)
     try:
@@ -34,7 +38,7 @@ def main():
         sys.exit("play_when_ready: %s said nothing within %g s (did the perception start? its "
                  "log says why not)" % (args.ready, args.timeout))
     rospy.loginfo("play_when_ready: %s is true, playing the bag", args.ready)
-    player = subprocess.Popen(["rosbag", "play"] + argv[split + 1:])
+    player = subprocess.Popen(["rosbag", "play"] + play_args)
     # roslaunch stops its nodes with SIGINT; rosbag play is stopped cleanly with SIGTERM.
     signal.signal(signal.SIGINT, lambda *_: player.terminate())
     signal.signal(signal.SIGTERM, lambda *_: player.terminate())

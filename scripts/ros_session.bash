@@ -28,8 +28,11 @@ ros_session_stop() {  # every process group started here: INT, then TERM, then K
 ros_session_kill() {  # ros_session_kill PID
   local pid=$1 keep=()
   kill -INT -- -"$pid" 2>/dev/null || true
-  for _ in $(seq 20); do kill -0 -- -"$pid" 2>/dev/null || break; sleep 0.5; done
-  kill -KILL -- -"$pid" 2>/dev/null || true
+  for _ in $(seq 120); do kill -0 -- -"$pid" 2>/dev/null || break; sleep 0.5; done
+  if kill -0 -- -"$pid" 2>/dev/null; then
+    echo "process group $pid still ran 60 s after SIGINT: killed" >&2
+    kill -KILL -- -"$pid" 2>/dev/null || true
+  fi
   for p in "${ROS_SESSION_PIDS[@]}"; do [ "$p" != "$pid" ] && keep+=("$p"); done
   ROS_SESSION_PIDS=("${keep[@]}")
 }

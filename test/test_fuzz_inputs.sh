@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Malformed inputs through the tools (a corpus generated here: no third-party files). Every case
 # must end with a non-zero exit and one message line naming the problem, or with exit 0 and a
-# sensible result: never a signal, never more than 60 s.
+# sensible result: never a signal, never a hang (a refusal within 120 s, a run that works within
+# 300 s: limits for a loaded 2-core machine, where the slowest case takes about 17 s idle).
 # Usage: test_fuzz_inputs.sh BIN_DIR
 set -u
 bin=$1
@@ -11,30 +12,30 @@ fail=0
 reconstruct="$bin/simstack_reconstruct"
 K=525,525,319.5,239.5
 
-# expect NAME WORDS CMD...: non-zero exit (not a signal), WORDS in stderr, within 60 s.
+# expect NAME WORDS CMD...: non-zero exit (not a signal), WORDS in stderr, within 120 s.
 expect() {
   local name=$1 words=$2; shift 2
-  timeout 60 "$@" > "$dir/out.txt" 2> "$dir/err.txt"
+  timeout 120 "$@" > "$dir/out.txt" 2> "$dir/err.txt"
   local rc=$?
   if [ $rc -eq 0 ]; then echo "FAIL $name: accepted"; fail=1; return; fi
-  if [ $rc -eq 124 ]; then echo "FAIL $name: still running after 60 s"; fail=1; return; fi
+  if [ $rc -eq 124 ]; then echo "FAIL $name: still running after 120 s"; fail=1; return; fi
   if [ $rc -ge 128 ]; then echo "FAIL $name: killed by signal $((rc - 128))"; fail=1; return; fi
   if ! grep -q -- "$words" "$dir/err.txt"; then
     echo "FAIL $name: no '$words' in:"; cat "$dir/err.txt"; fail=1; return; fi
   echo "ok   $name: $(grep -m1 -- "$words" "$dir/err.txt" | cut -c1-150)"
 }
-# survive NAME CMD...: exit 0 or 1 (a result, or an error), no signal, within 60 s.
+# survive NAME CMD...: exit 0 or 1 (a result, or an error), no signal, within 300 s.
 survive() {
   local name=$1; shift
-  timeout 60 "$@" > "$dir/out.txt" 2> "$dir/err.txt"
+  timeout 300 "$@" > "$dir/out.txt" 2> "$dir/err.txt"
   local rc=$?
   if [ $rc -le 1 ]; then echo "ok   $name (exit $rc)"; else
     echo "FAIL $name: exit $rc"; cat "$dir/err.txt"; fail=1; fi
 }
-# succeed NAME CMD...: exit 0 within 60 s.
+# succeed NAME CMD...: exit 0 within 300 s.
 succeed() {
   local name=$1; shift
-  if timeout 60 "$@" > "$dir/out.txt" 2> "$dir/err.txt"; then echo "ok   $name"; else
+  if timeout 300 "$@" > "$dir/out.txt" 2> "$dir/err.txt"; then echo "ok   $name"; else
     echo "FAIL $name: exit $?"; cat "$dir/err.txt"; fail=1; fi
 }
 
@@ -84,13 +85,13 @@ expect "mask PNG header claiming 100000x100000" "claims_huge.png: 100000x100000"
 # Peak memory (maximum resident set, kB) of a run, whatever it ends with.
 peak_kb() {
   /usr/bin/python3 -c 'import resource, subprocess, sys
-subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=60)
+subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=300)
 print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)' "$@"
 }
 good_kb=$(peak_kb "$reconstruct" --depth "$good" --intrinsics $K --output "$dir/mem_good")
 for f in huge.pcd short.pcd claims_huge.png wide.png; do
   kb=$(peak_kb "$reconstruct" --depth "$dir/$f" --intrinsics $K --output "$dir/mem")
-  # A measurement that failed (a run past 60 s, a crash of the probe) is a failure, not a pass.
+  # A measurement that failed (a run past 300 s, a crash of the probe) is a failure, not a pass.
   if ! [[ "$kb" =~ ^[0-9]+$ && "$good_kb" =~ ^[0-9]+$ ]]; then
     echo "FAIL memory $f: not measured ('$kb', good view '$good_kb')"; fail=1
   elif [ "$kb" -gt $((2 * good_kb)) ]; then echo "FAIL memory $f: $kb kB, a good view takes $good_kb kB"; fail=1

@@ -35,9 +35,9 @@ refused() {
   for _ in $(seq 120); do grep -q "model refused" "$log" && break; sleep 0.5; done
   grep "ERROR.*model refused" "$log" | grep "$(basename "$model")" | grep -q "$check" ||
     { echo "$ns: no ERROR naming $model and '$check':"; cat "$log"; exit 1; }
-  timeout 20 rostopic echo -n 1 "/$ns/perception/ready" | grep -q "data: False" ||
+  timeout 60 rostopic echo -n 1 "/$ns/perception/ready" | grep -q "data: False" ||
     { echo "$ns: ~ready is not false"; exit 1; }
-  timeout 20 /usr/bin/python3 - "$ns" "$(basename "$model")" <<'PY' || { echo "$ns: no ERROR on /diagnostics"; exit 1; }
+  timeout 60 /usr/bin/python3 - "$ns" "$(basename "$model")" <<'PY' || { echo "$ns: no ERROR on /diagnostics"; exit 1; }
 import sys, rospy
 from diagnostic_msgs.msg import DiagnosticArray
 ns, name = sys.argv[1], sys.argv[2]
@@ -64,7 +64,8 @@ set -e
 [ "$status" -eq 1 ] && grep -q "FATAL.*~image_transport 'nosuch' cannot be loaded" "$ROS_HOME/node.log" ||
   { echo "perception_node with ~image_transport nosuch exited with $status:"; cat "$ROS_HOME/node.log"; exit 1; }
 ros_session_spawn "$ROS_HOME/manager.log" rosrun nodelet nodelet manager __name:=manager
-timeout 30 bash -c 'until rosnode list 2>/dev/null | grep -q /manager; do sleep 0.3; done'
+timeout 60 bash -c 'until rosnode list 2>/dev/null | grep -q /manager; do sleep 0.3; done' ||
+  { echo "the nodelet manager did not come up within 60 s:"; cat "$ROS_HOME/manager.log"; exit 1; }
 rosparam set /perception/model "$ROS_HOME/corrupt.pt"
 ros_session_spawn "$ROS_HOME/load.log" rosrun nodelet nodelet load simstack/PerceptionNodelet \
   manager __name:=perception --no-bond
