@@ -1,10 +1,12 @@
 #include <gtest/gtest.h>
 
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -271,5 +273,43 @@ TEST(StagedOutput, ACommittedFileReplacesTheTargetAndAnAbandonedOneLeavesNoTrace
   EXPECT_THROW(StagedDirectory(".", "tool_a"), std::runtime_error);
   EXPECT_THROW(StagedDirectory(fs::current_path().parent_path().string(), "tool_a"),
                std::runtime_error);
+  fs::remove_all(dir);
+}
+
+TEST(StagedOutput, WhatAKilledRunLeftIsRemovedByTheNextOne) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("simstack_killed_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  // A process that has ended (as one killed with SIGKILL), and one that runs (this test's
+  // parent), each with a staged file and directory left beside the targets.
+  const pid_t child = fork();
+  if (child == 0) _exit(0);
+  ASSERT_GT(child, 0);
+  waitpid(child, nullptr, 0);
+  char host[256] = {};
+  gethostname(host, sizeof(host) - 1);
+  const auto left = [&](const std::string& target, pid_t pid, const std::string& tail) {
+    const fs::path p = dir / (target + ".partial-" + host + "-" + std::to_string(pid) + tail);
+    if (tail.empty())
+      std::ofstream(p) << "half";
+    else
+      fs::create_directories(p / "views");
+    return p;
+  };
+  const fs::path dead_file = left("data.h5", child, ""), live_file = left("data.h5", getppid(), "");
+  const fs::path dead_dir = left("out", child, "-a1B2c3"),
+                 live_dir = left("out", getppid(), "-d4E5f6");
+  const fs::path other_host = dir / "data.h5.partial-elsewhere-1";
+  std::ofstream(other_host) << "theirs";
+  {
+    StagedFile staged((dir / "data.h5").string());
+    StagedDirectory staged_dir((dir / "out").string(), "tool_a");
+  }
+  EXPECT_FALSE(fs::exists(dead_file));
+  EXPECT_FALSE(fs::exists(dead_dir));
+  EXPECT_TRUE(fs::exists(live_file)) << "a live process's staged file was removed";
+  EXPECT_TRUE(fs::exists(live_dir));
+  EXPECT_TRUE(fs::exists(other_host)) << "another host's staged file was removed";
   fs::remove_all(dir);
 }

@@ -1,8 +1,12 @@
 #include "simstack/io/staged_output.h"
 
+#include <signal.h>
 #include <stdlib.h>
 #include <sys/stat.h>
 #include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
 
 #include <algorithm>
 #include <filesystem>
@@ -31,9 +35,39 @@ fs::path parentOf(const std::string& target) {
   return p;
 }
 
+/// ".partial-<host>-": after a target's name, the prefix of this host's staged outputs for it;
+/// the process id follows, so that a later run can tell which of them no process writes any
+/// more.
+std::string partialTag() {
+  char host[256] = {};
+  if (gethostname(host, sizeof(host) - 1) != 0 || host[0] == '\0') std::strcpy(host, "host");
+  return std::string(".partial-") + host + "-";
+}
+
+/// Removes the staged outputs for `target` that this host's processes left when they were
+/// killed (SIGKILL, the OOM killer): those whose process no longer runs. Another host's (a
+/// shared file system) are left alone, as are those of a live process.
+void removeStalePartials(const fs::path& target) {
+  const std::string prefix = target.filename().string() + partialTag();
+  std::error_code ec;
+  for (const fs::directory_entry& e : fs::directory_iterator(target.parent_path(), ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.compare(0, prefix.size(), prefix) != 0) continue;
+    const std::string rest = name.substr(prefix.size());
+    const size_t end = std::min(rest.find_first_not_of("0123456789"), rest.size());
+    if (end == 0 || end > 9) continue;
+    const pid_t pid = static_cast<pid_t>(std::stol(rest.substr(0, end)));
+    if (kill(pid, 0) == 0 || errno != ESRCH) continue;  // alive, or not ours to ask about
+    std::error_code ignored;
+    fs::remove_all(e.path(), ignored);
+  }
+}
+
 // A new directory or file name beside `target` (mkdtemp: unique, created by us).
 std::string uniqueDirectoryBeside(const fs::path& target, const std::string& what) {
-  std::string pattern = target.string() + "." + what + "-XXXXXX";
+  std::string pattern = target.string() +
+                        (what == "partial" ? partialTag() + std::to_string(getpid()) : "." + what) +
+                        "-XXXXXX";
   std::vector<char> buffer(pattern.begin(), pattern.end());
   buffer.push_back('\0');
   if (!mkdtemp(buffer.data()))
@@ -96,6 +130,7 @@ StagedDirectory::StagedDirectory(const std::string& target, const std::string& o
                              "it, e.g. " +
                              (fs::path(target) / "out").string());
   target_ = t.string();
+  removeStalePartials(t);
   staged_ = uniqueDirectoryBeside(t, "partial");
   // mkdtemp makes it private (0700); a result directory gets the usual mode.
   const mode_t mask = ::umask(0);
@@ -138,7 +173,8 @@ StagedFile::StagedFile(const std::string& target) {
                              " exists and is not a regular file (a device, a pipe or a "
                              "socket): give the path of a file");
   target_ = t.string();
-  staged_ = target_ + ".partial-" + std::to_string(getpid());
+  removeStalePartials(t);
+  staged_ = target_ + partialTag() + std::to_string(getpid());
   std::ofstream probe(staged_);  // an unwritable place fails now, not after the work
   if (!probe) throw std::runtime_error("cannot write " + staged_);
 }
