@@ -63,16 +63,19 @@ void removeStalePartials(const fs::path& target) {
   }
 }
 
-// A new directory or file name beside `target` (mkdtemp: unique, created by us).
-std::string uniqueDirectoryBeside(const fs::path& target, const std::string& what) {
-  std::string pattern = target.string() +
-                        (what == "partial" ? partialTag() + std::to_string(getpid()) : "." + what) +
-                        "-XXXXXX";
+/// Where this process stages its output for `target`: "<target>.partial-<host>-<pid>".
+std::string stagedStem(const fs::path& target) {
+  return target.string() + partialTag() + std::to_string(getpid());
+}
+
+// A new directory named `stem` and a unique suffix (mkdtemp: created by us).
+std::string uniqueDirectory(const std::string& stem) {
+  std::string pattern = stem + "-XXXXXX";
   std::vector<char> buffer(pattern.begin(), pattern.end());
   buffer.push_back('\0');
   if (!mkdtemp(buffer.data()))
-    throw std::runtime_error("cannot write beside " + target.string() + ": " +
-                             std::error_code(errno, std::generic_category()).message());
+    throw std::runtime_error("cannot write " + stem +
+                             "-*: " + std::error_code(errno, std::generic_category()).message());
   return buffer.data();
 }
 
@@ -131,7 +134,7 @@ StagedDirectory::StagedDirectory(const std::string& target, const std::string& o
                              (fs::path(target) / "out").string());
   target_ = t.string();
   removeStalePartials(t);
-  staged_ = uniqueDirectoryBeside(t, "partial");
+  staged_ = uniqueDirectory(stagedStem(t));
   // mkdtemp makes it private (0700); a result directory gets the usual mode.
   const mode_t mask = ::umask(0);
   ::umask(mask);
@@ -151,7 +154,7 @@ void StagedDirectory::commit() {
   std::error_code ec;
   std::string old;
   if (fs::exists(target_)) {
-    old = uniqueDirectoryBeside(target_, "old");
+    old = uniqueDirectory(target_ + ".old");
     fs::rename(target_, old, ec);  // replaces the empty directory just made
     if (ec)
       throw std::runtime_error("cannot move the earlier " + target_ + " aside: " + ec.message());
@@ -174,7 +177,7 @@ StagedFile::StagedFile(const std::string& target) {
                              "socket): give the path of a file");
   target_ = t.string();
   removeStalePartials(t);
-  staged_ = target_ + partialTag() + std::to_string(getpid());
+  staged_ = stagedStem(t);
   std::ofstream probe(staged_);  // an unwritable place fails now, not after the work
   if (!probe) throw std::runtime_error("cannot write " + staged_);
 }

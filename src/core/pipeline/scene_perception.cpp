@@ -280,7 +280,7 @@ void markTruncated(SceneHypothesis* h, const DepthView& given, const DepthView& 
   bool any_left_out = false;
   for (int i = 0; i < w * ht; ++i)
     if (validDepth(given.depth.pixels[i]) && !validDepth(used.depth.pixels[i])) {
-      left_out(i / w, i % w) = 1;
+      left_out.data[i] = 1;  // a new Mat: continuous, row by row as the depth image
       any_left_out = true;
     }
   // The pixels left out and their 8 neighbours (outside the image counts as not left out).
