@@ -508,6 +508,32 @@ TEST(SurfaceSegments, TheSameViewGivesTheSamePatches) {
   }
 }
 
+TEST(SurfaceSegments, SmallSegmentsJoinTheirLargestNeighbourWhateverLccpCallsThem) {
+  // Supervoxels 1-10 (segment A), 11-12 (B), 13-14 (C), 15-24 (D) in a chain A-B-C-D. B, the
+  // small segment with the lowest supervoxel, joins first, to its larger neighbour A; C then
+  // touches A (12 supervoxels) and D (10) and joins A. Visited the other way round, C would
+  // join D and B would follow: PCL visits in the order of its supervoxels' addresses.
+  const std::multimap<std::uint32_t, std::uint32_t> adjacency{
+      {10, 11}, {11, 10}, {12, 13}, {13, 12}, {14, 15}, {15, 14}, {1, 2}, {16, 17}};
+  std::map<std::uint32_t, std::uint32_t> expected;
+  for (std::uint32_t v = 1; v <= 24; ++v) expected[v] = v <= 14 ? 1 : 15;
+  for (const std::vector<std::uint32_t>& name : std::vector<std::vector<std::uint32_t>>{
+           {1, 2, 3, 4}, {4, 3, 2, 1}, {7, 1, 9, 3}, {2, 4, 1, 3}}) {
+    std::map<std::uint32_t, std::uint32_t> lccp;
+    for (std::uint32_t v = 1; v <= 24; ++v)
+      lccp[v] = name[v <= 10 ? 0 : v <= 12 ? 1 : v <= 14 ? 2 : 3];
+    std::map<std::uint32_t, std::set<std::uint32_t>> neighbours;
+    EXPECT_EQ(mergeSmallSegments(lccp, adjacency, 3, &neighbours), expected);
+    EXPECT_EQ(neighbours, (std::map<std::uint32_t, std::set<std::uint32_t>>{{1, {15}}, {15, {1}}}));
+  }
+  // A tie goes to the neighbour with the lowest supervoxel; a small segment alone stays.
+  std::map<std::uint32_t, std::uint32_t> lccp{{1, 5}, {2, 5}, {3, 6}, {4, 6}, {5, 7}, {9, 8}};
+  std::map<std::uint32_t, std::set<std::uint32_t>> neighbours;
+  const auto owner = mergeSmallSegments(lccp, {{5, 1}, {5, 4}}, 1, &neighbours);
+  EXPECT_EQ(owner, (std::map<std::uint32_t, std::uint32_t>{
+                       {1, 1}, {2, 1}, {3, 3}, {4, 3}, {5, 1}, {9, 9}}));
+}
+
 TEST(SurfaceSegments, EmptyViewsAndBadSettings) {
   const View v = look({}, {0.4, -0.3, 0.5}, {0, 0, 0});
   EXPECT_EQ(v.segments.patches, 0);  // only the table, which is left out

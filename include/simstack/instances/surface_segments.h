@@ -15,6 +15,9 @@
 /// meeting at a concave edge, or a box in front of another. Patches whose hull hides behind
 /// the observed surface can be one object, for example two sides of a box cut apart by an
 /// occluder in front of it, and stay together.
+#include <cstdint>
+#include <map>
+#include <set>
 #include <utility>
 #include <vector>
 
@@ -102,6 +105,20 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
                                       const Transform& T_table_camera, double min_height_m,
                                       const SurfaceSegmentConfig& config,
                                       const GridSpec* grid = nullptr);
+
+/// LCCP's small-segment rule in a fixed order. PCL's own pass visits the supervoxels in the
+/// order of their addresses in memory, so which neighbour absorbs a small segment can differ
+/// from run to run; `segmentVisibleSurface` runs LCCP without it and calls this instead.
+/// `lccp_segment_of` maps each supervoxel label to its LCCP segment, `adjacency` holds the
+/// supervoxel pairs that touch. A segment is named by its lowest supervoxel label and keeps
+/// that name as it absorbs others. A segment of at most `max_small` supervoxels joins its
+/// neighbour with the most supervoxels (ties: the lowest name), lowest name first, until no
+/// small segment has a neighbour. Returns each supervoxel's segment; `neighbours` receives the
+/// segments that touch.
+std::map<std::uint32_t, std::uint32_t> mergeSmallSegments(
+    const std::map<std::uint32_t, std::uint32_t>& lccp_segment_of,
+    const std::multimap<std::uint32_t, std::uint32_t>& adjacency, size_t max_small,
+    std::map<std::uint32_t, std::set<std::uint32_t>>* neighbours);
 
 /// Pixels on a concave crease of the depth image's surface (1; 0 elsewhere and where depth is
 /// missing). The surface is the camera-frame points averaged over `crease_window_px` squares;

@@ -288,6 +288,55 @@ void splitPatches(const ImageNeighbours& image, int min_points, SurfaceSegments*
 
 }  // namespace
 
+std::map<std::uint32_t, std::uint32_t> mergeSmallSegments(
+    const std::map<std::uint32_t, std::uint32_t>& lccp_segment_of,
+    const std::multimap<std::uint32_t, std::uint32_t>& adjacency, size_t max_small,
+    std::map<std::uint32_t, std::set<std::uint32_t>>* neighbours) {
+  std::map<std::uint32_t, std::uint32_t> name_of_lccp;  // LCCP's label -> lowest member
+  for (const auto& [voxel, segment] : lccp_segment_of) name_of_lccp.try_emplace(segment, voxel);
+  std::map<std::uint32_t, std::uint32_t> owner;
+  std::map<std::uint32_t, std::vector<std::uint32_t>> members;
+  for (const auto& [voxel, segment] : lccp_segment_of) {
+    owner[voxel] = name_of_lccp.at(segment);
+    members[owner[voxel]].push_back(voxel);
+  }
+  auto& near = *neighbours;
+  near.clear();
+  for (const auto& [a, b] : adjacency) {
+    const auto ia = owner.find(a), ib = owner.find(b);
+    if (ia == owner.end() || ib == owner.end() || ia->second == ib->second) continue;
+    near[ia->second].insert(ib->second);
+    near[ib->second].insert(ia->second);
+  }
+  for (bool merged = true; merged;) {
+    merged = false;
+    for (auto it = members.begin(); it != members.end();) {
+      const std::uint32_t small = it->first;
+      const auto around = near.find(small);
+      if (it->second.size() > max_small || around == near.end() || around->second.empty()) {
+        ++it;
+        continue;
+      }
+      std::uint32_t into = *around->second.begin();
+      for (std::uint32_t n : around->second)
+        if (members.at(n).size() > members.at(into).size()) into = n;
+      for (std::uint32_t voxel : it->second) owner[voxel] = into;
+      auto& target = members.at(into);
+      target.insert(target.end(), it->second.begin(), it->second.end());
+      for (std::uint32_t n : around->second) {
+        near[n].erase(small);
+        if (n == into) continue;
+        near[n].insert(into);
+        near[into].insert(n);
+      }
+      near.erase(around);
+      it = members.erase(it);
+      merged = true;
+    }
+  }
+  return owner;
+}
+
 SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCamera& camera,
                                       const Transform& T_table_camera, double min_height_m,
                                       const SurfaceSegmentConfig& config, const GridSpec* grid) {
@@ -350,18 +399,24 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
   lccp.setSanityCheck(false);
   lccp.setSmoothnessCheck(false, static_cast<float>(config.voxel_resolution_m),
                           static_cast<float>(config.seed_resolution_m));
-  lccp.setKFactor(1);  // extended convexity: one neighbour must confirm a convex edge
-  lccp.setMinSegmentSize(3);
+  lccp.setKFactor(1);         // extended convexity: one neighbour must confirm a convex edge
+  lccp.setMinSegmentSize(0);  // merged below, in an order that does not depend on memory
   lccp.setInputSupervoxels(clusters, adjacency);
   lccp.segment();
-  lccp.relabelCloud(*labelled);
+  std::map<std::uint32_t, std::uint32_t> lccp_segment_of;
+  lccp.getSupervoxelToSegmentMap(lccp_segment_of);
+  std::map<std::uint32_t, std::set<std::uint32_t>> segment_adjacency;
+  const auto segment_of = mergeSmallSegments(lccp_segment_of, adjacency, 3, &segment_adjacency);
+  for (auto& p : labelled->points) {
+    const auto it = segment_of.find(p.label);
+    p.label = it == segment_of.end() ? 0u : it->second;  // 0: in no supervoxel
+  }
 
   // Patches: LCCP segments with enough points, renumbered from 0.
   std::map<std::uint32_t, int> size;
   for (const auto& p : labelled->points)
     if (p.label != 0) ++size[p.label];
-  // Numbered in the order of their first point: PCL's labels depend on where its supervoxels
-  // land in memory, and the regrouping breaks ties by patch order.
+  // Numbered in the order of their first point: the regrouping breaks ties by patch order.
   std::map<std::uint32_t, int> index;
   for (const auto& p : labelled->points)
     if (p.label != 0 && size[p.label] >= config.min_segment_points && !index.count(p.label))
@@ -371,8 +426,6 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
     if (it != index.end()) out.patch[i] = it->second;
   }
   // Patches that share an edge: LCCP kept them apart, so the edge is concave.
-  std::map<std::uint32_t, std::set<std::uint32_t>> segment_adjacency;
-  lccp.getSegmentAdjacencyMap(segment_adjacency);
   std::set<std::pair<int, int>> concave;
   for (const auto& [a, neighbours] : segment_adjacency) {
     const auto ia = index.find(a);
