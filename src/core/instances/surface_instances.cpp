@@ -418,20 +418,25 @@ struct Gap {
 Gap lookIntoGap(const Face& fa, const Face& fb, int a, int b, const Grid3<int>& labels,
                 const std::vector<float>& depth, const PinholeCamera& camera,
                 const Transform& T_camera_table, double margin_m) {
-  constexpr size_t kMaxPoints = 400;  // per face in the nearest-pair search
-  const size_t sa = std::max<size_t>(1, fa.points.size() / kMaxPoints);
-  const size_t sb = std::max<size_t>(1, fb.points.size() / kMaxPoints);
+  // The nearest pair of points: each of a's looked up among b's.
+  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud_b(new pcl::PointCloud<pcl::PointXYZ>);
+  for (const Vec3& p : fb.points) cloud_b->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  pcl::search::KdTree<pcl::PointXYZ> tree_b;
+  tree_b.setInputCloud(cloud_b);
   Vec3 pa = fa.points.front(), pb = fb.points.front();
   double best = std::numeric_limits<double>::infinity();
-  for (size_t i = 0; i < fa.points.size(); i += sa)
-    for (size_t j = 0; j < fb.points.size(); j += sb) {
-      const double d = (fa.points[i] - fb.points[j]).squaredNorm();
-      if (d < best) {
-        best = d;
-        pa = fa.points[i];
-        pb = fb.points[j];
-      }
+  pcl::Indices nearest(1);
+  std::vector<float> squared(1);
+  for (const Vec3& p : fa.points) {
+    if (tree_b.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, nearest, squared) < 1)
+      continue;
+    const double d = (p - fb.points[nearest[0]]).squaredNorm();
+    if (d < best) {
+      best = d;
+      pa = p;
+      pb = fb.points[nearest[0]];
     }
+  }
   Gap gap;
   gap.length_m = std::sqrt(best);
   const int steps = static_cast<int>(std::ceil(gap.length_m / 0.004));
