@@ -532,6 +532,14 @@ TEST(SurfaceSegments, SmallSegmentsJoinTheirLargestNeighbourWhateverLccpCallsThe
   const auto owner = mergeSmallSegments(lccp, {{5, 1}, {5, 4}}, 1, &neighbours);
   EXPECT_EQ(owner, (std::map<std::uint32_t, std::uint32_t>{
                        {1, 1}, {2, 1}, {3, 3}, {4, 3}, {5, 1}, {9, 9}}));
+  EXPECT_EQ(neighbours, (std::map<std::uint32_t, std::set<std::uint32_t>>{{1, {3}}, {3, {1}}}));
+  // A small segment joins no smaller neighbour: S (1-3) waits beside T (4) for T to join U (5-14),
+  // then joins U too.
+  std::map<std::uint32_t, std::uint32_t> chain;
+  for (std::uint32_t v = 1; v <= 14; ++v) chain[v] = v <= 3 ? 1 : v == 4 ? 2 : 3;
+  const auto joined = mergeSmallSegments(chain, {{3, 4}, {4, 5}}, 3, &neighbours);
+  for (std::uint32_t v = 1; v <= 14; ++v) EXPECT_EQ(joined.at(v), 5u) << v;
+  EXPECT_TRUE(neighbours.empty());
 }
 
 TEST(SurfaceSegments, EmptyViewsAndBadSettings) {

@@ -111,10 +111,10 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
 /// from run to run; `segmentVisibleSurface` runs LCCP without it and calls this instead.
 /// `lccp_segment_of` maps each supervoxel label to its LCCP segment, `adjacency` holds the
 /// supervoxel pairs that touch. A segment is named by its lowest supervoxel label and keeps
-/// that name as it absorbs others. A segment of at most `max_small` supervoxels joins its
-/// neighbour with the most supervoxels (ties: the lowest name), lowest name first, until no
-/// small segment has a neighbour. Returns each supervoxel's segment; `neighbours` receives the
-/// segments that touch.
+/// that name as it absorbs others. Lowest name first, a segment of at most `max_small`
+/// supervoxels joins its neighbour with the most supervoxels (ties: the lowest name) if that
+/// one has at least as many as itself, as in PCL; passes repeat until none joins. Returns each
+/// supervoxel's segment; `neighbours` receives the segments that touch.
 std::map<std::uint32_t, std::uint32_t> mergeSmallSegments(
     const std::map<std::uint32_t, std::uint32_t>& lccp_segment_of,
     const std::multimap<std::uint32_t, std::uint32_t>& adjacency, size_t max_small,

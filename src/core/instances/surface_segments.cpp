@@ -317,9 +317,20 @@ std::map<std::uint32_t, std::uint32_t> mergeSmallSegments(
         ++it;
         continue;
       }
-      std::uint32_t into = *around->second.begin();
-      for (std::uint32_t n : around->second)
-        if (members.at(n).size() > members.at(into).size()) into = n;
+      // The largest neighbour, if it is at least as large as the segment (as in PCL).
+      std::uint32_t into = small;
+      size_t into_size = it->second.size();
+      for (std::uint32_t n : around->second) {
+        const size_t size = members.at(n).size();
+        if (into == small ? size >= into_size : size > into_size) {
+          into = n;
+          into_size = size;
+        }
+      }
+      if (into == small) {
+        ++it;
+        continue;
+      }
       for (std::uint32_t voxel : it->second) owner[voxel] = into;
       auto& target = members.at(into);
       target.insert(target.end(), it->second.begin(), it->second.end());
@@ -334,6 +345,8 @@ std::map<std::uint32_t, std::uint32_t> mergeSmallSegments(
       merged = true;
     }
   }
+  for (auto it = near.begin(); it != near.end();)
+    it = it->second.empty() ? near.erase(it) : std::next(it);
   return owner;
 }
 
