@@ -52,6 +52,13 @@ int labelNear(const Grid3<int>& labels, const Vec3& p, int reach) {
   return v < 0 ? -1 : labels.data[v];
 }
 
+/// The points as a PCL cloud, for its searches and segmentations.
+pcl::PointCloud<pcl::PointXYZ>::Ptr pointCloud(const Points3& points) {
+  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+  for (const Vec3& p : points) cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  return cloud;
+}
+
 /// The `share` quantile of `values` (taken by value: reordered).
 double quantile(std::vector<double> values, double share) {
   const size_t k = std::min(values.size() - 1, static_cast<size_t>(share * values.size()));
@@ -72,8 +79,7 @@ std::vector<std::vector<int>> euclideanClusters(const Points3& points, double to
                                                 int min_points) {
   std::vector<std::vector<int>> out;
   if (points.size() < static_cast<size_t>(std::max(1, min_points))) return out;
-  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
-  for (const Vec3& p : points) cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  const pcl::PointCloud<pcl::PointXYZ>::Ptr cloud = pointCloud(points);
   pcl::search::KdTree<pcl::PointXYZ>::Ptr tree(new pcl::search::KdTree<pcl::PointXYZ>);
   tree->setInputCloud(cloud);
   pcl::EuclideanClusterExtraction<pcl::PointXYZ> ec;
@@ -324,8 +330,7 @@ struct Face {
 Face largestFace(const Points3& points, double threshold_m, int min_points) {
   Face face;
   if (static_cast<int>(points.size()) < std::max(3, min_points)) return face;
-  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
-  for (const Vec3& p : points) cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  const pcl::PointCloud<pcl::PointXYZ>::Ptr cloud = pointCloud(points);
   pcl::SACSegmentation<pcl::PointXYZ> sac;
   sac.setOptimizeCoefficients(true);
   sac.setModelType(pcl::SACMODEL_PLANE);
@@ -419,10 +424,8 @@ Gap lookIntoGap(const Face& fa, const Face& fb, int a, int b, const Grid3<int>& 
                 const std::vector<float>& depth, const PinholeCamera& camera,
                 const Transform& T_camera_table, double margin_m) {
   // The nearest pair of points: each of a's looked up among b's.
-  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud_b(new pcl::PointCloud<pcl::PointXYZ>);
-  for (const Vec3& p : fb.points) cloud_b->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
   pcl::search::KdTree<pcl::PointXYZ> tree_b;
-  tree_b.setInputCloud(cloud_b);
+  tree_b.setInputCloud(pointCloud(fb.points));
   Vec3 pa = fa.points.front(), pb = fb.points.front();
   double best = std::numeric_limits<double>::infinity();
   pcl::Indices nearest(1);
