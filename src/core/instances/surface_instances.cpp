@@ -323,6 +323,8 @@ struct Face {
   Points3 points;
   std::vector<int> indices;
   Vec3 lo = Vec3::Zero(), hi = Vec3::Zero();  ///< the points' bounding box
+  /// A KD-tree over `points`, where the gap test needs one (searched once per pair of faces).
+  pcl::search::KdTree<pcl::PointXYZ>::Ptr tree;
 };
 
 /// The largest plane through `points` by PCL's RANSAC (inliers within `threshold_m`), a face
@@ -424,14 +426,12 @@ Gap lookIntoGap(const Face& fa, const Face& fb, int a, int b, const Grid3<int>& 
                 const std::vector<float>& depth, const PinholeCamera& camera,
                 const Transform& T_camera_table, double margin_m) {
   // The nearest pair of points: each of a's looked up among b's.
-  pcl::search::KdTree<pcl::PointXYZ> tree_b;
-  tree_b.setInputCloud(pointCloud(fb.points));
   Vec3 pa = fa.points.front(), pb = fb.points.front();
   double best = std::numeric_limits<double>::infinity();
   pcl::Indices nearest(1);
   std::vector<float> squared(1);
   for (const Vec3& p : fa.points) {
-    if (tree_b.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, nearest, squared) < 1)
+    if (fb.tree->nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, nearest, squared) < 1)
       continue;
     const double d = (p - fb.points[nearest[0]]).squaredNorm();
     if (d < best) {
@@ -533,9 +533,16 @@ int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
   const Transform T_camera_table = T_table_camera.inverse();
   const std::vector<float> depth = depthOfPoints(points_table, camera, T_camera_table, stride);
   std::vector<Points3> points = pointsByInstance(points_table, *seg, kMaxPoints);
+  const auto faceOf = [&](const Points3& p) {
+    Face face = largestFace(p, config.occluded_plane_m, config.min_points);
+    if (face.valid) {
+      face.tree.reset(new pcl::search::KdTree<pcl::PointXYZ>);
+      face.tree->setInputCloud(pointCloud(face.points));
+    }
+    return face;
+  };
   std::vector<Face> faces;
-  for (const Points3& p : points)
-    faces.push_back(largestFace(p, config.occluded_plane_m, config.min_points));
+  for (const Points3& p : points) faces.push_back(faceOf(p));
   const double min_cos = std::cos(kMaxAngleDeg * M_PI / 180.0);
   int joins = 0;
   for (;;) {
@@ -564,7 +571,7 @@ int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
     if (best_a < 0) return joins;
     joinInstancesAndPoints(seg, &points, best_a, best_b);
     faces.erase(faces.begin() + best_b);
-    faces[best_a] = largestFace(points[best_a], config.occluded_plane_m, config.min_points);
+    faces[best_a] = faceOf(points[best_a]);
     ++joins;
   }
 }
