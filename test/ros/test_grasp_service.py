@@ -393,8 +393,8 @@ class GraspService(unittest.TestCase):
                                 text=True)
         # The first progress line (a tenth of the pulls done). actionlib may log before it: its
         # Python client can take the goal's first status before send_goal has stored the handle.
-        lines = []
-        while len(lines) < 20 and (not lines or (lines[-1] and "pulls" not in lines[-1])):
+        lines = [proc.stderr.readline()]
+        while lines[-1] and "pulls" not in lines[-1] and len(lines) < 20:
             lines.append(proc.stderr.readline())
         self.assertIn("pulls", lines[-1], "".join(lines))
         proc.send_signal(signal.SIGINT)
