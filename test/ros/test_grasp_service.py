@@ -379,17 +379,21 @@ class GraspService(unittest.TestCase):
         from simstack import grasp_client
         scene = grasp_client.latest_scene(max_age=0)
         target = grasp_client.top_object(scene)
+        # A ranking long on any machine: 256 pulls of 30 s simulated each (7200 steps); 256 of
+        # the default 0.8 s can end within the 0.5 s bound below.
+        slow = dict(candidates=256, pull_distance_m=0.3, pull_speed_mps=0.01)
         # A bound on the ranking's wall time.
         results = self.action_results()
         with self.assertRaisesRegex(grasp_client.GraspServiceError,
                                     "no result within 0.5 s; the ranking was cancelled"):
-            grasp_client.rank_grasps(scene, target, candidates=256, result_timeout=0.5)
+            grasp_client.rank_grasps(scene, target, result_timeout=0.5, **slow)
         self.wait_for_preempted(results)
         # Ctrl-C in the script (rospy's own SIGINT handler ends the wait).
         results = self.action_results()
         path = os.path.join(rospkg.RosPack().get_path("simstack"), "scripts", "rank_grasps.py")
         proc = subprocess.Popen([path, "--target", "top", "--max-age", "0", "--candidates",
-                                 "256", "--progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                 "256", "--pull-distance", "0.3", "--pull-speed", "0.01",
+                                 "--progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 text=True)
         # The first progress line (a tenth of the pulls done). actionlib may log before it: its
         # Python client can take the goal's first status before send_goal has stored the handle.

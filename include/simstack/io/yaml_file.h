@@ -7,8 +7,11 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
 #include <set>
+#include <stdexcept>
 #include <string>
+#include <type_traits>
 
 namespace simstack {
 
@@ -23,6 +26,23 @@ YAML::Node parseYamlText(const std::string& text, const std::string& what,
 /// that is none of `known`: a misspelt field is an error, not a default silently kept.
 void requireKnownKeys(const YAML::Node& map, const std::set<std::string>& known,
                       const std::string& where, const std::string& path);
+
+/// `node` read as T, `field` ("hough.radius_m") naming it in the error: std::invalid_argument
+/// "<field>: <yaml-cpp's reason>", or "<field>: <text> is not a finite number" for a number at
+/// infinity or NaN (no config field means either).
+template <typename T>
+T readYamlValue(const YAML::Node& node, const std::string& field) {
+  T value{};
+  try {
+    value = node.as<T>();
+  } catch (const YAML::Exception& e) {
+    throw std::invalid_argument(field + ": " + e.what());
+  }
+  if constexpr (std::is_floating_point_v<T>)
+    if (!std::isfinite(value))
+      throw std::invalid_argument(field + ": " + node.Scalar() + " is not a finite number");
+  return value;
+}
 
 /// `text` (YAML with comments) with its top-level section `key` (the line `key:` down to the
 /// next top-level key, less the comments and blank lines just above that, plus the comments

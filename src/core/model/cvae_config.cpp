@@ -2,11 +2,9 @@
 
 #include <yaml-cpp/yaml.h>
 
-#include <cmath>
 #include <filesystem>
 #include <set>
 #include <stdexcept>
-#include <type_traits>
 
 #include "simstack/io/yaml_file.h"
 #include "simstack/render/depth_renderer.h"
@@ -17,16 +15,7 @@ namespace {
 /// `prefix` ("model.experimental.") names the field in errors.
 template <typename T>
 void get(const YAML::Node& n, const char* key, T* value, const std::string& prefix = "") {
-  if (!n[key]) return;
-  try {
-    *value = n[key].as<T>();
-  } catch (const YAML::Exception& e) {
-    throw std::invalid_argument("field '" + prefix + key + "': " + e.what());
-  }
-  if constexpr (std::is_same_v<T, double>)
-    if (!std::isfinite(*value))
-      throw std::invalid_argument("field '" + prefix + key + "': " + n[key].Scalar() +
-                                  " is not a finite number");
+  if (n[key]) *value = readYamlValue<T>(n[key], "field '" + prefix + key + "'");
 }
 
 YAML::Node parse(const std::string& text, const std::string& section) {

@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <array>
-#include <cmath>
 #include <filesystem>
 #include <set>
 #include <stdexcept>
@@ -155,18 +154,11 @@ void readFields(const YAML::Node& n, const std::string& prefix, C* c, Fields fie
                 const std::string& path) {
   fields(*c, [&](const char* key, auto& value) {
     if (!n[key]) return;
-    using Value = std::remove_reference_t<decltype(value)>;
     try {
-      value = n[key].as<Value>();
-    } catch (const YAML::Exception& e) {
-      throw std::runtime_error(path + ": " + prefix + key + ": " + e.what());
+      value = readYamlValue<std::remove_reference_t<decltype(value)>>(n[key], prefix + key);
+    } catch (const std::invalid_argument& e) {
+      throw std::runtime_error(path + ": " + e.what());
     }
-    // No number field means anything at infinity or NaN (the workspace's box, a list, may
-    // be unbounded).
-    if constexpr (std::is_same_v<Value, double>)
-      if (!std::isfinite(value))
-        throw std::runtime_error(path + ": " + prefix + key + ": " + n[key].Scalar() +
-                                 " is not a finite number");
   });
 }
 

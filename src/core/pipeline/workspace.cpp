@@ -94,7 +94,8 @@ struct Cluster {
 };
 
 /// Connected groups of the points' x/y cells (side `cell`, 8-neighbourhood), with fewer than
-/// `min_points` points dropped.
+/// `min_points` points dropped. The cells are hashed, not rasterised for OpenCV's labelling: a
+/// flying pixel may lie as far as max_depth_m (up to 100 m), a raster of 10^7-10^8 cells.
 std::vector<Cluster> connectedGroups(const std::vector<Vec3>& points, double cell,
                                      size_t min_points) {
   std::unordered_map<int64_t, std::vector<size_t>> cells;
