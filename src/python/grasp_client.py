@@ -113,29 +113,52 @@ _active = set()
 _hook_added = False
 
 
-def _cancel_and_wait(client, seconds=2.0):
-    """Cancels the client's goal and waits (wall clock) for the server to end it, so that the
-    cancel has reached the server before the caller goes on or exits."""
-    client.cancel_goal()
+class _Goal(object):
+    """One goal through actionlib's plain ActionClient, whose goal handle takes the server's
+    statuses from the moment the goal is sent. (SimpleActionClient stores its handle only after
+    sending, and logs an error when a local server's first status comes in between.)"""
+
+    def __init__(self, client):
+        self.client = client
+        self.handle = None
+
+    def send(self, goal, on_feedback):
+        self.handle = self.client.send_goal(goal, feedback_cb=lambda _, f: on_feedback(f))
+
+    def done(self):
+        return self.handle is None or self.handle.get_comm_state() == actionlib.CommState.DONE
+
+    def cancel(self):
+        if not self.done():  # a handle cancelled after its end would wait for an ack forever
+            self.handle.cancel()
+
+    def result(self):
+        return None if self.handle is None else self.handle.get_result()
+
+
+def _cancel_and_wait(goal, seconds=2.0):
+    """Cancels the goal and waits (wall clock) for the server to end it, so that the cancel has
+    reached the server before the caller goes on or exits."""
+    goal.cancel()
     deadline = time.time() + seconds
-    while client.simple_state != actionlib.SimpleGoalState.DONE and time.time() < deadline:
+    while not goal.done() and time.time() < deadline:
         time.sleep(0.02)
 
 
 def _cancel_active():
     with _active_lock:
-        clients = list(_active)
-    for client in clients:
-        _cancel_and_wait(client)
+        goals = list(_active)
+    for goal in goals:
+        _cancel_and_wait(goal)
 
 
-def _track(client):
+def _track(goal):
     global _hook_added
     with _active_lock:
         if not _hook_added:
             rospy.on_shutdown(_cancel_active)  # run before rospy closes its topics
             _hook_added = True
-        _active.add(client)
+        _active.add(goal)
 
 
 def rank_grasps(scene, target_id, camera="camera", candidates=0, pull_distance_m=0.10,
@@ -175,19 +198,19 @@ def rank_grasps(scene, target_id, camera="camera", candidates=0, pull_distance_m
         goal.target_point = target_point
     if scene is not None:
         goal.scene = scene
-    client = actionlib.SimpleActionClient(name, RankGraspsAction)
+    sent = _Goal(actionlib.ActionClient(name, RankGraspsAction))
     try:
-        return _run_goal(client, name, goal, timeout, result_timeout, feedback)
+        return _run_goal(sent, name, goal, timeout, result_timeout, feedback)
     finally:
         with _active_lock:
-            _active.discard(client)
-        client.action_client.stop()  # its topics' callbacks would otherwise stay for good
+            _active.discard(sent)
+        sent.client.stop()  # its topics' callbacks would otherwise stay for good
 
 
-def _run_goal(client, name, goal, timeout, result_timeout, feedback):
+def _run_goal(sent, name, goal, timeout, result_timeout, feedback):
     # On the wall clock: actionlib's own timeouts read ROS time, which under a looping or paused
     # bag may never reach them.
-    waiting = threading.Thread(target=client.wait_for_server, daemon=True)
+    waiting = threading.Thread(target=sent.client.wait_for_server, daemon=True)
     waiting.start()
     waiting.join(timeout)
     if waiting.is_alive():
@@ -203,12 +226,12 @@ def _run_goal(client, name, goal, timeout, result_timeout, feedback):
         except BaseException as e:  # rospy would only log it
             failures.append(e)
 
-    _track(client)
-    client.send_goal(goal, feedback_cb=on_feedback)
+    _track(sent)
+    sent.send(goal, on_feedback)
     start = time.time()
     gone_since = None
     try:
-        while client.simple_state != actionlib.SimpleGoalState.DONE:
+        while not sent.done():
             if failures:
                 raise failures[0]
             if rospy.is_shutdown():
@@ -217,7 +240,7 @@ def _run_goal(client, name, goal, timeout, result_timeout, feedback):
             if result_timeout is not None and time.time() - start > result_timeout:
                 raise GraspServiceError("%s: no result within %g s; the ranking was cancelled" % (
                     name, result_timeout))
-            if client.action_client.pub_goal.get_num_connections() == 0:
+            if sent.client.pub_goal.get_num_connections() == 0:
                 gone_since = gone_since or time.time()
                 if time.time() - gone_since > 2.0:
                     raise GraspServiceError("%s: the grasp server went away during the ranking" %
@@ -227,11 +250,11 @@ def _run_goal(client, name, goal, timeout, result_timeout, feedback):
             time.sleep(0.02)
     except BaseException:
         if not rospy.is_shutdown():
-            _cancel_and_wait(client)
+            _cancel_and_wait(sent)
         raise
     if failures:
         raise failures[0]
-    res = client.get_result()
+    res = sent.result()
     if rospy.core.is_shutdown_requested():  # cancelled by _cancel_active
         raise GraspServiceError("%s: rospy shut down (Ctrl-C?) before the ranking ended; it was "
                                 "cancelled on the server%s" % (
