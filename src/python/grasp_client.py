@@ -129,8 +129,17 @@ class _Goal(object):
         return self.handle is None or self.handle.get_comm_state() == actionlib.CommState.DONE
 
     def cancel(self):
-        if not self.done():  # a handle cancelled after its end would wait for an ack forever
-            self.handle.cancel()
+        if self.handle is None:
+            return
+        # Under the goal's own lock, so that a result arriving meanwhile cannot be followed by a
+        # cancel: a handle cancelled after its end would wait for an ack that never comes.
+        with self.handle.comm_state_machine.mutex:
+            if self.done():
+                return
+            try:
+                self.handle.cancel()
+            except rospy.ROSException:  # the client's topics already closed (rospy shutting down)
+                pass
 
     def result(self):
         return None if self.handle is None else self.handle.get_result()

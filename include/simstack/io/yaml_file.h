@@ -29,7 +29,8 @@ void requireKnownKeys(const YAML::Node& map, const std::set<std::string>& known,
 
 /// `node` read as T, `field` ("hough.radius_m") naming it in the error: std::invalid_argument
 /// "<field>: <yaml-cpp's reason>", or "<field>: <text> is not a finite number" for a number at
-/// infinity or NaN (no config field means either).
+/// infinity or NaN (no scalar field means either; lists such as the workspace box's corners may
+/// hold .inf and are not checked here).
 template <typename T>
 T readYamlValue(const YAML::Node& node, const std::string& field) {
   T value{};
