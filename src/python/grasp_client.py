@@ -216,15 +216,32 @@ def rank_grasps(scene, target_id, camera="camera", candidates=0, pull_distance_m
         sent.client.stop()  # its topics' callbacks would otherwise stay for good
 
 
+def _server_ready(client):
+    """Whether an action server is connected both ways: the test of actionlib's
+    wait_for_server. The server is the node that sent the last status; the client's goal and
+    cancel topics reach it, and its result and feedback topics reach the client."""
+    status = client.last_status_msg
+    if not status:
+        return False
+    server = status._connection_header["callerid"]
+    if not (client.pub_goal.impl.has_connection(server) and
+            client.pub_cancel.impl.has_connection(server)):
+        return False
+    return all(any(c.callerid_pub == server for c in sub.impl.connections)
+               for sub in (client.result_sub, client.feedback_sub))
+
+
 def _run_goal(sent, name, goal, timeout, result_timeout, feedback):
-    # On the wall clock: actionlib's own timeouts read ROS time, which under a looping or paused
-    # bag may never reach them.
-    waiting = threading.Thread(target=sent.client.wait_for_server, daemon=True)
-    waiting.start()
-    waiting.join(timeout)
-    if waiting.is_alive():
-        raise GraspServiceError("no grasp server at %s within %g s (is grasps.launch running?)" % (
-            name, timeout))
+    # On the wall clock: actionlib's wait_for_server reads ROS time, which under a looping or
+    # paused bag may never reach its timeout, and a thread left in it would poll until shutdown.
+    deadline = time.time() + timeout
+    while not _server_ready(sent.client):
+        if rospy.is_shutdown():
+            raise GraspServiceError("%s: rospy shut down (Ctrl-C?) before the server came" % name)
+        if time.time() >= deadline:
+            raise GraspServiceError("no grasp server at %s within %g s (is grasps.launch "
+                                    "running?)" % (name, timeout))
+        time.sleep(0.01)
     failures = []
 
     def on_feedback(f):

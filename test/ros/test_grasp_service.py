@@ -334,6 +334,12 @@ class GraspService(unittest.TestCase):
             grasp_client.rank_grasps(scene, 99)
         with self.assertRaisesRegex(grasp_client.GraspServiceError, "no scene on /nowhere"):
             grasp_client.latest_scene("nowhere", timeout=1.0)
+        # A server that never comes: refused on time, and nothing left polling for it.
+        threads = threading.active_count()
+        with self.assertRaisesRegex(grasp_client.GraspServiceError, "no grasp server at /nowhere"):
+            grasp_client.rank_grasps(scene, target, camera="nowhere", timeout=0.5)
+        time.sleep(0.5)
+        self.assertLessEqual(threading.active_count(), threads, threading.enumerate())
 
     def test_9c_the_client_checks_its_arguments_and_picks_the_top_above_the_table(self):
         from simstack import grasp_client
