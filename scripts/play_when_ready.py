@@ -7,6 +7,7 @@ Remappings after -- (camera/depth/image_rect:=camera/depth/image_rect_raw) go to
     play_when_ready.py --ready /camera/perception/ready [--timeout 300] -- --clock my.bag
 """
 import argparse
+import math
 import signal
 import subprocess
 import sys
@@ -17,17 +18,19 @@ from std_msgs.msg import Bool
 
 def main():
     argv = sys.argv[1:]
-    if "--" not in argv:
-        sys.exit("play_when_ready: give the rosbag play arguments after --")
-    split = argv.index("--")
+    split = argv.index("--") if "--" in argv else len(argv)
     # rosbag play's own, remappings included; roslaunch's __name:= and __log:= are this node's.
     play_args = [a for a in argv[split + 1:] if not a.startswith("__")]
-    own = rospy.myargv(argv[:split])
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--ready", required=True, help="the perception's latched ready topic")
     parser.add_argument("--timeout", type=float, default=300.0,
                         help="seconds (wall clock) to wait for it before giving up")
-    args = parser.parse_args(own)
+    args = parser.parse_args(rospy.myargv(argv[:split]))
+    if not play_args:
+        parser.error("give the rosbag play arguments after --")
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        parser.error("--timeout %s: give a number of seconds above 0" % args.timeout)
     rospy.init_node("play_when_ready", anonymous=True, disable_signals=True)
     rospy.loginfo("play_when_ready: waiting for %s", args.ready)
     try:

@@ -12,7 +12,8 @@ fail=0
 reconstruct="$bin/simstack_reconstruct"
 K=525,525,319.5,239.5
 
-# expect NAME WORDS CMD...: non-zero exit (not a signal), WORDS in stderr, within 120 s.
+# expect NAME WORDS CMD...: non-zero exit (not a signal), WORDS in stderr, within 120 s;
+# with want_rc=N before it, exit code N (the one docs/reference.md gives).
 expect() {
   local name=$1 words=$2; shift 2
   timeout 120 "$@" > "$dir/out.txt" 2> "$dir/err.txt"
@@ -20,6 +21,8 @@ expect() {
   if [ $rc -eq 0 ]; then echo "FAIL $name: accepted"; fail=1; return; fi
   if [ $rc -eq 124 ]; then echo "FAIL $name: still running after 120 s"; fail=1; return; fi
   if [ $rc -ge 128 ]; then echo "FAIL $name: killed by signal $((rc - 128))"; fail=1; return; fi
+  if [ -n "${want_rc:-}" ] && [ $rc -ne "$want_rc" ]; then
+    echo "FAIL $name: exit $rc, not $want_rc"; fail=1; return; fi
   if ! grep -q -- "$words" "$dir/err.txt"; then
     echo "FAIL $name: no '$words' in:"; cat "$dir/err.txt"; fail=1; return; fi
   echo "ok   $name: $(grep -m1 -- "$words" "$dir/err.txt" | cut -c1-150)"
@@ -283,9 +286,9 @@ mkdir -p "$dir/dircard/m.yaml"
 cp "$pkg/models/simstack_r32_fc.pt" "$dir/dircard/m.pt"
 expect "check_model with a directory as card" "it is a directory" "$bin/simstack_check_model" \
   "$dir/dircard/m.pt"
-expect "tune_hough --refinement 100" "refinement" "$bin/simstack_tune_hough" \
+want_rc=105 expect "tune_hough --refinement 100" "refinement" "$bin/simstack_tune_hough" \
   --dataset "$dir/keep.h5" --output "$dir/hough.yaml" --refinement 100
-expect "tune_hough --bandwidth nan" "bandwidth" "$bin/simstack_tune_hough" \
+want_rc=105 expect "tune_hough --bandwidth nan" "bandwidth" "$bin/simstack_tune_hough" \
   --dataset "$dir/keep.h5" --output "$dir/hough.yaml" --bandwidth nan
 
 # The table's RANSAC settings and the generator's object counts are checked.
@@ -299,8 +302,8 @@ for objects in 3x:4y 3:4:5 1:100000 0:2; do
 done
 
 # A seed below 0 (CLI11 would wrap it to 2^64 - 1); intrinsics with a trailing comma.
-expect "generate --seed -1" "not a seed" "$bin/simstack_generate" --scenes 1 --seed -1 --output "$dir/s.h5"
-expect "intrinsics with a trailing comma" "ends in a comma" "$reconstruct" --depth "$good" \
+want_rc=105 expect "generate --seed -1" "not a seed" "$bin/simstack_generate" --scenes 1 --seed -1 --output "$dir/s.h5"
+want_rc=1 expect "intrinsics with a trailing comma" "ends in a comma" "$reconstruct" --depth "$good" \
   --intrinsics $K, --output "$dir/o"
 
 # A training config's bad value is reported at its line in the file.
