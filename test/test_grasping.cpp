@@ -508,6 +508,35 @@ TEST(GraspRequest, TheSceneMustRestOnTheTableAndThePullStayInBounds) {
   refused(bad_hypothesis, "hypothesis 1 (of the scene's hypotheses), object 0: semi-axes");
 }
 
+TEST(GraspRequest, APointNamesTheObjectItIsDeepestInOrTheNearestSurface) {
+  // bridgedTarget: boxes 0 and 1 side by side (x = -0.055 and 0.055, 5 cm half-widths, tops at
+  // 6 cm); box 2 on top across both, centred at x = 0.03, 8.05 cm up.
+  const std::vector<SuperquadricShape> scene = bridgedTarget();
+  double distance = -1.0;
+  EXPECT_EQ(objectAtPoint(scene, Vec3(-0.055, 0, 0.03), &distance), 0);
+  EXPECT_EQ(distance, 0.0);
+  EXPECT_EQ(objectAtPoint(scene, Vec3(0.03, 0, 0.075)), 2);
+  // Two estimates that overlap: a point inside both belongs to the one it lies deeper in.
+  const std::vector<SuperquadricShape> overlapping = {box({0.05, 0.05, 0.05}, {0, 0, 0.05}),
+                                                      box({0.03, 0.03, 0.03}, {0.06, 0, 0.03})};
+  EXPECT_EQ(objectAtPoint(overlapping, Vec3(0.04, 0, 0.03)), 1);  // 4/5 out in 0, 2/3 in 1
+  EXPECT_EQ(objectAtPoint(overlapping, Vec3(0.02, 0, 0.03)), 0);  // outside 1
+  // Outside all: 3 cm beyond the left box's outer face is 3 cm from it, not from the others.
+  EXPECT_EQ(objectAtPoint(scene, Vec3(-0.135, 0, 0.03), &distance), 0);
+  EXPECT_NEAR(distance, 0.03, 0.002);
+  // Beyond kMaxTargetPointM from every surface: none, with the nearest's distance.
+  EXPECT_EQ(objectAtPoint(scene, Vec3(-0.3, 0, 0.03), &distance), -1);
+  EXPECT_NEAR(distance, 0.195, 0.005);
+  EXPECT_EQ(objectAtPoint({}, Vec3::Zero()), -1);
+  // 5 mm off a large box's face and 2 cm off a small neighbour's: the large box, 5 mm away.
+  const std::vector<SuperquadricShape> large_and_small = {
+      box({0.1, 0.1, 0.1}, {0, 0, 0.1}), box({0.02, 0.02, 0.02}, {0.145, 0, 0.02})};
+  EXPECT_EQ(objectAtPoint(large_and_small, Vec3(0.105, 0, 0.1), &distance), 0);
+  EXPECT_NEAR(distance, 0.005, 1e-6);
+  EXPECT_EQ(objectAtPoint(large_and_small, Vec3(0.105, 0, 0.02), &distance), 0);
+  EXPECT_LT(distance, 0.02);
+}
+
 TEST(GraspRequest, AStaleSceneIsRefusedUnlessAnyAgeIsAllowed) {
   EXPECT_TRUE(staleScene(5.0, 10.0).empty());
   EXPECT_TRUE(staleScene(-3.0, 10.0).empty());  // a looping bag's stamp ahead of now

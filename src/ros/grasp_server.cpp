@@ -29,8 +29,6 @@ std::string badIds(const ObjectArray& scene) {
   return "";
 }
 
-/// A target_point farther than this from every object's surface names none (m).
-constexpr double kMaxTargetPointM = 0.1;
 /// How long a tf lookup waits for the transform (wall-clock seconds).
 constexpr double kTfWaitS = 0.5;
 
@@ -119,21 +117,15 @@ bool GraspServer::nearestToPoint(const geometry_msgs::PointStamped& point, const
     }
     p = T_scene_point * p;
   }
-  // Inside an object (f < 1) beats outside, the deeper the better; outside, the nearer surface
-  // along the ray from the centre (the radial distance) wins.
-  double best = INFINITY, best_rank = INFINITY;
-  for (size_t k = 0; k < scene.objects.size(); ++k) {
-    const SuperquadricShape sq = superquadricFromMsg(
-        scene.objects[k].superquadric, "object " + std::to_string(scene.objects[k].id));
-    const double f = sq.insideOutside(p);
-    const double d = f < 1.0 ? 0.0 : sq.radialDistance(p);
-    const double rank = f < 1.0 ? f - 1.0 : d;
-    if (rank < best_rank) best_rank = rank, best = d, *target = static_cast<int>(k);
-  }
-  if (best > kMaxTargetPointM) {
+  std::vector<SuperquadricShape> shapes;
+  for (const Object& o : scene.objects)
+    shapes.push_back(superquadricFromMsg(o.superquadric, "object " + std::to_string(o.id)));
+  double distance = INFINITY;
+  *target = objectAtPoint(shapes, p, &distance);
+  if (*target < 0) {
     *why = "no object's surface lies within " + number(kMaxTargetPointM) + " m of target_point (" +
            number(p.x()) + ", " + number(p.y()) + ", " + number(p.z()) + ") in '" + scene_frame +
-           "': the nearest is " + number(best) + " m away";
+           "': the nearest is " + number(distance) + " m away";
     return false;
   }
   return true;

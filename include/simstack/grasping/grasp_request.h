@@ -73,6 +73,17 @@ void checkGraspBounds(const GraspRequest& request, const GraspPolicy& policy);
 PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConfig& base,
                              const GraspPolicy& policy);
 
+/// How far from every object's surface a point naming the target may lie (m).
+constexpr double kMaxTargetPointM = 0.1;
+
+/// The object of `scene` a point `p` (in the scene's frame) names: of the objects containing
+/// it, the one it lies deepest in (the lowest inside-outside value); else the object whose
+/// surface is nearest along the ray from its centre through `p`. -1 when no surface
+/// lies within kMaxTargetPointM; `distance_m` (if given) is the chosen or nearest object's
+/// distance, 0 inside.
+int objectAtPoint(const std::vector<SuperquadricShape>& scene, const Vec3& p,
+                  double* distance_m = nullptr);
+
 /// A number as a person writes it in a request's message: 0.1, 2, nan (std::to_string gives
 /// 0.100000 and -nan).
 std::string number(double v);

@@ -116,6 +116,22 @@ PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConf
   return out;
 }
 
+int objectAtPoint(const std::vector<SuperquadricShape>& scene, const Vec3& p, double* distance_m) {
+  int best = -1;
+  double best_rank = INFINITY, best_distance = INFINITY;
+  for (size_t k = 0; k < scene.size(); ++k) {
+    const Vec3 q = scene[k].T_table_object.inverse() * p;
+    const double f = scene[k].insideOutsideObject(q);
+    // Outside: the distance along the ray from the centre to the surface. (The fit's radial
+    // distance approximation, |q| (f - 1) / f, is several times that near a boxy object.)
+    const double d = f < 1.0 ? 0.0 : q.norm() - scene[k].surfacePointAlong(q).norm();
+    const double rank = f < 1.0 ? f - 1.0 : d;  // inside (below 0) before outside
+    if (rank < best_rank) best_rank = rank, best_distance = d, best = static_cast<int>(k);
+  }
+  if (distance_m) *distance_m = best_distance;
+  return best_distance <= kMaxTargetPointM ? best : -1;
+}
+
 std::string staleScene(double age_s, double max_age_s) {
   if (max_age_s <= 0.0 || !(age_s > max_age_s)) return {};
   return number(age_s) + " s old (max_scene_age_s " + number(max_age_s) + "): " +
