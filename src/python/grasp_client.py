@@ -20,9 +20,11 @@ the same object in the next while it stays where it was.
 import math
 import threading
 import time
+import uuid
 
 import actionlib
 import rospy
+from actionlib_msgs.msg import GoalID
 from simstack.msg import ObjectArray, RankGraspsAction, RankGraspsGoal
 
 
@@ -123,7 +125,14 @@ class _Goal(object):
         self.handle = None
 
     def send(self, goal, on_feedback):
+        # A goal id of its own. actionlib's is the node's name, a count from 1 and the time:
+        # task code run again under the same name while a replayed bag's clock stands still
+        # sends an id the server already lists, and the server ignores that goal.
+        self.client.manager._generate_id = _unique_goal_id
         self.handle = self.client.send_goal(goal, feedback_cb=lambda _, f: on_feedback(f))
+
+    def state(self):
+        return None if self.handle is None else self.handle.get_comm_state()
 
     def done(self):
         return self.handle is None or self.handle.get_comm_state() == actionlib.CommState.DONE
@@ -143,6 +152,22 @@ class _Goal(object):
 
     def result(self):
         return None if self.handle is None else self.handle.get_result()
+
+
+def _unique_goal_id():
+    now = rospy.Time.now()
+    return GoalID(id="%s-%s" % (rospy.get_caller_id(), uuid.uuid4().hex), stamp=now)
+
+
+# How long (wall clock) the server may take to list a goal it received, which it does at once
+# also while another ranking runs, and to send the result of a goal it lists as ended, which
+# comes with the status. Either wait that outlasts this is a goal the server will not answer
+# (one whose id it already listed), not a slow ranking.
+_REPLY_TIMEOUT_S = 10.0
+_NO_REPLY = {
+    actionlib.CommState.WAITING_FOR_GOAL_ACK: "did not take the goal",
+    actionlib.CommState.WAITING_FOR_RESULT: "ended the goal but sent no result",
+}
 
 
 def _cancel_and_wait(goal, seconds=2.0):
@@ -256,6 +281,7 @@ def _run_goal(sent, name, goal, timeout, result_timeout, feedback):
     sent.send(goal, on_feedback)
     start = time.time()
     gone_since = None
+    state, state_since = None, start
     try:
         while not sent.done():
             if failures:
@@ -266,6 +292,11 @@ def _run_goal(sent, name, goal, timeout, result_timeout, feedback):
             if result_timeout is not None and time.time() - start > result_timeout:
                 raise GraspServiceError("%s: no result within %g s; the ranking was cancelled" % (
                     name, result_timeout))
+            if sent.state() != state:
+                state, state_since = sent.state(), time.time()
+            if state in _NO_REPLY and time.time() - state_since > _REPLY_TIMEOUT_S:
+                raise GraspServiceError("%s: the grasp server %s within %g s" % (
+                    name, _NO_REPLY[state], _REPLY_TIMEOUT_S))
             if sent.client.pub_goal.get_num_connections() == 0:
                 gone_since = gone_since or time.time()
                 if time.time() - gone_since > 2.0:

@@ -364,6 +364,34 @@ class GraspService(unittest.TestCase):
             tilted.objects.append(o)
         self.assertEqual(grasp_client.top_object(tilted), 8)
 
+    def test_9e_task_code_run_again_under_a_stopped_clock_is_ranked(self):
+        # The same task run twice: the same node name, actionlib's goal count from the same
+        # start, and the clock where it stood (a replayed bag that ended). actionlib's own goal
+        # ids would repeat, and the server ignore the second goal.
+        import actionlib.action_client as action_client
+        from simstack import grasp_client
+        scene = grasp_client.latest_scene(max_age=0)
+        target = grasp_client.top_object(scene)
+        count, frozen, now = action_client.g_goal_id, rospy.Time.now(), rospy.Time.__dict__["now"]
+        rospy.Time.now = lambda: frozen
+        try:
+            for _ in range(2):
+                action_client.g_goal_id = count
+                res = grasp_client.rank_grasps(scene, target, candidates=4, result_timeout=60)
+                self.assertTrue(res.success, res.message)
+        finally:
+            rospy.Time.now = now
+        # A goal the server ignores (its id one the server lists already) ends in an error.
+        fixed, unique = grasp_client._unique_goal_id(), grasp_client._unique_goal_id
+        grasp_client._unique_goal_id = lambda: fixed
+        try:
+            grasp_client.rank_grasps(scene, target, candidates=4)
+            with self.assertRaisesRegex(grasp_client.GraspServiceError,
+                                        "the grasp server .* within 10 s"):
+                grasp_client.rank_grasps(scene, target, candidates=4)
+        finally:
+            grasp_client._unique_goal_id = unique
+
     def action_results(self):
         """The grasp server's action results as they come (a list that grows)."""
         results = []
