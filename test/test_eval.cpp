@@ -422,6 +422,11 @@ TEST(RealScenes, TheTruthScoresOneAndNothingZeroByCategory) {
             std::string::npos)
       << table;
   EXPECT_NE(table.find("| nothing: mixed | 1 |"), std::string::npos) << table;
+  EXPECT_NE(table.find("| -2.00 | 2.00 |\n"), std::string::npos) << table;  // a cell per figure
+  const std::vector<RealMethodResults> first = evaluateRealScenes(dir.string(), {&truth}, {}, 1);
+  ASSERT_EQ(first.size(), 1u);
+  ASSERT_EQ(first[0].scenes.size(), 1u);
+  EXPECT_EQ(first[0].scenes[0].scene, "learn3.pcd");
   std::filesystem::remove_all(dir);
 }
 

@@ -105,6 +105,9 @@ done
 expect "tiny focal length" "field of view" "$reconstruct" --depth "$good" --intrinsics 1e-9,1e-9,319.5,239.5 --output "$dir/o"
 expect "normalized intrinsics" "field of view" "$reconstruct" --depth "$good" --intrinsics 0.82,1.09,0.5,0.5 --output "$dir/o"
 expect "principal point outside" "cx = 1999.5" "$reconstruct" --depth "$good" --intrinsics 525,525,1999.5,239.5 --output "$dir/o"
+convert "$good" -resize 320x240 "$dir/half.png" || { echo "FAIL setup: convert"; exit 1; }
+expect "a half-size image with the full size's intrinsics" "middle half of the 320-pixel-wide" \
+  "$reconstruct" --depth "$dir/half.png" --intrinsics $K --output "$dir/o"
 expect "depth scale nan" "depth-scale" "$reconstruct" --depth "$good" --intrinsics $K --depth-scale nan --output "$dir/o"
 expect "depth scale with a float TIFF" "16-bit images only" "$reconstruct" --depth "$dir/random.tiff" \
   --intrinsics 52.5,52.5,31.5,23.5 --depth-scale 5 --output "$dir/o"

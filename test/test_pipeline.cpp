@@ -562,6 +562,7 @@ TEST(ScenePerception, ObjectsCutByTheImageBorderOrTheMaskAreTruncated) {
   // The image ends in the middle of box b.
   DepthView cropped{DepthImage(cut, camera.height, 0.0f), camera, T};
   cropped.camera.width = cut;
+  cropped.camera.window = true;  // a crop of the checked camera's image
   for (int v = 0; v < camera.height; ++v)
     for (int u = 0; u < cut; ++u) cropped.depth.at(u, v) = r.depth.at(u, v);
   EXPECT_EQ(truncation(cropped), std::make_pair(false, true));

@@ -100,7 +100,8 @@ def top_object(scene):
 def _check_count(name, value):
     """A uint32 field of the goal: a whole number in [0, 2^32)."""
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2 ** 32:
-        raise GraspServiceError("%s must be a whole number >= 0, not %r" % (name, value))
+        raise GraspServiceError("%s must be a whole number from 0 to %d, not %r" % (
+            name, 2 ** 32 - 1, value))
 
 
 def _check_number(name, value):

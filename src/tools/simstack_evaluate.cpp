@@ -79,7 +79,7 @@ void runDataset(const DatasetReader& reader, const std::string& dataset,
 /// Every model, and the classical baseline unless `classical` is false, on the labelled real
 /// scenes of `real_dir`; writes the results and prints the table.
 void runRealScenes(const std::vector<PerceptionConfig>& configs, bool classical,
-                   const std::string& real_dir, const std::string& output,
+                   const std::string& real_dir, int max_scenes, const std::string& output,
                    const std::string& summary, ResultFiles& files) {
   std::vector<std::unique_ptr<EvaluatedMethod>> methods;
   for (const PerceptionConfig& c : configs) {
@@ -96,12 +96,13 @@ void runRealScenes(const std::vector<PerceptionConfig>& configs, bool classical,
   }
   std::vector<EvaluatedMethod*> run;
   for (const auto& m : methods) run.push_back(m.get());
-  const int scenes = static_cast<int>(labelledCloudFiles(real_dir).size());
+  int scenes = static_cast<int>(labelledCloudFiles(real_dir).size());
+  if (max_scenes > 0) scenes = std::min(scenes, max_scenes);
   ProgressBar bar(
       "real scenes, " + std::to_string(run.size()) + (run.size() == 1 ? " method" : " methods"),
       scenes);
-  const std::vector<RealMethodResults> results =
-      evaluateRealScenes(real_dir, run, [&](int done, int) { bar.update(done); });
+  const std::vector<RealMethodResults> results = evaluateRealScenes(
+      real_dir, run, [&](int done, int) { bar.update(done); }, max_scenes);
   bar.finish();
   nlohmann::json j = {{"real_dir", real_dir}, {"methods", realScenesJson(results)}};
   writeJson(*files.results, output, j);
@@ -214,7 +215,7 @@ int main(int argc, char** argv) {
     ResultFiles files(output, summary, inputs);
     const std::vector<PerceptionConfig> configs = perception.configs();
     if (!real_dir.empty()) {
-      runRealScenes(configs, !no_classical, real_dir, output, summary, files);
+      runRealScenes(configs, !no_classical, real_dir, o.scenes, output, summary, files);
       return 0;
     }
     const DatasetReader reader(dataset, mesh_dir);

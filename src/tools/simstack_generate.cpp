@@ -3,6 +3,7 @@
 // (dataset/dataset_generation.h).
 #include <CLI/CLI.hpp>
 
+#include <iomanip>
 #include <iostream>
 
 #include "cli_checks.h"
@@ -125,7 +126,8 @@ int main(int argc, char** argv) {
     ProgressBar bar("generating", o.scenes);
     const GenerationSummary s = generateDataset(o, [&](int done, int) { bar.update(done); });
     bar.finish();
-    std::cout << "wrote " << o.scenes << " scenes (" << s.objects << " objects, "
+    std::cout << std::fixed << std::setprecision(1) << "wrote " << o.scenes << " scenes ("
+              << s.objects << " objects, "
               << (!o.ycb_dir.empty()        ? "YCB meshes"
                   : o.household_share > 0.0 ? "superquadrics and household shapes"
                                             : "superquadrics")

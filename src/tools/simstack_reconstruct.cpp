@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <iomanip>
 #include <iostream>
 #include <optional>
 #include <sstream>
@@ -162,10 +163,11 @@ int main(int argc, char** argv) {
               << est.instances().size() << " objects in " << est.tiles
               << (est.tiles == 1 ? " tile" : " tiles")
               << (est.tiles_cropped ? " (workspace.max_tiles reached: the pile is cut)" : "")
-              << "; timings (ms): table " << t.table_ms << ", tsdf " << t.tsdf_ms << ", network "
-              << t.network_ms << ", instances " << t.instances_ms << ", mesh " << t.mesh_ms
-              << ", fitting " << t.fitting_ms << ", total " << t.total_ms << "\nwrote " << output
-              << "/{";
+              << std::fixed << std::setprecision(1) << "; timings (ms): table " << t.table_ms
+              << ", tsdf " << t.tsdf_ms << ", network " << t.network_ms << ", instances "
+              << t.instances_ms << ", mesh " << t.mesh_ms << ", fitting " << t.fitting_ms
+              << ", total " << t.total_ms << "\nwrote "
+              << (fs::path(output) / "").lexically_normal().string() << "{";
     for (size_t i = 0; i < files.size(); ++i) std::cout << (i ? ", " : "") << files[i];
     std::cout << "}\n";
     return 0;

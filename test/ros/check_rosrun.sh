@@ -20,6 +20,11 @@ for node in perception_node grasp_server simstack_reconstruct; do
 done
 rosrun simstack simstack_generate --help > /dev/null
 echo "rosrun simstack simstack_generate --help: exit 0"
+# A Python script is found once (else rosrun asks which, on stdin).
+found=$(rosrun --prefix echo simstack rank_grasps.py < /dev/null 2>&1)
+[ "$found" = "$root/scripts/rank_grasps.py" ] ||
+  { echo "rosrun simstack rank_grasps.py found not just scripts/rank_grasps.py: $found"; exit 1; }
+echo "rosrun simstack rank_grasps.py -> $found"
 ros_session_start
 rosparam set /camera/perception/tf_timeout_s 0.5  # set before the start: kept
 ros_session_spawn "$ROS_HOME/node.log" rosrun simstack perception_node __ns:=camera

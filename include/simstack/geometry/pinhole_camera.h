@@ -20,9 +20,9 @@ struct PinholeCamera {
   bool window = false;
 
   /// Throws std::invalid_argument naming the bad value: zero/negative focal length or size,
-  /// non-finite parameters, and (but for a window) a principal point outside the image or a
-  /// focal length whose field of view is outside 2-175 degrees (normalized intrinsics, or
-  /// another image size's).
+  /// non-finite parameters, and (but for a window) a principal point outside the middle half
+  /// of the image or a focal length whose field of view is outside 2-175 degrees (normalized
+  /// intrinsics, or another image size's).
   void validate() const;
   /// Camera-frame point of pixel (u, v) at depth z (z along the optical axis, metres).
   Vec3 backproject(double u, double v, double depth_m) const {

@@ -113,9 +113,9 @@ DepthImage readDepthImage(const std::string& path, std::optional<double> depth_s
     for (int v = 0; v < m.rows; ++v)
       for (int u = 0; u < m.cols; ++u) depth.at(u, v) = m.at<float>(v, u);
   } else {
-    throw std::runtime_error(path +
-                             ": depth must be 16-bit (mm) or 32-bit float (m); found OpenCV type " +
-                             std::to_string(m.type()));
+    throw std::runtime_error(
+        path + ": depth must be 16-bit (mm) or 32-bit float (m), this image is " +
+        cv::typeToString(m.type()) + " (" + std::to_string(8 * m.elemSize1()) + "-bit)");
   }
   return depth;
 }

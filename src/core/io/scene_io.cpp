@@ -92,9 +92,10 @@ std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path,
     s.scale_m = Vec3(a[0], a[1], a[2]);
     s.exponents = Vec3(e[0], e[1], e[2]);
     if ((s.scale_m.array() <= 0).any() || (s.exponents.array() <= 0).any())
-      throw std::runtime_error(path + ": scales and exponents must be positive");
+      throw std::runtime_error(path + ": " + which + ": scales and exponents must be positive");
     Quat quat(q[0], q[1], q[2], q[3]);
-    if (quat.norm() < 1e-9) throw std::runtime_error(path + ": zero orientation quaternion");
+    if (quat.norm() < 1e-9)
+      throw std::runtime_error(path + ": " + which + ": zero orientation quaternion");
     s.T_table_object = Transform::Identity();
     s.T_table_object.linear() = quat.normalized().toRotationMatrix();
     s.T_table_object.translation() = Vec3(p[0], p[1], p[2]);

@@ -116,8 +116,10 @@ LabelledView readLabelledView(const std::string& path) {
 
 std::vector<RealMethodResults> evaluateRealScenes(const std::string& dir,
                                                   const std::vector<EvaluatedMethod*>& methods,
-                                                  const std::function<void(int, int)>& progress) {
-  const std::vector<std::string> files = labelledCloudFiles(dir);
+                                                  const std::function<void(int, int)>& progress,
+                                                  int max_scenes) {
+  std::vector<std::string> files = labelledCloudFiles(dir);
+  if (max_scenes > 0 && files.size() > static_cast<size_t>(max_scenes)) files.resize(max_scenes);
   std::vector<RealMethodResults> out;
   for (EvaluatedMethod* m : methods) out.push_back({m->name(), m->info(), {}});
   for (size_t f = 0; f < files.size(); ++f) {
@@ -194,7 +196,7 @@ json realScenesJson(const std::vector<RealMethodResults>& results) {
 std::string realScenesTable(const std::vector<RealMethodResults>& results) {
   std::ostringstream o;
   o << "| method | scenes | Overlap P | Overlap R | Overlap F | %75 | count exact | count error "
-       "|\n|---|---|---|---|---|---|---|---|\n";
+       "| absolute count error |\n|---|---|---|---|---|---|---|---|---|\n";
   for (const RealMethodResults& m : results) {
     std::vector<std::string> rows{""};
     for (const std::string& c : categoriesOf(m.scenes)) rows.push_back(c);
@@ -205,8 +207,8 @@ std::string realScenesTable(const std::vector<RealMethodResults>& results) {
         << percent("overlap_precision") << " | " << percent("overlap_recall") << " | "
         << percent("overlap_f") << " | " << percent("detected_075") << " | "
         << fixed(100 * s["count_exact"].get<double>(), 0) << " % | "
-        << fixed(s["count_error"].get<double>(), 2) << " (|"
-        << fixed(s["count_abs_error"].get<double>(), 2) << "|) |\n";
+        << fixed(s["count_error"].get<double>(), 2) << " | "
+        << fixed(s["count_abs_error"].get<double>(), 2) << " |\n";
     }
   }
   return o.str();

@@ -53,11 +53,12 @@ struct RealMethodResults {
   std::vector<RealSceneResult> scenes;
 };
 
-/// Every method (each must give pixel instances) on every labelled cloud of `dir`.
+/// Every method (each must give pixel instances) on every labelled cloud of `dir`, or on the
+/// first `max_scenes` of them in labelledCloudFiles' order (0: all).
 /// `progress(done, total)` is called after each scene.
 std::vector<RealMethodResults> evaluateRealScenes(
     const std::string& dir, const std::vector<EvaluatedMethod*>& methods,
-    const std::function<void(int, int)>& progress = {});
+    const std::function<void(int, int)>& progress = {}, int max_scenes = 0);
 
 /// Means over scenes (Overlap P/R/F, %75, count exact share, mean count error and its absolute
 /// value) of `scenes` whose category is `category` ("" for all).
