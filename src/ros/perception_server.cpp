@@ -272,25 +272,33 @@ void PerceptionServer::skip(const Frame& frame, const std::string& why) {
 }
 
 bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* why) {
-  try {
-    view->depth = depthFromImage(*frame.image);
-    view->camera = cameraFromInfo(*frame.info);
-  } catch (const std::invalid_argument& e) {
-    *why = e.what();
-    return false;
-  }
-  if (view->depth.width != view->camera.width || view->depth.height != view->camera.height) {
-    const sensor_msgs::CameraInfo& info = *frame.info;
-    const bool reduced = view->camera.window || info.binning_x > 1 || info.binning_y > 1;
+  const sensor_msgs::CameraInfo& info = *frame.info;
+  const sensor_msgs::RegionOfInterest& roi = info.roi;
+  const bool reduced = roi.x_offset != 0 || roi.y_offset != 0 || roi.width != 0 ||
+                       roi.height != 0 || info.binning_x > 1 || info.binning_y > 1;
+  const auto other_size = [&](int width, int height) {
     *why = "the depth image is " + std::to_string(view->depth.width) + "x" +
-           std::to_string(view->depth.height) + " but its camera_info " +
-           std::to_string(view->camera.width) + "x" + std::to_string(view->camera.height) +
+           std::to_string(view->depth.height) + " but its camera_info " + std::to_string(width) +
+           "x" + std::to_string(height) +
            (reduced ? " (" + std::to_string(info.width) + "x" + std::to_string(info.height) +
                           " with its ROI and binning " + std::to_string(info.binning_x) + "x" +
                           std::to_string(info.binning_y) + ")"
                     : std::string());
     return false;
+  };
+  try {
+    view->depth = depthFromImage(*frame.image);
+    // A whole image of another size: named as such, before its intrinsics are judged.
+    if (!reduced &&
+        (uint32_t(view->depth.width) != info.width || uint32_t(view->depth.height) != info.height))
+      return other_size(int(info.width), int(info.height));
+    view->camera = cameraFromInfo(info);
+  } catch (const std::invalid_argument& e) {
+    *why = e.what();
+    return false;
   }
+  if (view->depth.width != view->camera.width || view->depth.height != view->camera.height)
+    return other_size(view->camera.width, view->camera.height);
   size_t valid = 0;
   for (float d : view->depth.pixels) valid += validDepth(d);
   if (valid == 0) {
