@@ -75,6 +75,29 @@ if "$reconstruct" --depth "$dir/tenths.png" --table-pose "$dir/tenths.yaml" --de
   --output "$dir/out_x" > /dev/null 2> "$dir/e_ds"; then
   echo "accepted a --depth-scale that differs from the view file's"; exit 1; fi
 grep -q "depth-scale 0.001000 differs from .*tenths.yaml's depth_scale_m" "$dir/e_ds" || { cat "$dir/e_ds"; exit 1; }
+# The view file's depth_scale_m is its PNG's: the same depth as a float TIFF in metres, given
+# with that view file, is read in metres and perceived as the PNG.
+/usr/bin/python3 - "$dir/depth.raw" "$dir/depth_m.tiff" "$view.yaml" <<'PY'
+import struct, sys, numpy as np, yaml
+view = yaml.safe_load(open(sys.argv[3]))
+w, h = view["width"], view["height"]
+mm = np.frombuffer(open(sys.argv[1], "rb").read(), ">u2")
+data = (mm.astype(np.float64) * 0.001).astype("<f4").tobytes()
+# One strip of 32-bit IEEE floats: width, height, bits, no compression, black is zero, strip
+# offset, one sample, rows per strip, strip bytes, sample format float.
+tags = [(256, 4, w), (257, 4, h), (258, 3, 32), (259, 3, 1), (262, 3, 1), (273, 4, 0),
+        (277, 3, 1), (278, 4, h), (279, 4, len(data)), (339, 3, 3)]
+out = b"II*\x00" + struct.pack("<IH", 8, len(tags))
+for tag, kind, value in tags:
+    value = 8 + 2 + 12 * len(tags) + 4 if tag == 273 else value
+    out += struct.pack("<HHI", tag, kind, 1)
+    out += struct.pack("<HH", value, 0) if kind == 3 else struct.pack("<I", value)
+open(sys.argv[2], "wb").write(out + struct.pack("<I", 0) + data)
+PY
+"$reconstruct" --depth "$dir/depth_m.tiff" --table-pose "$view.yaml" --output "$dir/out_tiff" \
+  > "$dir/log_tiff.txt" || { echo "a float TIFF with its view file was refused"; exit 1; }
+cmp -s "$dir/out_vi/superquadrics.yaml" "$dir/out_tiff/superquadrics.yaml" ||
+  { echo "the float TIFF gave another result than the PNG"; cat "$dir/log_tiff.txt"; exit 1; }
 { cat "$view.yaml"; echo "depth_scale: 0.001"; } > "$dir/typo.yaml"
 if "$reconstruct" --depth "${view}_depth.png" --table-pose "$dir/typo.yaml" --output "$dir/out_x" \
   > /dev/null 2> "$dir/e_typo"; then

@@ -53,9 +53,10 @@ DepthView readView(const std::string& depth_path, std::optional<double> depth_sc
       throw std::invalid_argument("--depth-scale " + std::to_string(*depth_scale) +
                                   " differs from " + pose_path + "'s depth_scale_m " +
                                   std::to_string(*pose->depth_scale_m) + ": give one of them");
-    view.depth = readDepthImage(depth_path, depth_scale ? depth_scale
-                                            : pose      ? pose->depth_scale_m
-                                                        : std::nullopt);
+    // The view file's scale is its 16-bit PNG's: a float TIFF in metres given with it is read.
+    view.depth =
+        readDepthImage(depth_path, depth_scale,
+                       pose && pose->depth_scale_m ? *pose->depth_scale_m : kDefaultDepthScaleM);
   }
   if (!intrinsics.empty())
     view.camera = parseIntrinsics(intrinsics, view.depth.width, view.depth.height);

@@ -20,12 +20,16 @@ constexpr int kMaxDepthImageSide = 4096;
 /// Farthest a view description may place its camera from the table's origin (m).
 constexpr double kMaxCameraDistanceM = 100.0;
 
-/// Reads a one-channel 16-bit PNG (units of `depth_scale_m`, mm when not given) or 32-bit float
-/// TIFF in metres. Throws std::runtime_error naming the file for anything else (colour images
-/// included), for a side over kMaxDepthImageSide, and for a scale given with a float image
-/// (its unit is the metre).
+/// A 16-bit depth image's unit when nothing says otherwise: the millimetre.
+constexpr double kDefaultDepthScaleM = 0.001;
+
+/// Reads a one-channel 16-bit PNG (units of `depth_scale_m`, else of `default_scale_m`) or
+/// 32-bit float TIFF in metres. Throws std::runtime_error naming the file for anything else
+/// (colour images included), for a side over kMaxDepthImageSide, and for `depth_scale_m` given
+/// with a float image (its unit is the metre; `default_scale_m`, a view file's, is not read).
 DepthImage readDepthImage(const std::string& path,
-                          std::optional<double> depth_scale_m = std::nullopt);
+                          std::optional<double> depth_scale_m = std::nullopt,
+                          double default_scale_m = kDefaultDepthScaleM);
 /// 8-bit PNG of an instance mask.
 void writeMaskPng(const std::string& path, const InstanceImage& mask);
 /// Reads one; std::runtime_error naming the file for anything but a one-channel 8-bit image and

@@ -88,8 +88,9 @@ void requireDeclaredSide(const std::string& path, const std::string& what) {
 
 }  // namespace
 
-DepthImage readDepthImage(const std::string& path, std::optional<double> depth_scale) {
-  const double depth_scale_m = depth_scale.value_or(0.001);
+DepthImage readDepthImage(const std::string& path, std::optional<double> depth_scale,
+                          double default_scale_m) {
+  const double depth_scale_m = depth_scale.value_or(default_scale_m);
   requireDeclaredSide(path, "a depth image");
   const cv::Mat m = cv::imread(path, cv::IMREAD_UNCHANGED);
   if (m.empty()) throw std::runtime_error("cannot read a depth image from " + path);
