@@ -285,6 +285,11 @@ expect "tune_hough --output naming its --dataset" "is the input file" "$bin/sims
 expect "evaluate_grasps --output naming the model's card" "is the input file" \
   "$bin/simstack_evaluate_grasps" --dataset "$dir/keep.h5" --model "$dir/bad_card.pt" \
   --output "$dir/bad_card.yaml"
+mkdir -p "$dir/houghcard"
+cp "$pkg/models/simstack_r32_fc.pt" "$dir/houghcard/m.pt"
+sed 's/^\(    refinement:\).*/\1 100/' "$pkg/models/simstack_r32_fc.yaml" > "$dir/houghcard/m.yaml"
+expect "check_model on a card whose Hough setting loading refuses" "hough.refinement must be in" \
+  "$bin/simstack_check_model" "$dir/houghcard/m.pt"
 mkdir -p "$dir/dircard/m.yaml"
 cp "$pkg/models/simstack_r32_fc.pt" "$dir/dircard/m.pt"
 expect "check_model with a directory as card" "it is a directory" "$bin/simstack_check_model" \

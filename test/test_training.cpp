@@ -337,6 +337,15 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
     EXPECT_EQ(child["hough"]["refinement"].as<int>(), 7);
     EXPECT_EQ(child["samples"].as<int>(), 3);
     EXPECT_TRUE(fresh.IsMap() && !fresh["hough"]);
+    // From the run's checkpoint, which has no card of its own: its run's card gives the setting.
+    const std::string w2 = w + "_checkpoint";
+    const RemoveAtExit cleanup_w2{{w2}};
+    warm.init_from = a + "/checkpoint.pt";
+    CvaeTrainer(data, every, warm, w2, "test").run(false);
+    const YAML::Node from_checkpoint = loadYamlFile(w2 + "/model.yaml", "model card")["perception"];
+    ASSERT_TRUE(from_checkpoint["hough"])
+        << "a warm start from a checkpoint lost the run's setting";
+    EXPECT_EQ(from_checkpoint["hough"]["refinement"].as<int>(), 7);
     warm.init_from = "/nonexistent/start.pt";
     fs::remove_all(w);
     try {

@@ -4,11 +4,13 @@
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "simstack/model/cvae_config.h"
 #include "simstack/model/model_integrity.h"
+#include "simstack/pipeline/perception_config.h"
 #include "simstack/pipeline/scene_perception.h"
 
 using namespace simstack;
@@ -41,6 +43,17 @@ int main(int argc, char** argv) {
       }
       const ModelSelfTest t = checkModel(model);
       const bool recorded = readModelIntegrity(model).has_value();
+      // The card's perception: section, read and checked as a perception loading the model
+      // does (its samples and Hough setting).
+      PerceptionConfig card;
+      card.model_path = model;
+      if (!applyModelCard(&card).empty()) {
+        try {
+          card.hough.validate();
+        } catch (const std::invalid_argument& e) {
+          throw std::runtime_error(modelCardPath(model) + ": perception.hough: " + e.what());
+        }
+      }
       std::printf("%s: ok: %s; self-test %d object(s), %d occupied voxels\n", model.c_str(),
                   recorded ? "SHA-256 and format as its card records"
                            : "its card records no integrity: section (--stamp writes one)",

@@ -165,8 +165,15 @@ int main(int argc, char** argv) {
       throw std::runtime_error(o.output +
                                " is the working directory or holds it: name a directory inside "
                                "it, e.g. ./run");
+    // A run stopped or failed before its first checkpoint leaves its log alone: the directory
+    // is that run's, and a new run starts afresh in it.
+    const auto only_a_log = [&] {
+      for (const auto& e : std::filesystem::directory_iterator(o.output, ec))
+        if (e.path().filename() != "train_log.csv") return false;
+      return true;
+    };
     if (!o.resume && std::filesystem::is_directory(o.output) &&
-        !std::filesystem::is_empty(o.output, ec))
+        !std::filesystem::is_empty(o.output, ec) && !only_a_log())
       throw std::runtime_error(o.output +
                                " is not empty and holds no training run: choose another "
                                "directory, or empty it");

@@ -293,7 +293,8 @@ DatasetReader::DatasetReader(const std::string& path, const std::string& mesh_di
     expectShape(impl_->objects, "objects", {n, k, kColumns});
     info.num_scenes = static_cast<int>(n);
   } catch (const H5::Exception& e) {
-    throw std::runtime_error("cannot read dataset " + path + ": " + e.getDetailMsg());
+    throw std::runtime_error("cannot read dataset " + path + ": " + e.getDetailMsg() +
+                             " (not an HDF5 file of simstack_generate's, or cut short?)");
   } catch (const std::runtime_error& e) {
     throw std::runtime_error("cannot read dataset " + path + ": " + e.what());
   }
@@ -338,8 +339,15 @@ SceneRecord DatasetReader::readScene(int index) const {
   rec.grid.voxel_size_m = info.extent_m / info.resolution;
   for (int k = 0; k < n; ++k) {
     const double* row = &objects[static_cast<size_t>(k) * kColumns];
+    const std::string where =
+        impl_->path + ": scene " + std::to_string(index) + ", object " + std::to_string(k);
+    if (!std::all_of(row, row + kColumns, [](double v) { return std::isfinite(v); }))
+      throw std::runtime_error(where + " holds a value that is not finite");
     SceneObject o;
     if (row[0] == 0.0) {
+      if (row[2] <= 0.0 || row[3] <= 0.0 || row[4] <= 0.0 || row[5] <= 0.0 || row[6] <= 0.0 ||
+          row[7] <= 0.0)
+        throw std::runtime_error(where + ": a superquadric's semi-axes and exponents are > 0");
       SuperquadricShape sq;
       sq.scale_m = Vec3(row[2], row[3], row[4]);
       sq.exponents = Vec3(row[5], row[6], row[7]);
@@ -379,6 +387,12 @@ SceneRecord DatasetReader::read(int index) const {
                              ": " + e.getDetailMsg());
   }
   lock.unlock();
+  const auto finite = [](const std::vector<float>& v) {
+    return std::all_of(v.begin(), v.end(), [](float x) { return std::isfinite(x); });
+  };
+  if (!finite(rec.ground_truth.tsdf.data) || !finite(votes))
+    throw std::runtime_error(impl_->path + ": scene " + std::to_string(index) +
+                             " holds tsdf or vote values that are not finite");
   for (int i = 0; i < nv; ++i) {
     rec.ground_truth.votes.data[i] =
         Vec3f(votes[i], votes[static_cast<size_t>(nv) + i], votes[2 * static_cast<size_t>(nv) + i]);

@@ -278,7 +278,7 @@ json resultsJson(const EvaluationResults& r, bool with_views) {
 std::string resultsTable(const EvaluationResults& r) {
   std::ostringstream o;
   o << "| method | CD visible (mm) | CD full (mm) | CD full, superquadrics (mm) | IoU | BCE "
-       "| displacement (mm) | stable | objects exact |\n|---|---|---|---|---|---|---|---|---|\n";
+       "| displacement (mm) | stable | count exact |\n|---|---|---|---|---|---|---|---|---|\n";
   for (const MethodResults& m : r.methods) {
     const json s = summarise(m.rows);
     auto val = [&](const char* key, double scale, int digits) {

@@ -286,7 +286,11 @@ struct RecentSteps {
 // network there is); otherwise the default applies until simstack_tune_hough chooses one.
 std::string cardPerceptionSection(const std::string& init_from, bool latent) {
   YAML::Node hough;  // stays Null unless the parent's card has a hough: map
-  const std::string parent_card = init_from.empty() ? "" : modelCardPath(init_from);
+  std::string parent_card = init_from.empty() ? "" : modelCardPath(init_from);
+  // A run's checkpoint has no card of its own: its run's model card holds the setting.
+  if (!parent_card.empty() && !fs::exists(parent_card) &&
+      fs::path(init_from).filename() == "checkpoint.pt")
+    parent_card = (fs::path(init_from).parent_path() / "model.yaml").string();
   if (!parent_card.empty() && fs::exists(parent_card)) {
     const YAML::Node root = loadYamlFile(parent_card, "the warm start's model card");
     const YAML::Node section = root.IsMap() ? root["perception"] : YAML::Node();
@@ -796,6 +800,12 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
       const CvaeOutput o = model->forward(batch.partial, batch.tsdf, batch.votes);
       const CvaeLosses l =
           computeLosses(o, batch.partial, batch.tsdf, batch.votes, mc, batch.vote_weight);
+      // A loss that is not finite would carry NaN into every weight and checkpoint after it.
+      if (const double total = l.total.item<double>(); !std::isfinite(total))
+        throw std::runtime_error("step " + std::to_string(step + 1) + ": the loss is " +
+                                 std::to_string(total) +
+                                 " (a learning rate too high for the run?); the last checkpoint "
+                                 "stays as it was");
       l.total.backward();
       optimizer.step();
       ++trained;
