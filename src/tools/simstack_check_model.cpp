@@ -4,6 +4,7 @@
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
+#include <filesystem>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -54,9 +55,11 @@ int main(int argc, char** argv) {
           throw std::runtime_error(modelCardPath(model) + ": perception.hough: " + e.what());
         }
       }
+      const bool has_card = std::filesystem::exists(modelCardPath(model));
       std::printf("%s: ok: %s; self-test %d object(s), %d occupied voxels\n", model.c_str(),
-                  recorded ? "SHA-256 and format as its card records"
-                           : "its card records no integrity: section (--stamp writes one)",
+                  recorded   ? "SHA-256 and format as its card records"
+                  : has_card ? "its card records no integrity: section (--stamp writes one)"
+                             : "no card beside it (--stamp writes one)",
                   t.objects, t.occupied_voxels);
     }
   } catch (const std::exception& e) {

@@ -204,8 +204,9 @@ int main(int argc, char** argv) {
     return 2;
   }
   if (!real_dir.empty() && (o.views_per_estimate > 1 || !intrinsics.empty())) {
-    std::cerr << "simstack_evaluate: --multi-view and --intrinsics need --dataset (a real scene "
-                 "is one view of its own camera)\n";
+    std::cerr << "simstack_evaluate: error: "
+              << (o.views_per_estimate > 1 ? "--multi-view" : "--intrinsics")
+              << " needs --dataset (a real scene is one view of its own camera)\n";
     return 2;
   }
   try {

@@ -51,6 +51,13 @@ std::pair<int, int> parseRange(const std::string& s) {
   return r;
 }
 
+/// A name of --ycb-objects: not empty ("" given).
+const CLI::Validator kMeshName(
+    [](std::string& name) {
+      return name.empty() ? std::string("an empty object name") : std::string();
+    },
+    "NAME");
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -84,6 +91,7 @@ int main(int argc, char** argv) {
                  "with --ycb: the objects drawn, NAME[,NAME...] (subdirectories of --ycb; default "
                  "the paper's ten)")
       ->delimiter(',')
+      ->check(kMeshName)
       ->needs("--ycb");
   app.add_option("--household", o.household_share,
                  "share of the objects drawn from household shapes: bowls and cups (concave "

@@ -42,9 +42,9 @@ void printValidation(const std::string& model, const std::string& dataset,
 /// What a finished run prints: its losses and validation.
 void printTrained(const std::string& architecture, const std::string& output,
                   const TrainingReport& r) {
-  std::cout << "trained " << architecture << " for " << r.steps << " steps ("
-            << r.samples_per_second << " samples/s)\n  final losses: total " << r.total << ", tsdf "
-            << r.tsdf << ", partial " << r.partial << ", votes " << r.votes << ", mmd " << r.mmd
+  std::cout << "trained " << architecture << " to step " << r.steps << " (" << r.samples_per_second
+            << " samples/s)\n  final losses: total " << r.total << ", tsdf " << r.tsdf
+            << ", partial " << r.partial << ", votes " << r.votes << ", mmd " << r.mmd
             << ", occupancy " << r.occupancy << ", iou " << r.iou << "\n  validation: IoU "
             << r.validation_iou << " +- " << r.validation_iou_se << ", BCE " << r.validation_bce
             << ", hypotheses disagree on " << 100.0 * r.validation_disagreement

@@ -400,7 +400,9 @@ Pile PileGenerator::generate(uint64_t seed) const {
   }
   std::ostringstream msg;
   msg << "no pile accepted in " << config_.max_attempts << " attempts (seed " << seed << "):";
-  for (const auto& [reason, k] : rejections) msg << " " << k << "x " << reason << ";";
+  const char* separator = " ";
+  for (const auto& [reason, k] : rejections)
+    msg << separator << k << "x " << reason, separator = "; ";
   throw std::runtime_error(msg.str());
 }
 
