@@ -11,6 +11,8 @@ import math
 import signal
 import subprocess
 import sys
+import threading
+import time
 
 import rospy
 from std_msgs.msg import Bool
@@ -33,13 +35,23 @@ def main():
         parser.error("--timeout %s: give a number of seconds above 0" % args.timeout)
     rospy.init_node("play_when_ready", anonymous=True, disable_signals=True)
     rospy.loginfo("play_when_ready: waiting for %s", args.ready)
-    try:
-        while True:  # a false (not ready) is waited past
-            if rospy.wait_for_message(args.ready, Bool, timeout=args.timeout).data:
-                break
-    except rospy.ROSException:
-        sys.exit("play_when_ready: %s said nothing within %g s (did the perception start? its "
-                 "log says why not)" % (args.ready, args.timeout))
+    # One subscription and one deadline: a latched false (a perception that refused its model)
+    # is waited past, not read again and again.
+    said, ready = [], threading.Event()
+
+    def on_ready(msg):
+        said.append(msg.data)
+        if msg.data:
+            ready.set()
+
+    sub = rospy.Subscriber(args.ready, Bool, on_ready)
+    deadline = time.time() + args.timeout
+    while not ready.wait(0.1):
+        if time.time() > deadline or rospy.is_shutdown():
+            sys.exit("play_when_ready: %s %s within %g s (did the perception start? its log says "
+                     "why not)" % (args.ready, "said only false" if said else "said nothing",
+                                   args.timeout))
+    sub.unregister()
     rospy.loginfo("play_when_ready: %s is true, playing the bag", args.ready)
     player = subprocess.Popen(["rosbag", "play"] + play_args)
     # roslaunch stops its nodes with SIGINT; rosbag play is stopped cleanly with SIGTERM.

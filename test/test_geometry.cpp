@@ -142,6 +142,22 @@ TEST(PinholeCamera, ProjectBackprojectAndValidation) {
   EXPECT_NEAR(T.linear().determinant(), 1.0, 1e-12);
 }
 
+TEST(PinholeCamera, IntrinsicsOfAnotherImageSizeAreRefusedButAWindowIsNot) {
+  PinholeCamera kinect;  // 640x480, principal point at the centre
+  EXPECT_NO_THROW(kinect.validate());
+  PinholeCamera half = kinect;  // a 320x240 image given the 640x480 camera
+  half.width = 320, half.height = 240;
+  EXPECT_THROW(half.validate(), std::invalid_argument);
+  PinholeCamera twice = kinect;  // a 640x480 image given the 320x240 camera
+  twice.fx = twice.fy = 262.5, twice.cx = 159.5, twice.cy = 119.5;
+  EXPECT_THROW(twice.validate(), std::invalid_argument);
+  PinholeCamera off = kinect;  // 20 % of the width off the centre: a camera's
+  off.cx = 319.5 + 128.0;
+  EXPECT_NO_THROW(off.validate());
+  half.window = true;  // a crop of a checked camera's image
+  EXPECT_NO_THROW(half.validate());
+}
+
 TEST(ConvexHull, CubeInsideTest) {
   std::vector<Vec3> pts;
   for (int i = 0; i < 8; ++i) pts.emplace_back(i & 1 ? 1 : -1, i & 2 ? 1 : -1, i & 4 ? 1 : -1);

@@ -534,7 +534,16 @@ TEST(GraspRequest, APointNamesTheObjectItIsDeepestInOrTheNearestSurface) {
   EXPECT_EQ(objectAtPoint(large_and_small, Vec3(0.105, 0, 0.1), &distance), 0);
   EXPECT_NEAR(distance, 0.005, 1e-6);
   EXPECT_EQ(objectAtPoint(large_and_small, Vec3(0.105, 0, 0.02), &distance), 0);
-  EXPECT_LT(distance, 0.02);
+  EXPECT_NEAR(distance, 0.005, 0.001);
+  // 1 cm above a book near its edge, 3.6 cm from a small box: the book, 1 cm away (along the
+  // ray from the book's centre its surface is 4.6 cm off). 7 cm above its corner: within reach
+  // (along the ray, 13 cm).
+  const std::vector<SuperquadricShape> book_and_box = {box({0.1, 0.1, 0.01}, {0, 0, 0.01}),
+                                                       box({0.02, 0.02, 0.02}, {0.145, 0, 0.02})};
+  EXPECT_EQ(objectAtPoint(book_and_box, Vec3(0.09, 0, 0.03), &distance), 0);
+  EXPECT_NEAR(distance, 0.01, 0.001);
+  EXPECT_EQ(objectAtPoint({book_and_box[0]}, Vec3(0.095, 0.095, 0.09), &distance), 0);
+  EXPECT_NEAR(distance, 0.07, 0.001);
 }
 
 TEST(GraspRequest, AStaleSceneIsRefusedUnlessAnyAgeIsAllowed) {

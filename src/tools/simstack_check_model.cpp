@@ -52,7 +52,7 @@ int main(int argc, char** argv) {
         try {
           card.hough.validate();
         } catch (const std::invalid_argument& e) {
-          throw std::runtime_error(modelCardPath(model) + ": perception.hough: " + e.what());
+          throw std::runtime_error(modelCardPath(model) + ": perception." + e.what());
         }
       }
       const bool has_card = std::filesystem::exists(modelCardPath(model));

@@ -78,7 +78,7 @@ constexpr double kMaxTargetPointM = 0.1;
 
 /// The object of `scene` a point `p` (in the scene's frame) names: of the objects containing
 /// it, the one it lies deepest in (the lowest inside-outside value); else the object whose
-/// surface is nearest along the ray from its centre through `p`. -1 when no surface
+/// surface is nearest (Euclidean, to within a millimetre). -1 when no surface
 /// lies within kMaxTargetPointM; `distance_m` (if given) is the chosen or nearest object's
 /// distance, 0 inside.
 int objectAtPoint(const std::vector<SuperquadricShape>& scene, const Vec3& p,

@@ -16,14 +16,16 @@ void PinholeCamera::validate() const {
     // A camera's principal point lies near its image's centre; one beyond the middle half of
     // the image is another image size's (e.g. a 1280x720 camera's for a 640x360 image).
     const auto off_centre = [](double c, int side) {
-      return std::isfinite(c) && std::abs(c - 0.5 * (side - 1)) > 0.25 * side;
+      return std::isfinite(c) && std::abs(c - 0.5 * (side - 1)) >= 0.25 * side;
     };
     if (off_centre(cx, width))
       err << "cx = " << cx << " lies outside the middle half of the " << width
-          << "-pixel-wide image (intrinsics of another image size?); ";
+          << "-pixel-wide image (intrinsics of another image size? for a crop of a larger image, "
+             "give the whole image and a mask); ";
     if (off_centre(cy, height))
       err << "cy = " << cy << " lies outside the middle half of the " << height
-          << "-pixel-high image (intrinsics of another image size?); ";
+          << "-pixel-high image (intrinsics of another image size? for a crop of a larger image, "
+             "give the whole image and a mask); ";
     // A focal length that gives a field of view outside 2-175 degrees is a unit mistake (e.g.
     // normalized intrinsics, or intrinsics of another image size).
     const auto fov_deg = [](double side, double f) {

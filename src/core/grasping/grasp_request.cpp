@@ -116,15 +116,37 @@ PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConf
   return out;
 }
 
+namespace {
+
+/// Distance (m) from `q`, an object-frame point outside `sq`, to its surface: the nearest vertex
+/// of a fine mesh, then foot-point steps (onto the tangent plane, back onto the surface along
+/// the ray from the centre); the least of these and of the ray's own surface point. Each is a
+/// surface point, so the figure never understates.
+double distanceOutside(const SuperquadricShape& sq, const Vec3& q) {
+  double best = q.norm() - sq.surfacePointAlong(q).norm();
+  Vec3 x = Vec3::Zero();
+  for (const Vec3& v : sq.meshObject(24).vertices)
+    if ((v - q).norm() < best) best = (v - q).norm(), x = v;
+  if (x.isZero()) return best;
+  for (int i = 0; i < 8; ++i) {
+    const Vec3 n = sq.normalObject(x).normalized();
+    const Vec3 on_plane = q - (q - x).dot(n) * n;
+    if (!on_plane.allFinite() || on_plane.isZero()) break;
+    x = sq.surfacePointAlong(on_plane);
+    best = std::min(best, (x - q).norm());
+  }
+  return best;
+}
+
+}  // namespace
+
 int objectAtPoint(const std::vector<SuperquadricShape>& scene, const Vec3& p, double* distance_m) {
   int best = -1;
   double best_rank = INFINITY, best_distance = INFINITY;
   for (size_t k = 0; k < scene.size(); ++k) {
     const Vec3 q = scene[k].T_table_object.inverse() * p;
     const double f = scene[k].insideOutsideObject(q);
-    // Outside: the distance along the ray from the centre to the surface. (The fit's radial
-    // distance approximation, |q| (f - 1) / f, is several times that near a boxy object.)
-    const double d = f < 1.0 ? 0.0 : q.norm() - scene[k].surfacePointAlong(q).norm();
+    const double d = f < 1.0 ? 0.0 : distanceOutside(scene[k], q);
     const double rank = f < 1.0 ? f - 1.0 : d;  // inside (below 0) before outside
     if (rank < best_rank) best_rank = rank, best_distance = d, best = static_cast<int>(k);
   }

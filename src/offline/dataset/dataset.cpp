@@ -347,7 +347,7 @@ SceneRecord DatasetReader::readScene(int index) const {
     if (row[0] == 0.0) {
       if (row[2] <= 0.0 || row[3] <= 0.0 || row[4] <= 0.0 || row[5] <= 0.0 || row[6] <= 0.0 ||
           row[7] <= 0.0)
-        throw std::runtime_error(where + ": a superquadric's semi-axes and exponents are > 0");
+        throw std::runtime_error(where + ": a superquadric's semi-axes and exponents must be > 0");
       SuperquadricShape sq;
       sq.scale_m = Vec3(row[2], row[3], row[4]);
       sq.exponents = Vec3(row[5], row[6], row[7]);

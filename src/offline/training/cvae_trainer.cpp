@@ -762,6 +762,13 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   // checkpoint or from this one, never from parts of both. state.yaml repeats the step for
   // people and scripts.
   auto save_checkpoint = [&](int64_t step) {
+    // Weights a non-finite gradient reached are not written over the last good checkpoint.
+    for (const torch::Tensor& p : model->parameters())
+      if (!torch::isfinite(p).all().item<bool>())
+        throw std::runtime_error("step " + std::to_string(step) +
+                                 ": the network's weights are not finite (a gradient overflowed; "
+                                 "a learning rate too high for the run?); the last checkpoint "
+                                 "stays as it was");
     log.flush();
     saveCvae(checkpoint.string(), model, checkpointMetadata(*impl_->data, init_from),
              [&](torch::serialize::OutputArchive& archive) {
@@ -801,11 +808,10 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
       const CvaeLosses l =
           computeLosses(o, batch.partial, batch.tsdf, batch.votes, mc, batch.vote_weight);
       // A loss that is not finite would carry NaN into every weight and checkpoint after it.
-      if (const double total = l.total.item<double>(); !std::isfinite(total))
-        throw std::runtime_error("step " + std::to_string(step + 1) + ": the loss is " +
-                                 std::to_string(total) +
-                                 " (a learning rate too high for the run?); the last checkpoint "
-                                 "stays as it was");
+      if (!std::isfinite(l.total.item<double>()))
+        throw std::runtime_error("step " + std::to_string(step + 1) +
+                                 ": the loss is not finite (a learning rate too high for the "
+                                 "run?); the last checkpoint stays as it was");
       l.total.backward();
       optimizer.step();
       ++trained;

@@ -32,7 +32,8 @@ struct LabelledView {
 /// "cylindrical", test43-54 "mixed", test55-65 "complex"; "" for any other name.
 std::string mosdCategory(const std::string& file_name);
 
-/// The .pcd files of `dir` in name order (std::runtime_error naming `dir` when it has none).
+/// The .pcd files of `dir` in natural order, learn2 before learn10 (std::runtime_error naming
+/// `dir` when it has none).
 std::vector<std::string> labelledCloudFiles(const std::string& dir);
 
 /// Reads one labelled cloud (x y z label; organized, or unorganized and organized with the
