@@ -172,8 +172,7 @@ int main(int argc, char** argv) {
         if (e.path().filename() != "train_log.csv") return false;
       return true;
     };
-    if (!o.resume && std::filesystem::is_directory(o.output) &&
-        !std::filesystem::is_empty(o.output, ec) && !only_a_log())
+    if (!o.resume && std::filesystem::is_directory(o.output) && !only_a_log())
       throw std::runtime_error(o.output +
                                " is not empty and holds no training run: choose another "
                                "directory, or empty it");

@@ -15,17 +15,14 @@ void PinholeCamera::validate() const {
   if (!window) {
     // A camera's principal point lies near its image's centre; one beyond the middle half of
     // the image is another image size's (e.g. a 1280x720 camera's for a 640x360 image).
-    const auto off_centre = [](double c, int side) {
-      return std::isfinite(c) && std::abs(c - 0.5 * (side - 1)) >= 0.25 * side;
+    const auto check_centre = [&](const char* name, double c, int side, const char* along) {
+      if (std::isfinite(c) && std::abs(c - 0.5 * (side - 1)) >= 0.25 * side)
+        err << name << " = " << c << " lies outside the middle half of the " << side << "-pixel-"
+            << along << " image (intrinsics of another image size? for a crop of a larger image, "
+            << "give the whole image and a mask); ";
     };
-    if (off_centre(cx, width))
-      err << "cx = " << cx << " lies outside the middle half of the " << width
-          << "-pixel-wide image (intrinsics of another image size? for a crop of a larger image, "
-             "give the whole image and a mask); ";
-    if (off_centre(cy, height))
-      err << "cy = " << cy << " lies outside the middle half of the " << height
-          << "-pixel-high image (intrinsics of another image size? for a crop of a larger image, "
-             "give the whole image and a mask); ";
+    check_centre("cx", cx, width, "wide");
+    check_centre("cy", cy, height, "high");
     // A focal length that gives a field of view outside 2-175 degrees is a unit mistake (e.g.
     // normalized intrinsics, or intrinsics of another image size).
     const auto fov_deg = [](double side, double f) {

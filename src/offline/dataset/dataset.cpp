@@ -345,8 +345,7 @@ SceneRecord DatasetReader::readScene(int index) const {
       throw std::runtime_error(where + " holds a value that is not finite");
     SceneObject o;
     if (row[0] == 0.0) {
-      if (row[2] <= 0.0 || row[3] <= 0.0 || row[4] <= 0.0 || row[5] <= 0.0 || row[6] <= 0.0 ||
-          row[7] <= 0.0)
+      if (!std::all_of(row + 2, row + 8, [](double v) { return v > 0.0; }))  // a1-a3, r s t
         throw std::runtime_error(where + ": a superquadric's semi-axes and exponents must be > 0");
       SuperquadricShape sq;
       sq.scale_m = Vec3(row[2], row[3], row[4]);
