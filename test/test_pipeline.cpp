@@ -745,6 +745,13 @@ TEST(ScenePerception, AModelWithoutACodeGivesOneHypothesis) {
   config.decompose_samples = 1;
   const ScenePerception perception(config);
   EXPECT_EQ(perception.config().samples, 1);
+  // A live change is judged as updateSettings would, and shows what would be in effect.
+  PerceptionConfig live = perception.config();
+  live.samples = 5;
+  EXPECT_EQ(perception.settingsInEffect(live).samples, 1);
+  live.symmetries = 3;
+  EXPECT_THROW(perception.settingsInEffect(live), std::invalid_argument);
+  EXPECT_EQ(perception.config().symmetries, config.symmetries);
   config.decompose_samples = 10;
   try {
     ScenePerception{config};

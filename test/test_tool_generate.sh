@@ -37,6 +37,20 @@ test -s "$dir/mine_views/notes.txt"
 if "$tool" --scenes 1 --seed 4 --resolution 16 --output "$dir/same/p.h5" --views 1 --views-dir "$dir/same" \
   2> "$dir/err.txt"; then echo "views put where they replace the dataset"; exit 1; fi
 grep -q "holds the dataset" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
+# Views of another camera: a D435's size and intrinsics with its noise.
+"$tool" --scenes 1 --seed 3 --resolution 16 --output "$dir/rs.h5" --views 1 --noise --sensor realsense \
+  --width 1280 --height 720 --intrinsics 640,640,639.5,359.5 > /dev/null
+/usr/bin/python3 - "$dir/rs_views/scene_000000_view_0" <<'PY'
+import struct, sys, yaml
+png = open(sys.argv[1] + "_depth.png", "rb").read(24)
+assert struct.unpack(">II", png[16:24]) == (1280, 720), struct.unpack(">II", png[16:24])
+view = yaml.safe_load(open(sys.argv[1] + ".yaml"))
+assert (view["width"], view["height"]) == (1280, 720), view
+assert view["intrinsics"]["fx"] == 640 and view["intrinsics"]["cy"] == 359.5, view["intrinsics"]
+PY
+if "$tool" --scenes 1 --seed 3 --resolution 16 --output "$dir/rs2.h5" --views 1 --width 1280 --height 720 \
+  --intrinsics 320,320,159.5,119.5 2> "$dir/err.txt"; then echo "accepted another size's intrinsics"; exit 1; fi
+grep -q "cx = 159.5" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
 # Bad input: a clear message naming the value, non-zero exit.
 if "$tool" --scenes 1 --seed 1 --output "$dir/x.h5" --objects 4:2 2> "$dir/err.txt"; then echo "accepted --objects 4:2"; exit 1; fi
 grep -qi "object count" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }

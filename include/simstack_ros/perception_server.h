@@ -94,6 +94,9 @@ class PerceptionServer {
   double silenceSeconds(const ros::SteadyTime& now) const;
   /// Applies settings changed by dynamic_reconfigure (worker thread, between frames).
   void applySettings();
+  /// A dynamic_reconfigure change (mutex_ held): `config` becomes requested_ when the pipeline
+  /// would take it; else the refusal is logged and false returned.
+  bool request(const PerceptionConfig& config);
 
   ros::NodeHandle nh_, pnh_;
   NodeConfig node_;
@@ -139,8 +142,11 @@ class PerceptionServer {
   ViewHistory views_;    ///< accumulated views (accumulate_views)
   Image<uint8_t> mask_;  ///< the last ~mask received (empty: none)
   bool reset_requested_ = false;
-  std::optional<LiveSettingsConfig> pending_settings_;
-  std::optional<HoughSettingsConfig> pending_hough_;
+  /// The settings in effect from the next frame on, as judged when requested (under mutex_);
+  /// settings_changed_ until the worker has applied them.
+  PerceptionConfig requested_;
+  double requested_occupancy_min_ = 0.0;
+  bool settings_changed_ = false;
   std::thread worker_;  ///< last: starts after everything it uses
 };
 

@@ -143,16 +143,27 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   reconfigure_ =
       std::make_unique<dynamic_reconfigure::Server<LiveSettingsConfig>>(reconfigure_mutex_, pnh_);
   reconfigure_->updateConfig(liveSettings(perception_->config(), node_.occupancy_min));
+  requested_ = perception_->config();
+  requested_occupancy_min_ = node_.occupancy_min;
+  // A change is judged at once and answered with what will be in effect: a refused value is
+  // reported and shown back as the one that stays, before any frame comes.
   reconfigure_->setCallback([this](LiveSettingsConfig& settings, uint32_t) {
     std::lock_guard<std::mutex> lock(mutex_);
-    pending_settings_ = settings;
+    PerceptionConfig c = requested_;
+    pairLiveSettings(settings, c, kApply);
+    c.decompose_samples = std::min(decompose_samples_, c.samples);
+    if (request(c)) requested_occupancy_min_ = settings.occupancy_min;
+    settings = liveSettings(requested_, requested_occupancy_min_);
   });
   hough_reconfigure_ = std::make_unique<dynamic_reconfigure::Server<HoughSettingsConfig>>(
       reconfigure_mutex_, ros::NodeHandle(pnh_, "hough"));
   hough_reconfigure_->updateConfig(houghSettings(perception_->config().hough));
   hough_reconfigure_->setCallback([this](HoughSettingsConfig& settings, uint32_t) {
     std::lock_guard<std::mutex> lock(mutex_);
-    pending_hough_ = settings;
+    PerceptionConfig c = requested_;
+    pairHoughSettings(settings, c.hough, kApply);
+    request(c);
+    settings = houghSettings(requested_.hough);
   });
   warmUp();
   // The hints read ~image_transport (image_transport's convention, `_image_transport:=...`)
@@ -402,40 +413,31 @@ bool PerceptionServer::stopRequested() {
   return stop_;
 }
 
+bool PerceptionServer::request(const PerceptionConfig& config) {
+  try {
+    requested_ = perception_->settingsInEffect(config);
+    settings_changed_ = true;
+    return true;
+  } catch (const std::invalid_argument& e) {
+    ROS_ERROR("simstack perception: live setting refused, the previous ones stay: %s", e.what());
+    return false;
+  }
+}
+
 void PerceptionServer::applySettings() {
-  std::optional<LiveSettingsConfig> s;
-  std::optional<HoughSettingsConfig> h;
+  PerceptionConfig c;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    s.swap(pending_settings_);
-    h.swap(pending_hough_);
-    if (s) node_.occupancy_min = s->occupancy_min;
+    if (!settings_changed_) return;
+    settings_changed_ = false;
+    c = requested_;
+    node_.occupancy_min = requested_occupancy_min_;
   }
-  if (!s && !h) return;
-  PerceptionConfig c = perception_->config();
-  if (s) {
-    pairLiveSettings(*s, c, kApply);
-    c.decompose_samples = std::min(decompose_samples_, c.samples);
-  }
-  if (h) pairHoughSettings(*h, c.hough, kApply);
   try {
-    perception_->updateSettings(c);
+    perception_->updateSettings(c);  // judged when requested already; this is a guard
   } catch (const std::invalid_argument& e) {
     ROS_ERROR("simstack perception: new settings refused, the previous ones stay: %s", e.what());
   }
-  // What is in effect (a refused value, or an FC model's single sample) shown back, but not
-  // over a change that came in meanwhile (it is applied, and shown, at the next frame). The
-  // reconfigure servers' lock, then mutex_ (the order of their callbacks), keeps a change from
-  // landing between the check and the update.
-  boost::recursive_mutex::scoped_lock shown_lock(reconfigure_mutex_);
-  double occupancy_min;
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (pending_settings_ || pending_hough_) return;
-    occupancy_min = node_.occupancy_min;
-  }
-  reconfigure_->updateConfig(liveSettings(perception_->config(), occupancy_min));
-  hough_reconfigure_->updateConfig(houghSettings(perception_->config().hough));
 }
 
 void PerceptionServer::process(const Frame& frame) {

@@ -198,13 +198,14 @@ void GraspServerConfig::validate() const {
 }
 
 GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
+  // rank_grasps_action: actionlib's own settings of the action (status_list_timeout, ...).
   static const std::set<std::string> known{
-      "objects_topic",       "threads",          "max_candidates",     "max_candidates_limit",
-      "max_pull_distance_m", "cup_radius_m",     "seal_tolerance_m",   "surface_samples",
-      "tool_length_m",       "max_force_n",      "cup_stiffness_hz",   "settle_s",
-      "topple_deg",          "match_distance_m", "density_kgpm3",      "max_scene_age_s",
-      "pregrasp_distance_m", "perturbed_copies", "perturb_position_m", "perturb_rotation_deg",
-      "perturb_scale_share"};
+      "objects_topic",       "threads",           "max_candidates",     "max_candidates_limit",
+      "max_pull_distance_m", "cup_radius_m",      "seal_tolerance_m",   "surface_samples",
+      "tool_length_m",       "max_force_n",       "cup_stiffness_hz",   "settle_s",
+      "topple_deg",          "match_distance_m",  "density_kgpm3",      "max_scene_age_s",
+      "pregrasp_distance_m", "perturbed_copies",  "perturb_position_m", "perturb_rotation_deg",
+      "perturb_scale_share", "rank_grasps_action"};
   XmlRpc::XmlRpcValue all;
   if (ros::param::get(pnh.getNamespace(), all) && all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
     for (auto& kv : all)

@@ -7,6 +7,7 @@
 #include <iostream>
 
 #include "cli_checks.h"
+#include "perception_options.h"
 #include "progress.h"
 #include "sensor_option.h"
 #include "simstack/offline/dataset/dataset_generation.h"
@@ -58,6 +59,39 @@ const CLI::Validator kMeshName(
     },
     "NAME");
 
+/// The rendered views' camera as given: --width, --height, --intrinsics.
+struct ViewCamera {
+  int width = 640, height = 480;
+  std::string intrinsics;
+};
+
+/// --views and what they are: where, pictures, noise, sensor and camera.
+void addViewOptions(CLI::App& app, GenerationOptions* o, ViewCamera* camera) {
+  app.add_option("--views", o->views, "rendered views per scene written beside the dataset")
+      ->check(FiniteNonNegative);
+  app.add_option("--views-dir", o->views_dir, "where views go (default: <output stem>_views/)")
+      ->check(WritablePath);
+  app.add_flag("--pictures", o->pictures,
+               "also write colour depth and shaded PNG pictures of each view");
+  CLI::Option* noise_flag = app.add_flag(
+      "--noise", o->noise, "sensor noise and missing pixels in the rendered views (--sensor's)");
+  addSensorOption(app, &o->sensor, "with --noise, ")->needs(noise_flag);
+  app.add_option("--width", camera->width,
+                 "view width (pixels): fx scales with the width, fy with the height, so keep 4:3 "
+                 "for square pixels")
+      ->capture_default_str()
+      ->check(CLI::Range(16, 4096))
+      ->needs("--views");
+  app.add_option("--height", camera->height, "view height (pixels)")
+      ->capture_default_str()
+      ->check(CLI::Range(16, 4096))
+      ->needs("--views");
+  app.add_option("--intrinsics", camera->intrinsics,
+                 "fx,fy,cx,cy (pixels) of another camera for the --width x --height views, "
+                 "instead of the scaled Kinect (e.g. a D435's with --sensor realsense)")
+      ->needs("--views");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -102,15 +136,8 @@ int main(int argc, char** argv) {
   app.add_flag("--loose", o.loose,
                "objects dropped 15 cm about the centre and kept side by side: piles need not be "
                "one stack (real tables)");
-  app.add_option("--views", o.views, "rendered views per scene written beside the dataset")
-      ->check(FiniteNonNegative);
-  app.add_option("--views-dir", o.views_dir, "where views go (default: <output stem>_views/)")
-      ->check(WritablePath);
-  app.add_flag("--pictures", o.pictures,
-               "also write colour depth and shaded PNG pictures of each view");
-  CLI::Option* noise_flag = app.add_flag(
-      "--noise", o.noise, "sensor noise and missing pixels in the rendered views (--sensor's)");
-  addSensorOption(app, &o.sensor, "with --noise, ")->needs(noise_flag);
+  ViewCamera camera;
+  addViewOptions(app, &o, &camera);
   app.add_option("--extent", o.extent_m, "scene grid side in metres (at most 10)")
       ->check(FinitePositive & CLI::Range(0.0, 10.0))
       ->capture_default_str();
@@ -131,6 +158,9 @@ int main(int argc, char** argv) {
   try {
     std::tie(o.min_objects, o.max_objects) = parseRange(objects);
     std::tie(o.min_size_m, o.max_size_m) = parseSizes(sizes);
+    o.camera = camera.intrinsics.empty()
+                   ? scaledKinect(camera.width, camera.height)
+                   : parseIntrinsics(camera.intrinsics, camera.width, camera.height);
     ProgressBar bar("generating", o.scenes);
     const GenerationSummary s = generateDataset(o, [&](int done, int) { bar.update(done); });
     bar.finish();

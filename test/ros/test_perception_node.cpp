@@ -487,8 +487,10 @@ TEST_F(PerceptionNodeTest, LiveSettingsChangeTheNextFrame) {
   ASSERT_TRUE(nh_.getParam("/camera/perception/hough/bandwidth_m", set_bandwidth));
   EXPECT_DOUBLE_EQ(set_bandwidth, 0.04);
   EXPECT_TRUE(sendDepth(depth, 60.0));  // a frame perceived with it
-  // A count of passes the pipeline refuses leaves the one in effect.
+  // A count of passes the pipeline refuses leaves the one in effect, shown back at once.
   ASSERT_TRUE(set("symmetries", 3));
+  ASSERT_TRUE(nh_.getParam("/camera/perception/symmetries", symmetries));
+  EXPECT_EQ(symmetries, 1) << "a refused setting is shown back before the next frame";
   out = sendDepth(depth, 60.0);
   ASSERT_TRUE(out);
   EXPECT_EQ(out->symmetries, 1u);

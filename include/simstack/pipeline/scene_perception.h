@@ -154,6 +154,10 @@ class ScenePerception {
   /// another model or thread count, or a bad value; the settings in use then stay). Not
   /// thread-safe: call it between perceive() calls.
   void updateSettings(const PerceptionConfig& config);
+  /// The settings updateSettings(config) would put in effect (an FC model's single sample),
+  /// changing nothing; throws std::invalid_argument where it would. Safe beside a perceive() or
+  /// updateSettings() on another thread: it reads only what those never change.
+  PerceptionConfig settingsInEffect(const PerceptionConfig& config) const;
 
   const PerceptionConfig& config() const;
   const CvaeConfig& modelConfig() const;

@@ -402,6 +402,8 @@ Image<int> pixelInstances(const DepthView& view, const SceneEstimate& est, int h
 struct ScenePerception::Impl {
   PerceptionConfig config;
   std::unique_ptr<CvaeInference> model;
+  std::string model_path;  ///< as config's, but never written after construction
+  int threads = 1;         ///< the same
 };
 
 namespace {
@@ -501,16 +503,22 @@ ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Imp
   impl_->model = std::make_unique<CvaeInference>(config.model_path, cappedThreads(config.threads));
   validate(config, impl_->model->config().hasLatentCode());
   impl_->config = forModel(config, impl_->model->config());
+  impl_->model_path = impl_->config.model_path;
+  impl_->threads = impl_->config.threads;
+}
+
+PerceptionConfig ScenePerception::settingsInEffect(const PerceptionConfig& config) const {
+  if (config.model_path != impl_->model_path)
+    throw std::invalid_argument("updateSettings keeps the model: " + impl_->model_path + ", not " +
+                                config.model_path);
+  if (cappedThreads(config.threads) != impl_->threads)
+    throw std::invalid_argument("updateSettings keeps the thread count");
+  validate(config, impl_->model->config().hasLatentCode());
+  return forModel(config, impl_->model->config());
 }
 
 void ScenePerception::updateSettings(const PerceptionConfig& config) {
-  if (config.model_path != impl_->config.model_path)
-    throw std::invalid_argument("updateSettings keeps the model: " + impl_->config.model_path +
-                                ", not " + config.model_path);
-  if (cappedThreads(config.threads) != impl_->config.threads)
-    throw std::invalid_argument("updateSettings keeps the thread count");
-  validate(config, impl_->model->config().hasLatentCode());
-  impl_->config = forModel(config, impl_->model->config());
+  impl_->config = settingsInEffect(config);
 }
 
 ScenePerception::~ScenePerception() = default;

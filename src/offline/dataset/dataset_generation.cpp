@@ -47,7 +47,7 @@ void writeViews(const GenerationOptions& o, const fs::path& dir, int index, cons
   DepthRenderer renderer(scene);
   std::mt19937_64 rng(seed ^ 0x5157u);
   const Vec3 centre = scene.surfaceCentroid();
-  PinholeCamera camera;
+  const PinholeCamera& camera = o.camera;
   for (int v = 0; v < o.views; ++v) {
     ViewDescription view;
     view.camera = camera;

@@ -34,6 +34,7 @@ struct GenerationOptions {
   bool pictures = false;  ///< colour depth and shaded ground-truth PNGs per view
   bool noise = false;     ///< sensor noise and missing pixels in the rendered views
   SensorModel sensor = SensorModel::kinect;  ///< whose noise (SensorNoiseConfig::preset)
+  PinholeCamera camera;                      ///< the views' camera (a 640x480 Kinect)
   double extent_m = 0.64;
   double truncation_vox = 3.0;
   double max_tilt_deg = 180.0;
