@@ -8,6 +8,7 @@ Remappings after -- (camera/depth/image_rect:=camera/depth/image_rect_raw) go to
 """
 import argparse
 import math
+import os
 import signal
 import subprocess
 import sys
@@ -33,6 +34,10 @@ def main():
         parser.error("give the rosbag play arguments after --")
     if not (math.isfinite(args.timeout) and args.timeout > 0):
         parser.error("--timeout %s: give a number of seconds above 0" % args.timeout)
+    # rosbag play reports a missing bag and exits 0: refuse it here, before any wait.
+    for bag in (a for a in play_args if a.endswith(".bag") and not a.startswith("-")):
+        if not os.path.isfile(bag) or not os.access(bag, os.R_OK):
+            sys.exit("play_when_ready: no readable bag file %s" % bag)
     rospy.init_node("play_when_ready", anonymous=True, disable_signals=True)
     rospy.loginfo("play_when_ready: waiting for %s", args.ready)
     # One subscription and one deadline: a latched false (a perception that refused its model)

@@ -14,12 +14,15 @@ functions: `from simstack import grasp_client` (src/python/grasp_client.py).
 """
 import argparse
 import json
+import math
 import os
 import sys
 import time
 
+import genpy
 import rosgraph
 import rospy
+from geometry_msgs.msg import PoseStamped, Vector3
 from simstack import grasp_client
 
 
@@ -43,6 +46,32 @@ def pose_list(pose):
     """[x, y, z, qw, qx, qy, qz] of a geometry_msgs/Pose."""
     p, q = pose.position, pose.orientation
     return [p.x, p.y, p.z, q.w, q.x, q.y, q.z]
+
+
+def plain(value):
+    """A message field as JSON: poses as [x, y, z, qw, qx, qy, qz] (with a stamped pose's frame
+    left to the caller), vectors as [x, y, z], stamps in seconds, not-a-number as null."""
+    if isinstance(value, PoseStamped):
+        return pose_list(value.pose)
+    if isinstance(value, Vector3):
+        return [value.x, value.y, value.z]
+    if isinstance(value, genpy.Message):
+        return {name: plain(getattr(value, name)) for name in value.__slots__}
+    if isinstance(value, (genpy.Time, genpy.Duration)):
+        return value.to_sec()
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def response_json(res):
+    """Every field of the ranking's response; the scene's frame and stamp, and the poses' frame."""
+    out = {"frame": res.header.frame_id, "scene_stamp": res.header.stamp.to_sec(),
+           "pose_frame": res.grasps[0].tool_pose.header.frame_id if res.grasps else ""}
+    out.update((name, plain(getattr(res, name))) for name in res.__slots__ if name != "header")
+    return out
 
 
 def progress(done, total, best):
@@ -78,7 +107,8 @@ def main():
                         help="pre-grasp stand-off in metres (0: the server's ~pregrasp_distance_m)")
     parser.add_argument("--progress", action="store_true",
                         help="print the pulls done as they are simulated (on stderr)")
-    parser.add_argument("--json", help="also write the response to this file")
+    parser.add_argument("--json", help="also write the response to this file (every field; poses as "
+                        "[x, y, z, qw, qx, qy, qz])")
     args = parser.parse_args(rospy.myargv()[1:])
     # The request's counts are uint32: one outside is an argument error, not a traceback.
     for name in ("candidates", "hypotheses", "rows"):
@@ -129,19 +159,7 @@ def main():
     print(table(res, args.rows))
     if args.json:
         with open(args.json, "w") as f:  # checked above; a disk that fills still raises
-            json.dump({"target_id": res.target_id, "frame": res.header.frame_id,
-                       "message": res.message,
-                       "baseline_displacement_m": list(res.baseline_displacement_m),
-                       "pose_frame": res.grasps[0].tool_pose.header.frame_id if res.grasps else "",
-                       "grasps": [{"tool_pose": pose_list(g.tool_pose.pose),
-                                   "pregrasp_pose": pose_list(g.pregrasp_pose.pose),
-                                   "held": g.held, "freed": g.freed,
-                                   "approach": [g.approach.x, g.approach.y, g.approach.z],
-                                   "seal_score": g.seal_score,
-                                   "mean_displacement_m": g.mean_displacement_m,
-                                   "max_displacement_m": g.max_displacement_m,
-                                   "toppled": g.toppled, "freed_share": g.freed_share,
-                                   "failed_share": g.failed_share} for g in res.grasps]}, f, indent=1)
+            json.dump(response_json(res), f, indent=1)
         print("wrote %s" % args.json)
 
 

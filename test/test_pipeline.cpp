@@ -703,6 +703,19 @@ TEST(ScenePerception, BadInputGetsClearErrors) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("sensor range"), std::string::npos) << e.what();
   }
+  // Millimetres in a metre image: their span given, and what it looks like.
+  DepthImage millimetres = p.view.depth;
+  for (float& d : millimetres.pixels) d *= 1000.0f;
+  try {
+    perception.perceive(DepthView{millimetres, p.camera, p.T_table_camera});
+    ADD_FAILURE() << "a view in millimetres was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("sensor range 0.1 .. 10 m (its depths span"),
+              std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("millimetres where metres"), std::string::npos)
+        << e.what();
+  }
   // Depth beyond the sensor's range (a float image of random bits) is missing, not a crash.
   DepthImage far = p.view.depth;
   for (size_t i = 0; i < far.pixels.size(); i += 7) far.pixels[i] = 1e30f;

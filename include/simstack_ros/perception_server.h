@@ -92,6 +92,10 @@ class PerceptionServer {
   double secondsWithoutFrame(const ros::SteadyTime& now) const;
   /// The same, or 0 while frames come within input_timeout_s (mutex_ held).
   double silenceSeconds(const ros::SteadyTime& now) const;
+  /// Why no frame came for `silent` s, as far as the topics tell (mutex_ held).
+  std::string silenceCause(const ros::SteadyTime& now, double silent) const;
+  /// The dynamic_reconfigure servers of the live settings, showing the settings in effect.
+  void startLiveSettings();
   /// Applies settings changed by dynamic_reconfigure (worker thread, between frames).
   void applySettings();
   /// A dynamic_reconfigure change (mutex_ held): `config` becomes requested_ when the pipeline
@@ -106,7 +110,8 @@ class PerceptionServer {
   tf2_ros::TransformBroadcaster tf_broadcaster_;
   image_transport::ImageTransport it_;
   image_transport::CameraSubscriber depth_sub_;
-  ros::Subscriber mask_sub_;  ///< ~mask: the workspace mask, applied to every frame
+  ros::Subscriber mask_sub_;        ///< ~mask: the workspace mask, applied to every frame
+  ros::Subscriber info_watch_sub_;  ///< the camera_info topic alone (silenceCause)
   ros::Publisher objects_pub_, instances_pub_, markers_pub_, occupancy_pub_, ready_pub_;
   image_transport::Publisher labels_pub_;
   ros::ServiceServer reset_srv_, save_srv_;
@@ -127,6 +132,8 @@ class PerceptionServer {
   ros::SteadyTime last_warning_;
   ros::SteadyTime started_, last_arrival_;  ///< when the node started; when the last frame came
   ros::SteadyTime last_silence_warning_;    ///< zero while frames arrive
+  ros::SteadyTime last_info_arrival_;       ///< when camera_info last came, alone
+  ros::Time last_info_stamp_;               ///< and its stamp
   long processed_before_ = 0;
   ros::SteadyTime rate_since_;
   ObjectTracker tracker_;  ///< ids kept across frames (node/track_*); under mutex_

@@ -32,16 +32,25 @@ class GraspServiceError(RuntimeError):
     """The scene or the ranking could not be had; the message says why."""
 
 
+def _require_node():
+    """rospy's topics and actions do nothing before rospy.init_node: say so, not that the
+    server or the scene is missing."""
+    if not rospy.core.is_initialized():
+        raise GraspServiceError("call rospy.init_node(...) before using grasp_client")
+
+
 def scene_age(scene):
     """Seconds since the scene's stamp, or None when there is nothing to judge it by (a stamp of
-    0, or a simulated clock that has not ticked within 3 s: a bag that has ended)."""
+    0, or a simulated clock that has not ticked: nothing publishes /clock, or it sent nothing
+    within 3 s, as after a bag has ended)."""
     if scene.header.stamp.is_zero():
         return None
-    deadline = time.time() + 3.0  # the first /clock message under simulated time
     now = rospy.Time.now()
-    while now.is_zero() and time.time() < deadline:
-        time.sleep(0.05)
-        now = rospy.Time.now()
+    if now.is_zero() and any(name == "/clock" for name, _ in rospy.get_published_topics()):
+        deadline = time.time() + 3.0  # the first /clock message under simulated time
+        while now.is_zero() and time.time() < deadline:
+            time.sleep(0.05)
+            now = rospy.Time.now()
     return None if now.is_zero() else (now - scene.header.stamp).to_sec()
 
 
@@ -50,6 +59,7 @@ def latest_scene(camera="camera", timeout=10.0, max_age=None):
     however old it is: refused when its stamp is more than `max_age` seconds behind the clock
     (None: the grasp server's ~max_scene_age_s, 10 s when unset; 0: any age), or when it holds
     no object."""
+    _require_node()
     topic = "/%s/perception/objects" % camera
     try:
         scene = rospy.wait_for_message(topic, ObjectArray, timeout=timeout)
@@ -214,6 +224,7 @@ def rank_grasps(scene, target_id, camera="camera", candidates=0, pull_distance_m
     message when it refuses the request, and when the server goes away, the ranking outlasts
     `result_timeout`, or rospy shuts down (Ctrl-C) before it ends; in the last two cases and on
     a KeyboardInterrupt the ranking is cancelled on the server first."""
+    _require_node()
     if target_id is None and target_point is None:
         raise GraspServiceError("give a target_id, or a target_point")
     _check_count("target_id", 0 if target_id is None else target_id)

@@ -1,6 +1,7 @@
 #include "simstack_ros/perception_server.h"
 
 #include <geometry_msgs/TransformStamped.h>
+#include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <simstack/ObjectArray.h>
 #include <std_msgs/Bool.h>
@@ -10,6 +11,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <iomanip>
 #include <sstream>
 
 #include "simstack/io/octomap_io.h"
@@ -137,34 +139,7 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   reset_srv_ = pnh_.advertiseService("reset", &PerceptionServer::reset, this);
   save_srv_ = pnh_.advertiseService("save_octomap", &PerceptionServer::saveOctomap, this);
   decompose_samples_ = perception_->config().decompose_samples;
-  // Two servers, so that every live setting keeps its parameter's name: ~samples, ~symmetries,
-  // ... on ~, the Hough voting's on ~hough (~hough/bandwidth_m). Each shows the node's
-  // parameters, not the .cfg's defaults.
-  reconfigure_ =
-      std::make_unique<dynamic_reconfigure::Server<LiveSettingsConfig>>(reconfigure_mutex_, pnh_);
-  reconfigure_->updateConfig(liveSettings(perception_->config(), node_.occupancy_min));
-  requested_ = perception_->config();
-  requested_occupancy_min_ = node_.occupancy_min;
-  // A change is judged at once and answered with what will be in effect: a refused value is
-  // reported and shown back as the one that stays, before any frame comes.
-  reconfigure_->setCallback([this](LiveSettingsConfig& settings, uint32_t) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    PerceptionConfig c = requested_;
-    pairLiveSettings(settings, c, kApply);
-    c.decompose_samples = std::min(decompose_samples_, c.samples);
-    if (request(c)) requested_occupancy_min_ = settings.occupancy_min;
-    settings = liveSettings(requested_, requested_occupancy_min_);
-  });
-  hough_reconfigure_ = std::make_unique<dynamic_reconfigure::Server<HoughSettingsConfig>>(
-      reconfigure_mutex_, ros::NodeHandle(pnh_, "hough"));
-  hough_reconfigure_->updateConfig(houghSettings(perception_->config().hough));
-  hough_reconfigure_->setCallback([this](HoughSettingsConfig& settings, uint32_t) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    PerceptionConfig c = requested_;
-    pairHoughSettings(settings, c.hough, kApply);
-    request(c);
-    settings = houghSettings(requested_.hough);
-  });
+  startLiveSettings();
   warmUp();
   // The hints read ~image_transport (image_transport's convention, `_image_transport:=...`)
   // from the node's own namespace: a nodelet's "~" would be its manager's.
@@ -176,6 +151,13 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
     throw std::runtime_error("~image_transport '" + hints.getTransport() +
                              "' cannot be loaded: " + e.what());
   }
+  // camera_info watched alone, to say why no frame comes when it flows without its images.
+  info_watch_sub_ = nh_.subscribe<sensor_msgs::CameraInfo>(
+      depth_sub_.getInfoTopic(), 1, [this](const sensor_msgs::CameraInfoConstPtr& info) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        last_info_arrival_ = ros::SteadyTime::now();
+        last_info_stamp_ = info->header.stamp;
+      });
   // A latched publisher's mask arrives once; a bad one is reported and the previous one kept.
   const std::string mask_topic = pnh_.resolveName("mask");
   mask_sub_ = pnh_.subscribe<sensor_msgs::Image>(
@@ -382,8 +364,9 @@ bool PerceptionServer::waitForTransform(const std::string& target, const std::st
   const ros::Time start = ros::Time::now();
   ros::Time last = start;
   ros::SteadyTime last_moved = begun;
-  std::string error;
-  while (!tf_buffer_.canTransform(target, source, stamp, &error)) {
+  for (;;) {
+    std::string error;  // tf2 appends to it: one attempt's reason only
+    if (tf_buffer_.canTransform(target, source, stamp, &error)) return true;
     const ros::SteadyTime wall = ros::SteadyTime::now();
     const ros::Time now = ros::Time::now();
     if (now != last) {
@@ -400,17 +383,50 @@ bool PerceptionServer::waitForTransform(const std::string& target, const std::st
       else
         out << "(the node stopped while waiting)";
       out << ": " << error;
+      if (waited && target == node_.table_frame && !node_.estimate_table)
+        out << " (the table frame comes from tf: a bag needs its /tf_static or /tf recorded, or "
+               "set ~estimate_table to find the table in the depth)";
       *why = out.str();
       return false;
     }
     ros::WallDuration(0.005).sleep();
   }
-  return true;
 }
 
 bool PerceptionServer::stopRequested() {
   std::lock_guard<std::mutex> lock(mutex_);
   return stop_;
+}
+
+void PerceptionServer::startLiveSettings() {
+  // Two servers, so that every live setting keeps its parameter's name: ~samples, ~symmetries,
+  // ... on ~, the Hough voting's on ~hough (~hough/bandwidth_m). Each shows the node's
+  // parameters, not the .cfg's defaults.
+  reconfigure_ =
+      std::make_unique<dynamic_reconfigure::Server<LiveSettingsConfig>>(reconfigure_mutex_, pnh_);
+  reconfigure_->updateConfig(liveSettings(perception_->config(), node_.occupancy_min));
+  requested_ = perception_->config();
+  requested_occupancy_min_ = node_.occupancy_min;
+  // A change is judged at once and answered with what will be in effect: a refused value is
+  // reported and shown back as the one that stays, before any frame comes.
+  reconfigure_->setCallback([this](LiveSettingsConfig& settings, uint32_t) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    PerceptionConfig c = requested_;
+    pairLiveSettings(settings, c, kApply);
+    c.decompose_samples = std::min(decompose_samples_, c.samples);
+    if (request(c)) requested_occupancy_min_ = settings.occupancy_min;
+    settings = liveSettings(requested_, requested_occupancy_min_);
+  });
+  hough_reconfigure_ = std::make_unique<dynamic_reconfigure::Server<HoughSettingsConfig>>(
+      reconfigure_mutex_, ros::NodeHandle(pnh_, "hough"));
+  hough_reconfigure_->updateConfig(houghSettings(perception_->config().hough));
+  hough_reconfigure_->setCallback([this](HoughSettingsConfig& settings, uint32_t) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    PerceptionConfig c = requested_;
+    pairHoughSettings(settings, c.hough, kApply);
+    request(c);
+    settings = houghSettings(requested_.hough);
+  });
 }
 
 bool PerceptionServer::request(const PerceptionConfig& config) {
@@ -611,6 +627,27 @@ double PerceptionServer::silenceSeconds(const ros::SteadyTime& now) const {
   return silent >= node_.input_timeout_s ? silent : 0.0;
 }
 
+std::string PerceptionServer::silenceCause(const ros::SteadyTime& now, double silent) const {
+  // image_transport hands on an image only with the camera_info of exactly its stamp.
+  const bool info_flows =
+      !last_info_arrival_.isZero() && (now - last_info_arrival_).toSec() < silent;
+  const uint32_t image_publishers = depth_sub_.getNumPublishers();
+  std::ostringstream out;
+  out << std::fixed << std::setprecision(3);
+  if (info_flows && image_publishers > 0)
+    out << "camera_info arrives (the last stamped " << last_info_stamp_.toSec()
+        << ") but no depth image with its exact stamp: each image is taken with the "
+           "camera_info of the same stamp";
+  else if (info_flows)
+    out << "camera_info arrives but nothing publishes the depth image";
+  else if (image_publishers > 0)
+    out << "nothing arrives on " << depth_sub_.getInfoTopic() << " while the depth image has "
+        << image_publishers << " publisher(s): each image is taken with its camera_info";
+  else
+    out << "is the camera running, and its namespace the one given?";
+  return out.str();
+}
+
 void PerceptionServer::onSilenceCheck() {
   const ros::SteadyTime now = ros::SteadyTime::now();
   double silent = 0.0;
@@ -629,11 +666,15 @@ void PerceptionServer::onSilenceCheck() {
     }
   }
   const std::string topics = depth_sub_.getTopic() + " and " + depth_sub_.getInfoTopic();
-  if (warn)
-    ROS_WARN(
-        "simstack perception: no depth frame on %s for %.0f s (is the camera running, and "
-        "its namespace the one given?)",
-        topics.c_str(), silent);
+  if (warn) {
+    std::string cause;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      cause = silenceCause(now, silent);
+    }
+    ROS_WARN("simstack perception: no depth frame on %s for %.0f s: %s", topics.c_str(), silent,
+             cause.c_str());
+  }
   if (resumed) ROS_INFO("simstack perception: depth frames arrive again on %s", topics.c_str());
 }
 
@@ -650,12 +691,12 @@ void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   rate_since_ = now;
   processed_before_ = processed_;
   const double silent = silenceSeconds(now);
-  if (silent > 0.0)
+  if (processed_ == 0 && skipped_ > 0)  // stays an error when the frames stop coming
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "no frame processed: " + last_error_);
+  else if (silent > 0.0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
                    "no depth frame for " + std::to_string(static_cast<int>(silent)) + " s on " +
-                       depth_sub_.getTopic());
-  else if (processed_ == 0 && skipped_ > 0)
-    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "no frame processed: " + last_error_);
+                       depth_sub_.getTopic() + ": " + silenceCause(now, silent));
   else if (failing_)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "frames skipped: " + last_error_);
   else if (received_ == 0)

@@ -1,10 +1,12 @@
 #!/usr/bin/env python3
 """rostest node of test/ros/grasps.test: the grasp service on the replayed example bag."""
 import copy
+import json
 import math
 import os
 import signal
 import subprocess
+import tempfile
 import threading
 import time
 import unittest
@@ -14,9 +16,9 @@ import rospkg
 import rospy
 import rostest
 from actionlib_msgs.msg import GoalStatus
-from simstack.msg import (ObjectArray, Object, RankGraspsAction, RankGraspsActionResult,
+from simstack.msg import (Grasp, ObjectArray, Object, RankGraspsAction, RankGraspsActionResult,
                           RankGraspsGoal, SceneSample)
-from simstack.srv import RankGrasps, RankGraspsRequest
+from simstack.srv import RankGrasps, RankGraspsRequest, RankGraspsResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
 
@@ -297,12 +299,28 @@ class GraspService(unittest.TestCase):
         return done.returncode, done.stdout + done.stderr
 
     def test_8_the_script_ranks_the_top_object(self):
-        code, out = self.script("--target", "top", "--candidates", "32", "--progress")
+        folder = tempfile.TemporaryDirectory()
+        self.addCleanup(folder.cleanup)
+        path = os.path.join(folder.name, "grasps.json")
+        code, out = self.script("--target", "top", "--candidates", "32", "--progress",
+                                "--json", path)
         self.assertEqual(code, 0, out)
         self.assertRegex(out, r"object \d+: .*grasps ranked")
         self.assertIn("rank  contact (m, table)", out)
         # The action's feedback (the last may come after the result, which ends the goal).
         self.assertRegex(out, r"pulls \d+ of 32")
+        # The file holds every field of the response and of each grasp, in strict JSON.
+        with open(path) as f:
+            written = json.load(f, parse_constant=lambda c: self.fail("%s in the JSON" % c))
+        for field in RankGraspsResponse.__slots__:
+            if field != "header":
+                self.assertIn(field, written)
+        self.assertGreater(written["scene_stamp"], 0)
+        self.assertEqual(written["frame"], "table")
+        self.assertGreater(len(written["grasps"]), 0)
+        for field in Grasp.__slots__:
+            self.assertIn(field, written["grasps"][0])
+        self.assertEqual(len(written["grasps"][0]["tool_pose"]), 7)
 
     def test_9_the_script_refuses_a_stale_latched_scene(self):
         # A latched scene arrives at once however old it is; the bag's clock reads 1 s or more.
@@ -322,6 +340,12 @@ class GraspService(unittest.TestCase):
 
     def test_9b_task_code_imports_the_client_module(self):
         from simstack import grasp_client
+        # Task code that forgot rospy.init_node is told so, not that nothing is there.
+        forgot = subprocess.run(
+            ["/usr/bin/python3", "-c", "from simstack import grasp_client as g\n"
+             "try:\n g.latest_scene(timeout=1)\nexcept g.GraspServiceError as e:\n print(e)"],
+            capture_output=True, text=True, timeout=60)
+        self.assertIn("call rospy.init_node", forgot.stdout + forgot.stderr)
         scene = grasp_client.latest_scene(max_age=0)
         target = grasp_client.top_object(scene)
         self.assertIn(target, [o.id for o in scene.objects])

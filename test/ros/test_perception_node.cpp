@@ -368,6 +368,24 @@ TEST_F(PerceptionNodeTest, BadInputIsSkippedAndTheNodeKeepsPublishing) {
     spoil(&image, &bad_info);
     EXPECT_FALSE(send(image, bad_info, 2.0)) << name << ": published for a bad frame";
   }
+  // The last case's reason, as /diagnostics reports it: tf2's text once, not once per attempt
+  // of the 0.5 s wait, and the way to give the node its table.
+  std::string last_error;
+  ros::Subscriber diagnostics = nh_.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 10, [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& msg) {
+        for (const auto& status : msg->status)
+          if (status.name == "camera/perception: perception")
+            for (const auto& kv : status.values)
+              if (kv.key == "last error") last_error = kv.value;
+      });
+  for (int i = 0; i < 300 && last_error.find("nowhere") == std::string::npos; ++i) {
+    ros::spinOnce();
+    ros::WallDuration(0.02).sleep();
+  }
+  EXPECT_NE(last_error.find("no transform table <- 'nowhere' within 0.5 s"), std::string::npos)
+      << last_error;
+  EXPECT_LT(last_error.size(), 600u) << last_error;
+  EXPECT_NE(last_error.find("~estimate_table"), std::string::npos) << last_error;
   const std::optional<ObjectArray> good = sendDepth(depth, 60.0);
   ASSERT_TRUE(good) << "the node stopped publishing after bad input";
   // Frames are perceived in order: an answer to a bad frame later than its 2 s would have come
@@ -587,6 +605,27 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
   // the other run cleared, and later frames fuse with it again.
   EXPECT_EQ(send(2, 30.0), 1u) << "a frame from the past was fused with newer views";
   EXPECT_EQ(send(3), 2u);
+  // Images whose camera_info is stamped 1 ms later never make a frame: once input_timeout_s
+  // (5 s) has passed, the node says why, not that the camera is silent.
+  std::string summary;
+  ros::Subscriber diagnostics = nh_.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 10, [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& msg) {
+        for (const auto& status : msg->status)
+          if (status.name == "accumulating/perception: perception") summary = status.message;
+      });
+  const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(20.0);
+  while (ros::WallTime::now() < until &&
+         summary.find("no depth image with its exact stamp") == std::string::npos) {
+    const ros::Time stamp = ros::Time::now();
+    sensor_msgs::Image img = imageMsg(renderer.render(camera_, poses[0]).depth, stamp);
+    sensor_msgs::CameraInfo ci = infoMsg(stamp + ros::Duration(0.001));
+    img.header.frame_id = ci.header.frame_id = cameras[0].child_frame_id;
+    info.publish(ci);
+    image.publish(img);
+    for (int i = 0; i < 10; ++i, ros::WallDuration(0.025).sleep()) ros::spinOnce();
+  }
+  EXPECT_NE(summary.find("camera_info arrives"), std::string::npos) << summary;
+  EXPECT_NE(summary.find("no depth image with its exact stamp"), std::string::npos) << summary;
 }
 
 TEST_F(PerceptionNodeTest, DiagnosticsComeOncePerDiagnosticPeriod) {

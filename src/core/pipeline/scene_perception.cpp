@@ -10,6 +10,7 @@
 #include <map>
 #include <optional>
 #include <random>
+#include <sstream>
 #include <stdexcept>
 #include <thread>
 #include <tuple>
@@ -78,14 +79,22 @@ std::vector<DepthView> withinSensorRange(const std::vector<DepthView>& views,
   for (size_t i = 0; i < out.size(); ++i) {
     applyMask(&out[i]);
     size_t valid = 0;
+    float lo = std::numeric_limits<float>::infinity(), hi = 0.0f;  // of the depths given
     for (float& d : out[i].depth.pixels) {
+      if (d > 0.0f && std::isfinite(d)) lo = std::min(lo, d), hi = std::max(hi, d);
       if (!(d >= c.min_depth_m && d <= c.max_depth_m)) d = 0.0f;
       valid += d > 0.0f;
     }
-    if (i == 0 && valid == 0)
-      throw std::invalid_argument(
-          "view 0 has no depth within the sensor range " + std::to_string(c.min_depth_m) + " .. " +
-          std::to_string(c.max_depth_m) + " m" + (out[i].mask.empty() ? "" : " and its mask"));
+    if (i == 0 && valid == 0) {
+      std::ostringstream why;
+      why << "view 0 has no depth within the sensor range " << c.min_depth_m << " .. "
+          << c.max_depth_m << " m" << (out[i].mask.empty() ? "" : " and its mask");
+      if (hi > 0.0f) why << " (its depths span " << lo << " .. " << hi << " m";
+      if (lo >= 100.0f && hi <= 20000.0f)  // 0.1-20 m, read as metres
+        why << ": millimetres where metres are expected?";
+      if (hi > 0.0f) why << ")";
+      throw std::invalid_argument(why.str());
+    }
   }
   return out;
 }
