@@ -494,6 +494,12 @@ TEST(GraspRequest, TheSceneMustRestOnTheTableAndThePullStayInBounds) {
   refused(standoff, "pregrasp_distance_m must lie in [0, 1] m");
   target.target = 2;
   refused(target, "target 2 is not an object of the 2-object scene");
+  // A bad shape is named by its object's id where the request gives the ids.
+  GraspRequest named = request;
+  named.scenes[0][1].scale_m.x() = std::numeric_limits<double>::quiet_NaN();
+  refused(named, "the scene's object 1: semi-axes");
+  named.ids = {12, 7};
+  refused(named, "the scene's object 7: semi-axes");
   GraspRequest many = request;
   many.candidates = 1000;
   many.hypotheses = 3;

@@ -271,6 +271,12 @@ TEST(HoughVoting, EmptySceneAndBadInput) {
   HoughConfig no_bandwidth;
   no_bandwidth.bandwidth_m = std::nan("");
   EXPECT_THROW(no_bandwidth.validate(), std::invalid_argument);
+  // Votes are unit directions: a least norm of 1 or more would leave every scene empty.
+  for (double norm : {1.0, 2.0, std::nan(""), -0.1}) {
+    HoughConfig config;
+    config.min_vote_norm = norm;
+    EXPECT_THROW(config.validate(), std::invalid_argument) << "min_vote_norm " << norm;
+  }
   // A grid without a size or a place would leave every voxel with no centre: refused.
   const std::vector<std::function<void(GridSpec&)>> bends = {
       [](GridSpec& s) { s.voxel_size_m = 0; }, [](GridSpec& s) { s.voxel_size_m = std::nan(""); },

@@ -113,7 +113,8 @@ class PerceptionServer {
   ros::Subscriber mask_sub_;        ///< ~mask: the workspace mask, applied to every frame
   ros::Subscriber info_watch_sub_;  ///< the camera_info topic alone (silenceCause)
   ros::Publisher objects_pub_, instances_pub_, markers_pub_, occupancy_pub_, ready_pub_;
-  image_transport::Publisher labels_pub_;
+  image_transport::Publisher labels_pub_;  ///< ~labels unlatched, through any transport
+  ros::Publisher labels_latched_pub_;      ///< ~labels latched, raw
   ros::ServiceServer reset_srv_, save_srv_;
   diagnostic_updater::Updater diagnostics_;
   boost::recursive_mutex reconfigure_mutex_;
@@ -155,6 +156,19 @@ class PerceptionServer {
   double requested_occupancy_min_ = 0.0;
   bool settings_changed_ = false;
   std::thread worker_;  ///< last: starts after everything it uses
+};
+
+/// What a perception nodelet that could not start (a refused setting) leaves in its namespace:
+/// ~ready latched false and an ERROR on /diagnostics once a second saying why, so that a launch
+/// file or task code waiting for it learns at once; the manager keeps running.
+class RefusedPerception {
+ public:
+  RefusedPerception(const ros::NodeHandle& nh, const ros::NodeHandle& pnh, const std::string& why);
+
+ private:
+  ros::Publisher ready_pub_;
+  diagnostic_updater::Updater diagnostics_;
+  ros::SteadyTimer timer_;
 };
 
 }  // namespace simstack

@@ -94,8 +94,10 @@ bool GraspServer::lookup(const std::string& target, const std::string& source,
     *T_target_source = tf2::transformToEigen(tf_buffer_.lookupTransform(target, source, stamp));
     return true;
   } catch (const tf2::TransformException& e) {
-    *why = "no transform '" + target + "' <- '" + source + "' at the scene's stamp " +
-           number(stamp.toSec()) + " s: " + e.what();
+    char seconds[32];
+    std::snprintf(seconds, sizeof(seconds), "%.3f", stamp.toSec());
+    *why = "no transform '" + target + "' <- '" + source + "' at the scene's stamp " + seconds +
+           " s: " + e.what();
     return false;
   }
 }
@@ -217,6 +219,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   // The scenes asked for only (table frame; throws for a bad pose).
   request.scenes = graspScenes(*scene, GraspPolicy::hypothesesFor(req.hypotheses));
   request.target = out->target;
+  for (const Object& o : scene->objects) request.ids.push_back(o.id);
   if (req.use_camera_pose) {  // its position only: candidates are what is in sight from it
     const geometry_msgs::Point& p = req.camera_pose.position;
     request.camera_table = out->T_scene_table.inverse() * Vec3(p.x, p.y, p.z);

@@ -18,9 +18,12 @@ class PerceptionNodelet : public nodelet::Nodelet {
     } catch (const std::exception& e) {
       // Reported, and the manager with its other nodelets keeps running.
       NODELET_FATAL("simstack perception not started: %s", e.what());
+      refused_ = std::make_unique<RefusedPerception>(getMTNodeHandle(), getMTPrivateNodeHandle(),
+                                                     e.what());
     }
   }
   std::unique_ptr<PerceptionServer> server_;
+  std::unique_ptr<RefusedPerception> refused_;  ///< ~ready false and the reason, when refused
 };
 
 }  // namespace simstack

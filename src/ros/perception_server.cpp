@@ -80,6 +80,7 @@ std::string badFileName(const std::string& name) {
   if (name == "." || name == ".." || name.find("..") != std::string::npos)
     return "'" + name + "' may not contain '..'";
   const std::string ext = std::filesystem::path(name).extension().string();
+  if (name[0] == '.') return "'" + name + "' has no name before its extension";
   if (ext != ".ot" && ext != ".bt") return "'" + name + "' must end in .ot or .bt";
   return "";
 }
@@ -134,8 +135,12 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   instances_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("instances", 1, latch);
   markers_pub_ = pnh_.advertise<visualization_msgs::MarkerArray>("markers", 1, latch);
   occupancy_pub_ = pnh_.advertise<sensor_msgs::PointCloud2>("occupancy", 1, latch);
-  image_transport::ImageTransport private_it(pnh_);
-  labels_pub_ = private_it.advertise("labels", 1, latch);
+  // image_transport publishes only to transports that have subscribers, so its latched copy
+  // would stay an older frame's (or none): latched labels go out raw on a plain publisher.
+  if (latch)
+    labels_latched_pub_ = pnh_.advertise<sensor_msgs::Image>("labels", 1, true);
+  else
+    labels_pub_ = image_transport::ImageTransport(pnh_).advertise("labels", 1);
   reset_srv_ = pnh_.advertiseService("reset", &PerceptionServer::reset, this);
   save_srv_ = pnh_.advertiseService("save_octomap", &PerceptionServer::saveOctomap, this);
   decompose_samples_ = perception_->config().decompose_samples;
@@ -295,7 +300,7 @@ bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* 
   size_t valid = 0;
   for (float d : view->depth.pixels) valid += validDepth(d);
   if (valid == 0) {
-    *why = "the depth image holds no valid depth (all zero or NaN)";
+    *why = "the depth image holds no valid depth (all zero, negative or NaN)";
     return false;
   }
   const std::string camera_frame = tf2Frame(frame.image->header.frame_id);
@@ -556,9 +561,13 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
   if (node_.latch || labels_pub_.getNumSubscribers() > 0) {
     DepthView posed = view;
     posed.T_table_camera = view.T_table_camera.value_or(estimate.T_table_camera);
-    labels_pub_.publish(
+    const sensor_msgs::Image labels =
         labelImage(camera_header,
-                   pixelInstances(posed, estimate, 0, labelMinHeight(perception_->config())), ids));
+                   pixelInstances(posed, estimate, 0, labelMinHeight(perception_->config())), ids);
+    if (node_.latch)
+      labels_latched_pub_.publish(labels);
+    else
+      labels_pub_.publish(labels);
   }
 }
 
@@ -725,6 +734,23 @@ void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   status.add("workspace mask",
              mask_.empty() ? std::string("none")
                            : std::to_string(mask_.width) + "x" + std::to_string(mask_.height));
+}
+
+RefusedPerception::RefusedPerception(const ros::NodeHandle& nh, const ros::NodeHandle& pnh,
+                                     const std::string& why)
+    : diagnostics_(nh, pnh, pnh.getNamespace()) {
+  ready_pub_ = ros::NodeHandle(pnh).advertise<std_msgs::Bool>("ready", 1, true);
+  std_msgs::Bool ready;
+  ready.data = false;
+  ready_pub_.publish(ready);
+  diagnostics_.setHardwareID("simstack_perception " + pnh.getNamespace());
+  diagnostics_.add("perception", [why](diagnostic_updater::DiagnosticStatusWrapper& status) {
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "not started: " + why);
+    status.add("ready (model loaded and warmed up, listening)", std::string("false"));
+  });
+  timer_ = ros::NodeHandle(nh).createSteadyTimer(
+      ros::WallDuration(1.0),
+      [this](const ros::SteadyTimerEvent&) { diagnostics_.force_update(); });
 }
 
 }  // namespace simstack

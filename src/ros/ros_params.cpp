@@ -144,7 +144,7 @@ void NodeConfig::validate() const {
   try {
     tracking.validate();
   } catch (const std::invalid_argument& e) {
-    throw std::invalid_argument(std::string("~track_*: ") + e.what());
+    throw std::invalid_argument(std::string("~track_") + e.what());  // the parameter's name
   }
 }
 

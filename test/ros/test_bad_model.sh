@@ -4,7 +4,7 @@
 # "model refused" naming the file and the check, reports ERROR on /diagnostics, latches ~ready
 # false and publishes no ObjectArray; the nodelet does the same inside a manager that keeps
 # running. A ~image_transport no plugin provides is a configuration error: the node exits 1 with
-# a ROS_FATAL naming it.
+# a ROS_FATAL naming it; the nodelet latches ~ready false and reports ERROR on /diagnostics.
 # Usage: test_bad_model.sh BUILD_DIR SOURCE_DIR
 set -e
 build=$1
@@ -79,5 +79,17 @@ ros_session_spawn "$ROS_HOME/load2.log" rosrun nodelet nodelet load simstack/Per
 for _ in $(seq 120); do grep -q "FATAL.*~image_transport 'nosuch'" "$ROS_HOME/manager.log" && break; sleep 0.5; done
 grep -q "FATAL.*~image_transport 'nosuch' cannot be loaded" "$ROS_HOME/manager.log" ||
   { echo "the nodelet did not read its ~image_transport:"; cat "$ROS_HOME/manager.log"; exit 1; }
+# A nodelet that refused its settings says so where a launch file or task code waits for it.
+timeout 60 rostopic echo -n 1 /transport/ready | grep -q "data: False" ||
+  { echo "the refused nodelet's ~ready is not false"; exit 1; }
+timeout 60 /usr/bin/python3 - <<'PY' || { echo "the refused nodelet reports no ERROR on /diagnostics"; exit 1; }
+import sys, rospy
+from diagnostic_msgs.msg import DiagnosticArray
+rospy.init_node("diagnostics_reader", anonymous=True)
+while not rospy.is_shutdown():
+    for s in rospy.wait_for_message("/diagnostics", DiagnosticArray, timeout=15).status:
+        if s.name.startswith("transport") and s.level == 2 and "nosuch" in s.message:
+            sys.exit(0)
+PY
 rosnode ping -c 1 /manager > /dev/null || { echo "the manager died"; cat "$ROS_HOME/manager.log"; exit 1; }
-echo "bad models refused (ERROR, ~ready false, no objects), the node and the manager alive; a bad transport exits 1"
+echo "bad models refused (ERROR, ~ready false, no objects), the node and the manager alive; a bad transport exits 1 (a nodelet: ~ready false, ERROR)"

@@ -244,6 +244,10 @@ TEST_F(PerceptionNodeTest, IdsStayWithTheirObjectsAndLateSubscribersGetTheLatche
   std::optional<visualization_msgs::MarkerArray> late_markers;
   std::optional<sensor_msgs::PointCloud2> late_instances;
   std::optional<bool> ready;
+  std::optional<sensor_msgs::Image> late_labels;
+  ros::Subscriber l = nh_.subscribe<sensor_msgs::Image>(
+      "/camera/perception/labels", 1,
+      [&](const sensor_msgs::Image::ConstPtr& msg) { late_labels = *msg; });
   ros::Subscriber m = nh_.subscribe<visualization_msgs::MarkerArray>(
       "/camera/perception/markers", 1,
       [&](const visualization_msgs::MarkerArray::ConstPtr& msg) { late_markers = *msg; });
@@ -253,13 +257,15 @@ TEST_F(PerceptionNodeTest, IdsStayWithTheirObjectsAndLateSubscribersGetTheLatche
   ros::Subscriber r = nh_.subscribe<std_msgs::Bool>(
       "/camera/perception/ready", 1,
       [&](const std_msgs::Bool::ConstPtr& msg) { ready = msg->data; });
-  for (int k = 0; k < 200 && !(late_markers && late_instances && ready); ++k) {
+  for (int k = 0; k < 200 && !(late_markers && late_instances && ready && late_labels); ++k) {
     ros::spinOnce();
     ros::WallDuration(0.05).sleep();
   }
   ASSERT_TRUE(late_markers && late_instances && ready) << "no latched markers, instances or ready";
   EXPECT_TRUE(*ready);
   EXPECT_EQ(late_instances->header.stamp, second->header.stamp);
+  ASSERT_TRUE(late_labels) << "no latched labels";
+  EXPECT_EQ(late_labels->header.stamp, second->header.stamp) << "the latched labels are older";
   ASSERT_FALSE(late_markers->markers.empty());
   EXPECT_EQ(late_markers->markers.front().action, visualization_msgs::Marker::DELETEALL);
   std::set<int> marker_ids;

@@ -50,6 +50,8 @@ struct GraspRequest {
   uint32_t hypotheses = 0;           ///< scenes used, the first counted; 0: all of them
   double pregrasp_m = 0.0;           ///< 0: GraspPolicy::pregrasp_distance_m
   std::optional<Vec3> camera_table;  ///< candidates are what this camera sees (else five views)
+  /// The ids of scenes[0]'s objects, which messages name them by (empty: their indices).
+  std::vector<uint32_t> ids;
 };
 
 /// A request checked and turned into a ranking's input.
@@ -69,7 +71,8 @@ void checkGraspBounds(const GraspRequest& request, const GraspPolicy& policy);
 /// Checks `request` against `policy` and prepares the ranking on `base`'s cup, seal, physics and
 /// threads. Throws std::invalid_argument saying what is wrong and the allowed range: a pull
 /// distance or speed out of bounds, a pre-grasp stand-off out of bounds, an unknown target, a
-/// scene or hypothesis checkScene refuses (named by its index), a scene below the table.
+/// scene or hypothesis checkScene refuses (the scene's objects named by their ids, a
+/// hypothesis's by index), a scene below the table.
 PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConfig& base,
                              const GraspPolicy& policy);
 

@@ -147,14 +147,16 @@ PullOutcome executeGrasp(const PullSimulator& sim, const std::vector<Superquadri
   return sim.pullPerceived(target, *contact, c.approach_table);
 }
 
-std::string checkScene(const std::vector<SuperquadricShape>& scene) {
+std::string checkScene(const std::vector<SuperquadricShape>& scene,
+                       const std::vector<uint32_t>& ids) {
   // Each pull simulates every object: a scene of thousands would hold a request for hours.
   if (scene.size() > kMaxGraspSceneObjects)
     return "a scene of " + std::to_string(scene.size()) + " objects; at most " +
            std::to_string(kMaxGraspSceneObjects) + " are simulated";
   for (size_t i = 0; i < scene.size(); ++i) {
     const SuperquadricShape& sq = scene[i];
-    const std::string name = "object " + std::to_string(i) + ": ";
+    const std::string name =
+        "object " + std::to_string(ids.size() == scene.size() ? ids[i] : i) + ": ";
     if (!sq.scale_m.allFinite() || (sq.scale_m.array() <= 0.0).any() ||
         (sq.scale_m.array() > 1.0).any())
       return name + "semi-axes must be finite and in (0, 1] m";

@@ -88,7 +88,9 @@ PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConf
   out.scenes.assign(request.scenes.begin(),
                     request.scenes.begin() + std::min(wanted, request.scenes.size()));
   for (size_t h = 0; h < out.scenes.size(); ++h)
-    if (const std::string why = checkScene(out.scenes[h]); !why.empty())
+    if (const std::string why =
+            checkScene(out.scenes[h], h == 0 ? request.ids : std::vector<uint32_t>());
+        !why.empty())
       throw std::invalid_argument(
           (h == 0 ? std::string("the scene's ")
                   : "hypothesis " + std::to_string(h) + " (of the scene's hypotheses), ") +

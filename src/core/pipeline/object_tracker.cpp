@@ -29,10 +29,10 @@ double sizeRatio(const Vec3& a, const Vec3& b) {
 
 void TrackerConfig::validate() const {
   if (!(std::isfinite(max_centre_distance_m) && max_centre_distance_m > 0.0))
-    throw std::invalid_argument("tracking max_centre_distance_m must be finite and > 0, got " +
+    throw std::invalid_argument("max_centre_distance_m must be finite and > 0, not " +
                                 std::to_string(max_centre_distance_m));
   if (!(std::isfinite(max_size_ratio) && max_size_ratio >= 1.0))
-    throw std::invalid_argument("tracking max_size_ratio must be finite and >= 1, got " +
+    throw std::invalid_argument("max_size_ratio must be finite and >= 1, not " +
                                 std::to_string(max_size_ratio));
 }
 
