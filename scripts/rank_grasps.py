@@ -52,9 +52,9 @@ def plain(value):
     """A message field as JSON: poses as [x, y, z, qw, qx, qy, qz] (with a stamped pose's frame
     left to the caller), vectors as [x, y, z], stamps in seconds, not-a-number as null."""
     if isinstance(value, PoseStamped):
-        return pose_list(value.pose)
+        return plain(pose_list(value.pose))
     if isinstance(value, Vector3):
-        return [value.x, value.y, value.z]
+        return plain([value.x, value.y, value.z])
     if isinstance(value, genpy.Message):
         return {name: plain(getattr(value, name)) for name in value.__slots__}
     if isinstance(value, (genpy.Time, genpy.Duration)):
@@ -159,7 +159,7 @@ def main():
     print(table(res, args.rows))
     if args.json:
         with open(args.json, "w") as f:  # checked above; a disk that fills still raises
-            json.dump(response_json(res), f, indent=1)
+            json.dump(response_json(res), f, indent=1, allow_nan=False)
         print("wrote %s" % args.json)
 
 

@@ -1043,6 +1043,17 @@ TEST(ObjectTracker, IdsStayWithTheirObjectsAndVanishedOnesAreRetired) {
   tracker.reset();
   EXPECT_EQ(tracker.assign({sq(0.01, 0.0, 0.05)}), (std::vector<uint32_t>{7}));
   EXPECT_TRUE(tracker.assign({}).empty());
+  // A long flat object half hidden: from the next view its estimate lies 6 cm further along
+  // it, beyond the centre gate, but each estimate holds the other's centre: one object. A box
+  // that a pick uncovers under another (its centre below the picked one's bottom) is new.
+  SuperquadricShape flat = sq(0.2, 0.0, 0.08), stacked = sq(0.0, 0.2, 0.05);
+  flat.scale_m.z() = 0.015;
+  stacked.T_table_object.translation().z() = 0.075;  // on a box below it, hidden at first
+  EXPECT_EQ(tracker.assign({flat, stacked}), (std::vector<uint32_t>{8, 9}));
+  SuperquadricShape seen_further = flat, uncovered = sq(0.0, 0.2, 0.05);
+  seen_further.T_table_object.translation().x() += 0.06;
+  uncovered.T_table_object.translation().z() = 0.02;
+  EXPECT_EQ(tracker.assign({seen_further, uncovered}), (std::vector<uint32_t>{8, 10}));
   TrackerConfig bad;
   bad.max_size_ratio = 0.9;
   EXPECT_THROW(ObjectTracker{bad}, std::invalid_argument);

@@ -92,8 +92,8 @@ class PerceptionServer {
   double secondsWithoutFrame(const ros::SteadyTime& now) const;
   /// The same, or 0 while frames come within input_timeout_s (mutex_ held).
   double silenceSeconds(const ros::SteadyTime& now) const;
-  /// Why no frame came for `silent` s, as far as the topics tell (mutex_ held).
-  std::string silenceCause(const ros::SteadyTime& now, double silent) const;
+  /// Why no frame comes, as far as the topics tell (mutex_ held).
+  std::string silenceCause(const ros::SteadyTime& now) const;
   /// The dynamic_reconfigure servers of the live settings, showing the settings in effect.
   void startLiveSettings();
   /// Applies settings changed by dynamic_reconfigure (worker thread, between frames).
@@ -135,6 +135,7 @@ class PerceptionServer {
   ros::SteadyTime last_silence_warning_;    ///< zero while frames arrive
   ros::SteadyTime last_info_arrival_;       ///< when camera_info last came, alone
   ros::Time last_info_stamp_;               ///< and its stamp
+  long infos_since_frame_ = 0;              ///< camera_info messages since the last frame
   long processed_before_ = 0;
   ros::SteadyTime rate_since_;
   ObjectTracker tracker_;  ///< ids kept across frames (node/track_*); under mutex_

@@ -39,6 +39,14 @@ def _require_node():
         raise GraspServiceError("call rospy.init_node(...) before using grasp_client")
 
 
+def _clock_published():
+    """Whether anything publishes /clock (a simulated clock that may yet tick)."""
+    try:
+        return any(name == "/clock" for name, _ in rospy.get_published_topics())
+    except (OSError, rospy.ROSException) as e:
+        raise GraspServiceError("cannot ask the ROS master what publishes /clock: %s" % e)
+
+
 def scene_age(scene):
     """Seconds since the scene's stamp, or None when there is nothing to judge it by (a stamp of
     0, or a simulated clock that has not ticked: nothing publishes /clock, or it sent nothing
@@ -46,7 +54,7 @@ def scene_age(scene):
     if scene.header.stamp.is_zero():
         return None
     now = rospy.Time.now()
-    if now.is_zero() and any(name == "/clock" for name, _ in rospy.get_published_topics()):
+    if now.is_zero() and _clock_published():
         deadline = time.time() + 3.0  # the first /clock message under simulated time
         while now.is_zero() and time.time() < deadline:
             time.sleep(0.05)

@@ -149,20 +149,26 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   // The hints read ~image_transport (image_transport's convention, `_image_transport:=...`)
   // from the node's own namespace: a nodelet's "~" would be its manager's.
   const image_transport::TransportHints hints(node_.image_transport, ros::TransportHints(), pnh_);
+  image_transport::CameraSubscriber depth_sub;
   try {
-    depth_sub_ =
-        it_.subscribeCamera("depth/image_rect", 1, &PerceptionServer::onFrame, this, hints);
+    depth_sub = it_.subscribeCamera("depth/image_rect", 1, &PerceptionServer::onFrame, this, hints);
   } catch (const image_transport::TransportLoadException& e) {
     throw std::runtime_error("~image_transport '" + hints.getTransport() +
                              "' cannot be loaded: " + e.what());
   }
   // camera_info watched alone, to say why no frame comes when it flows without its images.
-  info_watch_sub_ = nh_.subscribe<sensor_msgs::CameraInfo>(
-      depth_sub_.getInfoTopic(), 1, [this](const sensor_msgs::CameraInfoConstPtr& info) {
+  ros::Subscriber info_watch_sub = nh_.subscribe<sensor_msgs::CameraInfo>(
+      depth_sub.getInfoTopic(), 1, [this](const sensor_msgs::CameraInfoConstPtr& info) {
         std::lock_guard<std::mutex> lock(mutex_);
         last_info_arrival_ = ros::SteadyTime::now();
         last_info_stamp_ = info->header.stamp;
+        ++infos_since_frame_;
       });
+  {
+    std::lock_guard<std::mutex> lock(mutex_);  // the diagnostics timer already reads them
+    depth_sub_ = depth_sub;
+    info_watch_sub_ = info_watch_sub;
+  }
   // A latched publisher's mask arrives once; a bad one is reported and the previous one kept.
   const std::string mask_topic = pnh_.resolveName("mask");
   mask_sub_ = pnh_.subscribe<sensor_msgs::Image>(
@@ -213,6 +219,7 @@ PerceptionServer::~PerceptionServer() {
   diagnostics_timer_.stop();
   depth_sub_.shutdown();
   mask_sub_.shutdown();
+  info_watch_sub_.shutdown();
   reset_srv_.shutdown();
   save_srv_.shutdown();
   hough_reconfigure_.reset();
@@ -225,6 +232,7 @@ void PerceptionServer::onFrame(const sensor_msgs::ImageConstPtr& image,
     std::lock_guard<std::mutex> lock(mutex_);
     ++received_;
     last_arrival_ = ros::SteadyTime::now();
+    infos_since_frame_ = 0;
     if (mailbox_) ++dropped_;
     mailbox_ = Frame{image, info};
   }
@@ -636,11 +644,14 @@ double PerceptionServer::silenceSeconds(const ros::SteadyTime& now) const {
   return silent >= node_.input_timeout_s ? silent : 0.0;
 }
 
-std::string PerceptionServer::silenceCause(const ros::SteadyTime& now, double silent) const {
-  // image_transport hands on an image only with the camera_info of exactly its stamp.
+std::string PerceptionServer::silenceCause(const ros::SteadyTime& now) const {
+  // image_transport hands on an image only with the camera_info of exactly its stamp. One
+  // camera_info after the last frame may be that frame's own, come after its image: camera_info
+  // flows when two or more came since, the last within input_timeout_s.
   const bool info_flows =
-      !last_info_arrival_.isZero() && (now - last_info_arrival_).toSec() < silent;
+      infos_since_frame_ >= 2 && (now - last_info_arrival_).toSec() < node_.input_timeout_s;
   const uint32_t image_publishers = depth_sub_.getNumPublishers();
+  const uint32_t info_publishers = info_watch_sub_.getNumPublishers();
   std::ostringstream out;
   out << std::fixed << std::setprecision(3);
   if (info_flows && image_publishers > 0)
@@ -649,9 +660,12 @@ std::string PerceptionServer::silenceCause(const ros::SteadyTime& now, double si
            "camera_info of the same stamp";
   else if (info_flows)
     out << "camera_info arrives but nothing publishes the depth image";
-  else if (image_publishers > 0)
-    out << "nothing arrives on " << depth_sub_.getInfoTopic() << " while the depth image has "
+  else if (image_publishers > 0 && info_publishers == 0)
+    out << "nothing publishes " << depth_sub_.getInfoTopic() << " while the depth image has "
         << image_publishers << " publisher(s): each image is taken with its camera_info";
+  else if (image_publishers > 0)
+    out << "both topics have publishers but nothing comes (a paused or ended bag, a stopped "
+           "camera?)";
   else
     out << "is the camera running, and its namespace the one given?";
   return out.str();
@@ -679,7 +693,7 @@ void PerceptionServer::onSilenceCheck() {
     std::string cause;
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      cause = silenceCause(now, silent);
+      cause = silenceCause(now);
     }
     ROS_WARN("simstack perception: no depth frame on %s for %.0f s: %s", topics.c_str(), silent,
              cause.c_str());
@@ -705,7 +719,7 @@ void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   else if (silent > 0.0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
                    "no depth frame for " + std::to_string(static_cast<int>(silent)) + " s on " +
-                       depth_sub_.getTopic() + ": " + silenceCause(now, silent));
+                       depth_sub_.getTopic() + ": " + silenceCause(now));
   else if (failing_)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "frames skipped: " + last_error_);
   else if (received_ == 0)

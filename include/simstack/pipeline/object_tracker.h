@@ -4,6 +4,9 @@
 /// name a target once and find it again. Each new frame's objects are matched to the previous
 /// frame's by their superquadric centres and sizes; a match keeps its id, an object without
 /// one gets a new id, and the ids of objects that vanished are retired (never given again).
+/// Objects left over by the centre gate are matched when each one's centre lies inside the
+/// other's shape: two solids cannot hold each other's centres, but one object's estimates from
+/// two views can lie further apart than the gate (a long flat object half hidden).
 
 #include <cstdint>
 #include <vector>
@@ -31,7 +34,8 @@ class ObjectTracker {
   explicit ObjectTracker(const TrackerConfig& config = TrackerConfig());
 
   /// The ids of this frame's objects, in their order. Pairs within both gates are matched
-  /// nearest centres first, each object at most once.
+  /// nearest centres first, each object at most once; then, nearest first, the pairs left whose
+  /// shapes hold each other's centres, within the size gate.
   std::vector<uint32_t> assign(const std::vector<SuperquadricShape>& objects);
   /// Forgets the previous frame (a restarted bag, a cleared scene); ids keep counting up.
   void reset();
@@ -40,6 +44,7 @@ class ObjectTracker {
  private:
   struct Track {
     uint32_t id;
+    SuperquadricShape shape;
     Vec3 centre;
     Vec3 sorted_axes;
   };

@@ -486,8 +486,8 @@ void HoughConfig::validate() const {
   require(std::isfinite(bandwidth_m) && bandwidth_m >= 0.001 && bandwidth_m <= 10, "bandwidth_m",
           bandwidth_m, "in [0.001, 10] m");
   require(min_instance_voxels >= 0, "min_instance_voxels", min_instance_voxels, ">= 0");
-  // Votes are unit directions that the network shortens where it is unsure: from 1 on, none
-  // would cast a ray and every scene would be empty.
+  // The votes' targets are unit directions, and the network shortens the votes it is unsure
+  // of: from 1 on, next to none would cast a ray and every scene would be empty.
   require(min_vote_norm >= 0 && min_vote_norm < 1, "min_vote_norm", min_vote_norm, "in [0, 1)");
   require(outside_tolerance_vox >= 0, "outside_tolerance_vox", outside_tolerance_vox, ">= 0");
   const HoughExperimental& x = experimental;

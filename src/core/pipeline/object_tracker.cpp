@@ -41,18 +41,23 @@ ObjectTracker::ObjectTracker(const TrackerConfig& config) : config_(config) { co
 std::vector<uint32_t> ObjectTracker::assign(const std::vector<SuperquadricShape>& objects) {
   std::vector<Track> now(objects.size());
   for (size_t i = 0; i < objects.size(); ++i)
-    now[i] = {0, objects[i].T_table_object.translation(), sortedAxes(objects[i])};
-  std::vector<std::tuple<double, size_t, size_t>> pairs;  // distance, new, previous
+    now[i] = {0, objects[i], objects[i].T_table_object.translation(), sortedAxes(objects[i])};
+  // Pass 0: centres within the gate; pass 1: shapes that hold each other's centres.
+  std::vector<std::tuple<int, double, size_t, size_t>> pairs;  // pass, distance, new, previous
   for (size_t i = 0; i < now.size(); ++i)
     for (size_t j = 0; j < previous_.size(); ++j) {
+      if (sizeRatio(now[i].sorted_axes, previous_[j].sorted_axes) > config_.max_size_ratio)
+        continue;
       const double d = (now[i].centre - previous_[j].centre).norm();
-      if (d <= config_.max_centre_distance_m &&
-          sizeRatio(now[i].sorted_axes, previous_[j].sorted_axes) <= config_.max_size_ratio)
-        pairs.emplace_back(d, i, j);
+      if (d <= config_.max_centre_distance_m)
+        pairs.emplace_back(0, d, i, j);
+      else if (now[i].shape.contains(previous_[j].centre) &&
+               previous_[j].shape.contains(now[i].centre))
+        pairs.emplace_back(1, d, i, j);
     }
   std::sort(pairs.begin(), pairs.end());
   std::vector<bool> matched_new(now.size(), false), matched_old(previous_.size(), false);
-  for (const auto& [d, i, j] : pairs) {
+  for (const auto& [pass, d, i, j] : pairs) {
     if (matched_new[i] || matched_old[j]) continue;
     matched_new[i] = matched_old[j] = true;
     now[i].id = previous_[j].id;

@@ -90,7 +90,7 @@ std::vector<DepthView> withinSensorRange(const std::vector<DepthView>& views,
       why << "view 0 has no depth within the sensor range " << c.min_depth_m << " .. "
           << c.max_depth_m << " m" << (out[i].mask.empty() ? "" : " and its mask");
       if (hi > 0.0f) why << " (its depths span " << lo << " .. " << hi << " m";
-      if (lo >= 100.0f && hi <= 20000.0f)  // 0.1-20 m, read as metres
+      if (hi > 0.0f && lo >= 100.0f && hi <= 20000.0f)  // 0.1-20 m, read as metres
         why << ": millimetres where metres are expected?";
       if (hi > 0.0f) why << ")";
       throw std::invalid_argument(why.str());
