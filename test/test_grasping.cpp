@@ -266,6 +266,22 @@ TEST(GraspRanking, AnUpwardPullRanksBeforeASidewaysOneThatDoesAsWell) {
   EXPECT_TRUE(rankedBefore(side, up));
 }
 
+TEST(GraspRanking, ASealTheCameraSawRanksBeforeAGuessedOneThatDoesAsWell) {
+  RankedGrasp seen, guessed;
+  seen.outcomes.resize(1), guessed.outcomes.resize(1);
+  seen.freed_share = guessed.freed_share = 1.0;
+  seen.candidate.measured = true;
+  seen.candidate.approach_table = Vec3(1.0, 0.0, 0.0);  // sideways, and it moves the others more
+  guessed.candidate.approach_table = Vec3::UnitZ();
+  seen.score_m = 0.02, guessed.score_m = 0.001;
+  EXPECT_TRUE(rankedBefore(seen, guessed));
+  EXPECT_FALSE(rankedBefore(guessed, seen));
+  // The pull's predicted outcome comes first: a guessed seal that frees the target ranks before
+  // a seen one that does not.
+  seen.freed_share = 0.0;
+  EXPECT_TRUE(rankedBefore(guessed, seen));
+}
+
 TEST(GraspRanking, RanksASlideOutFirstUnderABridge) {
   GraspRankingConfig config;
   config.candidates.max_candidates = 16;

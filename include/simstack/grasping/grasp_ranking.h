@@ -123,8 +123,9 @@ using RankingProgress = std::function<bool(int done, int total, const RankedGras
 void addNote(std::string* message, const std::string& note);
 
 /// Whether grasp `a` ranks before grasp `b`: fewer seal failures, then more often freed, fewer
-/// topples, a more upward pull (the approach's z in tenths), less displacement (whole
-/// millimetres), a pull nearer the centre of mass (whole millimetres), lower peak load.
+/// topples, a seal measured on the camera's points before one judged on the superquadric alone, a
+/// more upward pull (the approach's z in tenths), less displacement (whole millimetres), a pull
+/// nearer the centre of mass (whole millimetres), lower peak load.
 bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b);
 
 /// `measured_target`: depth points measured on hypotheses[0][target] (table frame), where the

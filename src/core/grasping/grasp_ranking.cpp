@@ -197,6 +197,8 @@ bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b) {
   if (a.failed_share != b.failed_share) return a.failed_share < b.failed_share;
   if (a.freed_share != b.freed_share) return a.freed_share > b.freed_share;
   if (a.mean_toppled != b.mean_toppled) return a.mean_toppled < b.mean_toppled;
+  // A seal the camera saw is a fact, one on a face it did not see a guess of the estimate.
+  if (a.candidate.measured != b.candidate.measured) return a.candidate.measured;
   // A pull that lifts against gravity depends least on where the estimate puts the target's
   // neighbours and centre of mass (docs/experiments.md, "Grasp ranking").
   const double ua = std::round(a.candidate.approach_table.z() * 10.0),
