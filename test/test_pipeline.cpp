@@ -572,6 +572,17 @@ TEST(ScenePerception, ObjectsCutByTheImageBorderOrTheMaskAreTruncated) {
   for (int v = 0; v < camera.height; ++v)
     for (int u = cut; u < camera.width; ++u) masked.mask.at(u, v) = 0;
   EXPECT_EQ(truncation(masked), std::make_pair(false, true));
+  // The workspace box ends inside box b (x = 0.12 +- 0.05 m), past its centre.
+  PerceptionConfig bounded = config;
+  bounded.workspace.max_m[0] = 0.14;
+  const ScenePerception bounded_perception(bounded);
+  const SceneEstimate est = bounded_perception.perceive(whole);
+  const int ka = nearestInstance(est, a), kb = nearestInstance(est, b);
+  ASSERT_GE(ka, 0);
+  EXPECT_FALSE(est.instances()[ka].truncated);
+  ASSERT_GE(kb, 0) << "the part of box b inside the workspace was not found";
+  EXPECT_NE(ka, kb);
+  EXPECT_TRUE(est.instances()[kb].truncated) << "an object the workspace cuts is not truncated";
 }
 
 TEST(PixelInstances, LabelsFollowTheDepthEdges) {
