@@ -351,6 +351,12 @@ class GraspService(unittest.TestCase):
         self.assertIn(target, [o.id for o in scene.objects])
         res = grasp_client.rank_grasps(scene, target, candidates=8)
         self.assertTrue(res.success, res.message)
+        # The service ranks as the action does: the same grasps of the same scene, in order.
+        by_service = self.rank(request(scene=scene, target_id=target, candidates=8))
+        self.assertTrue(by_service.success, by_service.message)
+        self.assertEqual([(g.tool_pose.pose, g.freed_share, g.failed_share) for g in res.grasps],
+                         [(g.tool_pose.pose, g.freed_share, g.failed_share)
+                          for g in by_service.grasps])
         held = grasp_client.held_grasps(res)
         self.assertTrue(all(g.failed_share == 0.0 and g.held for g in held))
         self.assertEqual(held, [g for g in res.grasps if g.failed_share == 0.0])
