@@ -1067,7 +1067,14 @@ TEST(ObjectTracker, IdsStayWithTheirObjectsAndVanishedOnesAreRetired) {
   EXPECT_EQ(tracker.assign({seen_further, uncovered}), (std::vector<uint32_t>{8, 10}));
   TrackerConfig bad;
   bad.max_size_ratio = 0.9;
-  EXPECT_THROW(ObjectTracker{bad}, std::invalid_argument);
+  try {
+    ObjectTracker{bad};
+    ADD_FAILURE() << "max_size_ratio 0.9 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("max_size_ratio must be finite and >= 1, not 0.9"),
+              std::string::npos)
+        << e.what();
+  }
   bad = TrackerConfig();
   bad.max_centre_distance_m = std::nan("");
   EXPECT_THROW(ObjectTracker{bad}, std::invalid_argument);

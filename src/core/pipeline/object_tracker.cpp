@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <tuple>
@@ -28,12 +29,15 @@ double sizeRatio(const Vec3& a, const Vec3& b) {
 }  // namespace
 
 void TrackerConfig::validate() const {
+  const auto refuse = [](const char* what, double value) {
+    std::ostringstream out;
+    out << what << ", not " << value;
+    throw std::invalid_argument(out.str());
+  };
   if (!(std::isfinite(max_centre_distance_m) && max_centre_distance_m > 0.0))
-    throw std::invalid_argument("max_centre_distance_m must be finite and > 0, not " +
-                                std::to_string(max_centre_distance_m));
+    refuse("max_centre_distance_m must be finite and > 0", max_centre_distance_m);
   if (!(std::isfinite(max_size_ratio) && max_size_ratio >= 1.0))
-    throw std::invalid_argument("max_size_ratio must be finite and >= 1, not " +
-                                std::to_string(max_size_ratio));
+    refuse("max_size_ratio must be finite and >= 1", max_size_ratio);
 }
 
 ObjectTracker::ObjectTracker(const TrackerConfig& config) : config_(config) { config_.validate(); }
