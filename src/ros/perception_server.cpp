@@ -675,6 +675,7 @@ void PerceptionServer::onSilenceCheck() {
   const ros::SteadyTime now = ros::SteadyTime::now();
   double silent = 0.0;
   bool warn = false, resumed = false;
+  std::string cause;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     silent = silenceSeconds(now);
@@ -683,21 +684,16 @@ void PerceptionServer::onSilenceCheck() {
         (last_silence_warning_.isZero() || (now - last_silence_warning_).toSec() >= 30.0)) {
       warn = true;
       last_silence_warning_ = now;
+      cause = silenceCause(now);
     } else if (silent == 0.0 && !last_silence_warning_.isZero()) {
       resumed = true;
       last_silence_warning_ = ros::SteadyTime();
     }
   }
   const std::string topics = depth_sub_.getTopic() + " and " + depth_sub_.getInfoTopic();
-  if (warn) {
-    std::string cause;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      cause = silenceCause(now);
-    }
+  if (warn)
     ROS_WARN("simstack perception: no depth frame on %s for %.0f s: %s", topics.c_str(), silent,
              cause.c_str());
-  }
   if (resumed) ROS_INFO("simstack perception: depth frames arrive again on %s", topics.c_str());
 }
 

@@ -215,18 +215,20 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   // An instance whose centre lies outside the workspace is not reported (its voxels are free),
   // unless the camera saw it inside: the depth points left are the workspace's, and an object
   // the workspace's edge cuts is completed past it (then reported, truncated).
-  std::vector<int> seen_inside(seg.size(), 0);
-  if (config.workspace.bounded())
+  std::vector<bool> outside(seg.size(), false);
+  for (int k = 0; k < seg.size(); ++k)
+    outside[k] = !config.workspace.contains(seg.centres_table[k]);
+  if (std::find(outside.begin(), outside.end(), true) != outside.end()) {
+    std::vector<int> seen_inside(seg.size(), 0);
     for (const MeasuredView& view : measured_views)
       for (const Vec3& p : view.points_table) {
         const int voxel = nearestLabelledVoxel(seg.labels, p);
         const int k = voxel >= 0 ? seg.labels.data[voxel] : -1;
-        if (k >= 0 && k < seg.size()) ++seen_inside[k];
+        if (k >= 0 && outside[k]) ++seen_inside[k];
       }
-  std::vector<bool> outside(seg.size(), false);
-  for (int k = 0; k < seg.size(); ++k)
-    outside[k] = !config.workspace.contains(seg.centres_table[k]) &&
-                 seen_inside[k] < std::max(1, config.min_instance_points);
+    for (int k = 0; k < seg.size(); ++k)
+      outside[k] = outside[k] && seen_inside[k] < std::max(1, config.min_instance_points);
+  }
   for (int& label : h->labels.data)
     if (label >= 0 && outside[label]) label = -1;
   if (timings) timings->instances_ms += msSince(t);
