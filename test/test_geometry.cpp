@@ -98,6 +98,34 @@ TEST(SuperquadricShape, RadialDistanceFollowsThePaper) {
   EXPECT_NEAR(s.norm(), 0.1, 1e-12);
 }
 
+// The share of the smaller solid inside the other, against volumes known in closed form: a
+// box-like cube whose centre sits on a larger one's face has half of itself inside; a sphere
+// inside an ellipsoid all of itself; shapes apart none. The order of the arguments does not
+// matter.
+TEST(SuperquadricShape, SharedVolumeShareIsTheSmallerSolidsShareInsideTheOther) {
+  SuperquadricShape big;
+  big.scale_m = Vec3(0.10, 0.10, 0.10);
+  big.exponents = Vec3::Constant(60.0);  // a cube to within 1.2 % of its volume
+  SuperquadricShape small = big;
+  small.scale_m = Vec3::Constant(0.03);
+  small.T_table_object.translation() = Vec3(0.10, 0.0, 0.0);  // its centre on big's face
+  EXPECT_NEAR(sharedVolumeShare(big, small, 4000), 0.5, 0.03);
+  EXPECT_DOUBLE_EQ(sharedVolumeShare(big, small, 4000), sharedVolumeShare(small, big, 4000));
+  small.T_table_object.translation() = Vec3(0.12, 0.0, 0.0);  // a sixth of it inside
+  EXPECT_NEAR(sharedVolumeShare(big, small), 1.0 / 6.0, 0.05);
+  const SuperquadricShape e = ellipsoid();
+  SuperquadricShape sphere;
+  sphere.scale_m = Vec3::Constant(0.03);
+  sphere.T_table_object.translation() = e.centroid();
+  EXPECT_DOUBLE_EQ(sharedVolumeShare(e, sphere), 1.0);
+  EXPECT_DOUBLE_EQ(sharedVolumeShare(e, e), 1.0);
+  // Past the ellipsoid's largest semi-axis, but within the bounding spheres' reach: sampled.
+  sphere.T_table_object.translation() = e.centroid() + Vec3(0.0, 0.0, 0.15);
+  EXPECT_DOUBLE_EQ(sharedVolumeShare(e, sphere), 0.0);
+  sphere.T_table_object.translation() = e.centroid() + Vec3(1.0, 0.0, 0.0);
+  EXPECT_DOUBLE_EQ(sharedVolumeShare(e, sphere), 0.0);
+}
+
 TEST(VoxelGrid, IndexingAndTrilinear) {
   const GridSpec g = GridSpec::sceneGrid(Vec2(0.1, -0.2), 0.64, 32);
   EXPECT_DOUBLE_EQ(g.voxel_size_m, 0.02);

@@ -9,6 +9,7 @@
 
 #include "simstack/grasping/grasp_ranking.h"
 #include "simstack/grasping/grasp_request.h"
+#include "simstack/grasping/grasp_settings.h"
 #include "simstack/offline/piles/pile_generator.h"
 #include "test_scenes.h"
 
@@ -475,6 +476,56 @@ TEST(GraspRanking, RejectsBadScenesAndSettings) {
   c = config, c.pull.cup_stiffness_hz = 10.0;
   rejects(good, 0, c, "cup_stiffness_hz must be at most 9.5");
   EXPECT_THROW(rankGrasps({}, 0, {}, config), std::invalid_argument);
+}
+
+// config/grasps.yaml holds every setting at its default (the server without the file ranks as
+// with it); a setting given replaces its default, the cup's radius both where the seal is
+// judged and where the pull peels it; a misspelt key, a mistyped or bad value names itself.
+TEST(GraspSettings, TheShippedFileHoldsTheDefaultsAndEveryKeyIsChecked) {
+  const std::set<std::string> server_keys{"objects_topic", "rank_grasps_action"};
+  const GraspSettings shipped =
+      loadGraspSettingsYaml(std::string(SIMSTACK_SOURCE_DIR) + "/config/grasps.yaml", server_keys);
+  const GraspSettings defaults;
+  EXPECT_EQ(shipped.ranking.threads, defaults.ranking.threads);
+  EXPECT_EQ(shipped.policy.max_candidates, defaults.policy.max_candidates);
+  EXPECT_EQ(shipped.policy.max_candidates_limit, defaults.policy.max_candidates_limit);
+  EXPECT_EQ(shipped.policy.pregrasp_distance_m, defaults.policy.pregrasp_distance_m);
+  EXPECT_EQ(shipped.ranking.candidates.cup_radius_m, defaults.ranking.candidates.cup_radius_m);
+  EXPECT_EQ(shipped.ranking.candidates.seal_tolerance_m,
+            defaults.ranking.candidates.seal_tolerance_m);
+  EXPECT_EQ(shipped.ranking.pull.max_force_n, defaults.ranking.pull.max_force_n);
+  EXPECT_EQ(shipped.ranking.pull.cup_stiffness_hz, defaults.ranking.pull.cup_stiffness_hz);
+  EXPECT_NEAR(shipped.ranking.pull.topple_rad, defaults.ranking.pull.topple_rad, 1e-12);
+  EXPECT_EQ(shipped.ranking.pull.physics.density_kgpm3,
+            defaults.ranking.pull.physics.density_kgpm3);
+  EXPECT_EQ(shipped.ranking.perturbation.copies, defaults.ranking.perturbation.copies);
+  EXPECT_EQ(shipped.ranking.perturbation.position_m, defaults.ranking.perturbation.position_m);
+  EXPECT_EQ(shipped.ranking.match_distance_m, defaults.ranking.match_distance_m);
+
+  const GraspSettings set = parseGraspSettingsYaml(
+      "cup_radius_m: 0.02\ntopple_deg: 45\nperturbed_copies: 3\nthreads: 1\n", "text");
+  EXPECT_EQ(set.ranking.candidates.cup_radius_m, 0.02);
+  EXPECT_EQ(set.ranking.pull.cup_radius_m, 0.02);
+  EXPECT_NEAR(set.ranking.pull.topple_rad, M_PI / 4, 1e-12);
+  EXPECT_EQ(set.ranking.perturbation.copies, 3);
+  EXPECT_EQ(set.ranking.threads, 1);
+  EXPECT_EQ(parseGraspSettingsYaml("", "empty").ranking.threads, defaults.ranking.threads);
+
+  const auto message = [](const std::string& text) {
+    try {
+      parseGraspSettingsYaml(text, "here.yaml");
+    } catch (const std::exception& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NE(message("max_force: 3\n").find("unknown key 'max_force'"), std::string::npos);
+  EXPECT_NE(message("objects_topic: x\n").find("unknown key 'objects_topic'"), std::string::npos);
+  EXPECT_NE(message("surface_samples: 2.5\n").find("here.yaml: surface_samples"),
+            std::string::npos);
+  EXPECT_NE(message("cup_radius_m: -0.01\n").find("cup_radius_m"), std::string::npos);
+  EXPECT_NE(message("max_force_n: .nan\n").find("max_force_n"), std::string::npos);
+  EXPECT_NE(message("[1, 2]\n").find("map"), std::string::npos);
 }
 
 TEST(GraspRequest, TheSceneMustRestOnTheTableAndThePullStayInBounds) {

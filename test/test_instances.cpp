@@ -667,4 +667,27 @@ TEST(SurfaceInstances, AnObjectSeenOnBothSidesOfANearerOneIsOne) {
   EXPECT_THROW(occludedJoins(behind, halves, 3, bad), std::invalid_argument);
 }
 
+// Joining two instances renumbers the labels above the one dropped and weighs the centres by
+// their voxels; indices out of order or range are refused.
+TEST(SurfaceInstances, JoiningTwoInstancesRenumbersTheRest) {
+  const GridSpec g = GridSpec::sceneGrid(Vec2(0.0, 0.0), 0.64, 32);
+  InstanceSegmentation seg;
+  seg.labels = Grid3<int>(g, -1);
+  seg.labels.data[0] = 0;
+  seg.labels.data[1] = 1;
+  seg.labels.data[2] = 1;
+  seg.labels.data[3] = 1;
+  seg.labels.data[4] = 2;
+  seg.voxel_counts = {1, 3, 1};
+  seg.centres_table = {Vec3(0, 0, 0), Vec3(0.4, 0, 0), Vec3(1, 1, 1)};
+  EXPECT_THROW(joinInstances(&seg, 1, 0), std::invalid_argument);
+  EXPECT_THROW(joinInstances(&seg, 0, 3), std::invalid_argument);
+  joinInstances(&seg, 0, 1);
+  ASSERT_EQ(seg.size(), 2);
+  EXPECT_EQ(seg.voxel_counts, (std::vector<int>{4, 1}));
+  EXPECT_TRUE(seg.centres_table[0].isApprox(Vec3(0.3, 0, 0)));
+  EXPECT_EQ(std::vector<int>(seg.labels.data.begin(), seg.labels.data.begin() + 6),
+            (std::vector<int>{0, 0, 0, 0, 1, -1}));
+}
+
 }  // namespace simstack

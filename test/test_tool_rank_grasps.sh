@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # End-to-end check of simstack_rank_grasps on a two-box stack written as simstack_reconstruct
 # writes scenes: the table, grasps.json and grasps.png, the best grasp lifting the top box
-# straight up, and clear errors (non-zero exit) for an unknown id and bad files.
+# straight up, the settings file and the options over it, and clear errors (non-zero exit) for
+# an unknown id and bad files.
 set -eu
 rank=$1
 dir=$(mktemp -d)
@@ -56,4 +57,23 @@ expect_error "pull-distance" --scene "$dir/stack.yaml" --target 7 --pull-distanc
 # CLI11's ranges let nan through: the option is named, not the scene file.
 expect_error "--pull-distance: 'nan' is not a finite number" --scene "$dir/stack.yaml" --target 7 \
   --pull-distance nan
+# The settings come from config/grasps.yaml, or the file --config names, and the options given
+# override it: a seal that breaks at 0.5 N drops the top box (1.7 N) in every pull, unless
+# --max-force says otherwise; perturbed copies from the file show in the outcome.
+printf 'objects_topic: perception/objects\nmax_force_n: 0.5\nperturbed_copies: 2\n' > "$dir/weak.yaml"
+"$rank" --scene "$dir/stack.yaml" --target 7 --candidates 8 --config "$dir/weak.yaml" --output "$dir/weak" > /dev/null
+"$rank" --scene "$dir/stack.yaml" --target 7 --candidates 8 --config "$dir/weak.yaml" --max-force 30 \
+  --output "$dir/strong" > /dev/null
+/usr/bin/python3 - "$dir/weak/grasps.json" "$dir/strong/grasps.json" "$dir/out/grasps.json" <<'PY'
+import json, sys
+weak, strong, default = (json.load(open(p))["grasps"] for p in sys.argv[1:])
+assert all(g["failed_share"] == 1 for g in weak), [g["failed_share"] for g in weak]
+assert strong[0]["failed_share"] == 0, strong[0]  # held in the pile and in both copies
+assert all(g["perturbed_held_share"] is not None for g in weak + strong), weak[0]
+assert all(g["perturbed_held_share"] is None for g in default), default[0]  # the shipped file: none
+PY
+printf 'max_force: 0.5\n' > "$dir/misspelt.yaml"
+expect_error "unknown key 'max_force'" --scene "$dir/stack.yaml" --target 7 --config "$dir/misspelt.yaml"
+printf 'surface_samples: 2.5\n' > "$dir/typed.yaml"
+expect_error "typed.yaml: surface_samples" --scene "$dir/stack.yaml" --target 7 --config "$dir/typed.yaml"
 echo "tool_rank_grasps ok"

@@ -10,7 +10,7 @@
 
 #include <string>
 
-#include "simstack/grasping/grasp_request.h"
+#include "simstack/grasping/grasp_settings.h"
 #include "simstack/pipeline/object_tracker.h"
 #include "simstack/pipeline/perception_config.h"
 
@@ -55,15 +55,15 @@ PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
 NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh);
 
 /// The grasp server's settings (config/grasps.yaml, loaded into its private namespace).
-struct GraspServerConfig {
+/// The grasp server's settings: config/grasps.yaml's (core GraspSettings) and the topic of the
+/// scenes it ranks on.
+struct GraspServerConfig : GraspSettings {
   std::string objects_topic = "perception/objects";  ///< scene of requests without one
-  GraspPolicy policy;                                ///< what a request may ask (grasp_request.h)
-  GraspRankingConfig ranking;                        ///< cup, seal, physics, threads
   /// Throws std::invalid_argument naming the parameter.
   void validate() const;
 };
 /// The grasp server's settings from `pnh` (absent ones keep their defaults); throws
-/// std::runtime_error naming an unknown or mistyped parameter, std::invalid_argument for a bad
+/// std::runtime_error naming an unknown parameter, std::invalid_argument for a mistyped or bad
 /// value.
 GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh);
 

@@ -180,66 +180,27 @@ NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh) {
 }
 
 void GraspServerConfig::validate() const {
-  const auto positive = [](double v, const char* name) {
-    if (!(v > 0.0) || !std::isfinite(v))
-      throw std::invalid_argument(std::string(name) + " must be a positive number");
-  };
   if (objects_topic.empty()) throw std::invalid_argument("objects_topic must not be empty");
-  policy.validate();
-  positive(ranking.candidates.cup_radius_m, "cup_radius_m");
-  positive(ranking.candidates.seal_tolerance_m, "seal_tolerance_m");
-  positive(ranking.candidates.tool_length_m, "tool_length_m");
-  positive(ranking.match_distance_m, "match_distance_m");
-  if (ranking.candidates.surface_samples < 100 || ranking.candidates.surface_samples > 100000)
-    throw std::invalid_argument("surface_samples must lie in [100, 100000]");
-  if (ranking.threads < 0) throw std::invalid_argument("threads must be >= 0 (0: all cores)");
-  ranking.pull.validate();
-  ranking.perturbation.validate();
+  GraspSettings::validate();
 }
 
 GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
-  // rank_grasps_action: actionlib's own settings of the action (status_list_timeout, ...).
-  static const std::set<std::string> known{
-      "objects_topic",       "threads",           "max_candidates",     "max_candidates_limit",
-      "max_pull_distance_m", "cup_radius_m",      "seal_tolerance_m",   "surface_samples",
-      "tool_length_m",       "max_force_n",       "cup_stiffness_hz",   "settle_s",
-      "topple_deg",          "match_distance_m",  "density_kgpm3",      "max_scene_age_s",
-      "pregrasp_distance_m", "perturbed_copies",  "perturb_position_m", "perturb_rotation_deg",
-      "perturb_scale_share", "rank_grasps_action"};
-  XmlRpc::XmlRpcValue all;
-  if (ros::param::get(pnh.getNamespace(), all) && all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
-    for (auto& kv : all)
-      if (!known.count(kv.first))
-        throw std::runtime_error("unknown parameter " + pnh.resolveName(kv.first));
+  // The grasp settings (config/grasps.yaml's fields) go to the core's reader as YAML, as the
+  // file would; objects_topic is the node's own, rank_grasps_action actionlib's (its status
+  // list's timeout and the like).
+  XmlRpc::XmlRpcValue all = privateParameters(pnh);
+  std::ostringstream yaml;
+  if (all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
+    for (auto& kv : all) {
+      if (kv.first == "objects_topic" || kv.first == "rank_grasps_action") continue;
+      yaml << kv.first << ":";
+      emit(yaml, kv.second, 2);
+      yaml << "\n";
+    }
   GraspServerConfig c;
-  CandidateConfig& k = c.ranking.candidates;
-  PullConfig& p = c.ranking.pull;
-  double topple_deg = p.topple_rad * 180.0 / M_PI;
+  static_cast<GraspSettings&>(c) =
+      parseGraspSettingsYaml(yaml.str(), "the parameters under " + pnh.getNamespace());
   read(pnh, "objects_topic", &c.objects_topic);
-  c.ranking.threads = 2;
-  read(pnh, "threads", &c.ranking.threads);
-  read(pnh, "max_candidates", &c.policy.max_candidates);
-  read(pnh, "max_candidates_limit", &c.policy.max_candidates_limit);
-  read(pnh, "max_pull_distance_m", &c.policy.max_pull_distance_m);
-  read(pnh, "max_scene_age_s", &c.policy.max_scene_age_s);
-  read(pnh, "pregrasp_distance_m", &c.policy.pregrasp_distance_m);
-  read(pnh, "cup_radius_m", &k.cup_radius_m);
-  read(pnh, "seal_tolerance_m", &k.seal_tolerance_m);
-  read(pnh, "surface_samples", &k.surface_samples);
-  read(pnh, "tool_length_m", &k.tool_length_m);
-  read(pnh, "max_force_n", &p.max_force_n);
-  read(pnh, "cup_stiffness_hz", &p.cup_stiffness_hz);
-  read(pnh, "settle_s", &p.settle_s);
-  read(pnh, "density_kgpm3", &p.physics.density_kgpm3);
-  read(pnh, "topple_deg", &topple_deg);
-  read(pnh, "match_distance_m", &c.ranking.match_distance_m);
-  PerturbationConfig& q = c.ranking.perturbation;
-  read(pnh, "perturbed_copies", &q.copies);
-  read(pnh, "perturb_position_m", &q.position_m);
-  read(pnh, "perturb_rotation_deg", &q.rotation_deg);
-  read(pnh, "perturb_scale_share", &q.scale_share);
-  p.cup_radius_m = k.cup_radius_m;
-  p.topple_rad = topple_deg * M_PI / 180.0;
   c.validate();
   return c;
 }

@@ -8,8 +8,10 @@
 #include <optional>
 
 #include "cli_checks.h"
+#include "perception_options.h"
 #include "simstack/grasping/grasp_files.h"
 #include "simstack/grasping/grasp_request.h"
+#include "simstack/grasping/grasp_settings.h"
 #include "simstack/io/scene_io.h"
 #include "simstack/io/staged_output.h"
 
@@ -34,11 +36,11 @@ Points3 measuredTarget(const std::string& scene_path, std::string cloud_path, in
 }
 
 /// The service's checks on the request: bounds, and a valid scene resting on the table (one far
-/// below z = 0 of its frame is refused, one above it said); this tool's own option ranges are
-/// the bounds.
+/// below z = 0 of its frame is refused, one above it said).
 PreparedGrasps prepare(const std::vector<SuperquadricShape>& scene, int target,
-                       const GraspRankingConfig& config, double pregrasp_m,
+                       const GraspSettings& settings, double pregrasp_m,
                        const std::string& scene_path) {
+  const GraspRankingConfig& config = settings.ranking;
   GraspRequest request;
   request.scenes = {scene};
   request.target = target;
@@ -46,51 +48,96 @@ PreparedGrasps prepare(const std::vector<SuperquadricShape>& scene, int target,
   request.pull_speed_mps = config.pull.pull_speed_mps;
   request.candidates = static_cast<uint32_t>(config.candidates.max_candidates);
   request.pregrasp_m = pregrasp_m;
-  GraspPolicy policy;
-  policy.max_candidates_limit = 1024;
-  policy.max_pull_distance_m = 1.0;
   try {
-    return prepareGrasps(request, config, policy);
+    return prepareGrasps(request, config, settings.policy);
   } catch (const std::invalid_argument& e) {
     throw std::invalid_argument(scene_path + ": " + e.what());
   }
 }
+
+/// The command line's grasp settings: the file's (config/grasps.yaml unless --config names
+/// another), with the options given laid over them.
+struct RankOptions {
+  std::string config_path = packageFile("config/grasps.yaml");
+  int candidates = 0, threads = 0, copies = 0;
+  double pull_distance_m = 0, pull_speed_mps = 0, max_force_n = 0, cup_radius_m = 0;
+  CLI::Option *candidates_opt = nullptr, *threads_opt = nullptr, *copies_opt = nullptr,
+              *distance_opt = nullptr, *speed_opt = nullptr, *force_opt = nullptr,
+              *cup_opt = nullptr;
+
+  explicit RankOptions(CLI::App& app) {
+    const GraspSettings defaults;
+    const PullConfig pull;
+    candidates = defaults.policy.max_candidates;
+    threads = defaults.ranking.threads;
+    pull_distance_m = pull.pull_distance_m;
+    pull_speed_mps = pull.pull_speed_mps;
+    max_force_n = pull.max_force_n;
+    cup_radius_m = defaults.ranking.candidates.cup_radius_m;
+    app.add_option("--config", config_path,
+                   "grasp settings (the grasp server's config/grasps.yaml: cup, seal, physics, "
+                   "perturbed copies); the options below override it")
+        ->capture_default_str()
+        ->check(CLI::ExistingFile);
+    candidates_opt = app.add_option("--candidates", candidates, "grasps to simulate")
+                         ->capture_default_str()
+                         ->check(CLI::Range(1, 1024));
+    distance_opt = app.add_option("--pull-distance", pull_distance_m, "metres along the approach")
+                       ->capture_default_str()
+                       ->check(FinitePositive)
+                       ->check(CLI::Range(1e-3, 1.0));
+    speed_opt = app.add_option("--pull-speed", pull_speed_mps, "metres per second")
+                    ->capture_default_str()
+                    ->check(FinitePositive)
+                    ->check(CLI::Range(1e-3, 2.0));
+    force_opt = app.add_option("--max-force", max_force_n, "newtons the seal holds")
+                    ->capture_default_str()
+                    ->check(FinitePositive)
+                    ->check(CLI::Range(0.1, 1000.0));
+    cup_opt = app.add_option("--cup-radius", cup_radius_m, "metres")
+                  ->capture_default_str()
+                  ->check(FinitePositive)
+                  ->check(CLI::Range(0.002, 0.1));
+    copies_opt = app.add_option("--perturbed-copies", copies,
+                                "perturbed copies of the scene each grasp is also pulled in")
+                     ->check(CLI::Range(0, 64));
+    threads_opt = app.add_option("--threads", threads, "threads simulating pulls (0: all cores)")
+                      ->capture_default_str()
+                      ->check(CLI::Range(0, 1024));
+  }
+
+  /// The settings file's, with the options given; the pull's distance and speed (a request's,
+  /// in the service) are the options' or their defaults, and the bounds on a request this
+  /// tool's option ranges.
+  GraspSettings settings() const {
+    GraspSettings s = loadGraspSettingsYaml(config_path, {"objects_topic", "rank_grasps_action"});
+    GraspRankingConfig& c = s.ranking;
+    c.candidates.max_candidates = candidates_opt->count() ? candidates : s.policy.max_candidates;
+    c.pull.pull_distance_m = pull_distance_m;
+    c.pull.pull_speed_mps = pull_speed_mps;
+    if (force_opt->count()) c.pull.max_force_n = max_force_n;
+    if (cup_opt->count()) c.candidates.cup_radius_m = c.pull.cup_radius_m = cup_radius_m;
+    if (copies_opt->count()) c.perturbation.copies = copies;
+    if (threads_opt->count()) c.threads = threads;
+    s.policy.max_candidates_limit = 1024;
+    s.policy.max_pull_distance_m = 1.0;
+    return s;
+  }
+};
 
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string scene_path, output;
   int target_id = -1, rows = 10;
-  GraspRankingConfig config;
-  config.threads = 2;
   CLI::App app{
       "Rank suction grasps on one object of a superquadrics.yaml (as simstack_reconstruct "
       "writes it): candidates on its visible surface where a cup seals, each pull simulated in "
-      "Bullet, best first by the other objects' displacement."};
+      "Bullet, best first by the other objects' displacement; the grasp server's ranking and "
+      "settings (config/grasps.yaml)."};
   app.add_option("--scene", scene_path, "superquadrics.yaml")->required()->check(CLI::ExistingFile);
   app.add_option("--target", target_id, "the target object's id in the scene file")->required();
-  app.add_option("--candidates", config.candidates.max_candidates, "grasps to simulate")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 1024));
-  app.add_option("--pull-distance", config.pull.pull_distance_m, "metres along the approach")
-      ->capture_default_str()
-      ->check(FinitePositive)
-      ->check(CLI::Range(1e-3, 1.0));
-  app.add_option("--pull-speed", config.pull.pull_speed_mps, "metres per second")
-      ->capture_default_str()
-      ->check(FinitePositive)
-      ->check(CLI::Range(1e-3, 2.0));
-  app.add_option("--max-force", config.pull.max_force_n, "newtons the seal holds")
-      ->capture_default_str()
-      ->check(FinitePositive)
-      ->check(CLI::Range(0.1, 1000.0));
-  app.add_option("--cup-radius", config.candidates.cup_radius_m, "metres")
-      ->capture_default_str()
-      ->check(FinitePositive)
-      ->check(CLI::Range(0.002, 0.1));
-  app.add_option("--threads", config.threads, "threads simulating pulls (0: all cores)")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 1024));
+  const RankOptions options(app);
   app.add_option("--rows", rows, "grasps printed")
       ->capture_default_str()
       ->check(CLI::Range(1, 1024));
@@ -103,18 +150,19 @@ int main(int argc, char** argv) {
   bool superquadric_seal = false;
   app.add_flag("--superquadric-seal", superquadric_seal,
                "judge seals on the superquadric alone, not on measured points");
-  double pregrasp_m = 0.05;
+  double pregrasp_m = 0.0;
   app.add_option("--pregrasp-distance", pregrasp_m,
-                 "metres the pre-grasp pose in grasps.json stands back from the contact")
+                 "metres the pre-grasp pose in grasps.json stands back from the contact (0: the "
+                 "settings' pregrasp_distance_m)")
       ->capture_default_str()
       ->check(FiniteNonNegative)
       ->check(CLI::Range(0.0, 1.0));
   app.add_option("--output", output, "directory for grasps.json and grasps.png (created)")
       ->check(WritablePath);
   CLI11_PARSE(app, argc, argv);
-  config.pull.cup_radius_m = config.candidates.cup_radius_m;
 
   try {
+    const GraspSettings settings = options.settings();
     std::vector<int> ids;
     const std::vector<SuperquadricShape> scene = readSuperquadricsYaml(scene_path, &ids);
     const auto found = std::find(ids.begin(), ids.end(), target_id);
@@ -125,7 +173,7 @@ int main(int argc, char** argv) {
                                   scene_path + " (its ids: " + known + ")");
     }
     const int target = static_cast<int>(found - ids.begin());
-    const PreparedGrasps prepared = prepare(scene, target, config, pregrasp_m, scene_path);
+    const PreparedGrasps prepared = prepare(scene, target, settings, pregrasp_m, scene_path);
     if (!prepared.notes.empty()) std::cout << prepared.notes << "\n";
     std::optional<StagedDirectory> staged;  // before the work: a bad --output fails at once
     if (!output.empty()) staged.emplace(output, "simstack_rank_grasps");

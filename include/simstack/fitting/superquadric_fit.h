@@ -112,6 +112,18 @@ constexpr double kLeastJointVolumeShare = 0.01;
 /// box's (the degenerate basin of eq. 5, whose global minimum is a point).
 bool collapsedFit(const SuperquadricShape& shape, const Points3& points_table);
 
+/// Stage one for a scene: fitSuperquadric for each point set of at least `min_points` points (in
+/// parallel over `threads`; smaller sets and sets that cannot be fitted get std::nullopt), the
+/// points' oriented box (initialGuess) where the fit collapses (collapsedFit).
+std::vector<std::optional<SuperquadricShape>> fitEachInstance(const std::vector<Points3>& points,
+                                                              const FitConfig& config,
+                                                              int min_points = 30);
+
+/// Stage two for a scene: the shapes of `fits` (std::nullopt: none) refined jointly with their
+/// points, as fitInstances describes. std::invalid_argument when the counts differ.
+void refineInstances(const std::vector<Points3>& points, const FitConfig& config,
+                     std::vector<std::optional<SuperquadricShape>>* fits);
+
 /// Both stages for a scene: per-instance fits (in parallel over `threads`), then, when
 /// `joint`, the joint refinement of all fitted shapes. Sets with fewer than `min_points`
 /// points are skipped (std::nullopt). No fit collapses: a per-instance fit that does

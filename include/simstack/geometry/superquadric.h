@@ -59,4 +59,9 @@ SuperquadricShape canonicalSuperquadric(const SuperquadricShape& sq);
 /// other's surface. Independent of how the axes are numbered.
 bool sameSuperquadric(const SuperquadricShape& a, const SuperquadricShape& b, double tolerance_m);
 
+/// The share of the smaller solid's volume that lies inside the other, from `samples` points
+/// drawn uniformly inside the smaller one (a fixed random stream: the same shapes give the same
+/// share). 0 when their bounding spheres do not meet.
+double sharedVolumeShare(const SuperquadricShape& a, const SuperquadricShape& b, int samples = 400);
+
 }  // namespace simstack

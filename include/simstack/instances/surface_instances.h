@@ -53,6 +53,10 @@ struct SurfaceInstanceConfig {
   /// ... and the faces' sides along the gap line up within this (m): across the gap, in the
   /// plane, their points' 5th and 95th percentiles differ by at most this much.
   double occluded_edge_m = 0.015;
+  /// Two instances are one object when their own superquadrics (each fitted alone, before the
+  /// joint refinement pushes them apart) overlap by this share of the smaller one's volume: two
+  /// solid objects cannot. The joined instance is fitted again on both point sets. 0 = off.
+  double fit_overlap_share = 0.0;
   void validate() const;  ///< std::invalid_argument naming the field
 };
 
@@ -85,6 +89,11 @@ struct RevolutionFit {
 };
 RevolutionFit fitCommonRevolution(const Points3& a, const Points3& b, const Vec2& camera_xy,
                                   double bin_m = 0.01);
+
+/// Instance `drop` joins `keep` (keep < drop): its voxels take `keep`'s label, labels above
+/// `drop` move down by one, and the centre becomes the two centres' mean weighted by their
+/// voxels. std::invalid_argument for indices out of order or range.
+void joinInstances(InstanceSegmentation* seg, int keep, int drop);
 
 /// Joins, pair by pair (the closest fit first), instances whose depth points are one open
 /// container by the `container_*` fields (the points are given to the instance of their nearest

@@ -12,6 +12,7 @@
 #include <optional>
 #include <random>
 #include <stdexcept>
+#include <string>
 #include <tuple>
 #include <unordered_map>
 
@@ -819,9 +820,8 @@ SuperquadricShape shrunkUntilClear(const SuperquadricShape& shape,
 
 }  // namespace
 
-std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Points3>& points,
-                                                           const FitConfig& c, bool joint,
-                                                           int min_points) {
+std::vector<std::optional<SuperquadricShape>> fitEachInstance(const std::vector<Points3>& points,
+                                                              const FitConfig& c, int min_points) {
   c.validate();
   const int n = static_cast<int>(points.size());
   std::vector<std::optional<SuperquadricShape>> fits(n);
@@ -844,7 +844,17 @@ std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Poi
     }
   }
   if (error) std::rethrow_exception(error);
-  if (!joint) return fits;
+  return fits;
+}
+
+void refineInstances(const std::vector<Points3>& points, const FitConfig& c,
+                     std::vector<std::optional<SuperquadricShape>>* fits_io) {
+  c.validate();
+  if (fits_io->size() != points.size())
+    throw std::invalid_argument("refineInstances: " + std::to_string(fits_io->size()) +
+                                " shapes for " + std::to_string(points.size()) + " point sets");
+  std::vector<std::optional<SuperquadricShape>>& fits = *fits_io;
+  const int n = static_cast<int>(points.size());
   std::vector<Points3> pts;
   std::vector<SuperquadricShape> shapes;
   std::vector<int> index;
@@ -854,7 +864,7 @@ std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Poi
     shapes.push_back(*fits[i]);
     index.push_back(i);
   }
-  if (shapes.empty()) return fits;
+  if (shapes.empty()) return;
   std::vector<SuperquadricShape> refined = refineJointly(pts, shapes, c);
   for (size_t k = 0; k < index.size(); ++k) {
     if (!collapsedFit(refined[k], pts[k]) &&
@@ -867,6 +877,13 @@ std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Poi
     refined[k] = shrunkUntilClear(shapes[k], refined, k, least);
   }
   for (size_t k = 0; k < index.size(); ++k) fits[index[k]] = refined[k];
+}
+
+std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Points3>& points,
+                                                           const FitConfig& c, bool joint,
+                                                           int min_points) {
+  std::vector<std::optional<SuperquadricShape>> fits = fitEachInstance(points, c, min_points);
+  if (joint) refineInstances(points, c, &fits);
   return fits;
 }
 

@@ -181,4 +181,26 @@ bool sameSuperquadric(const SuperquadricShape& a, const SuperquadricShape& b, do
   return largestRayGap(a, b) <= tolerance_m && largestRayGap(b, a) <= tolerance_m;
 }
 
+double sharedVolumeShare(const SuperquadricShape& a, const SuperquadricShape& b, int samples) {
+  const bool a_smaller = a.volume() <= b.volume();
+  const SuperquadricShape& small = a_smaller ? a : b;
+  const SuperquadricShape& large = a_smaller ? b : a;
+  if ((small.centroid() - large.centroid()).norm() >= small.scale_m.norm() + large.scale_m.norm() ||
+      samples <= 0)
+    return 0.0;
+  // Rejection sampling in the smaller solid's box: a convex superquadric (exponents >= 1) fills
+  // at least a sixth of it (the octahedron), so about six draws give one sample.
+  std::mt19937_64 rng(0x5eed);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  int drawn = 0, inside = 0;
+  for (int tries = 0; drawn < samples && tries < 20 * samples; ++tries) {
+    const Vec3 p(unit(rng) * small.scale_m.x(), unit(rng) * small.scale_m.y(),
+                 unit(rng) * small.scale_m.z());
+    if (small.insideOutsideObject(p) >= 1.0) continue;
+    ++drawn;
+    if (large.contains(small.T_table_object * p)) ++inside;
+  }
+  return drawn > 0 ? static_cast<double>(inside) / drawn : 0.0;
+}
+
 }  // namespace simstack

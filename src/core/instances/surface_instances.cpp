@@ -42,6 +42,8 @@ void SurfaceInstanceConfig::validate() const {
   if (!(occluded_margin_m > 0.0)) fail("occluded_margin_m must be > 0");
   if (!(occluded_share > 0.0 && occluded_share <= 1.0)) fail("occluded_share must lie in (0, 1]");
   if (!(occluded_edge_m > 0.0)) fail("occluded_edge_m must be > 0");
+  if (!(fit_overlap_share >= 0.0 && fit_overlap_share <= 1.0))
+    fail("fit_overlap_share must lie in [0, 1]");
 }
 
 namespace {
@@ -275,21 +277,6 @@ std::vector<Points3> pointsByInstance(const Points3& points, const InstanceSegme
   return out;
 }
 
-/// Instance `drop` joins `keep`; labels above `drop` move down by one.
-void joinInstances(InstanceSegmentation* seg, int keep, int drop) {
-  const int nk = seg->voxel_counts[keep], nd = seg->voxel_counts[drop];
-  if (nk + nd > 0)
-    seg->centres_table[keep] =
-        (seg->centres_table[keep] * nk + seg->centres_table[drop] * nd) / double(nk + nd);
-  seg->voxel_counts[keep] = nk + nd;
-  for (int& l : seg->labels.data) {
-    if (l == drop) l = keep;
-    if (l > drop) --l;
-  }
-  seg->centres_table.erase(seg->centres_table.begin() + drop);
-  seg->voxel_counts.erase(seg->voxel_counts.begin() + drop);
-}
-
 /// joinInstances, the instances' point sets (pointsByInstance) joined alike.
 void joinInstancesAndPoints(InstanceSegmentation* seg, std::vector<Points3>* points, int keep,
                             int drop) {
@@ -483,6 +470,24 @@ Gap lookIntoGap(const Face& fa, const Face& fb, int a, int b, const Grid3<int>& 
 }
 
 }  // namespace
+
+void joinInstances(InstanceSegmentation* seg, int keep, int drop) {
+  if (keep < 0 || drop <= keep || drop >= seg->size())
+    throw std::invalid_argument("joinInstances: instance " + std::to_string(drop) +
+                                " cannot join " + std::to_string(keep) + " of " +
+                                std::to_string(seg->size()));
+  const int nk = seg->voxel_counts[keep], nd = seg->voxel_counts[drop];
+  if (nk + nd > 0)
+    seg->centres_table[keep] =
+        (seg->centres_table[keep] * nk + seg->centres_table[drop] * nd) / double(nk + nd);
+  seg->voxel_counts[keep] = nk + nd;
+  for (int& l : seg->labels.data) {
+    if (l == drop) l = keep;
+    if (l > drop) --l;
+  }
+  seg->centres_table.erase(seg->centres_table.begin() + drop);
+  seg->voxel_counts.erase(seg->voxel_counts.begin() + drop);
+}
 
 int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
                        const SurfaceInstanceConfig& config, InstanceSegmentation* seg) {

@@ -95,6 +95,7 @@ void surfaceInstanceFields(C& c, F&& f) {
   f("occluded_margin_m", c.occluded_margin_m);
   f("occluded_share", c.occluded_share);
   f("occluded_edge_m", c.occluded_edge_m);
+  f("fit_overlap_share", c.fit_overlap_share);
 }
 template <class C, class F>
 void fitFields(C& c, F&& f) {

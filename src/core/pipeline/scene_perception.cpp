@@ -18,7 +18,9 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "simstack/geometry/superquadric.h"
 #include "simstack/instances/instance_finder.h"
+#include "simstack/instances/surface_instances.h"
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/mesh/mesh_ops.h"
 #include "simstack/model/cvae_inference.h"
@@ -191,6 +193,47 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Gri
   return points;
 }
 
+/// Joins, pair by pair (the largest overlap first), instances whose own fits overlap by
+/// `surface_instances.fit_overlap_share` of the smaller one's volume, and fits each joined
+/// instance again on both point sets. The per-instance arrays follow the segmentation's labels.
+/// Returns the number of joins.
+int joinOverlappingFits(const PerceptionConfig& config, const FitConfig& fit,
+                        InstanceSegmentation* seg, std::vector<TriangleMesh>* parts,
+                        std::vector<Points3>* points, std::vector<int>* measured_counts,
+                        std::vector<bool>* outside,
+                        std::vector<std::optional<SuperquadricShape>>* fits) {
+  const SurfaceInstanceConfig& c = config.surface_instances;
+  if (!c.enabled || c.fit_overlap_share <= 0.0) return 0;
+  int joins = 0;
+  for (;;) {
+    int keep = -1, drop = -1;
+    double best = c.fit_overlap_share;
+    for (int a = 0; a < seg->size(); ++a)
+      for (int b = a + 1; b < seg->size(); ++b) {
+        if (!(*fits)[a] || !(*fits)[b]) continue;
+        const double share = sharedVolumeShare(*(*fits)[a], *(*fits)[b]);
+        if (share >= best) {
+          best = share;
+          keep = a;
+          drop = b;
+        }
+      }
+    if (keep < 0) return joins;
+    joinInstances(seg, keep, drop);
+    (*parts)[keep].append((*parts)[drop]);
+    parts->erase(parts->begin() + drop);
+    Points3& kept = (*points)[keep];
+    kept.insert(kept.end(), (*points)[drop].begin(), (*points)[drop].end());
+    points->erase(points->begin() + drop);
+    (*measured_counts)[keep] += (*measured_counts)[drop];
+    measured_counts->erase(measured_counts->begin() + drop);
+    outside->erase(outside->begin() + drop);  // an instance left outside has no fit: never joined
+    fits->erase(fits->begin() + drop);
+    (*fits)[keep] = fitEachInstance({kept}, fit, config.min_instance_points).front();
+    ++joins;
+  }
+}
+
 }  // namespace
 
 void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings* timings,
@@ -240,7 +283,7 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   for (size_t k = 0; k < parts.size(); ++k)
     if (outside[k]) parts[k] = TriangleMesh();
   std::vector<int> measured_counts(parts.size(), 0);
-  const std::vector<Points3> points =
+  std::vector<Points3> points =
       config.observed_points && !measured_views.empty()
           ? fitPoints(parts, h->labels, measured_views, config.points_per_instance, config.seed,
                       &measured_counts)
@@ -250,8 +293,15 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   t = Clock::now();
   FitConfig fit = config.fit;
   fit.threads = std::max(1, config.threads);
-  const std::vector<std::optional<SuperquadricShape>> fits =
-      fitInstances(points, fit, config.joint_refinement, config.min_instance_points);
+  std::vector<std::optional<SuperquadricShape>> fits =
+      fitEachInstance(points, fit, config.min_instance_points);
+  if (joinOverlappingFits(config, fit, &seg, &parts, &points, &measured_counts, &outside, &fits) >
+      0) {
+    h->labels = seg.labels;
+    for (int& label : h->labels.data)
+      if (label >= 0 && outside[label]) label = -1;
+  }
+  if (config.joint_refinement) refineInstances(points, fit, &fits);
   h->instances.clear();
   std::vector<int> reported(parts.size(), -1);  // segmentation label -> index in instances
   for (size_t k = 0; k < parts.size(); ++k) {
