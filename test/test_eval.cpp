@@ -6,6 +6,7 @@
 #include <fstream>
 #include <map>
 #include <numeric>
+#include <optional>
 #include <random>
 #include <set>
 #include <tuple>
@@ -478,7 +479,15 @@ TEST(SceneFiles, SuperquadricsMeshesAndGridsRoundTrip) {
       box(Vec3(0.05, 0.04, 0.03), Vec3(0.1, -0.2, 0.03), 0.7),
       box(Vec3(0.02, 0.03, 0.04), Vec3(0, 0, 0.1), -1.2)};
   writeSuperquadricsYaml((dir / "sq.yaml").string(), shapes);
-  const std::vector<SuperquadricShape> back = readSuperquadricsYaml((dir / "sq.yaml").string());
+  std::optional<Vec3> camera = Vec3(9, 9, 9);
+  const std::vector<SuperquadricShape> back =
+      readSuperquadricsYaml((dir / "sq.yaml").string(), nullptr, &camera);
+  EXPECT_FALSE(camera.has_value());  // none written
+  writeSuperquadricsYaml((dir / "sq_camera.yaml").string(), shapes, "table", {},
+                         Vec3(0.5, -0.25, 0.75));
+  readSuperquadricsYaml((dir / "sq_camera.yaml").string(), nullptr, &camera);
+  ASSERT_TRUE(camera.has_value());
+  EXPECT_TRUE(camera->isApprox(Vec3(0.5, -0.25, 0.75)));
   ASSERT_EQ(back.size(), 2u);
   for (int i = 0; i < 2; ++i) {
     EXPECT_TRUE(back[i].scale_m.isApprox(shapes[i].scale_m, 1e-9));

@@ -87,6 +87,49 @@ TEST(SuctionCandidates, MeasuredPointsSealOnAFaceAndNotOverAnEdgeOrAGap) {
   EXPECT_FALSE(measuredSeal({}, {0, 0, 0.1}, Vec3::UnitZ(), config).seen);
 }
 
+// A mug (radius 4 cm, 3 mm wall, 10 cm tall) estimated as a solid cylinder: looking down its
+// mouth, the camera measured its wall's top and its inside bottom 8 cm below. The estimate's
+// top face is where the camera looked through: no candidate there. A lid measured at the
+// contact, or no camera known to have measured the points, leaves the candidates there.
+TEST(SuctionCandidates, NoCandidateWhereTheCameraSawPastTheEstimate) {
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> noise(0.0, 0.001);
+  Points3 mug;
+  for (double a = 0; a < 2 * M_PI; a += 0.05)
+    for (double r = 0.037; r <= 0.04; r += 0.0015) mug.emplace_back(r * cos(a), r * sin(a), 0.1);
+  for (double x = -0.036; x <= 0.036; x += 0.003)
+    for (double y = -0.036; y <= 0.036; y += 0.003)
+      if (std::hypot(x, y) < 0.036) mug.emplace_back(x, y, 0.02 + noise(rng));
+  const std::vector<Vec3> above{Vec3(0.05, 0.0, 1.0)};
+  EXPECT_TRUE(seenThrough(mug, {0, 0, 0.1}, above, 0.015));
+  EXPECT_TRUE(seenThrough(mug, {0.015, 0.01, 0.1}, above, 0.015));
+  EXPECT_FALSE(seenThrough(mug, {0.0385, 0, 0.1}, above, 0.015));  // on the wall's top
+  EXPECT_FALSE(seenThrough(mug, {0, 0, 0.1}, {}, 0.015));
+  Points3 lid = mug;  // a lid measured too: a surface at the contact
+  for (double x = -0.036; x <= 0.036; x += 0.003)
+    for (double y = -0.036; y <= 0.036; y += 0.003)
+      if (std::hypot(x, y) < 0.036) lid.emplace_back(x, y, 0.1 + noise(rng));
+  EXPECT_FALSE(seenThrough(lid, {0, 0, 0.1}, above, 0.015));
+
+  SuperquadricShape cylinder = box({0.04, 0.04, 0.05}, {0, 0, 0.05}, 2.0);
+  cylinder.exponents.z() = 20.0;
+  CandidateConfig config;
+  config.max_candidates = 256;
+  const CandidateSet open = suctionCandidates({cylinder}, 0, above, config, mug, above.front());
+  const CandidateSet closed = suctionCandidates({cylinder}, 0, above, config, lid, above.front());
+  // Without the camera that measured the points, nothing is known to be seen through.
+  const CandidateSet unknown = suctionCandidates({cylinder}, 0, above, config, mug);
+  const auto on_mouth = [](const CandidateSet& set) {
+    int n = 0;
+    for (const SuctionCandidate& c : set.candidates)
+      n += c.contact_table.z() > 0.095 && c.contact_table.head<2>().norm() < 0.03;
+    return n;
+  };
+  EXPECT_EQ(on_mouth(open), 0);
+  EXPECT_GT(on_mouth(closed), 0);
+  EXPECT_GT(on_mouth(unknown), 0);
+}
+
 TEST(GraspRanking, CandidatesOnMeasuredSurfaceTakeItsNormal) {
   // The top box of the stack, its top face measured 4 degrees off the superquadric's (the
   // fit's error): candidates there approach along the measured face's normal.
@@ -503,7 +546,7 @@ TEST(GraspSettings, TheShippedFileHoldsTheDefaultsAndEveryKeyIsChecked) {
   EXPECT_EQ(shipped.ranking.match_distance_m, defaults.ranking.match_distance_m);
 
   const GraspSettings set = parseGraspSettingsYaml(
-      "cup_radius_m: 0.02\ntopple_deg: 45\nperturbed_copies: 3\nthreads: 1\n", "text");
+      "cup_radius_m: 0.02\ntopple_deg: 45\nperturbed_copies: 3\nthreads: 1.0\n", "text");
   EXPECT_EQ(set.ranking.candidates.cup_radius_m, 0.02);
   EXPECT_EQ(set.ranking.pull.cup_radius_m, 0.02);
   EXPECT_NEAR(set.ranking.pull.topple_rad, M_PI / 4, 1e-12);
@@ -524,6 +567,8 @@ TEST(GraspSettings, TheShippedFileHoldsTheDefaultsAndEveryKeyIsChecked) {
   EXPECT_NE(message("surface_samples: 2.5\n").find("here.yaml: surface_samples"),
             std::string::npos);
   EXPECT_NE(message("cup_radius_m: -0.01\n").find("cup_radius_m"), std::string::npos);
+  EXPECT_NE(message("topple_deg: 0\n").find("topple_deg"), std::string::npos);
+  EXPECT_NE(message("perturb_rotation_deg: 90\n").find("perturb_rotation_deg"), std::string::npos);
   EXPECT_NE(message("max_force_n: .nan\n").find("max_force_n"), std::string::npos);
   EXPECT_NE(message("[1, 2]\n").find("map"), std::string::npos);
 }

@@ -224,6 +224,25 @@ TEST(GraspConversions, ScenesComeFromObjectsThenHypotheses) {
   EXPECT_THROW(graspScenes(msg, 1), std::invalid_argument);
 }
 
+// The camera that measured the objects' points: from table_pose (T_camera_table) when one view
+// was fused; none for several views or a pose made by hand (all zero).
+TEST(GraspConversions, TheMeasuringCameraIsTheOneViewsCamera) {
+  Transform T_table_camera = Transform::Identity();
+  T_table_camera.linear() = Eigen::AngleAxisd(2.5, Vec3(1, 0.2, 0).normalized()).toRotationMatrix();
+  T_table_camera.translation() = Vec3(0.3, -0.4, 0.9);
+  ObjectArray msg;
+  msg.views = 1;
+  msg.table_pose = poseMsg(T_table_camera.inverse());
+  const std::optional<Vec3> camera = measuringCamera(msg);
+  ASSERT_TRUE(camera.has_value());
+  EXPECT_TRUE(camera->isApprox(T_table_camera.translation(), 1e-9));
+  msg.views = 2;
+  EXPECT_FALSE(measuringCamera(msg).has_value());
+  ObjectArray by_hand;
+  by_hand.views = 1;
+  EXPECT_FALSE(measuringCamera(by_hand).has_value());
+}
+
 TEST(GraspConversions, ToolPoseLooksIntoTheSurfaceInTheAskedFrameAndArrowsShowTheOutcome) {
   RankedGrasp g;
   g.candidate.contact_table = Vec3(0.1, 0.2, 0.3);

@@ -7,6 +7,7 @@
 #include <simstack/ObjectArray.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <optional>
 #include <vector>
 
 #include "simstack/geometry/superquadric.h"
@@ -32,6 +33,11 @@ std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, 
 /// z float32), in its table frame: `T_table_frame` maps the message's frame there. Throws
 /// std::invalid_argument for a cloud without x y z fields or with fewer points than it claims.
 Points3 measuredSurface(const Object& object, const Transform& T_table_frame);
+
+/// The position of the camera that measured every object's depth points, in the table frame:
+/// from `msg.table_pose` when the frame fused one view (`views` 1) and the pose is a rigid
+/// transform; std::nullopt otherwise (points of several views, a message made by hand).
+std::optional<Vec3> measuringCamera(const ObjectArray& msg);
 
 /// What a grasp's pulls did: held and freed the target in every hypothesis; held in every one
 /// but did not always free it; or the seal broke in some.

@@ -61,7 +61,8 @@ class GraspServer {
     std_msgs::Header pose_header;  ///< frame of the tool and pre-grasp poses
     Transform T_pose_table = Transform::Identity();   ///< the table frame in pose_header's
     Transform T_scene_table = Transform::Identity();  ///< and in the scene's
-    Points3 measured_target;  ///< depth points measured on the target, table frame
+    Points3 measured_target;            ///< depth points measured on the target, table frame
+    std::optional<Vec3> measured_from;  ///< the camera that measured them, table frame
   };
   void onObjects(const ObjectArray::ConstPtr& msg);
   /// The request checked and turned into scenes; false with res.message set when it is bad.

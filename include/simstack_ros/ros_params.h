@@ -54,9 +54,8 @@ PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
 /// The node's settings from `pnh`'s parameters (absent ones keep their defaults).
 NodeConfig nodeConfigFromParams(const ros::NodeHandle& pnh);
 
-/// The grasp server's settings (config/grasps.yaml, loaded into its private namespace).
-/// The grasp server's settings: config/grasps.yaml's (core GraspSettings) and the topic of the
-/// scenes it ranks on.
+/// The grasp server's settings: config/grasps.yaml's (core GraspSettings, loaded into its private
+/// namespace) and the topic of the scenes it ranks on.
 struct GraspServerConfig : GraspSettings {
   std::string objects_topic = "perception/objects";  ///< scene of requests without one
   /// Throws std::invalid_argument naming the parameter.

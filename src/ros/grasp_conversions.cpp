@@ -65,6 +65,15 @@ std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, 
   return scenes;
 }
 
+std::optional<Vec3> measuringCamera(const ObjectArray& msg) {
+  if (msg.views != 1) return std::nullopt;
+  const geometry_msgs::Pose& p = msg.table_pose;
+  const Eigen::Vector4d q(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z);
+  const Vec3 t(p.position.x, p.position.y, p.position.z);
+  if (!q.allFinite() || !t.allFinite() || std::abs(q.norm() - 1.0) > 1e-3) return std::nullopt;
+  return transformFromPose(p).inverse().translation();  // T_camera_table: the camera in the table
+}
+
 Points3 measuredSurface(const Object& object, const Transform& T_table_frame) {
   const sensor_msgs::PointCloud2& cloud = object.surface;
   const size_t n = static_cast<size_t>(cloud.width) * cloud.height;

@@ -227,6 +227,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   // Throws std::invalid_argument saying what is out of bounds (caught by serve()).
   out->grasps = prepareGrasps(request, config_.ranking, config_.policy);
   out->measured_target = measuredSurface(scene->objects[out->target], out->T_scene_table.inverse());
+  out->measured_from = measuringCamera(*scene);
   std::string notes = out->grasps.notes;
   if (req.hypotheses == 0 && scene->hypotheses.empty())
     addNote(&notes,
@@ -346,8 +347,9 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
               graspMsg(*best, p.pose_header, p.T_pose_table, p.T_scene_table, p.grasps.pregrasp_m);
         return feedback(done, total, msg ? &*msg : nullptr);
       };
-    const GraspRanking ranking = rankGrasps(p.grasps.scenes, p.target, p.grasps.cameras,
-                                            p.grasps.config, progress, p.measured_target);
+    const GraspRanking ranking =
+        rankGrasps(p.grasps.scenes, p.target, p.grasps.cameras, p.grasps.config, progress,
+                   p.measured_target, p.measured_from);
     for (const RankedGrasp& g : ranking.grasps)
       res.grasps.push_back(
           graspMsg(g, p.pose_header, p.T_pose_table, p.T_scene_table, p.grasps.pregrasp_m));

@@ -66,22 +66,17 @@ struct RankOptions {
               *cup_opt = nullptr;
 
   explicit RankOptions(CLI::App& app) {
-    const GraspSettings defaults;
-    const PullConfig pull;
-    candidates = defaults.policy.max_candidates;
-    threads = defaults.ranking.threads;
+    const PullConfig pull;  // a request's distance and speed when the options are not given
     pull_distance_m = pull.pull_distance_m;
     pull_speed_mps = pull.pull_speed_mps;
-    max_force_n = pull.max_force_n;
-    cup_radius_m = defaults.ranking.candidates.cup_radius_m;
     app.add_option("--config", config_path,
                    "grasp settings (the grasp server's config/grasps.yaml: cup, seal, physics, "
                    "perturbed copies); the options below override it")
         ->capture_default_str()
         ->check(CLI::ExistingFile);
-    candidates_opt = app.add_option("--candidates", candidates, "grasps to simulate")
-                         ->capture_default_str()
-                         ->check(CLI::Range(1, 1024));
+    candidates_opt =
+        app.add_option("--candidates", candidates, "grasps to simulate (default: the file's)")
+            ->check(CLI::Range(1, 1024));
     distance_opt = app.add_option("--pull-distance", pull_distance_m, "metres along the approach")
                        ->capture_default_str()
                        ->check(FinitePositive)
@@ -90,24 +85,26 @@ struct RankOptions {
                     ->capture_default_str()
                     ->check(FinitePositive)
                     ->check(CLI::Range(1e-3, 2.0));
-    force_opt = app.add_option("--max-force", max_force_n, "newtons the seal holds")
-                    ->capture_default_str()
+    force_opt = app.add_option("--max-force", max_force_n,
+                               "newtons the seal holds (default: the file's max_force_n)")
                     ->check(FinitePositive)
                     ->check(CLI::Range(0.1, 1000.0));
-    cup_opt = app.add_option("--cup-radius", cup_radius_m, "metres")
-                  ->capture_default_str()
-                  ->check(FinitePositive)
-                  ->check(CLI::Range(0.002, 0.1));
+    cup_opt =
+        app.add_option("--cup-radius", cup_radius_m, "metres (default: the file's cup_radius_m)")
+            ->check(FinitePositive)
+            ->check(CLI::Range(0.002, 0.1));
     copies_opt = app.add_option("--perturbed-copies", copies,
-                                "perturbed copies of the scene each grasp is also pulled in")
+                                "perturbed copies of the scene each grasp is also pulled in "
+                                "(default: the file's perturbed_copies)")
                      ->check(CLI::Range(0, 64));
-    threads_opt = app.add_option("--threads", threads, "threads simulating pulls (0: all cores)")
-                      ->capture_default_str()
+    threads_opt = app.add_option("--threads", threads,
+                                 "threads simulating pulls, 0: all cores (default: the file's)")
                       ->check(CLI::Range(0, 1024));
   }
 
-  /// The settings file's, with the options given; the pull's distance and speed (a request's,
-  /// in the service) are the options' or their defaults, and the bounds on a request this
+  /// The settings file's (checked as the server checks them), with the options given; the
+  /// pull's distance and speed (a request's, in the service) are the options' or their
+  /// defaults, and the bounds on a request (max_candidates_limit, max_pull_distance_m) this
   /// tool's option ranges.
   GraspSettings settings() const {
     GraspSettings s = loadGraspSettingsYaml(config_path, {"objects_topic", "rank_grasps_action"});
@@ -137,7 +134,7 @@ int main(int argc, char** argv) {
       "settings (config/grasps.yaml)."};
   app.add_option("--scene", scene_path, "superquadrics.yaml")->required()->check(CLI::ExistingFile);
   app.add_option("--target", target_id, "the target object's id in the scene file")->required();
-  const RankOptions options(app);
+  RankOptions options(app);
   app.add_option("--rows", rows, "grasps printed")
       ->capture_default_str()
       ->check(CLI::Range(1, 1024));
@@ -164,7 +161,8 @@ int main(int argc, char** argv) {
   try {
     const GraspSettings settings = options.settings();
     std::vector<int> ids;
-    const std::vector<SuperquadricShape> scene = readSuperquadricsYaml(scene_path, &ids);
+    std::optional<Vec3> camera;  // the one camera whose points were fitted, when the file says
+    const std::vector<SuperquadricShape> scene = readSuperquadricsYaml(scene_path, &ids, &camera);
     const auto found = std::find(ids.begin(), ids.end(), target_id);
     if (found == ids.end()) {
       std::string known;
@@ -181,7 +179,8 @@ int main(int argc, char** argv) {
         superquadric_seal ? Points3() : measuredTarget(scene_path, measured_path, target_id);
     const auto start = std::chrono::steady_clock::now();
     const GraspRanking ranking =
-        rankGrasps(prepared.scenes, target, prepared.cameras, prepared.config, {}, measured);
+        rankGrasps(prepared.scenes, target, prepared.cameras, prepared.config, {}, measured,
+                   measured.empty() ? std::nullopt : camera);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     std::cout << "object " << target_id << ": " << ranking.candidates.visible << " of "

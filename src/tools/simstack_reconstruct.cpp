@@ -150,7 +150,7 @@ int main(int argc, char** argv) {
     const ScenePerception pipeline(config);
     const SceneEstimate est = pipeline.perceive(views);
     const std::vector<std::string> files =
-        writeReconstruction(staged.path(), view, est, labelMinHeight(config));
+        writeReconstruction(staged.path(), view, est, labelMinHeight(config), views.size() == 1);
     staged.commit();  // replaces an earlier run's directory whole
 
     const StageTimings& t = est.timings;

@@ -130,9 +130,12 @@ bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b);
 
 /// `measured_target`: depth points measured on hypotheses[0][target] (table frame), where the
 /// seal is judged and the approach taken (suctionCandidates); empty: the superquadric alone.
+/// `measured_from`: the position of the one camera that measured them (table frame), where
+/// known: no candidate where it saw past the estimate's surface.
 GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypotheses, int target,
                         const std::vector<Vec3>& camera_positions, const GraspRankingConfig& config,
-                        const RankingProgress& progress = {}, const Points3& measured_target = {});
+                        const RankingProgress& progress = {}, const Points3& measured_target = {},
+                        const std::optional<Vec3>& measured_from = std::nullopt);
 
 /// The lowest point of the scene's surfaces: z in the table frame, metres (infinity for an
 /// empty scene). A pile resting on the table has it near 0; the simulation's table is at z = 0,

@@ -58,6 +58,14 @@ struct MeasuredSeal {
 MeasuredSeal measuredSeal(const Points3& measured_table, const Vec3& contact, const Vec3& approach,
                           const CandidateConfig& config);
 
+/// Whether a camera at one of `camera_positions` saw past `contact`: at least three of
+/// `measured_table` (depth points on the target) lie on its line of sight through the contact
+/// (within a third of `cup_radius_m` of it) further than `cup_radius_m` beyond the contact, and
+/// none lies at the contact (within a third of `cup_radius_m` along the line). The estimate puts
+/// a surface where the camera looked through: a cup's mouth, a bowl's inside.
+bool seenThrough(const Points3& measured_table, const Vec3& contact,
+                 const std::vector<Vec3>& camera_positions, double cup_radius_m);
+
 /// The suction tool's pose at a candidate, as a motion planner takes it (MoveIt's convention:
 /// the tool's z along its approach): origin at the contact, z along -approach_table (into the
 /// surface), x the table's x projected onto the contact plane (its y where x is within 10
@@ -102,10 +110,13 @@ double rimDeviation(const SuperquadricShape& sq, const Vec3& contact_table,
 /// cups' radii from it (the six ends of the target's axes, four points around each at one radius
 /// and eight at two), kept first, then random surface samples spread by farthest-point sampling.
 /// With `measured_table` (depth points on the target): a candidate on measured surface must seal
-/// there too (measuredSeal) and takes its normal. Throws std::invalid_argument for a bad target or
+/// there too (measuredSeal) and takes its normal; with `measured_from`, the position of the one
+/// camera that measured them all, a candidate on no measured surface where that camera saw past
+/// the estimate's surface is none (seenThrough). Throws std::invalid_argument for a bad target or
 /// config.
 CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int target,
                                const std::vector<Vec3>& camera_positions,
-                               const CandidateConfig& config, const Points3& measured_table = {});
+                               const CandidateConfig& config, const Points3& measured_table = {},
+                               const std::optional<Vec3>& measured_from = std::nullopt);
 
 }  // namespace simstack

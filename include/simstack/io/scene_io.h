@@ -4,6 +4,7 @@
 /// (PCD) through PCL, predicted grids (HDF5). Every function throws std::runtime_error
 /// naming the file on failure.
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -18,14 +19,19 @@ namespace simstack {
 
 /// `objects:` list of {id, scale [a1,a2,a3], exponents [r,s,t], position [x,y,z],
 /// orientation [qw,qx,qy,qz]} in `frame` (the table frame); with `truncated` (one per shape)
-/// also each object's `truncated` flag (InstanceEstimate::truncated).
+/// also each object's `truncated` flag (InstanceEstimate::truncated); with `camera`, the
+/// position of the one camera whose depth points the objects were fitted to (`camera: [x, y,
+/// z]`, the same frame), where the grasp ranking tests what that camera saw past.
 void writeSuperquadricsYaml(const std::string& path, const std::vector<SuperquadricShape>& shapes,
                             const std::string& frame = "table",
-                            const std::vector<bool>& truncated = {});
+                            const std::vector<bool>& truncated = {},
+                            const std::optional<Vec3>& camera = std::nullopt);
 /// Reads what writeSuperquadricsYaml wrote; `ids` (when given) receives each object's `id`
-/// (its index when the file has none). Throws std::runtime_error naming the file and field.
+/// (its index when the file has none), `camera` (when given) the file's camera (std::nullopt
+/// when it has none). Throws std::runtime_error naming the file and field.
 std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path,
-                                                     std::vector<int>* ids = nullptr);
+                                                     std::vector<int>* ids = nullptr,
+                                                     std::optional<Vec3>* camera = nullptr);
 
 void writeMeshPly(const std::string& path, const TriangleMesh& mesh);
 TriangleMesh readMeshPly(const std::string& path);

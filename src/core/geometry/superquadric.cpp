@@ -181,10 +181,11 @@ bool sameSuperquadric(const SuperquadricShape& a, const SuperquadricShape& b, do
   return largestRayGap(a, b) <= tolerance_m && largestRayGap(b, a) <= tolerance_m;
 }
 
-double sharedVolumeShare(const SuperquadricShape& a, const SuperquadricShape& b, int samples) {
-  const bool a_smaller = a.volume() <= b.volume();
-  const SuperquadricShape& small = a_smaller ? a : b;
-  const SuperquadricShape& large = a_smaller ? b : a;
+namespace {
+
+/// The share of `small`'s volume inside `large` (sharedVolumeShare).
+double shareOfFirstInside(const SuperquadricShape& small, const SuperquadricShape& large,
+                          int samples) {
   if ((small.centroid() - large.centroid()).norm() >= small.scale_m.norm() + large.scale_m.norm() ||
       samples <= 0)
     return 0.0;
@@ -201,6 +202,15 @@ double sharedVolumeShare(const SuperquadricShape& a, const SuperquadricShape& b,
     if (large.contains(small.T_table_object * p)) ++inside;
   }
   return drawn > 0 ? static_cast<double>(inside) / drawn : 0.0;
+}
+
+}  // namespace
+
+double sharedVolumeShare(const SuperquadricShape& a, const SuperquadricShape& b, int samples) {
+  const double va = a.volume(), vb = b.volume();
+  if (va < vb) return shareOfFirstInside(a, b, samples);
+  if (vb < va) return shareOfFirstInside(b, a, samples);
+  return std::max(shareOfFirstInside(a, b, samples), shareOfFirstInside(b, a, samples));
 }
 
 }  // namespace simstack

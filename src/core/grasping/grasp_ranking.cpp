@@ -93,13 +93,13 @@ void summarise(RankedGrasp* g, int copies, const SuperquadricShape& target) {
 
 void PerturbationConfig::validate() const {
   if (copies < 0 || copies > 64)
-    throw std::invalid_argument("perturbation copies must lie in [0, 64]");
+    throw std::invalid_argument("perturbed_copies must lie in [0, 64]");
   if (!(position_m >= 0.0 && position_m <= 0.1))
-    throw std::invalid_argument("perturbation position_m must lie in [0, 0.1] m");
+    throw std::invalid_argument("perturb_position_m must lie in [0, 0.1] m");
   if (!(rotation_deg >= 0.0 && rotation_deg <= 45.0))
-    throw std::invalid_argument("perturbation rotation_deg must lie in [0, 45]");
+    throw std::invalid_argument("perturb_rotation_deg must lie in [0, 45]");
   if (!(scale_share >= 0.0 && scale_share <= 0.5))
-    throw std::invalid_argument("perturbation scale_share must lie in [0, 0.5]");
+    throw std::invalid_argument("perturb_scale_share must lie in [0, 0.5]");
 }
 
 std::vector<std::vector<SuperquadricShape>> perturbedCopies(
@@ -213,7 +213,8 @@ bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b) {
 
 GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypotheses, int target,
                         const std::vector<Vec3>& camera_positions, const GraspRankingConfig& config,
-                        const RankingProgress& progress, const Points3& measured_target) {
+                        const RankingProgress& progress, const Points3& measured_target,
+                        const std::optional<Vec3>& measured_from) {
   if (hypotheses.empty()) throw std::invalid_argument("no scene to rank grasps in");
   for (const auto& scene : hypotheses)
     if (const std::string why = checkScene(scene); !why.empty()) throw std::invalid_argument(why);
@@ -226,7 +227,7 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
   const auto& scene0 = hypotheses[0];
   out.candidates = suctionCandidates(
       scene0, target, camera_positions.empty() ? defaultCameraPositions(scene0) : camera_positions,
-      config.candidates, measured_target);
+      config.candidates, measured_target, measured_from);
   std::vector<int> targets;
   for (size_t h = 0; h < hypotheses.size(); ++h) {
     const int t =

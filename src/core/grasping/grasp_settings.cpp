@@ -46,6 +46,7 @@ void GraspSettings::validate() const {
       throw std::invalid_argument(std::string(name) + " must be a positive number");
   };
   policy.validate();
+  positive(ranking.pull.topple_rad, "topple_deg");  // said as the file gives it, in degrees
   positive(ranking.candidates.cup_radius_m, "cup_radius_m");
   positive(ranking.candidates.seal_tolerance_m, "seal_tolerance_m");
   positive(ranking.candidates.tool_length_m, "tool_length_m");
@@ -71,8 +72,18 @@ GraspSettings settingsFromNode(const YAML::Node& root, const std::string& source
   requireKnownKeys(root, known, "the grasp settings", source);
   try {
     settingFields(s, topple_deg, [&](const char* name, auto& value) {
-      if (const YAML::Node node = root[name])
-        value = readYamlValue<std::decay_t<decltype(value)>>(node, name);
+      const YAML::Node node = root[name];
+      if (!node) return;
+      if constexpr (std::is_integral_v<std::decay_t<decltype(value)>>) {
+        // A whole number written as 2.0 (as rosparam may hand it over) is the number 2.
+        const double v = readYamlValue<double>(node, name);
+        if (v != std::floor(v) || std::abs(v) > 1e9)
+          throw std::invalid_argument(std::string(name) + ": " + node.Scalar() +
+                                      " is not a whole number");
+        value = static_cast<int>(v);
+      } else {
+        value = readYamlValue<double>(node, name);
+      }
     });
     s.ranking.pull.cup_radius_m = s.ranking.candidates.cup_radius_m;
     s.ranking.pull.topple_rad = topple_deg * M_PI / 180.0;

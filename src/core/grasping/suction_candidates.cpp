@@ -288,9 +288,33 @@ MeasuredSeal measuredSeal(const Points3& measured, const Vec3& contact, const Ve
   return out;
 }
 
+bool seenThrough(const Points3& measured_table, const Vec3& contact,
+                 const std::vector<Vec3>& camera_positions, double cup_radius_m) {
+  constexpr int kBehindPoints = 3;  // fewer could be noise or a mixed pixel at an edge
+  for (const Vec3& camera : camera_positions) {
+    const double reach = (contact - camera).norm();
+    if (!(reach > 0.0)) continue;
+    const Vec3 ray = (contact - camera) / reach;
+    int behind = 0;
+    bool at_contact = false;
+    for (const Vec3& p : measured_table) {
+      const double t = (p - camera).dot(ray);
+      if ((p - camera - t * ray).norm() > cup_radius_m / 3.0) continue;
+      if (std::abs(t - reach) <= cup_radius_m / 3.0) {
+        at_contact = true;
+        break;
+      }
+      if (t > reach + cup_radius_m) ++behind;
+    }
+    if (!at_contact && behind >= kBehindPoints) return true;
+  }
+  return false;
+}
+
 CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int target,
                                const std::vector<Vec3>& camera_positions,
-                               const CandidateConfig& config, const Points3& measured) {
+                               const CandidateConfig& config, const Points3& measured,
+                               const std::optional<Vec3>& measured_from) {
   validate(scene, target, config);
   const SuperquadricShape& sq = scene[target];
   RenderConfig render;
@@ -324,6 +348,11 @@ CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int 
     if (!measured.empty()) {
       const MeasuredSeal m = measuredSeal(measured, c.contact_table, c.approach_table, config);
       if (m.seen && !m.seals) continue;  // the camera saw an edge, a bend or a gap there
+      // Nothing measured under the cup, and the camera looked past the estimate's surface
+      // there (a cup's mouth, a bowl's inside).
+      if (!m.seen && measured_from &&
+          seenThrough(measured, c.contact_table, {*measured_from}, config.cup_radius_m))
+        continue;
       if (m.seen) {
         // The measured surface's normal, and the contact on its plane.
         c.approach_table = m.normal;

@@ -41,11 +41,15 @@ std::vector<double> seq(const YAML::Node& n, size_t size, const std::string& wha
 }  // namespace
 
 void writeSuperquadricsYaml(const std::string& path, const std::vector<SuperquadricShape>& shapes,
-                            const std::string& frame, const std::vector<bool>& truncated) {
+                            const std::string& frame, const std::vector<bool>& truncated,
+                            const std::optional<Vec3>& camera) {
   if (!truncated.empty() && truncated.size() != shapes.size())
     throw std::invalid_argument("writeSuperquadricsYaml: one truncated flag per shape");
   YAML::Emitter out;
   out << YAML::BeginMap << YAML::Key << "frame" << YAML::Value << frame;
+  if (camera)
+    out << YAML::Key << "camera" << YAML::Value << YAML::Flow
+        << std::vector<double>{camera->x(), camera->y(), camera->z()};
   out << YAML::Key << "objects" << YAML::Value << YAML::BeginSeq;
   for (size_t i = 0; i < shapes.size(); ++i) {
     const SuperquadricShape& s = shapes[i];
@@ -72,12 +76,21 @@ void writeSuperquadricsYaml(const std::string& path, const std::vector<Superquad
   if (!f) throw std::runtime_error("cannot write " + path);
 }
 
-std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path,
-                                                     std::vector<int>* ids) {
+std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path, std::vector<int>* ids,
+                                                     std::optional<Vec3>* camera) {
   const YAML::Node root = loadYamlFile(path, "superquadrics");
   if (!root.IsMap() || !root["objects"] || !root["objects"].IsSequence())
     throw std::runtime_error(path + ": no 'objects' list");
-  requireKnownKeys(root, {"frame", "objects"}, "the file", path);
+  requireKnownKeys(root, {"frame", "camera", "objects"}, "the file", path);
+  if (camera) {
+    camera->reset();
+    if (root["camera"]) {
+      const auto c = seq(root["camera"], 3, "camera", path);
+      *camera = Vec3(c[0], c[1], c[2]);
+      if (!camera->value().allFinite())
+        throw std::runtime_error(path + ": camera has a value that is not finite");
+    }
+  }
   std::vector<SuperquadricShape> out;
   std::set<int> seen_ids;
   for (const auto& o : root["objects"]) {

@@ -222,10 +222,19 @@ int joinOverlappingFits(const PerceptionConfig& config, const FitConfig& fit,
     joinInstances(seg, keep, drop);
     (*parts)[keep].append((*parts)[drop]);
     parts->erase(parts->begin() + drop);
-    Points3& kept = (*points)[keep];
-    kept.insert(kept.end(), (*points)[drop].begin(), (*points)[drop].end());
+    // Measured depth points lead an instance's points (InstanceEstimate::measured_points): both
+    // instances' measured points first, then both sets of samples of the predicted surface.
+    const Points3& a = (*points)[keep];
+    const Points3& b = (*points)[drop];
+    const int ma = (*measured_counts)[keep], mb = (*measured_counts)[drop];
+    Points3 joined(a.begin(), a.begin() + ma);
+    joined.insert(joined.end(), b.begin(), b.begin() + mb);
+    joined.insert(joined.end(), a.begin() + ma, a.end());
+    joined.insert(joined.end(), b.begin() + mb, b.end());
+    (*points)[keep] = std::move(joined);
+    const Points3& kept = (*points)[keep];
     points->erase(points->begin() + drop);
-    (*measured_counts)[keep] += (*measured_counts)[drop];
+    (*measured_counts)[keep] = ma + mb;
     measured_counts->erase(measured_counts->begin() + drop);
     outside->erase(outside->begin() + drop);  // an instance left outside has no fit: never joined
     fits->erase(fits->begin() + drop);

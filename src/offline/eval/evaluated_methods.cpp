@@ -68,6 +68,7 @@ MethodEstimate NetworkMethod::estimateViews(const std::vector<DepthView>& views,
     out.hypotheses_tsdf.push_back(h.tsdf_m.data);
     out.surfaces.push_back(h.surface.empty() ? extractSurface(h.tsdf_m) : h.surface);
   }
+  if (views.size() == 1) out.measured_from = est.T_table_camera.translation();
   for (const InstanceEstimate& e : est.instances()) {
     out.superquadrics.push_back(e.superquadric);
     out.measured_surfaces.emplace_back(e.points.begin(), e.points.begin() + e.measured_points);

@@ -96,7 +96,9 @@ void pickOnEstimate(const std::vector<SuperquadricShape>& truth, const PullSimul
       k >= 0 && options.measured_seal && k < static_cast<int>(estimate.measured_surfaces.size())
           ? estimate.measured_surfaces[k]
           : none;
-  if (k >= 0) ranking = rankGrasps(scenes, k, {}, options.ranking, {}, measured);
+  if (k >= 0)
+    ranking = rankGrasps(scenes, k, {}, options.ranking, {}, measured,
+                         measured.empty() ? std::nullopt : estimate.measured_from);
   const EstimateError error =
       k >= 0 ? estimateError(estimate.superquadrics[k], truth[target]) : EstimateError();
   std::vector<std::string> choosers = {"ranked", "random", "top-most"};

@@ -61,7 +61,8 @@ void writeGrids(const std::filesystem::path& out, const SceneEstimate& est) {
 }  // namespace
 
 std::vector<std::string> writeReconstruction(const std::string& dir, const DepthView& view,
-                                             const SceneEstimate& est, double min_height_m) {
+                                             const SceneEstimate& est, double min_height_m,
+                                             bool one_view) {
   const std::filesystem::path out(dir);
   const SceneHypothesis& h = est.hypotheses.front();
   std::vector<std::string> written;
@@ -74,7 +75,9 @@ std::vector<std::string> writeReconstruction(const std::string& dir, const Depth
     writeMeshPly((out / name).string(), h.instances[k].mesh);
     written.push_back(name);
   }
-  writeSuperquadricsYaml((out / "superquadrics.yaml").string(), shapes, "table", truncated);
+  writeSuperquadricsYaml(
+      (out / "superquadrics.yaml").string(), shapes, "table", truncated,
+      one_view ? std::optional<Vec3>(est.T_table_camera.translation()) : std::nullopt);
   writeMeshPly((out / "surface.ply").string(),
                h.surface.empty() ? extractSurface(h.tsdf_m) : h.surface);
   writeVisibleInstances(out, view, est, min_height_m);

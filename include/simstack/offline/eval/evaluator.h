@@ -36,6 +36,8 @@ struct MethodEstimate {
   /// Per object, the depth points measured on it (table frame; empty when the method keeps
   /// none): where a grasp's seal is judged.
   std::vector<Points3> measured_surfaces;
+  /// The camera that measured them, when one did (table frame).
+  std::optional<Vec3> measured_from;
   /// The objects of the further hypotheses that were decomposed (robust grasp ranking).
   std::vector<std::vector<SuperquadricShape>> further_superquadrics;
   Image<int> pixel_instances;  ///< instance per pixel of the view, -1 none (may stay empty)

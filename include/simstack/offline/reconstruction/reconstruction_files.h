@@ -16,10 +16,11 @@ namespace simstack {
 
 /// Writes the files of hypothesis 0 of `estimate` (perceived from `view`) into `dir`, which
 /// must exist; pixels lower than `label_min_height_m` above the table are no instance's
-/// (labelMinHeight). Returns the names written. Throws std::runtime_error naming a file it
-/// cannot write.
+/// (labelMinHeight). With `one_view` (the estimate fused no other), superquadrics.yaml names
+/// the camera that measured the objects' points. Returns the names written. Throws
+/// std::runtime_error naming a file it cannot write.
 std::vector<std::string> writeReconstruction(const std::string& dir, const DepthView& view,
                                              const SceneEstimate& estimate,
-                                             double label_min_height_m);
+                                             double label_min_height_m, bool one_view = true);
 
 }  // namespace simstack
