@@ -378,6 +378,7 @@ class LabelledAnswer : public EvaluatedMethod {
         objects.insert(truth.pixels[i]);
       }
     out.superquadrics.resize(objects.size());
+    out.fits_at_bound = 1;  // counted through to the summary and the table
     return out;
   }
 
@@ -418,7 +419,11 @@ TEST(RealScenes, TheTruthScoresOneAndNothingZeroByCategory) {
   EXPECT_DOUBLE_EQ(n["overlap_f"].get<double>(), 0.0);
   EXPECT_DOUBLE_EQ(n["count_error"].get<double>(), -2.0);
   EXPECT_EQ(realSummary(results[0].scenes, "mixed")["scenes"].get<int>(), 1);
+  EXPECT_EQ(t["fits_at_bound"].get<int>(), 2);  // a total, not a mean
+  EXPECT_EQ(n["fits_at_bound"].get<int>(), 0);
   const std::string table = realScenesTable(results);
+  EXPECT_NE(table.find("truth: 2 superquadrics at the fitter's lower bound"), std::string::npos)
+      << table;
   EXPECT_NE(table.find("| truth: boxes | 1 | 100.0 | 100.0 | 100.0 | 100.0 | 100 % |"),
             std::string::npos)
       << table;

@@ -489,6 +489,15 @@ TEST(SuperquadricFit, ACollapsedShapeIsOneFarBelowItsPointsExtent) {
   const SuperquadricShape small =
       makeShape(Vec3(0.0075, 0.005, 0.005), Vec3(2, 2, 2), Vec3(0, 0, 0.01), Vec3(0, 0, 1), 0);
   EXPECT_FALSE(collapsedFit(dot, noisySurface(small, 200, 0.0002, 5)));
+  // At the fitter's 5 mm bound: the dot for the box's points, not for the small object's, and
+  // not the box itself; nor a thin rod (its largest semi-axis is long).
+  const FitConfig config;
+  EXPECT_TRUE(fitAtBound(dot, pts, config));
+  EXPECT_FALSE(fitAtBound(box, pts, config));
+  EXPECT_FALSE(fitAtBound(dot, noisySurface(small, 200, 0.0002, 5), config));
+  SuperquadricShape rod = dot;
+  rod.scale_m.x() = 0.1;
+  EXPECT_FALSE(fitAtBound(rod, pts, config));
 }
 
 TEST(JointRefinement, RejectsBadConfig) {

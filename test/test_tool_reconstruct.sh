@@ -27,6 +27,9 @@ labels = struct.unpack(">%dH" % (w * h), open(d + "/labels.raw", "rb").read())
 depth = struct.unpack(">%dH" % (w * h), open(d + "/depth.raw", "rb").read())
 shapes = {o["id"]: o for o in yaml.safe_load(open(d + "/out/superquadrics.yaml"))["objects"]}
 t, (qx, qy, qz, qw) = view["T_table_camera"]["translation"], view["T_table_camera"]["rotation_xyzw"]
+# One depth image: the file names the camera that measured the objects (its position).
+camera = yaml.safe_load(open(d + "/out/superquadrics.yaml"))["camera"]
+assert all(abs(a - b) < 1e-6 for a, b in zip(camera, t)), (camera, t)
 R = [[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
      [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
      [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)]]

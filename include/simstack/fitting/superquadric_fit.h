@@ -124,6 +124,13 @@ std::vector<std::optional<SuperquadricShape>> fitEachInstance(const std::vector<
 void refineInstances(const std::vector<Points3>& points, const FitConfig& config,
                      std::vector<std::optional<SuperquadricShape>>* fits);
 
+/// True when `shape` sits at the fitter's lower bound for an object seen larger: its largest
+/// semi-axis is at most 1.5 x `config.min_scale_m` while `visible_table` (the depth points
+/// measured on the object) spans more than kCollapseSpanM. No shipped fit should; the
+/// evaluations count them (`fits_at_bound`).
+bool fitAtBound(const SuperquadricShape& shape, const Points3& visible_table,
+                const FitConfig& config);
+
 /// Both stages for a scene: per-instance fits (in parallel over `threads`), then, when
 /// `joint`, the joint refinement of all fitted shapes. Sets with fewer than `min_points`
 /// points are skipped (std::nullopt). No fit collapses: a per-instance fit that does

@@ -887,6 +887,13 @@ std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Poi
   return fits;
 }
 
+bool fitAtBound(const SuperquadricShape& shape, const Points3& visible_table,
+                const FitConfig& config) {
+  if (visible_table.size() < 4) return false;
+  return shape.scale_m.maxCoeff() <= 1.5 * config.min_scale_m &&
+         2 * initialGuess(visible_table).scale_m.maxCoeff() > kCollapseSpanM;
+}
+
 bool collapsedFit(const SuperquadricShape& shape, const Points3& points_table) {
   if (points_table.size() < 4) return false;
   const SuperquadricShape box = initialGuess(points_table);

@@ -72,6 +72,8 @@ MethodEstimate NetworkMethod::estimateViews(const std::vector<DepthView>& views,
   for (const InstanceEstimate& e : est.instances()) {
     out.superquadrics.push_back(e.superquadric);
     out.measured_surfaces.emplace_back(e.points.begin(), e.points.begin() + e.measured_points);
+    out.fits_at_bound +=
+        fitAtBound(e.superquadric, out.measured_surfaces.back(), perception_->config().fit);
   }
   for (size_t h = 1; h < est.hypotheses.size() && est.hypotheses[h].decomposed; ++h) {
     out.further_superquadrics.emplace_back();

@@ -7,6 +7,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "simstack/fitting/superquadric_fit.h"
 #include "simstack/offline/dataset/ground_truth.h"
 #include "simstack/offline/eval/occupancy.h"
 #include "simstack/offline/eval/scene_metrics.h"
@@ -20,7 +21,8 @@ using nlohmann::json;
 const std::vector<double> kBinEdges = {0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 1.01};
 const std::vector<std::string> kMetrics = {
     "chamfer_visible_m", "chamfer_full_m", "chamfer_full_sq_m", "iou",         "bce",
-    "displacement_m",    "stable",         "count_error",       "count_exact", "count_exact_seen"};
+    "displacement_m",    "stable",         "count_error",       "count_exact", "count_exact_seen",
+    "fits_at_bound"};
 
 double mean(const std::vector<double>& v) {
   double s = 0;
@@ -85,6 +87,7 @@ void scoreEstimate(const MethodEstimate& est, const SceneRecord& rec, const Scen
   (*row)["count_error"] = std::abs(static_cast<double>(shapes.size()) - objects);
   (*row)["count_exact"] = shapes.size() == rec.scene.objects.size();
   (*row)["count_exact_seen"] = static_cast<int>(shapes.size()) == vt.objects_seen;
+  (*row)["fits_at_bound"] = est.fits_at_bound;
   if (options.stability && !shapes.empty()) {
     const StabilityResult st = simulateStability(shapes);
     (*row)["displacement_m"] = st.mean_displacement_m;
@@ -293,6 +296,15 @@ std::string resultsTable(const EvaluationResults& r) {
       << val("chamfer_full_m", 1000, 1) << " | " << val("chamfer_full_sq_m", 1000, 1) << " | "
       << val("iou", 1, 3) << " | " << val("bce", 1, 3) << " | " << val("displacement_m", 1000, 1)
       << " | " << percent("stable") << " | " << percent("count_exact") << " |\n";
+  }
+  for (const MethodResults& m : r.methods) {
+    const std::vector<double> v = finiteValues(m.rows, "fits_at_bound");
+    if (v.empty()) continue;
+    double total = 0;
+    for (double x : v) total += x;
+    o << (&m == &r.methods.front() ? "\n" : "") << m.name << ": " << fixed(total, 0)
+      << " superquadrics at the fitter's lower bound for objects seen over "
+      << fixed(100 * kCollapseSpanM, 0) << " cm, in " << v.size() << " views\n";
   }
   if (!r.truth_stable.empty())
     o << "\nthe true piles under the same stability test: " << fixed(100 * mean(r.truth_stable), 0)

@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <tuple>
 
+#include "simstack/fitting/superquadric_fit.h"
 #include "simstack/io/scene_io.h"
 
 namespace simstack {
@@ -139,6 +140,7 @@ std::vector<RealMethodResults> evaluateRealScenes(const std::string& dir,
       r.found = static_cast<int>(est.superquadrics.size());
       r.table_estimated = est.table_estimated;
       r.perceive_ms = est.perceive_ms;
+      r.fits_at_bound = est.fits_at_bound;
       out[k].scenes.push_back(r);
     }
     if (progress) progress(static_cast<int>(f + 1), static_cast<int>(files.size()));
@@ -148,6 +150,7 @@ std::vector<RealMethodResults> evaluateRealScenes(const std::string& dir,
 
 json realSummary(const std::vector<RealSceneResult>& scenes, const std::string& category) {
   std::vector<double> p, r, f, d, exact, error, abs_error, ms;
+  int at_bound = 0;
   for (const RealSceneResult& s : scenes) {
     if (!category.empty() && s.category != category) continue;
     p.push_back(s.overlap.precision);
@@ -158,12 +161,13 @@ json realSummary(const std::vector<RealSceneResult>& scenes, const std::string& 
     error.push_back(s.found - s.objects);
     abs_error.push_back(std::abs(s.found - s.objects));
     ms.push_back(s.perceive_ms);
+    at_bound += s.fits_at_bound;
   }
   return {{"scenes", p.size()},           {"overlap_precision", meanOf(p)},
           {"overlap_recall", meanOf(r)},  {"overlap_f", meanOf(f)},
           {"detected_075", meanOf(d)},    {"count_exact", meanOf(exact)},
           {"count_error", meanOf(error)}, {"count_abs_error", meanOf(abs_error)},
-          {"perceive_ms", meanOf(ms)}};
+          {"perceive_ms", meanOf(ms)},    {"fits_at_bound", at_bound}};
 }
 
 json realScenesJson(const std::vector<RealMethodResults>& results) {
@@ -187,7 +191,8 @@ json realScenesJson(const std::vector<RealMethodResults>& results) {
                              {"overlap_f", s.overlap.f_measure},
                              {"detected_075", s.overlap.detected_075},
                              {"table_estimated", s.table_estimated},
-                             {"perceive_ms", s.perceive_ms}});
+                             {"perceive_ms", s.perceive_ms},
+                             {"fits_at_bound", s.fits_at_bound}});
     out[m.name] = j;
   }
   return out;
@@ -211,6 +216,11 @@ std::string realScenesTable(const std::vector<RealMethodResults>& results) {
         << fixed(s["count_abs_error"].get<double>(), 2) << " |\n";
     }
   }
+  for (const RealMethodResults& m : results)
+    o << (&m == &results.front() ? "\n" : "") << m.name << ": "
+      << realSummary(m.scenes)["fits_at_bound"].get<int>()
+      << " superquadrics at the fitter's lower bound for objects seen over "
+      << fixed(100 * kCollapseSpanM, 0) << " cm, in " << m.scenes.size() << " scenes\n";
   return o.str();
 }
 
