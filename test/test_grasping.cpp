@@ -101,15 +101,15 @@ TEST(SuctionCandidates, NoCandidateWhereTheCameraSawPastTheEstimate) {
     for (double y = -0.036; y <= 0.036; y += 0.003)
       if (std::hypot(x, y) < 0.036) mug.emplace_back(x, y, 0.02 + noise(rng));
   const std::vector<Vec3> above{Vec3(0.05, 0.0, 1.0)};
-  EXPECT_TRUE(seenThrough(mug, {0, 0, 0.1}, above, 0.015));
-  EXPECT_TRUE(seenThrough(mug, {0.015, 0.01, 0.1}, above, 0.015));
-  EXPECT_FALSE(seenThrough(mug, {0.0385, 0, 0.1}, above, 0.015));  // on the wall's top
-  EXPECT_FALSE(seenThrough(mug, {0, 0, 0.1}, {}, 0.015));
+  const Vec3 up = Vec3::UnitZ();
+  EXPECT_TRUE(seenThrough(mug, {0, 0, 0.1}, up, above.front(), 0.015));
+  EXPECT_TRUE(seenThrough(mug, {0.015, 0.01, 0.1}, up, above.front(), 0.015));
+  EXPECT_FALSE(seenThrough(mug, {0.0385, 0, 0.1}, up, above.front(), 0.015));  // the wall's top
   Points3 lid = mug;  // a lid measured too: a surface at the contact
   for (double x = -0.036; x <= 0.036; x += 0.003)
     for (double y = -0.036; y <= 0.036; y += 0.003)
       if (std::hypot(x, y) < 0.036) lid.emplace_back(x, y, 0.1 + noise(rng));
-  EXPECT_FALSE(seenThrough(lid, {0, 0, 0.1}, above, 0.015));
+  EXPECT_FALSE(seenThrough(lid, {0, 0, 0.1}, up, above.front(), 0.015));
 
   SuperquadricShape cylinder = box({0.04, 0.04, 0.05}, {0, 0, 0.05}, 2.0);
   cylinder.exponents.z() = 20.0;
@@ -117,8 +117,11 @@ TEST(SuctionCandidates, NoCandidateWhereTheCameraSawPastTheEstimate) {
   config.max_candidates = 256;
   const CandidateSet open = suctionCandidates({cylinder}, 0, above, config, mug, above.front());
   const CandidateSet closed = suctionCandidates({cylinder}, 0, above, config, lid, above.front());
-  // Without the camera that measured the points, nothing is known to be seen through.
+  // Without the camera that measured the points, or with one at the table's origin (a pose
+  // left at the identity), nothing is known to be seen through.
   const CandidateSet unknown = suctionCandidates({cylinder}, 0, above, config, mug);
+  const CandidateSet origin =
+      suctionCandidates({cylinder}, 0, above, config, mug, Vec3(0.0, 0.0, 0.0));
   const auto on_mouth = [](const CandidateSet& set) {
     int n = 0;
     for (const SuctionCandidate& c : set.candidates)
@@ -126,8 +129,48 @@ TEST(SuctionCandidates, NoCandidateWhereTheCameraSawPastTheEstimate) {
     return n;
   };
   EXPECT_EQ(on_mouth(open), 0);
+  EXPECT_GT(open.seen_through, 0);
   EXPECT_GT(on_mouth(closed), 0);
   EXPECT_GT(on_mouth(unknown), 0);
+  EXPECT_GT(on_mouth(origin), 0);
+  EXPECT_EQ(origin.seen_through, 0);
+  // The ranking says how many it left out.
+  GraspRankingConfig ranking;
+  ranking.candidates.max_candidates = 4;
+  const GraspRanking r = rankGrasps({{cylinder}}, 0, above, ranking, {}, mug, above.front());
+  EXPECT_NE(r.message.find(std::to_string(r.candidates.seen_through) +
+                           " sealable places left out where the camera saw past the shape"),
+            std::string::npos)
+      << r.message;
+}
+
+// A solid box (10 cm) seen from the side and above, its faces measured 2.5 mm apart.
+// A contact on the fit, 8 mm proud of the front face and seen at 60 degrees, has a dozen of
+// that face's points beyond it along the line of sight, but none a cup's radius inside the
+// surface: not seen through. Nor
+// is a contact on a side face the line of sight grazes, whose own points lie beyond it.
+TEST(SuctionCandidates, ASolidObjectsOwnFacesAreNotSeenThrough) {
+  Points3 box;
+  for (double u = -0.05; u <= 0.05; u += 0.0025)
+    for (double v = 0.0; v <= 0.1; v += 0.0025) {
+      box.emplace_back(0.05, u, v);  // the front face, x = 0.05
+      box.emplace_back(u, 0.05, v);  // a side face, y = 0.05
+    }
+  for (double u = -0.05; u <= 0.05; u += 0.0025)
+    for (double v = -0.05; v <= 0.05; v += 0.0025) box.emplace_back(u, v, 0.1);  // the top
+  const Vec3 front = Vec3::UnitX(), side = Vec3::UnitY();
+  const Vec3 contact(0.058, 0.0, 0.05);
+  const Vec3 at_60 = contact + 0.8 * Vec3(std::cos(M_PI / 3), 0.0, std::sin(M_PI / 3));
+  EXPECT_FALSE(seenThrough(box, contact, front, at_60, 0.015));
+  const Vec3 on_side(0.0, 0.05, 0.05);
+  const Vec3 grazing = on_side + 0.8 * Vec3(0.99, 0.0, 0.14).normalized();
+  EXPECT_FALSE(seenThrough(box, on_side, side, grazing, 0.015));
+  // A line of sight through the closed top of an estimate whose object is open, only its floor
+  // 9 cm below measured (an open box): seen through, the floor lies inside the surface.
+  Points3 hollow;
+  for (double u = -0.05; u <= 0.05; u += 0.0025)
+    for (double v = -0.05; v <= 0.05; v += 0.0025) hollow.emplace_back(u, v, 0.01);
+  EXPECT_TRUE(seenThrough(hollow, Vec3(0.0, 0.0, 0.1), Vec3::UnitZ(), Vec3(0.3, 0.0, 0.9), 0.015));
 }
 
 TEST(GraspRanking, CandidatesOnMeasuredSurfaceTakeItsNormal) {

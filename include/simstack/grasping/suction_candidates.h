@@ -58,13 +58,16 @@ struct MeasuredSeal {
 MeasuredSeal measuredSeal(const Points3& measured_table, const Vec3& contact, const Vec3& approach,
                           const CandidateConfig& config);
 
-/// Whether a camera at one of `camera_positions` saw past `contact`: at least three of
-/// `measured_table` (depth points on the target) lie on its line of sight through the contact
-/// (within a third of `cup_radius_m` of it) further than `cup_radius_m` beyond the contact, and
-/// none lies at the contact (within a third of `cup_radius_m` along the line). The estimate puts
-/// a surface where the camera looked through: a cup's mouth, a bowl's inside.
-bool seenThrough(const Points3& measured_table, const Vec3& contact,
-                 const std::vector<Vec3>& camera_positions, double cup_radius_m);
+/// Whether the camera at `camera` (table frame) saw past `contact`, a point of the estimated
+/// surface with outward `normal`: at least three of `measured_table` (depth points on the
+/// target) lie on its line of sight through the contact (within a third of `cup_radius_m` of
+/// it), further than `cup_radius_m` beyond the contact and deeper than `cup_radius_m` inside
+/// the surface's tangent plane there, and none lies at the contact (within a third of
+/// `cup_radius_m` along the line). The estimate puts a surface where the camera looked through:
+/// a cup's mouth, a bowl's inside. False where the line of sight meets the surface at more than
+/// 70 degrees from its normal (it runs along the face, whose own points lie beyond the contact).
+bool seenThrough(const Points3& measured_table, const Vec3& contact, const Vec3& normal,
+                 const Vec3& camera, double cup_radius_m);
 
 /// The suction tool's pose at a candidate, as a motion planner takes it (MoveIt's convention:
 /// the tool's z along its approach): origin at the contact, z along -approach_table (into the
@@ -84,6 +87,7 @@ struct CandidateSet {
   int sealable = 0;         ///< of those, where the rim seals (on the superquadric and, where
                             ///< the camera measured the surface, on the measured points)
   int measured = 0;         ///< of those, on surface the camera measured
+  int seen_through = 0;     ///< sealable ones dropped where the camera saw past the estimate
 };
 
 /// The five virtual cameras of the paper's section 4.3: one above the scene's centre and four
@@ -111,9 +115,9 @@ double rimDeviation(const SuperquadricShape& sq, const Vec3& contact_table,
 /// and eight at two), kept first, then random surface samples spread by farthest-point sampling.
 /// With `measured_table` (depth points on the target): a candidate on measured surface must seal
 /// there too (measuredSeal) and takes its normal; with `measured_from`, the position of the one
-/// camera that measured them all, a candidate on no measured surface where that camera saw past
-/// the estimate's surface is none (seenThrough). Throws std::invalid_argument for a bad target or
-/// config.
+/// camera that measured them all (above the table), a candidate on no measured surface where
+/// that camera saw past the estimate's surface is none (seenThrough; counted in `seen_through`).
+/// Throws std::invalid_argument for a bad target or config.
 CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int target,
                                const std::vector<Vec3>& camera_positions,
                                const CandidateConfig& config, const Points3& measured_table = {},

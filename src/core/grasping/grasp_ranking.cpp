@@ -228,6 +228,10 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
   out.candidates = suctionCandidates(
       scene0, target, camera_positions.empty() ? defaultCameraPositions(scene0) : camera_positions,
       config.candidates, measured_target, measured_from);
+  if (out.candidates.seen_through > 0)
+    addNote(&out.message, std::to_string(out.candidates.seen_through) +
+                              " sealable places left out where the camera saw past the shape "
+                              "(an opening the superquadric closes)");
   std::vector<int> targets;
   for (size_t h = 0; h < hypotheses.size(); ++h) {
     const int t =

@@ -288,27 +288,27 @@ MeasuredSeal measuredSeal(const Points3& measured, const Vec3& contact, const Ve
   return out;
 }
 
-bool seenThrough(const Points3& measured_table, const Vec3& contact,
-                 const std::vector<Vec3>& camera_positions, double cup_radius_m) {
+bool seenThrough(const Points3& measured_table, const Vec3& contact, const Vec3& normal,
+                 const Vec3& camera, double cup_radius_m) {
   constexpr int kBehindPoints = 3;  // fewer could be noise or a mixed pixel at an edge
-  for (const Vec3& camera : camera_positions) {
-    const double reach = (contact - camera).norm();
-    if (!(reach > 0.0)) continue;
-    const Vec3 ray = (contact - camera) / reach;
-    int behind = 0;
-    bool at_contact = false;
-    for (const Vec3& p : measured_table) {
-      const double t = (p - camera).dot(ray);
-      if ((p - camera - t * ray).norm() > cup_radius_m / 3.0) continue;
-      if (std::abs(t - reach) <= cup_radius_m / 3.0) {
-        at_contact = true;
-        break;
-      }
-      if (t > reach + cup_radius_m) ++behind;
-    }
-    if (!at_contact && behind >= kBehindPoints) return true;
+  // Past 70 degrees from the normal the line of sight runs along the face: its own points
+  // would lie on it far beyond the contact.
+  const double cos_grazing = std::cos(70.0 * M_PI / 180.0);
+  const double reach = (contact - camera).norm();
+  const Vec3 n = normal.normalized();
+  if (!(reach > 0.0) || !n.allFinite()) return false;
+  const Vec3 ray = (contact - camera) / reach;
+  if (-ray.dot(n) < cos_grazing) return false;
+  const double near = cup_radius_m / 3.0;
+  int behind = 0;
+  for (const Vec3& p : measured_table) {
+    const double t = (p - camera).dot(ray);
+    if ((p - camera - t * ray).norm() > near) continue;
+    if (std::abs(t - reach) <= near) return false;  // the surface is at the contact
+    // Beyond the contact and a cup's radius inside the estimated surface: seen through it.
+    if (t > reach + cup_radius_m && (contact - p).dot(n) > cup_radius_m) ++behind;
   }
-  return false;
+  return behind >= kBehindPoints;
 }
 
 CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int target,
@@ -316,6 +316,8 @@ CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int 
                                const CandidateConfig& config, const Points3& measured,
                                const std::optional<Vec3>& measured_from) {
   validate(scene, target, config);
+  // A camera at or below the table plane measured no pile (a pose left at the identity).
+  const bool camera_below = measured_from && measured_from->allFinite() && measured_from->z() > 0.0;
   const SuperquadricShape& sq = scene[target];
   RenderConfig render;
   render.table_half_size_m = 10.0;
@@ -350,9 +352,12 @@ CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int 
       if (m.seen && !m.seals) continue;  // the camera saw an edge, a bend or a gap there
       // Nothing measured under the cup, and the camera looked past the estimate's surface
       // there (a cup's mouth, a bowl's inside).
-      if (!m.seen && measured_from &&
-          seenThrough(measured, c.contact_table, {*measured_from}, config.cup_radius_m))
+      if (!m.seen && camera_below &&
+          seenThrough(measured, c.contact_table, c.approach_table, *measured_from,
+                      config.cup_radius_m)) {
+        ++out.seen_through;
         continue;
+      }
       if (m.seen) {
         // The measured surface's normal, and the contact on its plane.
         c.approach_table = m.normal;

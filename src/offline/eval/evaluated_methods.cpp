@@ -69,10 +69,11 @@ MethodEstimate NetworkMethod::estimateViews(const std::vector<DepthView>& views,
     out.surfaces.push_back(h.surface.empty() ? extractSurface(h.tsdf_m) : h.surface);
   }
   if (views.size() == 1) out.measured_from = est.T_table_camera.translation();
+  out.fits_at_bound = 0;
   for (const InstanceEstimate& e : est.instances()) {
     out.superquadrics.push_back(e.superquadric);
     out.measured_surfaces.emplace_back(e.points.begin(), e.points.begin() + e.measured_points);
-    out.fits_at_bound +=
+    *out.fits_at_bound +=
         fitAtBound(e.superquadric, out.measured_surfaces.back(), perception_->config().fit);
   }
   for (size_t h = 1; h < est.hypotheses.size() && est.hypotheses[h].decomposed; ++h) {

@@ -87,7 +87,7 @@ void scoreEstimate(const MethodEstimate& est, const SceneRecord& rec, const Scen
   (*row)["count_error"] = std::abs(static_cast<double>(shapes.size()) - objects);
   (*row)["count_exact"] = shapes.size() == rec.scene.objects.size();
   (*row)["count_exact_seen"] = static_cast<int>(shapes.size()) == vt.objects_seen;
-  (*row)["fits_at_bound"] = est.fits_at_bound;
+  if (est.fits_at_bound) (*row)["fits_at_bound"] = *est.fits_at_bound;
   if (options.stability && !shapes.empty()) {
     const StabilityResult st = simulateStability(shapes);
     (*row)["displacement_m"] = st.mean_displacement_m;
@@ -297,14 +297,16 @@ std::string resultsTable(const EvaluationResults& r) {
       << val("iou", 1, 3) << " | " << val("bce", 1, 3) << " | " << val("displacement_m", 1000, 1)
       << " | " << percent("stable") << " | " << percent("count_exact") << " |\n";
   }
+  bool first = true;
   for (const MethodResults& m : r.methods) {
     const std::vector<double> v = finiteValues(m.rows, "fits_at_bound");
-    if (v.empty()) continue;
+    if (v.empty()) continue;  // a method that keeps no measured points per object
     double total = 0;
     for (double x : v) total += x;
-    o << (&m == &r.methods.front() ? "\n" : "") << m.name << ": " << fixed(total, 0)
+    o << (first ? "\n" : "") << m.name << ": " << fixed(total, 0)
       << " superquadrics at the fitter's lower bound for objects seen over "
       << fixed(100 * kCollapseSpanM, 0) << " cm, in " << v.size() << " views\n";
+    first = false;
   }
   if (!r.truth_stable.empty())
     o << "\nthe true piles under the same stability test: " << fixed(100 * mean(r.truth_stable), 0)

@@ -150,7 +150,7 @@ std::vector<RealMethodResults> evaluateRealScenes(const std::string& dir,
 
 json realSummary(const std::vector<RealSceneResult>& scenes, const std::string& category) {
   std::vector<double> p, r, f, d, exact, error, abs_error, ms;
-  int at_bound = 0;
+  std::optional<int> at_bound;
   for (const RealSceneResult& s : scenes) {
     if (!category.empty() && s.category != category) continue;
     p.push_back(s.overlap.precision);
@@ -161,13 +161,18 @@ json realSummary(const std::vector<RealSceneResult>& scenes, const std::string& 
     error.push_back(s.found - s.objects);
     abs_error.push_back(std::abs(s.found - s.objects));
     ms.push_back(s.perceive_ms);
-    at_bound += s.fits_at_bound;
+    if (s.fits_at_bound) at_bound = at_bound.value_or(0) + *s.fits_at_bound;
   }
-  return {{"scenes", p.size()},           {"overlap_precision", meanOf(p)},
-          {"overlap_recall", meanOf(r)},  {"overlap_f", meanOf(f)},
-          {"detected_075", meanOf(d)},    {"count_exact", meanOf(exact)},
-          {"count_error", meanOf(error)}, {"count_abs_error", meanOf(abs_error)},
-          {"perceive_ms", meanOf(ms)},    {"fits_at_bound", at_bound}};
+  return {{"scenes", p.size()},
+          {"overlap_precision", meanOf(p)},
+          {"overlap_recall", meanOf(r)},
+          {"overlap_f", meanOf(f)},
+          {"detected_075", meanOf(d)},
+          {"count_exact", meanOf(exact)},
+          {"count_error", meanOf(error)},
+          {"count_abs_error", meanOf(abs_error)},
+          {"perceive_ms", meanOf(ms)},
+          {"fits_at_bound", at_bound ? json(*at_bound) : json(nullptr)}};
 }
 
 json realScenesJson(const std::vector<RealMethodResults>& results) {
@@ -181,18 +186,19 @@ json realScenesJson(const std::vector<RealMethodResults>& results) {
       j["by_category"][c] = realSummary(m.scenes, c);
     j["scenes"] = json::array();
     for (const RealSceneResult& s : m.scenes)
-      j["scenes"].push_back({{"scene", s.scene},
-                             {"category", s.category},
-                             {"objects", s.objects},
-                             {"found", s.found},
-                             {"instances_on_pixels", s.overlap.instances},
-                             {"overlap_precision", s.overlap.precision},
-                             {"overlap_recall", s.overlap.recall},
-                             {"overlap_f", s.overlap.f_measure},
-                             {"detected_075", s.overlap.detected_075},
-                             {"table_estimated", s.table_estimated},
-                             {"perceive_ms", s.perceive_ms},
-                             {"fits_at_bound", s.fits_at_bound}});
+      j["scenes"].push_back(
+          {{"scene", s.scene},
+           {"category", s.category},
+           {"objects", s.objects},
+           {"found", s.found},
+           {"instances_on_pixels", s.overlap.instances},
+           {"overlap_precision", s.overlap.precision},
+           {"overlap_recall", s.overlap.recall},
+           {"overlap_f", s.overlap.f_measure},
+           {"detected_075", s.overlap.detected_075},
+           {"table_estimated", s.table_estimated},
+           {"perceive_ms", s.perceive_ms},
+           {"fits_at_bound", s.fits_at_bound ? json(*s.fits_at_bound) : json(nullptr)}});
     out[m.name] = j;
   }
   return out;
@@ -216,11 +222,15 @@ std::string realScenesTable(const std::vector<RealMethodResults>& results) {
         << fixed(s["count_abs_error"].get<double>(), 2) << " |\n";
     }
   }
-  for (const RealMethodResults& m : results)
-    o << (&m == &results.front() ? "\n" : "") << m.name << ": "
-      << realSummary(m.scenes)["fits_at_bound"].get<int>()
+  bool first = true;
+  for (const RealMethodResults& m : results) {
+    const json at_bound = realSummary(m.scenes)["fits_at_bound"];
+    if (at_bound.is_null()) continue;  // a method that keeps no measured points per object
+    o << (first ? "\n" : "") << m.name << ": " << at_bound.get<int>()
       << " superquadrics at the fitter's lower bound for objects seen over "
       << fixed(100 * kCollapseSpanM, 0) << " cm, in " << m.scenes.size() << " scenes\n";
+    first = false;
+  }
   return o.str();
 }
 

@@ -39,8 +39,9 @@ struct MethodEstimate {
   /// The camera that measured them, when one did (table frame).
   std::optional<Vec3> measured_from;
   /// Objects whose superquadric sits at the fitter's lower bound though the camera saw them
-  /// larger (fitAtBound on their measured points).
-  int fits_at_bound = 0;
+  /// larger (fitAtBound on their measured points); none for a method that keeps no measured
+  /// points per object.
+  std::optional<int> fits_at_bound;
   /// The objects of the further hypotheses that were decomposed (robust grasp ranking).
   std::vector<std::vector<SuperquadricShape>> further_superquadrics;
   Image<int> pixel_instances;  ///< instance per pixel of the view, -1 none (may stay empty)

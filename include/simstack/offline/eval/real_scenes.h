@@ -46,7 +46,7 @@ struct RealSceneResult {
   OverlapScores overlap;       ///< over the valid pixels
   bool table_estimated = false;
   double perceive_ms = 0;
-  int fits_at_bound = 0;  ///< MethodEstimate::fits_at_bound
+  std::optional<int> fits_at_bound;  ///< MethodEstimate::fits_at_bound
 };
 
 struct RealMethodResults {
