@@ -150,8 +150,12 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   // from the node's own namespace: a nodelet's "~" would be its manager's.
   const image_transport::TransportHints hints(node_.image_transport, ros::TransportHints(), pnh_);
   image_transport::CameraSubscriber depth_sub;
+  // Two pairs pending: image_transport pairs an image with its camera_info by exact stamp and
+  // drops the oldest pending pair when the queue is full, so with one, a half pair left stamped
+  // later than everything still to come (a bag played in a loop, back to its start) would drop
+  // every new pair in its favour; the frames themselves are taken one at a time (onFrame).
   try {
-    depth_sub = it_.subscribeCamera("depth/image_rect", 1, &PerceptionServer::onFrame, this, hints);
+    depth_sub = it_.subscribeCamera("depth/image_rect", 2, &PerceptionServer::onFrame, this, hints);
   } catch (const image_transport::TransportLoadException& e) {
     throw std::runtime_error("~image_transport '" + hints.getTransport() +
                              "' cannot be loaded: " + e.what());

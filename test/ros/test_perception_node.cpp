@@ -611,6 +611,13 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
   // the other run cleared, and later frames fuse with it again.
   EXPECT_EQ(send(2, 30.0), 1u) << "a frame from the past was fused with newer views";
   EXPECT_EQ(send(3), 2u);
+  // A half pair stamped later than every frame to come (a looped bag gone back to its start,
+  // its last camera_info without the image): the next frames still pair and are perceived.
+  sensor_msgs::CameraInfo half = infoMsg(ros::Time::now() + ros::Duration(100.0));
+  half.header.frame_id = cameras[0].child_frame_id;
+  info.publish(half);
+  ros::WallDuration(0.3).sleep();
+  EXPECT_EQ(send(1), 3u) << "a half pair stamped later held back the frames after it";
   // Images whose camera_info is stamped 1 ms later never make a frame: once input_timeout_s
   // (5 s) has passed, the node says why, not that the camera is silent.
   std::string summary;
