@@ -286,7 +286,7 @@ TEST(RealScenes, MosdFileNamesGiveTheirCategory) {
 /// A labelled cloud as mOSD stores one, from a rendered view: the camera-frame points of the
 /// valid pixels, label 1 on the table and 10 (k + 1) + (v % 2) on object k (two parts each).
 void writeMosdLikeCloud(const std::string& path, const RenderResult& r, const PinholeCamera& camera,
-                        bool organized) {
+                        bool organized, double z_noise_m = 0.0) {
   Points3 points;
   std::vector<int> labels;
   for (int v = 0; v < r.depth.height; ++v)
@@ -296,6 +296,8 @@ void writeMosdLikeCloud(const std::string& path, const RenderResult& r, const Pi
       const bool valid = validDepth(d) && k != kNoSurface;
       if (!valid && !organized) continue;
       points.push_back(valid ? camera.backproject(u, v, d) : Vec3::Constant(std::nan("")));
+      // z filtered after x and y were taken: moved up and down in a checkerboard.
+      points.back().z() += (u + v) % 2 ? z_noise_m : -z_noise_m;
       labels.push_back(!valid ? 0 : k == 0 ? 1 : 10 * (k + 1) + v % 2);
     }
   writeLabelledCloudPcd(path, points, labels);
@@ -356,6 +358,30 @@ TEST(RealScenes, AnUnorganizedCloudIsPlacedOnThePixelsOfTheCamera) {
   const Vec3 centre_pixel(0.5 / 525, 0.5 / 525, 1.0);  // on pixel (320, 240)
   writeLabelledCloudPcd((dir / "twice.pcd").string(), {centre_pixel, centre_pixel}, {20, 30});
   refused((dir / "twice.pcd").string(), &camera, "falls on the pixel of point 0");
+  // An organized cloud holds its camera in its x and y: another one is refused, naming it.
+  refused(grid, &other, "they fit fx 525, fy 525, cx 319.5, cy 239.5");
+  other = camera;
+  other.fx = other.fy = 524;  // 0.6 px off at the corners
+  refused(grid, &other, "other intrinsics?");
+  EXPECT_EQ(readDepthPcd(grid, &camera).width, 640);
+  // Its z moved by 2 mm after x and y were taken (a depth filter): still its camera.
+  const std::string filtered = (dir / "filtered.pcd").string();
+  writeMosdLikeCloud(filtered, r, camera, true, 0.002);
+  EXPECT_EQ(readDepthPcd(filtered, &camera).width, 640);
+  // Its own camera: the given one when its points fit it, else the one they fit.
+  std::optional<PinholeCamera> own;
+  readDepthPcd(filtered, &camera, nullptr, &own);
+  ASSERT_TRUE(own);
+  EXPECT_EQ(own->fx, 525.0);
+  const PinholeCamera half = test::centredCamera(320, 240, 260.0);
+  writeMosdLikeCloud(
+      filtered, DepthRenderer(scene).render(half, lookAt(Vec3(0.5, -0.4, 0.6), Vec3(0, 0, 0.03))),
+      half, true);
+  readDepthPcd(filtered, &camera, nullptr, &own);
+  ASSERT_TRUE(own);
+  EXPECT_NEAR(own->fx, 260.0, 1e-3);
+  EXPECT_NEAR(own->cx, 159.5, 1e-3);
+  EXPECT_EQ(own->width, 320);
   std::filesystem::remove_all(dir);
 }
 
@@ -477,6 +503,35 @@ TEST(GraspSummary, PicksNeverPulledFreeNothingAndDoNotDiluteThePulls) {
   EXPECT_NEAR(s[0]["toppled_share"].get<double>(), 0.5, 1e-12);
   EXPECT_NE(graspSummaryTable(s).find("| m | ranked | 3 | 67 % | 33 % | 50 % ("), std::string::npos)
       << graspSummaryTable(s);
+}
+
+TEST(GraspSummary, AMethodThatPulledNothingHasNoPullFigures) {
+  // Two targets: the oracle frees both without a broken seal; the method found neither.
+  std::vector<PickResult> picks;
+  for (int t = 0; t < 2; ++t) {
+    PickResult m;
+    m.method = "m", m.chooser = "ranked", m.target = t;
+    m.found = false, m.grasped = false;
+    PickResult o;
+    o.method = "truth", o.chooser = "ranked", o.target = t;
+    o.outcome.cup_held = true, o.outcome.target_freed = true;
+    picks.push_back(m);
+    picks.push_back(o);
+  }
+  const nlohmann::json all = graspSummary(picks);
+  ASSERT_EQ(all.size(), 2u);
+  const nlohmann::json& m = all[0];
+  EXPECT_NEAR(m["freed_share"].get<double>(), 0.0, 1e-12);
+  EXPECT_NEAR(m["freed_of_oracle"].get<double>(), 0.0, 1e-12);
+  for (const char* key : {"seal_broke_share", "mean_displacement_mm", "median_displacement_mm",
+                          "freed_mean_displacement_mm", "toppled_share", "seal_broke_of_oracle"})
+    EXPECT_TRUE(m[key].is_null()) << key << " " << m[key];
+  // The oracle broke no seal: its own ratio to itself is not defined either.
+  EXPECT_TRUE(all[1]["seal_broke_of_oracle"].is_null());
+  EXPECT_NE(graspSummaryTable(all).find(
+                "| m | ranked | 2 | 0 % | 0 % | 0 % (0-0) | - | - | - | - | - | - |"),
+            std::string::npos)
+      << graspSummaryTable(all);
 }
 
 TEST(SceneFiles, SuperquadricsMeshesAndGridsRoundTrip) {

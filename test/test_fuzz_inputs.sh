@@ -131,7 +131,11 @@ open(sys.argv[2] + "/below.yaml", "w").write(text.replace(m.group(0), "translati
 # A kilometre away and more; no rotation at all.
 open(sys.argv[2] + "/far.yaml", "w").write(text.replace(m.group(0), "translation: [1e6, %g, %g]" % (y, z)))
 open(sys.argv[2] + "/zero_q.yaml", "w").write(re.sub(r"rotation_xyzw: \[[^\]]+\]", "rotation_xyzw: [0, 0, 0, 0]", text))
+# No pose at all: named with the file.
+open(sys.argv[2] + "/no_pose.yaml", "w").write(re.sub(r"T_table_camera:(\n  .*)*", "", text))
 PY
+expect "view file without T_table_camera" "no_pose.yaml: it has no T_table_camera" "$reconstruct" \
+  --depth "$good" --table-pose "$dir/no_pose.yaml" --output "$dir/o"
 expect "NaN pose" "pose is not finite" "$reconstruct" --depth "$good" --intrinsics $K --table-pose "$dir/bad_pose.yaml" --output "$dir/o"
 expect "camera below the table" "above" "$reconstruct" --depth "$good" --intrinsics $K --table-pose "$dir/below.yaml" --output "$dir/o"
 expect "camera 1e6 m away" "at most 100 m" "$reconstruct" --depth "$good" --intrinsics $K --table-pose "$dir/far.yaml" --output "$dir/o"
@@ -191,6 +195,24 @@ cp "$dir/text.pcd" "$dir/real/a.pcd"
 cp "$good" "$dir/real/b.PCD"
 expect "evaluate --real on files that are not PCDs" "is not a PCD file" "$bin/simstack_evaluate" --real "$dir/real" --output "$dir/eval.json"
 [ ! -e "$dir/eval.json" ] || { echo "FAIL evaluate --real: wrote eval.json"; fail=1; }
+want_rc=1 expect "evaluate --output naming a --real scene" "is the input file" "$bin/simstack_evaluate" \
+  --real "$dir/real" --output "$dir/real/a.pcd"
+want_rc=2 expect "evaluate --real with --noise" "needs --dataset" "$bin/simstack_evaluate" \
+  --real "$dir/real" --noise --output "$dir/eval.json"
+# An organized cloud of a 64x48 camera (fx 52.5): refused with other intrinsics, which it names;
+# without a label field, it is no real scene to score.
+mkdir "$dir/organized"
+/usr/bin/python3 - "$dir/organized/scene.pcd" <<'PY'
+import sys
+rows = ["%g %g 1" % ((u - 31.5) / 52.5, (v - 23.5) / 52.5) for v in range(48) for u in range(64)]
+with open(sys.argv[1], "w") as f:
+    f.write("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 64\nHEIGHT 48\n")
+    f.write("VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3072\nDATA ascii\n" + "\n".join(rows) + "\n")
+PY
+want_rc=1 expect "organized cloud with other intrinsics" "they fit fx 52.5" "$reconstruct" \
+  --depth "$dir/organized/scene.pcd" --intrinsics 105,105,31.5,23.5 --output "$dir/o"
+want_rc=1 expect "evaluate --real on a cloud without labels" "has no label field" \
+  "$bin/simstack_evaluate" --real "$dir/organized" --no-classical --output "$dir/eval.json"
 
 # A generator run that cannot make its piles (a 0.2 m grid) leaves no file behind.
 expect "generate with no pile possible" "no pile accepted" "$bin/simstack_generate" --scenes 2 --seed 1 --extent 0.2 --sizes 0.05:0.15 --output "$dir/g.h5"
@@ -311,6 +333,8 @@ done
 
 # A seed below 0 (CLI11 would wrap it to 2^64 - 1); intrinsics with a trailing comma.
 want_rc=105 expect "generate --seed -1" "not a seed" "$bin/simstack_generate" --scenes 1 --seed -1 --output "$dir/s.h5"
+want_rc=105 expect "generate --seed 2^64" "not a seed" "$bin/simstack_generate" --scenes 1 \
+  --seed 18446744073709551616 --output "$dir/s.h5"
 want_rc=1 expect "intrinsics with a trailing comma" "ends in a comma" "$reconstruct" --depth "$good" \
   --intrinsics $K, --output "$dir/o"
 
@@ -328,6 +352,16 @@ for option in --distance --elevation --interval; do
 done
 expect "make_bag with one frame for the table and the camera" "must differ" \
   "$bin/simstack_make_bag" --output "$dir/same.bag" --table-frame cam --camera-frame cam
+for camera in 'bad name!' '~cam' 'cam/' 'a//b' '/cam'; do
+  want_rc=105 expect "make_bag --camera '$camera'" "is not a namespace of ROS names" \
+    "$bin/simstack_make_bag" --output "$dir/same.bag" --camera "$camera"
+done
+want_rc=105 expect "make_bag --table-frame /table" "no leading '/'" \
+  "$bin/simstack_make_bag" --output "$dir/same.bag" --table-frame /table
+# A seed written with a leading zero is the same seed (CLI11 alone reads 010 as octal 8).
+if "$bin/simstack_make_bag" --output "$dir/s.bag" --views 1 --repeats 1 --seed 010 |
+    grep -q "seed 10)"; then echo "ok   make_bag --seed 010 is seed 10"; else
+  echo "FAIL make_bag --seed 010 is not seed 10"; fail=1; fi
 [ ! -e "$dir/nan.bag" ] && [ ! -e "$dir/same.bag" ] || { echo "FAIL make_bag left a bag"; fail=1; }
 # An existing device, pipe or socket is not replaced by an output file.
 mkfifo "$dir/pipe"

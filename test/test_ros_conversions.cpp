@@ -8,6 +8,7 @@
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack_ros/conversions.h"
 #include "simstack_ros/grasp_conversions.h"
+#include "simstack_ros/stamp_pairing.h"
 
 using namespace simstack;
 
@@ -372,4 +373,62 @@ TEST(Conversions, MalformedSurfaceCloudsAreRefused) {
   EXPECT_THROW(measuredSurface(object, I), std::invalid_argument);
   object.measured_points = 0;  // nothing measured: nothing read
   EXPECT_TRUE(measuredSurface(object, I).empty());
+}
+
+// Images (first) and camera_info (second) as strings naming their stamps.
+using Pairing = StampPairing<std::string, std::string>;
+
+TEST(StampPairing, PairsEqualStampsInEitherOrderAndToleratesLag) {
+  Pairing pairing(4);
+  EXPECT_FALSE(pairing.addFirst(1, "image 1"));
+  auto pair = pairing.addSecond(1, "info 1");
+  ASSERT_TRUE(pair);
+  EXPECT_EQ(pair->first, "image 1");
+  EXPECT_EQ(pair->second, "info 1");
+  EXPECT_FALSE(pairing.addSecond(2, "info 2"));
+  pair = pairing.addFirst(2, "image 2");
+  ASSERT_TRUE(pair);
+  EXPECT_EQ(pair->second, "info 2");
+  // camera_info three frames behind its images: every image still finds its own.
+  for (int t = 3; t <= 5; ++t) EXPECT_FALSE(pairing.addFirst(t, "image " + std::to_string(t)));
+  for (int t = 3; t <= 5; ++t) {
+    pair = pairing.addSecond(t, "info " + std::to_string(t));
+    ASSERT_TRUE(pair) << t;
+    EXPECT_EQ(pair->first, "image " + std::to_string(t));
+  }
+  EXPECT_EQ(pairing.forgotten(), 0);
+  EXPECT_EQ(pairing.pendingFirst() + pairing.pendingSecond(), 0u);
+}
+
+TEST(StampPairing, AHalfPairIsForgottenOnceALaterPairCompletes) {
+  Pairing pairing(4);
+  EXPECT_FALSE(pairing.addSecond(1, "info 1"));  // its image was lost
+  EXPECT_FALSE(pairing.addFirst(2, "image 2"));  // nor was its info sent yet
+  EXPECT_FALSE(pairing.addFirst(3, "image 3"));
+  ASSERT_TRUE(pairing.addSecond(3, "info 3"));
+  // info 1 and image 2 came before image 3: no partner can follow them in stamp order.
+  EXPECT_EQ(pairing.forgotten(), 2);
+  EXPECT_EQ(pairing.pendingFirst() + pairing.pendingSecond(), 0u);
+}
+
+TEST(StampPairing, HalfPairsStampedAheadDoNotHoldBackTheFramesAfterThem) {
+  // A bag played in a loop, back at its start: the end of the last pass left two camera_info
+  // and an image without partners, stamped later than every frame of the next pass.
+  // message_filters' ExactTime forgets the oldest stamp first and would keep them for ever.
+  Pairing pairing(2);
+  EXPECT_FALSE(pairing.addSecond(100, "info 100"));
+  EXPECT_FALSE(pairing.addSecond(101, "info 101"));
+  EXPECT_FALSE(pairing.addFirst(102, "image 102"));
+  auto pair = pairing.addSecond(1, "info 1");
+  EXPECT_FALSE(pair);
+  pair = pairing.addFirst(1, "image 1");
+  ASSERT_TRUE(pair) << "the first frame of the new pass was held back";
+  EXPECT_EQ(pair->second, "info 1");
+  EXPECT_EQ(pairing.pendingFirst() + pairing.pendingSecond(), 0u);
+  EXPECT_EQ(pairing.forgotten(), 3);
+  // More half pairs ahead than are kept: the oldest arrivals go first, and new ones pair.
+  for (int t = 200; t < 210; ++t) pairing.addSecond(t, "info");
+  EXPECT_EQ(pairing.pendingSecond(), 2u);
+  EXPECT_FALSE(pairing.addFirst(2, "image 2"));
+  EXPECT_TRUE(pairing.addSecond(2, "info 2"));
 }

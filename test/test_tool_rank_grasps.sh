@@ -16,6 +16,7 @@ YAML
 "$rank" --scene "$dir/stack.yaml" --target 7 --candidates 16 --pregrasp-distance 0.08 --output "$dir/out" > "$dir/log.txt"
 cat "$dir/log.txt"
 grep -q "16 grasps ranked" "$dir/log.txt"
+grep -q "no measured cloud" "$dir/log.txt"  # none beside the scene: said, not silent
 test -s "$dir/out/grasps.png"
 /usr/bin/python3 - "$dir/out/grasps.json" <<'PY'
 import json, sys
@@ -76,4 +77,22 @@ printf 'max_force: 0.5\n' > "$dir/misspelt.yaml"
 expect_error "unknown key 'max_force'" --scene "$dir/stack.yaml" --target 7 --config "$dir/misspelt.yaml"
 printf 'surface_samples: 2.5\n' > "$dir/typed.yaml"
 expect_error "typed.yaml: surface_samples" --scene "$dir/stack.yaml" --target 7 --config "$dir/typed.yaml"
+sed 's/id: 7/id: -1/' "$dir/stack.yaml" > "$dir/negative.yaml"
+expect_error "ids are 0 or more" --scene "$dir/negative.yaml" --target -1
+# Measured points labelled 8 (id 7 + 1): on the top box's upper face, they judge its seals; a
+# metre away (another scene's cloud), they are refused.
+/usr/bin/python3 - "$dir" <<'PY'
+import sys
+def cloud(path, dx):
+    pts = [(dx + 0.005 * i, 0.005 * j, 0.1805, 8) for i in range(-10, 11) for j in range(-10, 11)]
+    with open(path, "w") as f:
+        f.write("VERSION 0.7\nFIELDS x y z label\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\n")
+        f.write("WIDTH %d\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS %d\nDATA ascii\n" % (len(pts), len(pts)))
+        f.writelines("%g %g %g %d\n" % p for p in pts)
+cloud(sys.argv[1] + "/on_top.pcd", 0.0)
+cloud(sys.argv[1] + "/elsewhere.pcd", 1.0)
+PY
+"$rank" --scene "$dir/stack.yaml" --target 7 --candidates 8 --measured "$dir/on_top.pcd" > "$dir/measured.txt"
+grep -q "seals judged on 441 points of object 7" "$dir/measured.txt"
+expect_error "is it this scene's cloud" --scene "$dir/stack.yaml" --target 7 --measured "$dir/elsewhere.pcd"
 echo "tool_rank_grasps ok"

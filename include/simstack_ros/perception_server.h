@@ -33,6 +33,7 @@
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/pipeline/view_history.h"
 #include "simstack_ros/ros_params.h"
+#include "simstack_ros/stamp_pairing.h"
 
 namespace simstack {
 
@@ -53,6 +54,9 @@ class PerceptionServer {
     sensor_msgs::ImageConstPtr image;
     sensor_msgs::CameraInfoConstPtr info;
   };
+  void onImage(const sensor_msgs::ImageConstPtr& image);
+  void onInfo(const sensor_msgs::CameraInfoConstPtr& info);
+  /// An image with the camera_info of its stamp: into the mailbox.
   void onFrame(const sensor_msgs::ImageConstPtr& image,
                const sensor_msgs::CameraInfoConstPtr& info);
   void work();
@@ -109,9 +113,11 @@ class PerceptionServer {
   tf2_ros::TransformListener tf_listener_;
   tf2_ros::TransformBroadcaster tf_broadcaster_;
   image_transport::ImageTransport it_;
-  image_transport::CameraSubscriber depth_sub_;
-  ros::Subscriber mask_sub_;        ///< ~mask: the workspace mask, applied to every frame
-  ros::Subscriber info_watch_sub_;  ///< the camera_info topic alone (silenceCause)
+  image_transport::Subscriber image_sub_;  ///< depth/image_rect, through ~image_transport
+  ros::Subscriber info_sub_;               ///< the camera_info beside it
+  ros::Subscriber mask_sub_;               ///< ~mask: the workspace mask, applied to every frame
+  std::mutex pairing_mutex_;               ///< taken before mutex_ where both are
+  StampPairing<sensor_msgs::ImageConstPtr, sensor_msgs::CameraInfoConstPtr> pairing_{4};
   ros::Publisher objects_pub_, instances_pub_, markers_pub_, occupancy_pub_, ready_pub_;
   image_transport::Publisher labels_pub_;  ///< ~labels unlatched, through any transport
   ros::Publisher labels_latched_pub_;      ///< ~labels latched, raw

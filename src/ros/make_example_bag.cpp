@@ -11,9 +11,13 @@
 #include <tf2_msgs/TFMessage.h>
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <iostream>
+#include <regex>
+#include <utility>
 
 #include "cli_checks.h"
 #include "simstack/io/staged_output.h"
@@ -22,6 +26,36 @@
 #include "simstack_ros/conversions.h"
 
 using namespace simstack;
+
+namespace {
+
+/// Why the camera namespace and frames cannot be used ("" when they can): a namespace of
+/// names a replay can subscribe to (the topics are /<camera>/depth/...: letters, digits and
+/// underscores, each name starting with a letter), frame ids tf2 takes (no leading '/', no
+/// blank), the table and camera frames apart.
+std::string badNames(const std::string& camera_ns, const std::string& table_frame,
+                     const std::string& camera_frame) {
+  if (camera_ns.empty() || table_frame.empty() || camera_frame.empty() ||
+      table_frame == camera_frame)
+    return "--camera, --table-frame and --camera-frame must not be empty, and the table and "
+           "camera frames must differ";
+  static const std::regex kNamespace("[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*");
+  if (!std::regex_match(camera_ns, kNamespace))
+    return "--camera '" + camera_ns +
+           "' is not a namespace of ROS names (letters, digits and '_', each name starting "
+           "with a letter, joined by '/', no leading '/')";
+  for (const auto& [option, frame] : {std::make_pair("--table-frame", &table_frame),
+                                      std::make_pair("--camera-frame", &camera_frame)}) {
+    if (frame->front() == '/')
+      return std::string(option) + " '" + *frame + "': a tf2 frame id has no leading '/'";
+    if (std::any_of(frame->begin(), frame->end(),
+                    [](unsigned char c) { return std::isspace(c) || std::iscntrl(c); }))
+      return std::string(option) + " '" + *frame + "': a frame id holds no blank";
+  }
+  return "";
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   std::string output, camera_ns = "camera", table_frame = "table",
@@ -36,7 +70,7 @@ int main(int argc, char** argv) {
   app.add_option("--output", output, "bag file")->required()->check(WritablePath);
   app.add_option("--seed", seed, "pile seed (simstack_generate's scene seeds)")
       ->capture_default_str()
-      ->check(SeedNumber);
+      ->transform(SeedNumber);
   app.add_option("--views", views, "viewpoints on the ring")
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
@@ -61,10 +95,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--noise,!--no-noise", noise, "Kinect-like sensor noise (on by default)");
   CLI11_PARSE(app, argc, argv);
-  if (camera_ns.empty() || table_frame.empty() || camera_frame.empty() ||
-      table_frame == camera_frame) {
-    std::cerr << "simstack_make_bag: error: --camera, --table-frame and --camera-frame must not "
-                 "be empty, and the table and camera frames must differ\n";
+  const std::string bad = badNames(camera_ns, table_frame, camera_frame);
+  if (!bad.empty()) {
+    std::cerr << "simstack_make_bag: error: " << bad << "\n";
     return 105;  // as CLI11's refusals of an option's value
   }
   try {

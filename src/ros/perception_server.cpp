@@ -1,6 +1,7 @@
 #include "simstack_ros/perception_server.h"
 
 #include <geometry_msgs/TransformStamped.h>
+#include <image_transport/camera_common.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <simstack/ObjectArray.h>
@@ -149,29 +150,24 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   // The hints read ~image_transport (image_transport's convention, `_image_transport:=...`)
   // from the node's own namespace: a nodelet's "~" would be its manager's.
   const image_transport::TransportHints hints(node_.image_transport, ros::TransportHints(), pnh_);
-  image_transport::CameraSubscriber depth_sub;
-  // Two pairs pending: image_transport pairs an image with its camera_info by exact stamp and
-  // drops the oldest pending pair when the queue is full, so with one, a half pair left stamped
-  // later than everything still to come (a bag played in a loop, back to its start) would drop
-  // every new pair in its favour; the frames themselves are taken one at a time (onFrame).
+  // The image and its camera_info subscribed apart and paired here by exact stamp
+  // (StampPairing: a half pair left stamped later than every frame to come, as a looped bag
+  // leaves, must not hold back the frames after it).
+  image_transport::Subscriber image_sub;
   try {
-    depth_sub = it_.subscribeCamera("depth/image_rect", 2, &PerceptionServer::onFrame, this, hints);
+    image_sub = it_.subscribe("depth/image_rect", 2, &PerceptionServer::onImage, this, hints);
   } catch (const image_transport::TransportLoadException& e) {
     throw std::runtime_error("~image_transport '" + hints.getTransport() +
                              "' cannot be loaded: " + e.what());
   }
-  // camera_info watched alone, to say why no frame comes when it flows without its images.
-  ros::Subscriber info_watch_sub = nh_.subscribe<sensor_msgs::CameraInfo>(
-      depth_sub.getInfoTopic(), 1, [this](const sensor_msgs::CameraInfoConstPtr& info) {
-        std::lock_guard<std::mutex> lock(mutex_);
-        last_info_arrival_ = ros::SteadyTime::now();
-        last_info_stamp_ = info->header.stamp;
-        ++infos_since_frame_;
-      });
+  // Beside the image's base name (a compressed transport's subscriber names its own topic).
+  ros::Subscriber info_sub =
+      nh_.subscribe(image_transport::getCameraInfoTopic(nh_.resolveName("depth/image_rect")), 2,
+                    &PerceptionServer::onInfo, this);
   {
     std::lock_guard<std::mutex> lock(mutex_);  // the diagnostics timer already reads them
-    depth_sub_ = depth_sub;
-    info_watch_sub_ = info_watch_sub;
+    image_sub_ = image_sub;
+    info_sub_ = info_sub;
   }
   // A latched publisher's mask arrives once; a bad one is reported and the previous one kept.
   const std::string mask_topic = pnh_.resolveName("mask");
@@ -193,7 +189,7 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
       "on %s",
       perception_->config().model_path.c_str(), perception_->config().samples,
       node_.estimate_table ? "estimated and broadcast as" : "from tf frame",
-      node_.table_frame.c_str(), node_.outputFrame().c_str(), depth_sub_.getTopic().c_str());
+      node_.table_frame.c_str(), node_.outputFrame().c_str(), image_sub_.getTopic().c_str());
   // Ready once it listens: a launch file or bag player waiting for it loses no frame.
   std_msgs::Bool ready;
   ready.data = true;
@@ -221,13 +217,37 @@ PerceptionServer::~PerceptionServer() {
   // reads the subscriber's topic).
   silence_timer_.stop();
   diagnostics_timer_.stop();
-  depth_sub_.shutdown();
+  image_sub_.shutdown();
+  info_sub_.shutdown();
   mask_sub_.shutdown();
-  info_watch_sub_.shutdown();
   reset_srv_.shutdown();
   save_srv_.shutdown();
   hough_reconfigure_.reset();
   reconfigure_.reset();
+}
+
+void PerceptionServer::onImage(const sensor_msgs::ImageConstPtr& image) {
+  std::optional<std::pair<sensor_msgs::ImageConstPtr, sensor_msgs::CameraInfoConstPtr>> pair;
+  {
+    std::lock_guard<std::mutex> lock(pairing_mutex_);
+    pair = pairing_.addFirst(image->header.stamp.toNSec(), image);
+  }
+  if (pair) onFrame(pair->first, pair->second);
+}
+
+void PerceptionServer::onInfo(const sensor_msgs::CameraInfoConstPtr& info) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);  // watched alone too, for silenceCause
+    last_info_arrival_ = ros::SteadyTime::now();
+    last_info_stamp_ = info->header.stamp;
+    ++infos_since_frame_;
+  }
+  std::optional<std::pair<sensor_msgs::ImageConstPtr, sensor_msgs::CameraInfoConstPtr>> pair;
+  {
+    std::lock_guard<std::mutex> lock(pairing_mutex_);
+    pair = pairing_.addSecond(info->header.stamp.toNSec(), info);
+  }
+  if (pair) onFrame(pair->first, pair->second);
 }
 
 void PerceptionServer::onFrame(const sensor_msgs::ImageConstPtr& image,
@@ -278,7 +298,7 @@ void PerceptionServer::skip(const Frame& frame, const std::string& why) {
   }
   if (warn)
     ROS_WARN("simstack perception: frame %u of %s skipped: %s", frame.image->header.seq,
-             depth_sub_.getTopic().c_str(), why.c_str());
+             image_sub_.getTopic().c_str(), why.c_str());
 }
 
 bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* why) {
@@ -495,7 +515,7 @@ void PerceptionServer::process(const Frame& frame) {
       ROS_WARN(
           "simstack perception: frame stamped %.3f s is %.3f s older than the last one on "
           "%s (a bag restarted?): the accumulated views are cleared",
-          frame.image->header.stamp.toSec(), arrival.back_s, depth_sub_.getTopic().c_str());
+          frame.image->header.stamp.toSec(), arrival.back_s, image_sub_.getTopic().c_str());
     if (arrival.went_back) tracker_.reset();  // a restarted bag: its objects are new
     if (reset_requested_) {
       views_.clear();
@@ -654,8 +674,8 @@ std::string PerceptionServer::silenceCause(const ros::SteadyTime& now) const {
   // flows when two or more came since, the last within input_timeout_s.
   const bool info_flows =
       infos_since_frame_ >= 2 && (now - last_info_arrival_).toSec() < node_.input_timeout_s;
-  const uint32_t image_publishers = depth_sub_.getNumPublishers();
-  const uint32_t info_publishers = info_watch_sub_.getNumPublishers();
+  const uint32_t image_publishers = image_sub_.getNumPublishers();
+  const uint32_t info_publishers = info_sub_.getNumPublishers();
   std::ostringstream out;
   out << std::fixed << std::setprecision(3);
   if (info_flows && image_publishers > 0)
@@ -665,7 +685,7 @@ std::string PerceptionServer::silenceCause(const ros::SteadyTime& now) const {
   else if (info_flows)
     out << "camera_info arrives but nothing publishes the depth image";
   else if (image_publishers > 0 && info_publishers == 0)
-    out << "nothing publishes " << depth_sub_.getInfoTopic() << " while the depth image has "
+    out << "nothing publishes " << info_sub_.getTopic() << " while the depth image has "
         << image_publishers << " publisher(s): each image is taken with its camera_info";
   else if (image_publishers > 0)
     out << "both topics have publishers but nothing comes (a paused or ended bag, a stopped "
@@ -694,7 +714,7 @@ void PerceptionServer::onSilenceCheck() {
       last_silence_warning_ = ros::SteadyTime();
     }
   }
-  const std::string topics = depth_sub_.getTopic() + " and " + depth_sub_.getInfoTopic();
+  const std::string topics = image_sub_.getTopic() + " and " + info_sub_.getTopic();
   if (warn)
     ROS_WARN("simstack perception: no depth frame on %s for %.0f s: %s", topics.c_str(), silent,
              cause.c_str());
@@ -702,6 +722,11 @@ void PerceptionServer::onSilenceCheck() {
 }
 
 void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  long unpaired = 0;
+  {
+    std::lock_guard<std::mutex> lock(pairing_mutex_);
+    unpaired = pairing_.forgotten();
+  }
   std::lock_guard<std::mutex> lock(mutex_);
   if (!model_error_.empty()) {
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "model refused: " + model_error_);
@@ -719,7 +744,7 @@ void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   else if (silent > 0.0)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
                    "no depth frame for " + std::to_string(static_cast<int>(silent)) + " s on " +
-                       depth_sub_.getTopic() + ": " + silenceCause(now));
+                       image_sub_.getTopic() + ": " + silenceCause(now));
   else if (failing_)
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "frames skipped: " + last_error_);
   else if (received_ == 0)
@@ -729,12 +754,13 @@ void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   status.add("ready (model loaded and warmed up, listening)", std::string("true"));
   status.add("warm-up objects found (a 12 x 8 x 6 cm box)", warm_up_objects_);
   status.add("warm-up seconds", warm_up_s_);
-  status.add("depth topic", depth_sub_.getTopic());
+  status.add("depth topic", image_sub_.getTopic());
   status.add("seconds since the last frame", secondsWithoutFrame(now));
   status.add("frames received", received_);
   status.add("frames processed", processed_);
   status.add("frames dropped (newer frame came first)", dropped_);
   status.add("frames skipped (bad input)", skipped_);
+  status.add("images or camera_info without a partner of their stamp (forgotten)", unpaired);
   status.add("frames processed per second (since the last report)", rate);
   status.add("last error", last_error_);
   status.add("table ms", last_timings_.table_ms);

@@ -45,7 +45,7 @@ PerceptionOptions::PerceptionOptions(CLI::App& app, Which which) {
           ->check(CLI::IsMember({1, 2, 4, 8}));
   if (which.seed)
     seed_opt_ = app.add_option("--seed", seed_, "latent code seed (default: the config's)")
-                    ->check(SeedNumber);
+                    ->transform(SeedNumber);
   threads_opt_ = app.add_option("--threads", threads_, "threads (default: the config's)")
                      ->check(FinitePositive);
   if (which.joint) app.add_flag("--no-joint", no_joint_, "skip the joint refinement (eqs. 7-9)");

@@ -135,7 +135,7 @@ void addViewOptions(CLI::App& app, EvaluationOptions* o, std::string* intrinsics
       ->check(FiniteNonNegative);
   app.add_option("--seed", o->seed, "viewpoint and Chamfer-sample seed")
       ->capture_default_str()
-      ->check(SeedNumber);
+      ->transform(SeedNumber);
   CLI::Option* noise_flag =
       app.add_flag("--noise", o->noise, "sensor noise in the rendered views (--sensor's)");
   addSensorOption(app, &o->sensor, "with --noise, ")->needs(noise_flag);
@@ -203,16 +203,21 @@ int main(int argc, char** argv) {
     std::cerr << "simstack_evaluate: --refine needs --multi-view 2 or more\n";
     return 2;
   }
-  if (!real_dir.empty() && (o.views_per_estimate > 1 || !intrinsics.empty())) {
-    std::cerr << "simstack_evaluate: error: "
-              << (o.views_per_estimate > 1 ? "--multi-view" : "--intrinsics")
-              << " needs --dataset (a real scene is one view of its own camera)\n";
-    return 2;
-  }
+  // The rendered views' options mean nothing to a real scene, one view of its own camera.
+  for (const char* name :
+       {"--multi-view", "--intrinsics", "--views", "--width", "--height", "--noise", "--sensor",
+        "--overhead", "--ycb", "--chamfer-points", "--seen-pixels", "--seed"})
+    if (!real_dir.empty() && app.get_option(name)->count() > 0) {
+      std::cerr << "simstack_evaluate: error: " << name
+                << " needs --dataset (a real scene is one view of its own camera)\n";
+      return 2;
+    }
   try {
     if (!intrinsics.empty()) o.camera = parseIntrinsics(intrinsics, o.width, o.height);
     std::vector<std::string> inputs = perception.inputFiles();
     inputs.push_back(dataset);
+    if (!real_dir.empty())  // the labelled scenes are inputs too
+      for (const std::string& f : labelledCloudFiles(real_dir)) inputs.push_back(f);
     ResultFiles files(output, summary, inputs);
     const std::vector<PerceptionConfig> configs = perception.configs();
     if (!real_dir.empty()) {

@@ -194,7 +194,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 16));
   app.add_option("--seed", o.seed, "viewpoints, noise and the random chooser")
       ->capture_default_str()
-      ->check(SeedNumber);
+      ->transform(SeedNumber);
   CLI::Option* no_noise_flag =
       app.add_flag("--no-noise", no_noise, "clean rendered views instead of --sensor's noise");
   addSensorOption(app, &o.sensor, "")->excludes(no_noise_flag);

@@ -103,7 +103,7 @@ int main(int argc, char** argv) {
   app.add_option("--scenes", o.scenes, "number of piles")->required()->check(FinitePositive);
   app.add_option("--seed", o.seed, "random seed (scene i uses a hash of seed and i)")
       ->required()
-      ->check(SeedNumber);
+      ->transform(SeedNumber);
   app.add_option("--resolution", o.resolution, "grid resolution R (R^3 voxels)")
       ->check(CLI::Range(4, 256))
       ->capture_default_str();
@@ -141,8 +141,8 @@ int main(int argc, char** argv) {
   app.add_option("--extent", o.extent_m, "scene grid side in metres (at most 10)")
       ->check(FinitePositive & CLI::Range(0.0, 10.0))
       ->capture_default_str();
-  app.add_option("--truncation-vox", o.truncation_vox, "TSDF truncation in voxels (at most 64)")
-      ->check(FinitePositive & CLI::Range(0.0, 64.0))
+  app.add_option("--truncation-vox", o.truncation_vox, "TSDF truncation in voxels (0.5-64)")
+      ->check(FinitePositive & CLI::Range(0.5, 64.0))
       ->capture_default_str();
   app.add_option(
          "--max-tilt", o.max_tilt_deg,

@@ -20,18 +20,47 @@ namespace fs = std::filesystem;
 
 namespace {
 
+/// Measured points further than this outside the target's superquadric are not its.
+constexpr double kNearShapeM = 0.02;
+/// At least this share of the cloud's target points must be near the shape.
+constexpr double kNearShare = 0.25;
+
+/// How far `p_table` lies outside `sq`, along the ray from its centre (metres; 0 inside: a
+/// cup's inner wall lies inside the superquadric that closes it).
+double outsideBy(const SuperquadricShape& sq, const Vec3& p_table) {
+  const Vec3 p = sq.T_table_object.inverse() * p_table;
+  if (p.norm() < 1e-9) return 0.0;
+  return std::max(0.0, p.norm() - sq.surfacePointAlong(p).norm());
+}
+
 /// The depth points measured on the target: those labelled target_id + 1 in `cloud_path`, or
 /// in the reconstruction's instances.pcd beside the scene file when none is given (none when
-/// there is no such file).
-Points3 measuredTarget(const std::string& scene_path, std::string cloud_path, int target_id) {
+/// there is no such file: said). A cloud whose target points lie mostly away from the target's
+/// shape is another scene's, or labelled otherwise: refused.
+Points3 measuredTarget(const std::string& scene_path, std::string cloud_path, int target_id,
+                       const SuperquadricShape& target) {
   if (cloud_path.empty()) {
     const fs::path beside = fs::path(scene_path).parent_path() / "instances.pcd";
-    if (!fs::exists(beside)) return {};
+    if (!fs::exists(beside)) {
+      std::cout << "no measured cloud (no --measured, no " << beside.string()
+                << "): seals judged on the superquadric alone\n";
+      return {};
+    }
     cloud_path = beside.string();
   }
   Points3 out = readLabelledPoints(cloud_path, static_cast<uint32_t>(target_id + 1));
+  const long near = std::count_if(
+      out.begin(), out.end(), [&](const Vec3& p) { return outsideBy(target, p) <= kNearShapeM; });
+  if (!out.empty() && near < kNearShare * static_cast<double>(out.size()))
+    throw std::invalid_argument(
+        std::to_string(near) + " of the " + std::to_string(out.size()) + " points labelled " +
+        std::to_string(target_id + 1) + " in " + cloud_path + " lie inside or within " +
+        std::to_string(static_cast<int>(kNearShapeM * 100)) + " cm of object " +
+        std::to_string(target_id) + "'s superquadric in " + scene_path +
+        ": is it this scene's cloud, labelled id + 1?");
   std::cout << "seals judged on " << out.size() << " points of object " << target_id
-            << " measured in " << cloud_path << "\n";
+            << " measured in " << cloud_path
+            << (out.empty() ? " (none: seals judged on the superquadric alone)" : "") << "\n";
   return out;
 }
 
@@ -176,11 +205,11 @@ int main(int argc, char** argv) {
     std::optional<StagedDirectory> staged;  // before the work: a bad --output fails at once
     if (!output.empty()) staged.emplace(output, "simstack_rank_grasps");
     const Points3 measured =
-        superquadric_seal ? Points3() : measuredTarget(scene_path, measured_path, target_id);
+        superquadric_seal ? Points3()
+                          : measuredTarget(scene_path, measured_path, target_id, scene[target]);
     const auto start = std::chrono::steady_clock::now();
-    const GraspRanking ranking =
-        rankGrasps(prepared.scenes, target, prepared.cameras, prepared.config, {}, measured,
-                   measured.empty() ? std::nullopt : camera);
+    const GraspRanking ranking = rankGrasps(prepared.scenes, target, prepared.cameras,
+                                            prepared.config, {}, measured, camera);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     std::cout << "object " << target_id << ": " << ranking.candidates.visible << " of "

@@ -113,8 +113,9 @@ int main(int argc, char** argv) {
                  "fx,fy,cx,cy in pixels; may be left out when every --depth has its --table-pose "
                  "view file, which holds them");
   const CLI::Option* scale_option =
-      app.add_option("--depth-scale", depth_scale, "metres per unit of a 16-bit PNG")
-          ->capture_default_str()
+      app.add_option("--depth-scale", depth_scale,
+                     "metres per unit of a 16-bit PNG (default: the --table-pose view file's "
+                     "depth_scale_m, else 0.001)")
           ->check(FinitePositive);
   app.add_option("--table-pose", pose_paths,
                  "YAML with T_table_camera (a view file of simstack_generate --views), one per "

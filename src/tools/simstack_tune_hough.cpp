@@ -156,7 +156,7 @@ int main(int argc, char** argv) {
       ->check(FinitePositive);
   app.add_option("--scenes", scenes, "only the first N scenes of each dataset (0 = all)")
       ->check(FiniteNonNegative);
-  app.add_option("--seed", seed, "viewpoint seed")->capture_default_str()->check(SeedNumber);
+  app.add_option("--seed", seed, "viewpoint seed")->capture_default_str()->transform(SeedNumber);
   app.add_flag("--noise", noise, "Kinect-like sensor noise in the rendered views");
   addSweepOptions(app, sweep);
   app.add_option("--top", top, "rows of the table")->capture_default_str()->check(FinitePositive);

@@ -611,11 +611,20 @@ TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {
   // the other run cleared, and later frames fuse with it again.
   EXPECT_EQ(send(2, 30.0), 1u) << "a frame from the past was fused with newer views";
   EXPECT_EQ(send(3), 2u);
-  // A half pair stamped later than every frame to come (a looped bag gone back to its start,
-  // its last camera_info without the image): the next frames still pair and are perceived.
-  sensor_msgs::CameraInfo half = infoMsg(ros::Time::now() + ros::Duration(100.0));
-  half.header.frame_id = cameras[0].child_frame_id;
-  info.publish(half);
+  // Half pairs stamped later than every frame to come (a looped bag gone back to its start,
+  // its last camera_info and an image without partners): the next frames still pair and are
+  // perceived.
+  for (int k = 0; k < 3; ++k) {
+    const ros::Time ahead = ros::Time::now() + ros::Duration(100.0 + k);
+    sensor_msgs::CameraInfo half_info = infoMsg(ahead);
+    sensor_msgs::Image half_image = imageMsg(renderer.render(camera_, poses[0]).depth, ahead);
+    half_info.header.frame_id = half_image.header.frame_id = cameras[0].child_frame_id;
+    if (k < 2)
+      info.publish(half_info);
+    else
+      image.publish(half_image);
+    ros::WallDuration(0.1).sleep();
+  }
   ros::WallDuration(0.3).sleep();
   EXPECT_EQ(send(1), 3u) << "a half pair stamped later held back the frames after it";
   // Images whose camera_info is stamped 1 ms later never make a frame: once input_timeout_s

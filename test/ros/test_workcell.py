@@ -185,6 +185,11 @@ class Workcell(unittest.TestCase):
         self.assertTrue(result.success)
         self.assertGreater(len(result.grasps), 0)
         self.assertEqual(result.grasps[0].tool_pose.header.frame_id, "base_link")
+        # Feedback and result come on topics of their own, in no order between them: the last
+        # pull's feedback may arrive just after the result.
+        deadline = time.time() + 5
+        while (not feedback or feedback[-1].pulls_done < result.pulls) and time.time() < deadline:
+            time.sleep(0.01)
         done = [f.pulls_done for f in feedback]
         self.assertEqual(done, sorted(done))
         self.assertEqual(done[-1], result.pulls)

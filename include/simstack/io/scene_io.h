@@ -56,10 +56,17 @@ void checkPcdHeader(const std::string& path);
 /// points dropped) is organized with `camera`: each point goes to the pixel it projects to,
 /// which must lie within 0.05 px of a pixel centre of the camera's image, one point a pixel
 /// (std::runtime_error naming the file and the first point that does not; also without a
-/// camera). With `labels`, also the label of each pixel's point (pcl::PointXYZL; 0 where
-/// none).
+/// camera). An organized cloud given a camera is checked against the camera its points fit
+/// (least squares of their pixels): rays placed over half a pixel apart at the image's corners
+/// are refused, naming the intrinsics they fit. With `own_camera`, an organized cloud's camera
+/// is written there instead: `camera` (at the cloud's size) when its points fit it, else the
+/// camera fitted to them, refused when their median distance from their pixel under it is over
+/// half a pixel (std::nullopt for an unorganized cloud). With
+/// `labels`, also the label of each pixel's point (pcl::PointXYZL; 0 where none); a file
+/// without a label field is refused.
 DepthImage readDepthPcd(const std::string& path, const PinholeCamera* camera = nullptr,
-                        Image<uint32_t>* labels = nullptr);
+                        Image<uint32_t>* labels = nullptr,
+                        std::optional<PinholeCamera>* own_camera = nullptr);
 
 /// Grids of one prediction, all on `grid`: datasets tsdf, occupancy_probability, labels,
 /// partial_tsdf, partial_weight ([z][y][x]), with attributes origin_table, voxel_size_m,

@@ -24,6 +24,9 @@ constexpr int kMaxSamples = 64;
 struct PerceptionConfig {
   std::string model_path;       ///< a model written by simstack_train (required)
   std::string model_card_path;  ///< the card samples and hough came from ("" = defaults)
+  /// Where the settings were read (a file, or the node's parameters): named, with the card,
+  /// when validatePerceptionConfig refuses a value ("" = built in code).
+  std::string source;
   int samples = 3;              ///< S latent samples per frame (model card)
   bool zero_code_first = true;  ///< hypothesis 0 is the mean scene (z = 0)
   uint64_t seed = 0;            ///< latent codes; the same seed gives the same hypotheses
@@ -79,6 +82,17 @@ const std::vector<std::string>& perceptionConfigSections();
 /// The pipeline's own fields, at the top level of a perception config (model, samples, ...).
 const std::vector<std::string>& perceptionConfigFields();
 
+struct RefineOptions;  // simstack/model/cvae_inference.h
+/// The code fitting's options (CvaeInference::refine) of a perception config.
+RefineOptions refineOptions(const PerceptionConfig& config);
+
+/// Throws std::invalid_argument naming the first field out of its range, and the config's
+/// source and model card. `latent`: the model has a latent code; without one every sample is
+/// the same scene, so the sample counts only need to be in range (ScenePerception takes them
+/// as 1). ScenePerception checks every config it is given; a tool that lays options over a
+/// loaded config checks the result.
+void validatePerceptionConfig(const PerceptionConfig& config, bool latent = false);
+
 /// Reads a perception config: the pipeline's own fields at the top level (model, symmetries,
 /// ...) and the sections `hough:`, `segments:`, `surface_instances:`, `fitting:`, `table:` and
 /// `workspace:` (absent fields keep their defaults; unknown fields are errors, so that a typo is
@@ -86,7 +100,8 @@ const std::vector<std::string>& perceptionConfigFields();
 /// path is taken relative to `base_dir` when given. Then the model's card is read
 /// (applyModelCard), and last the file's own `samples` and `hough:` section, which override the
 /// card's when present (normally they are absent). Throws std::runtime_error naming the file
-/// and the field.
+/// and the field; values out of range are left to validatePerceptionConfig (`source` names the
+/// file).
 PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& base_dir = "",
                                     const std::string& model_path = "");
 

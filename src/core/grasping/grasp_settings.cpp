@@ -45,15 +45,23 @@ void GraspSettings::validate() const {
     if (!(v > 0.0) || !std::isfinite(v))
       throw std::invalid_argument(std::string(name) + " must be a positive number");
   };
+  // The ranges simstack_rank_grasps gives the options that override these fields.
+  const auto within = [](double v, double low, double high, const char* name) {
+    if (!(v >= low && v <= high))
+      throw std::invalid_argument(std::string(name) + " must lie in [" + number(low) + ", " +
+                                  number(high) + "], not " + number(v));
+  };
   policy.validate();
+  within(policy.max_candidates, 1, 1024, "max_candidates");
+  within(ranking.pull.max_force_n, 0.1, 1000.0, "max_force_n");
+  within(ranking.candidates.cup_radius_m, 0.002, 0.1, "cup_radius_m");
+  within(ranking.threads, 0, 1024, "threads");
   positive(ranking.pull.topple_rad, "topple_deg");  // said as the file gives it, in degrees
-  positive(ranking.candidates.cup_radius_m, "cup_radius_m");
   positive(ranking.candidates.seal_tolerance_m, "seal_tolerance_m");
   positive(ranking.candidates.tool_length_m, "tool_length_m");
   positive(ranking.match_distance_m, "match_distance_m");
   if (ranking.candidates.surface_samples < 100 || ranking.candidates.surface_samples > 100000)
     throw std::invalid_argument("surface_samples must lie in [100, 100000]");
-  if (ranking.threads < 0) throw std::invalid_argument("threads must be >= 0 (0: all cores)");
   ranking.pull.validate();
   ranking.perturbation.validate();
 }

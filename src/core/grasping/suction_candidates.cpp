@@ -317,7 +317,8 @@ CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int 
                                const std::optional<Vec3>& measured_from) {
   validate(scene, target, config);
   // A camera at or below the table plane measured no pile (a pose left at the identity).
-  const bool camera_below = measured_from && measured_from->allFinite() && measured_from->z() > 0.0;
+  const bool measuring_camera =
+      measured_from && measured_from->allFinite() && measured_from->z() > 0.0;
   const SuperquadricShape& sq = scene[target];
   RenderConfig render;
   render.table_half_size_m = 10.0;
@@ -352,7 +353,7 @@ CandidateSet suctionCandidates(const std::vector<SuperquadricShape>& scene, int 
       if (m.seen && !m.seals) continue;  // the camera saw an edge, a bend or a gap there
       // Nothing measured under the cup, and the camera looked past the estimate's surface
       // there (a cup's mouth, a bowl's inside).
-      if (!m.seen && camera_below &&
+      if (!m.seen && measuring_camera &&
           seenThrough(measured, c.contact_table, c.approach_table, *measured_from,
                       config.cup_radius_m)) {
         ++out.seen_through;

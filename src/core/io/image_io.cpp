@@ -278,6 +278,9 @@ ViewDescription readViewYaml(const std::string& path) {
                              ": it holds no map of width, height, intrinsics and T_table_camera");
   requireKnownKeys(n, {"width", "height", "intrinsics", "depth_scale_m", "T_table_camera"},
                    "the view description", path);
+  for (const char* key : {"width", "height", "intrinsics", "T_table_camera"})
+    if (!n[key])
+      throw std::runtime_error("cannot read view description " + path + ": it has no " + key);
   if (n["intrinsics"].IsMap())
     requireKnownKeys(n["intrinsics"], {"fx", "fy", "cx", "cy"}, "intrinsics", path);
   if (n["T_table_camera"].IsMap())

@@ -8,12 +8,15 @@
 #include <pcl/point_types.h>
 #include <yaml-cpp/yaml.h>
 
+#include <Eigen/Cholesky>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <limits>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -123,6 +126,9 @@ std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path, st
         throw std::runtime_error(path + ": object " + std::to_string(out.size()) +
                                  " has an id that is not an integer");
       }
+      if (ids->back() < 0)
+        throw std::runtime_error(path + ": object " + std::to_string(out.size() - 1) + " has id " +
+                                 std::to_string(ids->back()) + ": ids are 0 or more");
       if (!seen_ids.insert(ids->back()).second)
         throw std::runtime_error(path + ": id " + std::to_string(ids->back()) + " is given twice");
     }
@@ -338,12 +344,130 @@ long pixelOf(const PinholeCamera& camera, const Vec3& p) {
   return static_cast<long>(vr) * camera.width + static_cast<long>(ur);
 }
 
+/// How far (pixels) two cameras of an organized cloud may place a ray apart at the image's
+/// corners, and a point may lie (median) from its own pixel under the camera fitted to them.
+constexpr double kOrganizedTolerance = 0.5;
+
+/// The pinhole camera an organized cloud's points fit: least squares of u = fx x/z + cx and
+/// v = fy y/z + cy over its finite points (u, v their pixel), none when no point is finite or
+/// the fit has no positive focal lengths; and the median distance (pixels) of the points from
+/// their own pixel under it.
+struct OrganizedFit {
+  std::optional<PinholeCamera> fitted;
+  long points = 0;
+  double median_residual_px = 0.0;
+};
+
+template <class Point>
+OrganizedFit fitOrganized(const pcl::PointCloud<Point>& cloud) {
+  Eigen::Matrix2d Au = Eigen::Matrix2d::Zero(), Av = Eigen::Matrix2d::Zero();
+  Eigen::Vector2d bu = Eigen::Vector2d::Zero(), bv = Eigen::Vector2d::Zero();
+  OrganizedFit out;
+  const auto finite = [&](size_t i) {
+    const Vec3 p(cloud[i].x, cloud[i].y, cloud[i].z);
+    return p.allFinite() && p.z() > 0;
+  };
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    if (!finite(i)) continue;
+    const double u = static_cast<double>(i % cloud.width), v = static_cast<double>(i / cloud.width);
+    const Eigen::Vector2d a(cloud[i].x / cloud[i].z, 1), b(cloud[i].y / cloud[i].z, 1);
+    Au += a * a.transpose(), Av += b * b.transpose();
+    bu += a * u, bv += b * v;
+    ++out.points;
+  }
+  const Eigen::Vector2d fu = Au.ldlt().solve(bu), fv = Av.ldlt().solve(bv);
+  if (out.points == 0 || !fu.allFinite() || !fv.allFinite() || !(fu(0) > 0) || !(fv(0) > 0))
+    return out;
+  PinholeCamera c;
+  c.width = static_cast<int>(cloud.width), c.height = static_cast<int>(cloud.height);
+  c.fx = fu(0), c.cx = fu(1), c.fy = fv(0), c.cy = fv(1);
+  out.fitted = c;
+  std::vector<double> residuals;
+  residuals.reserve(out.points);
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    if (!finite(i)) continue;
+    double pu = 0, pv = 0;
+    c.project(Vec3(cloud[i].x, cloud[i].y, cloud[i].z), &pu, &pv);
+    residuals.push_back(std::max(std::abs(pu - static_cast<double>(i % cloud.width)),
+                                 std::abs(pv - static_cast<double>(i / cloud.width))));
+  }
+  std::nth_element(residuals.begin(), residuals.begin() + residuals.size() / 2, residuals.end());
+  out.median_residual_px = residuals[residuals.size() / 2];
+  return out;
+}
+
+/// The largest distance (pixels) at which `given` places the rays of `fitted`'s image corners.
+double cornerOffsetPx(const PinholeCamera& fitted, const PinholeCamera& given) {
+  double most = 0.0;
+  for (const double u : {0.0, fitted.width - 1.0})
+    for (const double v : {0.0, fitted.height - 1.0}) {
+      const Vec3 ray = fitted.ray(u, v);
+      most = std::max({most, std::abs(given.fx * ray.x() + given.cx - u),
+                       std::abs(given.fy * ray.y() + given.cy - v)});
+    }
+  return most;
+}
+
+std::string intrinsicsText(const PinholeCamera& c) {
+  std::ostringstream out;
+  out << "fx " << c.fx << ", fy " << c.fy << ", cx " << c.cx << ", cy " << c.cy;
+  return out.str();
+}
+
+/// An organized cloud holds x and y beside z: `camera` is refused (std::runtime_error naming the
+/// file and the intrinsics the points fit) when it places the rays of the camera fitted to them
+/// over kOrganizedTolerance from their pixels, so that wrong intrinsics do not silently scale
+/// every object. A cloud with no finite point cannot say.
+template <class Point>
+void checkOrganizedIntrinsics(const std::string& path, const pcl::PointCloud<Point>& cloud,
+                              const PinholeCamera& camera) {
+  const OrganizedFit fit = fitOrganized(cloud);
+  if (fit.points == 0) return;
+  if (!fit.fitted)
+    throw std::runtime_error(path +
+                             ": its points fit no pinhole camera looking along +z with x "
+                             "right and y down (another frame?)");
+  if (cornerOffsetPx(*fit.fitted, camera) <= kOrganizedTolerance) return;
+  std::ostringstream out;
+  out << path << ": its points do not fit the camera " << intrinsicsText(camera) << " (rays "
+      << cornerOffsetPx(*fit.fitted, camera) << " px off at the image's corners); they fit "
+      << intrinsicsText(*fit.fitted) << ": other intrinsics?";
+  throw std::runtime_error(out.str());
+}
+
+/// The camera of an organized cloud: `camera` (at the cloud's size) when its points fit it,
+/// else the camera fitted to them; refused when they fit no pinhole camera.
+template <class Point>
+std::optional<PinholeCamera> organizedCamera(const std::string& path,
+                                             const pcl::PointCloud<Point>& cloud,
+                                             const PinholeCamera* camera) {
+  const OrganizedFit fit = fitOrganized(cloud);
+  std::optional<PinholeCamera> sized;
+  if (camera) {
+    sized = *camera;
+    sized->width = static_cast<int>(cloud.width), sized->height = static_cast<int>(cloud.height);
+  }
+  if (fit.points == 0) return sized;
+  if (!fit.fitted || fit.median_residual_px > kOrganizedTolerance)
+    throw std::runtime_error(path +
+                             ": its points fit no pinhole camera looking along +z with x "
+                             "right and y down (another frame, or not a depth image?)");
+  if (sized && cornerOffsetPx(*fit.fitted, *sized) <= kOrganizedTolerance) return sized;
+  return fit.fitted;
+}
+
 /// The depth image of `cloud` and, for each of its pixels, the cloud point there (-1 none).
 template <class Point>
 DepthImage depthOf(const std::string& path, const pcl::PointCloud<Point>& cloud,
-                   const PinholeCamera* camera, std::vector<long>* point_of_pixel) {
+                   const PinholeCamera* camera, std::vector<long>* point_of_pixel,
+                   std::optional<PinholeCamera>* own_camera) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   if (cloud.isOrganized() && cloud.width >= 2 && cloud.height >= 2) {
+    if (own_camera) {
+      *own_camera = organizedCamera(path, cloud, camera);
+    } else if (camera) {
+      checkOrganizedIntrinsics(path, cloud, *camera);
+    }
     DepthImage depth(cloud.width, cloud.height, nan);
     point_of_pixel->resize(cloud.size());
     for (size_t i = 0; i < cloud.size(); ++i) {
@@ -385,18 +509,31 @@ DepthImage depthOf(const std::string& path, const pcl::PointCloud<Point>& cloud,
 }  // namespace
 
 DepthImage readDepthPcd(const std::string& path, const PinholeCamera* camera,
-                        Image<uint32_t>* labels) {
+                        Image<uint32_t>* labels, std::optional<PinholeCamera>* own_camera) {
   checkPcdHeader(path);
   std::vector<long> point_of_pixel;
+  if (own_camera) own_camera->reset();
   if (!labels) {
     pcl::PointCloud<pcl::PointXYZ> cloud;
     if (pcl::io::loadPCDFile(path, cloud) != 0)
       throw std::runtime_error("cannot read cloud " + path);
-    return depthOf(path, cloud, camera, &point_of_pixel);
+    return depthOf(path, cloud, camera, &point_of_pixel, own_camera);
   }
+  // PCL fills a field the file lacks with zeros and only prints a warning: every pixel would
+  // read as unlabelled.
+  pcl::PCLPointCloud2 header;
+  Eigen::Vector4f origin;
+  Eigen::Quaternionf orientation;
+  int version = 0, type = 0;
+  unsigned int offset = 0;
+  if (pcl::PCDReader().readHeader(path, header, origin, orientation, version, type, offset) != 0)
+    throw std::runtime_error("cannot read the header of cloud " + path);
+  if (std::none_of(header.fields.begin(), header.fields.end(),
+                   [](const pcl::PCLPointField& f) { return f.name == "label"; }))
+    throw std::runtime_error(path + " has no label field: its objects are not labelled");
   pcl::PointCloud<pcl::PointXYZL> cloud;
   if (pcl::io::loadPCDFile(path, cloud) != 0) throw std::runtime_error("cannot read cloud " + path);
-  DepthImage depth = depthOf(path, cloud, camera, &point_of_pixel);
+  DepthImage depth = depthOf(path, cloud, camera, &point_of_pixel, own_camera);
   *labels = Image<uint32_t>(depth.width, depth.height, 0);
   for (size_t i = 0; i < point_of_pixel.size(); ++i)
     if (point_of_pixel[i] >= 0) labels->pixels[i] = cloud[point_of_pixel[i]].label;

@@ -10,6 +10,7 @@
 #include <type_traits>
 
 #include "simstack/io/yaml_file.h"
+#include "simstack/model/cvae_inference.h"
 
 namespace simstack {
 namespace {
@@ -309,10 +310,73 @@ PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& p
       root, "table", &c.table, [](auto& x, auto&& f) { tableFields(x, f); }, path);
   readSection(
       root, "workspace", &c.workspace, [](auto& x, auto&& f) { workspaceFields(x, f); }, path);
+  c.source = path;
   return finishConfig(c, root, path, base_dir, model_path);
 }
 
 }  // namespace
+
+RefineOptions refineOptions(const PerceptionConfig& c) {
+  return {c.refine_iterations, c.refine_learning_rate, c.symmetries,      c.refine_prior_weight,
+          c.refine_starts,     c.refine_evidence,      c.refine_on_passes};
+}
+
+namespace {
+
+void checkRanges(const PerceptionConfig& config, bool latent) {
+  if (config.samples < 1 || config.samples > kMaxSamples)
+    throw std::invalid_argument("samples must lie in [1, " + std::to_string(kMaxSamples) +
+                                "], not " + std::to_string(config.samples));
+  if (!(config.min_pile_height_m >= 0.0 && config.min_pile_height_m <= 1.0))
+    throw std::invalid_argument("min_pile_height_m must lie in [0, 1] m, not " +
+                                std::to_string(config.min_pile_height_m));
+  if (!(config.min_depth_m > 0.0 && config.min_depth_m < config.max_depth_m &&
+        config.max_depth_m <= 100.0))
+    throw std::invalid_argument(
+        "the sensor range min_depth_m .. max_depth_m must satisfy 0 < min "
+        "< max <= 100 m, not " +
+        std::to_string(config.min_depth_m) + " .. " + std::to_string(config.max_depth_m));
+  const int most_decomposed = latent ? config.samples : kMaxSamples;
+  if (config.decompose_samples < 0 || config.decompose_samples > most_decomposed)
+    throw std::invalid_argument("decompose_samples must lie in [0, " +
+                                std::to_string(most_decomposed) + (latent ? " (samples)" : "") +
+                                "], not " + std::to_string(config.decompose_samples));
+  // Each instance's points are sampled, fitted and published: a million would hold a frame for
+  // minutes and could exhaust the memory.
+  if (config.points_per_instance < 10 || config.points_per_instance > 100000)
+    throw std::invalid_argument("points_per_instance must lie in [10, 100000], not " +
+                                std::to_string(config.points_per_instance));
+  if (config.min_instance_points < 0)
+    throw std::invalid_argument("min_instance_points must be >= 0, not " +
+                                std::to_string(config.min_instance_points));
+  if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
+  validateSymmetries(config.symmetries);
+  validateRefineOptions(refineOptions(config));
+  if (config.condition_views != "all" && config.condition_views != "first")
+    throw std::invalid_argument("condition_views must be 'all' or 'first', not '" +
+                                config.condition_views + "'");
+  config.fit.validate();
+  config.workspace.validate();
+  config.segments.validate();
+  config.surface_instances.validate();
+  config.hough.validate();
+  config.table.validate();
+}
+
+}  // namespace
+
+void validatePerceptionConfig(const PerceptionConfig& config, bool latent) {
+  try {
+    checkRanges(config, latent);
+  } catch (const std::invalid_argument& e) {
+    if (config.source.empty()) throw;
+    throw std::invalid_argument(config.source +
+                                (config.model_card_path.empty()
+                                     ? std::string()
+                                     : " (with the model card " + config.model_card_path + ")") +
+                                ": " + e.what());
+  }
+}
 
 const std::vector<std::string>& perceptionConfigSections() {
   static const std::vector<std::string> sections{"hough",   "segments", "surface_instances",

@@ -263,7 +263,6 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
     joinOccludedPieces(points, measured_views.front().camera, measured_views.front().T_table_camera,
                        std::max(1, config.segments.pixel_stride), config.surface_instances, &seg);
   }
-  h->labels = seg.labels;
   // An instance whose centre lies outside the workspace is not reported (its voxels are free),
   // unless the camera saw it inside: the depth points left are the workspace's, and an object
   // the workspace's edge cuts is completed past it (then reported, truncated).
@@ -281,8 +280,13 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
     for (int k = 0; k < seg.size(); ++k)
       outside[k] = outside[k] && seen_inside[k] < std::max(1, config.min_instance_points);
   }
-  for (int& label : h->labels.data)
-    if (label >= 0 && outside[label]) label = -1;
+  // The hypothesis's labels: the segmentation's, less the instances left outside.
+  const auto keepInsideLabels = [&] {
+    h->labels = seg.labels;
+    for (int& label : h->labels.data)
+      if (label >= 0 && outside[label]) label = -1;
+  };
+  keepInsideLabels();
   if (timings) timings->instances_ms += msSince(t);
 
   t = Clock::now();
@@ -305,11 +309,8 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   std::vector<std::optional<SuperquadricShape>> fits =
       fitEachInstance(points, fit, config.min_instance_points);
   if (joinOverlappingFits(config, fit, &seg, &parts, &points, &measured_counts, &outside, &fits) >
-      0) {
-    h->labels = seg.labels;
-    for (int& label : h->labels.data)
-      if (label >= 0 && outside[label]) label = -1;
-  }
+      0)
+    keepInsideLabels();
   if (config.joint_refinement) refineInstances(points, fit, &fits);
   h->instances.clear();
   std::vector<int> reported(parts.size(), -1);  // segmentation label -> index in instances
@@ -489,54 +490,6 @@ struct ScenePerception::Impl {
 
 namespace {
 
-/// The code fitting's options (CvaeInference::refine) of a perception config.
-RefineOptions refineOptions(const PerceptionConfig& c) {
-  return {c.refine_iterations, c.refine_learning_rate, c.symmetries,      c.refine_prior_weight,
-          c.refine_starts,     c.refine_evidence,      c.refine_on_passes};
-}
-
-/// `latent`: the model has a latent code. Without one every sample is the same scene, so the
-/// sample counts are taken as 1 (forModel) and only need to be in range.
-void validate(const PerceptionConfig& config, bool latent) {
-  if (config.samples < 1 || config.samples > kMaxSamples)
-    throw std::invalid_argument("samples must lie in [1, " + std::to_string(kMaxSamples) +
-                                "], not " + std::to_string(config.samples));
-  if (!(config.min_pile_height_m >= 0.0 && config.min_pile_height_m <= 1.0))
-    throw std::invalid_argument("min_pile_height_m must lie in [0, 1] m, not " +
-                                std::to_string(config.min_pile_height_m));
-  if (!(config.min_depth_m > 0.0 && config.min_depth_m < config.max_depth_m &&
-        config.max_depth_m <= 100.0))
-    throw std::invalid_argument(
-        "the sensor range min_depth_m .. max_depth_m must satisfy 0 < min "
-        "< max <= 100 m, not " +
-        std::to_string(config.min_depth_m) + " .. " + std::to_string(config.max_depth_m));
-  const int most_decomposed = latent ? config.samples : kMaxSamples;
-  if (config.decompose_samples < 0 || config.decompose_samples > most_decomposed)
-    throw std::invalid_argument("decompose_samples must lie in [0, " +
-                                std::to_string(most_decomposed) + (latent ? " (samples)" : "") +
-                                "], not " + std::to_string(config.decompose_samples));
-  // Each instance's points are sampled, fitted and published: a million would hold a frame for
-  // minutes and could exhaust the memory.
-  if (config.points_per_instance < 10 || config.points_per_instance > 100000)
-    throw std::invalid_argument("points_per_instance must lie in [10, 100000], not " +
-                                std::to_string(config.points_per_instance));
-  if (config.min_instance_points < 0)
-    throw std::invalid_argument("min_instance_points must be >= 0, not " +
-                                std::to_string(config.min_instance_points));
-  if (config.threads < 1) throw std::invalid_argument("threads must be >= 1");
-  validateSymmetries(config.symmetries);
-  validateRefineOptions(refineOptions(config));
-  if (config.condition_views != "all" && config.condition_views != "first")
-    throw std::invalid_argument("condition_views must be 'all' or 'first', not '" +
-                                config.condition_views + "'");
-  config.fit.validate();
-  config.workspace.validate();
-  config.segments.validate();
-  config.surface_instances.validate();
-  config.hough.validate();
-  config.table.validate();
-}
-
 /// More threads than cores only make the OpenMP regions and torch slower (1000 threads never
 /// finish a frame).
 int cappedThreads(int threads) {
@@ -580,9 +533,10 @@ PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
 }  // namespace
 
 ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Impl) {
-  validate(config, false);  // the ranges before the slow model load, then what the model needs
+  validatePerceptionConfig(
+      config, false);  // the ranges before the slow model load, then what the model needs
   impl_->model = std::make_unique<CvaeInference>(config.model_path, cappedThreads(config.threads));
-  validate(config, impl_->model->config().hasLatentCode());
+  validatePerceptionConfig(config, impl_->model->config().hasLatentCode());
   impl_->config = forModel(config, impl_->model->config());
   impl_->model_path = impl_->config.model_path;
   impl_->threads = impl_->config.threads;
@@ -594,7 +548,10 @@ PerceptionConfig ScenePerception::settingsInEffect(const PerceptionConfig& confi
                                 config.model_path);
   if (cappedThreads(config.threads) != impl_->threads)
     throw std::invalid_argument("updateSettings keeps the thread count");
-  validate(config, impl_->model->config().hasLatentCode());
+  // A change is judged as itself, not as the file the first settings came from.
+  PerceptionConfig change = config;
+  change.source.clear();
+  validatePerceptionConfig(change, impl_->model->config().hasLatentCode());
   return forModel(config, impl_->model->config());
 }
 

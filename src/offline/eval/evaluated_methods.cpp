@@ -182,6 +182,18 @@ std::vector<std::unique_ptr<EvaluatedMethod>> multiViewMethods(
       }
     }
   }
+  const bool refined = std::any_of(methods.begin(), methods.end(), [](const auto& m) {
+    const std::string& n = m->name();
+    return n.size() > 4 && n.compare(n.size() - 4, 4, "_opt") == 0;
+  });
+  if (refine_iterations > 0 && !refined) {
+    std::string names;
+    for (const std::string& b : bases) names += (names.empty() ? "" : ", ") + b;
+    throw std::invalid_argument("refine_iterations " + std::to_string(refine_iterations) +
+                                " fits a C-VAE's latent codes to the views, and no model given "
+                                "has one (" +
+                                names + "): give a C-VAE's model");
+  }
   methods.push_back(std::make_unique<FusionMethod>(extent_m, resolution, truncation_m));
   return methods;
 }

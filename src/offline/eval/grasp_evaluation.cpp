@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <numeric>
 #include <random>
 #include <sstream>
 #include <stdexcept>
@@ -97,8 +98,7 @@ void pickOnEstimate(const std::vector<SuperquadricShape>& truth, const PullSimul
           ? estimate.measured_surfaces[k]
           : none;
   if (k >= 0)
-    ranking = rankGrasps(scenes, k, {}, options.ranking, {}, measured,
-                         measured.empty() ? std::nullopt : estimate.measured_from);
+    ranking = rankGrasps(scenes, k, {}, options.ranking, {}, measured, estimate.measured_from);
   const EstimateError error =
       k >= 0 ? estimateError(estimate.superquadrics[k], truth[target]) : EstimateError();
   std::vector<std::string> choosers = {"ranked", "random", "top-most"};
@@ -328,25 +328,37 @@ nlohmann::json graspSummary(const std::vector<PickResult>& picks) {
       if (p.outcome.target_freed) d_freed.push_back(d.back());
       toppled += p.outcome.toppled > 0, broke += p.outcome.failed();
     }
-    double mean = 0, mean_freed = 0;
-    for (double x : d) mean += x / d.size();
-    for (double x : d_freed) mean_freed += x / d_freed.size();
-    const auto share = [](double a, double b) { return b > 0 ? a / b : 0.0; };
+    // A figure over nothing (no pull, an oracle that freed or broke nothing) is null, not 0.
+    const nlohmann::json undefined;
+    const auto share = [&](double a, double b) -> nlohmann::json {
+      return b > 0 ? nlohmann::json(a / b) : undefined;
+    };
+    const auto mean = [&](const std::vector<double>& v) -> nlohmann::json {
+      return v.empty() ? undefined
+                       : nlohmann::json(std::accumulate(v.begin(), v.end(), 0.0) / v.size());
+    };
+    double oracle_freed = 0;
+    for (const auto& [x, y] : paired) oracle_freed += y;
     const OracleFraction of_oracle = freedOfOracle(paired);
-    out.push_back({{"method", method},
-                   {"chooser", chooser},
-                   {"picks", n},
-                   {"pulled_share", share(pulled, n)},
-                   {"freed_share", share(freed, n)},
-                   {"seal_broke_share", share(broke, pulled)},
-                   {"mean_displacement_mm", mean},
-                   {"median_displacement_mm", median(d)},
-                   {"freed_mean_displacement_mm", mean_freed},
-                   {"toppled_share", share(toppled, pulled)},
-                   {"target_found_share", share(found, n)},
-                   {"freed_of_oracle", of_oracle.ratio},
-                   {"freed_of_oracle_ci95", {of_oracle.low, of_oracle.high}},
-                   {"seal_broke_of_oracle", share(share(broke, pulled), oracle_broke_share)}});
+    const bool against_oracle = oracle_freed > 0;
+    out.push_back(
+        {{"method", method},
+         {"chooser", chooser},
+         {"picks", n},
+         {"pulled_share", share(pulled, n)},
+         {"freed_share", share(freed, n)},
+         {"seal_broke_share", share(broke, pulled)},
+         {"mean_displacement_mm", mean(d)},
+         {"median_displacement_mm", d.empty() ? undefined : nlohmann::json(median(d))},
+         {"freed_mean_displacement_mm", mean(d_freed)},
+         {"toppled_share", share(toppled, pulled)},
+         {"target_found_share", share(found, n)},
+         {"freed_of_oracle", against_oracle ? nlohmann::json(of_oracle.ratio) : undefined},
+         {"freed_of_oracle_ci95",
+          against_oracle ? nlohmann::json({of_oracle.low, of_oracle.high}) : undefined},
+         {"seal_broke_of_oracle", pulled > 0 && oracle_broke_share > 0
+                                      ? nlohmann::json(broke / pulled / oracle_broke_share)
+                                      : undefined}});
   }
   return out;
 }
@@ -357,21 +369,28 @@ std::string graspSummaryTable(const nlohmann::json& summary) {
          "CI) | of the pulls: seal broke | of the oracle's | others moved, mean (mm) | median "
          "(mm) | mean when freed (mm) | toppled something |\n"
          "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
-  char line[320];
+  // "-" where a figure is over nothing (null in the JSON).
+  const auto cell = [](const nlohmann::json& v, double scale, const char* format) {
+    if (v.is_null()) return std::string("-");
+    char text[64];
+    std::snprintf(text, sizeof text, format, scale * v.get<double>());
+    return std::string(text);
+  };
   for (const auto& r : summary) {
-    const auto ci = r["freed_of_oracle_ci95"];
-    std::snprintf(
-        line, sizeof line,
-        "| %s | %s | %d | %.0f %% | %.0f %% | %.0f %% (%.0f-%.0f) | %.0f %% | %.2fx | "
-        "%.1f | %.1f | %.1f | %.0f %% |\n",
-        r["method"].get<std::string>().c_str(), r["chooser"].get<std::string>().c_str(),
-        static_cast<int>(r["picks"].get<double>()), 100 * r["pulled_share"].get<double>(),
-        100 * r["freed_share"].get<double>(), 100 * r["freed_of_oracle"].get<double>(),
-        100 * ci[0].get<double>(), 100 * ci[1].get<double>(),
-        100 * r["seal_broke_share"].get<double>(), r["seal_broke_of_oracle"].get<double>(),
-        r["mean_displacement_mm"].get<double>(), r["median_displacement_mm"].get<double>(),
-        r["freed_mean_displacement_mm"].get<double>(), 100 * r["toppled_share"].get<double>());
-    out << line;
+    const auto& ci = r["freed_of_oracle_ci95"];
+    out << "| " << r["method"].get<std::string>() << " | " << r["chooser"].get<std::string>()
+        << " | " << static_cast<int>(r["picks"].get<double>()) << " | "
+        << cell(r["pulled_share"], 100, "%.0f %%") << " | "
+        << cell(r["freed_share"], 100, "%.0f %%") << " | "
+        << cell(r["freed_of_oracle"], 100, "%.0f %%")
+        << (ci.is_null() ? std::string()
+                         : " (" + cell(ci[0], 100, "%.0f") + "-" + cell(ci[1], 100, "%.0f") + ")")
+        << " | " << cell(r["seal_broke_share"], 100, "%.0f %%") << " | "
+        << cell(r["seal_broke_of_oracle"], 1, "%.2fx") << " | "
+        << cell(r["mean_displacement_mm"], 1, "%.1f") << " | "
+        << cell(r["median_displacement_mm"], 1, "%.1f") << " | "
+        << cell(r["freed_mean_displacement_mm"], 1, "%.1f") << " | "
+        << cell(r["toppled_share"], 100, "%.0f %%") << " |\n";
   }
   return out.str();
 }

@@ -103,11 +103,13 @@ LabelledView readLabelledView(const std::string& path) {
   LabelledView out;
   out.name = std::filesystem::path(path).filename().string();
   out.category = mosdCategory(out.name);
-  const PinholeCamera mosd;  // the Kinect intrinsics mOSD was recorded with
+  // The Kinect intrinsics mOSD was recorded with: an unorganized cloud is placed on their
+  // pixels; an organized one whose points do not fit them gives its own.
+  const PinholeCamera mosd;
   Image<uint32_t> labels;
-  out.view.depth = readDepthPcd(path, &mosd, &labels);
-  out.view.camera.width = out.view.depth.width;  // an organized cloud gives its size
-  out.view.camera.height = out.view.depth.height;
+  std::optional<PinholeCamera> own;
+  out.view.depth = readDepthPcd(path, &mosd, &labels, &own);
+  out.view.camera = own ? *own : mosd;
   out.objects = Image<int>(out.view.depth.width, out.view.depth.height, -1);
   for (size_t i = 0; i < labels.pixels.size(); ++i)
     if (validDepth(out.view.depth.pixels[i]) && labels.pixels[i] >= 20)

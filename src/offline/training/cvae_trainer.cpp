@@ -731,6 +731,28 @@ std::string CvaeTrainer::Impl::resumeFrom(const std::string& metadata, const fs:
   return parent;
 }
 
+namespace {
+
+/// Weights a non-finite gradient reached, or batch-norm statistics that overflowed, are not
+/// written over the last good checkpoint (the loader refuses either): std::runtime_error.
+void requireFinite(Cvae& model, int64_t step) {
+  for (const auto& p : model->named_parameters())
+    if (!torch::isfinite(p.value()).all().item<bool>())
+      throw std::runtime_error("step " + std::to_string(step) + ": the network's weight " +
+                               p.key() +
+                               " is not finite (a gradient overflowed; a learning rate too high "
+                               "for the run?); the last checkpoint stays as it was");
+  for (const auto& b : model->named_buffers())
+    if (b.value().is_floating_point() && !torch::isfinite(b.value()).all().item<bool>())
+      throw std::runtime_error("step " + std::to_string(step) + ": the network's statistic " +
+                               b.key() +
+                               " is not finite (activations overflowed; a damaged --init-from "
+                               "model or a learning rate too high?); the last checkpoint stays "
+                               "as it was");
+}
+
+}  // namespace
+
 TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& progress) {
   const TrainConfig& tc = impl_->config;
   const CvaeConfig& mc = impl_->model_config;
@@ -762,13 +784,7 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   // checkpoint or from this one, never from parts of both. state.yaml repeats the step for
   // people and scripts.
   auto save_checkpoint = [&](int64_t step) {
-    // Weights a non-finite gradient reached are not written over the last good checkpoint.
-    for (const torch::Tensor& p : model->parameters())
-      if (!torch::isfinite(p).all().item<bool>())
-        throw std::runtime_error("step " + std::to_string(step) +
-                                 ": the network's weights are not finite (a gradient overflowed; "
-                                 "a learning rate too high for the run?); the last checkpoint "
-                                 "stays as it was");
+    requireFinite(model, step);
     log.flush();
     saveCvae(checkpoint.string(), model, checkpointMetadata(*impl_->data, init_from),
              [&](torch::serialize::OutputArchive& archive) {
