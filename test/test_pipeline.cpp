@@ -715,6 +715,19 @@ TEST(ScenePerception, BadInputGetsClearErrors) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("sensor range"), std::string::npos) << e.what();
   }
+  // Depth at under 1 % of the pixels (a covered camera), or an image of a few pixels: no scene,
+  // so that a node keeps the last one rather than reporting the pile gone.
+  DepthImage covered = nan_depth;
+  for (int u = 0; u < 30; ++u) covered.at(u, 0) = 1.0f;
+  try {
+    perception.perceive(DepthView{covered, camera, p.T_table_camera});
+    ADD_FAILURE() << "a view with 30 depths was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("lost sight"), std::string::npos) << e.what();
+  }
+  PinholeCamera tiny = test::centredCamera(2, 2, 1.0);
+  EXPECT_THROW(perception.perceive(DepthView{DepthImage(2, 2, 1.0f), tiny, p.T_table_camera}),
+               std::invalid_argument);
   // Millimetres in a metre image: their span given, and what it looks like.
   DepthImage millimetres = p.view.depth;
   for (float& d : millimetres.pixels) d *= 1000.0f;

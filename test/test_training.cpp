@@ -466,6 +466,21 @@ TEST(CvaeTrainer, AResumeThatWouldRewindOrMixARunIsRefused) {
                 .find("base_channels: 4 (checkpoint) against "
                       "base_channels: 8 (config)"),
             std::string::npos);
+  // Other settings than the run was started with: named, the run left as it was.
+  {
+    TrainConfig faster = scratch.tc;
+    faster.steps = 6;
+    faster.learning_rate *= 10;
+    faster.batch_size += 1;
+    std::string why = "(not refused)";
+    try {
+      CvaeTrainer(scratch.data, tiny(), faster, run, "test").run(true);
+    } catch (const std::runtime_error& e) {
+      why = e.what();
+    }
+    EXPECT_NE(why.find("was trained with other settings (batch_size"), std::string::npos) << why;
+    EXPECT_NE(why.find("learning_rate"), std::string::npos) << why;
+  }
   // The same file written again: with other object counts, then with a fourth scene.
   EXPECT_NE(refused(tinyDataset(3, 2), tiny(), 6)
                 .find("was trained on a dataset of seed 5, 3 scenes of 3-4 objects"),
@@ -557,6 +572,9 @@ TEST(CvaeTrainer, AResumedWarmStartKeepsItsParentsHoughSetting) {
   EXPECT_EQ(
       loadYamlFile(child + "/model.yaml", "card")["perception"]["hough"]["refinement"].as<int>(),
       5);
+  // The card's training section names the parent, as an uninterrupted run's does.
+  EXPECT_EQ(loadYamlFile(child + "/model.yaml", "card")["training"]["init_from"].as<std::string>(),
+            parent + "/model.pt");
 }
 
 // A dataset that goes bad between two runs: the resumed run stops on its first training batch

@@ -419,7 +419,7 @@ bool PerceptionServer::waitForTransform(const std::string& target, const std::st
         out << "within " << timeout << " s";
       else
         out << "(the node stopped while waiting)";
-      out << ": " << error;
+      out << ": " << (error.empty() ? "tf holds nothing between them at that time" : error);
       if (waited && target == node_.table_frame && !node_.estimate_table)
         out << " (the table frame comes from tf: a bag needs its /tf_static or /tf recorded, or "
                "set ~estimate_table to find the table in the depth)";
@@ -451,7 +451,14 @@ void PerceptionServer::startLiveSettings() {
     PerceptionConfig c = requested_;
     pairLiveSettings(settings, c, kApply);
     c.decompose_samples = std::min(decompose_samples_, c.samples);
-    if (request(c)) requested_occupancy_min_ = settings.occupancy_min;
+    // dynamic_reconfigure's range clamp lets NaN through: an occupancy cloud of nothing.
+    if (!(settings.occupancy_min > 0.0 && settings.occupancy_min <= 1.0))
+      ROS_ERROR(
+          "simstack perception: live setting refused, the previous ones stay: "
+          "occupancy_min must lie in (0, 1], not %g",
+          settings.occupancy_min);
+    else if (request(c))
+      requested_occupancy_min_ = settings.occupancy_min;
     settings = liveSettings(requested_, requested_occupancy_min_);
   });
   hough_reconfigure_ = std::make_unique<dynamic_reconfigure::Server<HoughSettingsConfig>>(

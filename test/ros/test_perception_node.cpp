@@ -511,6 +511,16 @@ TEST_F(PerceptionNodeTest, LiveSettingsChangeTheNextFrame) {
   ASSERT_TRUE(nh_.getParam("/camera/perception/hough/bandwidth_m", set_bandwidth));
   EXPECT_DOUBLE_EQ(set_bandwidth, 0.04);
   EXPECT_TRUE(sendDepth(depth, 60.0));  // a frame perceived with it
+  // dynamic_reconfigure's range clamp lets NaN through: refused, the value in effect shown.
+  dynamic_reconfigure::Reconfigure occupancy;
+  dynamic_reconfigure::DoubleParameter occupancy_min;
+  occupancy_min.name = "occupancy_min";
+  occupancy_min.value = std::nan("");
+  occupancy.request.config.doubles.push_back(occupancy_min);
+  ASSERT_TRUE(ros::service::call("/camera/perception/set_parameters", occupancy));
+  double set_occupancy = 0.0;
+  ASSERT_TRUE(nh_.getParam("/camera/perception/occupancy_min", set_occupancy));
+  EXPECT_TRUE(set_occupancy > 0.0 && set_occupancy <= 1.0) << set_occupancy;
   // A count of passes the pipeline refuses leaves the one in effect, shown back at once.
   ASSERT_TRUE(set("symmetries", 3));
   ASSERT_TRUE(nh_.getParam("/camera/perception/symmetries", symmetries));

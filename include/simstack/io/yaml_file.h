@@ -7,6 +7,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <array>
 #include <cmath>
 #include <set>
 #include <stdexcept>
@@ -27,17 +28,39 @@ YAML::Node parseYamlText(const std::string& text, const std::string& what,
 void requireKnownKeys(const YAML::Node& map, const std::set<std::string>& known,
                       const std::string& where, const std::string& path);
 
+/// What a value of type T is, for errors ("a number", "a list of 3 numbers").
+template <typename T>
+std::string yamlTypeName() {
+  if constexpr (std::is_same_v<T, bool>) return "true or false";
+  if constexpr (std::is_integral_v<T>) return "a whole number";
+  if constexpr (std::is_floating_point_v<T>) return "a number";
+  if constexpr (std::is_same_v<T, std::string>) return "a string";
+  if constexpr (std::is_same_v<T, std::array<double, 3>>) return "a list of 3 numbers";
+  return "a value of its kind";
+}
+
 /// `node` read as T, `field` ("hough.radius_m") naming it in the error: std::invalid_argument
-/// "<field>: <yaml-cpp's reason>", or "<field>: <text> is not a finite number" for a number at
-/// infinity or NaN (no scalar field means either; lists such as the workspace box's corners may
-/// hold .inf and are not checked here).
+/// "<field>: <the value> (line L, column C) is not <what T is>", or "<field>: <text> is not a
+/// finite number" for a number at infinity or NaN (no scalar field means either; lists such as the
+/// workspace box's corners may hold .inf and are not checked here).
 template <typename T>
 T readYamlValue(const YAML::Node& node, const std::string& field) {
   T value{};
   try {
     value = node.as<T>();
-  } catch (const YAML::Exception& e) {
-    throw std::invalid_argument(field + ": " + e.what());
+  } catch (const YAML::Exception&) {
+    YAML::Emitter flow;
+    flow << YAML::Flow << node;
+    std::string text = flow.c_str();
+    if (text.size() > 60) text = text.substr(0, 57) + "...";
+    const bool quoted = node.IsScalar() && node.Tag() == "!";  // a string, as quoted
+    const YAML::Mark at = node.Mark();
+    throw std::invalid_argument(field + ": " + (quoted ? "the string " : "") + text +
+                                (at.is_null()
+                                     ? std::string()
+                                     : " (line " + std::to_string(at.line + 1) + ", column " +
+                                           std::to_string(at.column + 1) + ")") +
+                                " is not " + yamlTypeName<T>());
   }
   if constexpr (std::is_floating_point_v<T>)
     if (!std::isfinite(value))

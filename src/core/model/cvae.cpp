@@ -2,8 +2,12 @@
 
 #include <ATen/ops/mkldnn_convolution.h>
 
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <map>
+#include <sstream>
 #include <stdexcept>
 #include <tuple>
 #include <utility>
@@ -638,11 +642,28 @@ void saveCvae(const std::string& path, Cvae& model, const std::string& metadata,
   archive.write("simstack_format", torch::IValue(kFormatVersion));
   archive.write("simstack_config", torch::IValue(model->config().toYaml()));
   archive.write("simstack_metadata", torch::IValue(metadata));
-  const std::string tmp = path + ".tmp";
+  // Serialized in memory, then written and checked here: libtorch's file writer aborts the
+  // process when a write fails (a full disk) instead of throwing.
+  std::ostringstream bytes(std::ios::binary);
   try {
-    archive.save_to(tmp);
+    archive.save_to(bytes);
   } catch (const c10::Error& e) {
     throw std::runtime_error("cannot write model " + path + ": " + e.what_without_backtrace());
+  }
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream file(tmp, std::ios::binary | std::ios::trunc);
+    const std::string data = bytes.str();
+    file.write(data.data(), static_cast<std::streamsize>(data.size()));
+    file.flush();
+    if (!file) {
+      const std::string why = std::strerror(errno);
+      file.close();
+      std::error_code ec;
+      std::filesystem::remove(tmp, ec);
+      throw std::runtime_error("cannot write model " + path + " (" + std::to_string(data.size()) +
+                               " bytes): " + why + "; the file there stays as it was");
+    }
   }
   std::filesystem::rename(tmp, path);  // a crash never leaves half a file behind
 }

@@ -56,7 +56,18 @@ void checkPose(const Transform& T, size_t index) {
         std::to_string(std::asin(std::min(1.0, R.col(2).z())) * 180 / M_PI) + " degrees up)");
 }
 
+/// The smallest depth image perceived: a pile seen by fewer pixels is no scene.
+constexpr int kMinImageSide = 16;
+/// The least share of the first view's pixels with a depth: a camera that sees less has lost
+/// sight of the scene (covered, too close, dazzled) and would report the pile gone.
+constexpr double kMinValidShare = 0.01;
+
 void checkView(const DepthView& v, size_t index) {
+  if (v.depth.width < kMinImageSide || v.depth.height < kMinImageSide)
+    throw std::invalid_argument("view " + std::to_string(index) + ": the depth image is " +
+                                std::to_string(v.depth.width) + "x" +
+                                std::to_string(v.depth.height) + ": at least " +
+                                std::to_string(kMinImageSide) + " pixels each way");
   v.camera.validate();
   if (v.T_table_camera) checkPose(*v.T_table_camera, index);
   if (v.depth.width != v.camera.width || v.depth.height != v.camera.height ||
@@ -79,6 +90,14 @@ std::vector<DepthView> withinSensorRange(const std::vector<DepthView>& views,
                                          const PerceptionConfig& c) {
   std::vector<DepthView> out = views;
   for (size_t i = 0; i < out.size(); ++i) {
+    const size_t pixels = views[i].depth.pixels.size();
+    const size_t given = std::count_if(views[i].depth.pixels.begin(), views[i].depth.pixels.end(),
+                                       [](float d) { return d > 0.0f && std::isfinite(d); });
+    if (i == 0 && given > 0 && given < kMinValidShare * pixels)
+      throw std::invalid_argument(
+          "view 0 holds " + std::to_string(given) + " depths in its " + std::to_string(pixels) +
+          " pixels (under " + std::to_string(static_cast<int>(100 * kMinValidShare)) +
+          " %): a camera that lost sight of the scene (covered, too close, dazzled?)");
     applyMask(&out[i]);
     size_t valid = 0;
     float lo = std::numeric_limits<float>::infinity(), hi = 0.0f;  // of the depths given

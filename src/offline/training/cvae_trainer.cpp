@@ -15,6 +15,7 @@
 #include <fstream>
 #include <mutex>
 #include <numeric>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -359,14 +360,59 @@ std::string datasetTag(const DatasetMix& data) {
 /// and the step in one archive, with metadata naming the dataset and the warm start.
 constexpr int kCheckpointFormatVersion = 1;
 
-/// A checkpoint's metadata: its format, its dataset tag and the model the run was warm-started
-/// from.
-std::string checkpointMetadata(const DatasetMix& data, const std::string& init_from) {
+/// The mesh catalogues of the data, one short line ("superquadrics", or the number of mesh
+/// shapes and an FNV-1a hash of their names, per file): two datasets of one seed and size may
+/// still hold other shapes.
+std::string datasetMeshes(const DatasetMix& data) {
+  std::string out;
+  for (int k = 0; k < data.files(); ++k) {
+    const std::vector<std::string>& names = data.file(k).info().mesh_names;
+    std::uint64_t hash = 1469598103934665603ull;
+    for (const std::string& n : names)
+      for (const char c : n + ",") hash = (hash ^ static_cast<unsigned char>(c)) * 1099511628211ull;
+    char text[64];
+    std::snprintf(text, sizeof text, "%zu mesh shapes (names hashed %016llx)", names.size(),
+                  static_cast<unsigned long long>(hash));
+    out += (k ? " + " : "") + (names.empty() ? std::string("superquadrics") : std::string(text));
+  }
+  return out;
+}
+
+/// A checkpoint's metadata: its format, its dataset tag and meshes, the model the run was
+/// warm-started from, and the run's training settings (TrainConfig::toYaml).
+std::string checkpointMetadata(const DatasetMix& data, const std::string& init_from,
+                               const TrainConfig& training) {
   YAML::Emitter e;
   e << YAML::BeginMap << YAML::Key << "format_version" << YAML::Value << kCheckpointFormatVersion
-    << YAML::Key << "dataset" << YAML::Value << datasetTag(data) << YAML::Key << "init_from"
-    << YAML::Value << init_from << YAML::EndMap;
+    << YAML::Key << "dataset" << YAML::Value << datasetTag(data) << YAML::Key << "meshes"
+    << YAML::Value << datasetMeshes(data) << YAML::Key << "init_from" << YAML::Value << init_from
+    << YAML::Key << "training" << YAML::Value << training.toYaml() << YAML::EndMap;
   return e.c_str();
+}
+
+/// The settings a resumed run may change: how it runs and reports, not what it learns. The
+/// step count may grow (the learning rate's cosine then follows the new length: said).
+const std::set<std::string> kResumableSettings = {"threads",
+                                                  "checkpoint_every",
+                                                  "validate_every",
+                                                  "validation_views",
+                                                  "validation_samples",
+                                                  "init_from",
+                                                  "steps"};
+
+/// The training settings that differ between a checkpoint's run and `now`, other than
+/// kResumableSettings ("" when none, or when the checkpoint does not record them).
+std::string changedSettings(const std::string& recorded, const TrainConfig& now) {
+  if (recorded.empty()) return "";
+  const YAML::Node was = YAML::Load(recorded), is = YAML::Load(now.toYaml());
+  std::string out;
+  for (const auto& kv : is) {
+    const std::string key = kv.first.as<std::string>();
+    if (kResumableSettings.count(key)) continue;
+    const std::string a = was[key] ? YAML::Dump(was[key]) : "(none)", b = YAML::Dump(kv.second);
+    if (a != b) out += (out.empty() ? "" : ", ") + key + " " + a + " -> " + b;
+  }
+  return out;
 }
 
 /// A field of a checkpoint's metadata; empty when absent or unreadable.
@@ -722,12 +768,39 @@ std::string CvaeTrainer::Impl::resumeFrom(const std::string& metadata, const fs:
                              was + "; " + data->name() + " holds " + now +
                              ": resume on the run's own dataset, or warm-start a new run from "
                              "the checkpoint (--init-from) to train on this one");
+  const std::string meshes = metadataField(metadata, "meshes");
+  if (!meshes.empty() && meshes != datasetMeshes(*data))
+    throw std::runtime_error(
+        "checkpoint " + checkpoint.string() + " was trained on piles of " + meshes + "; " +
+        data->name() + " holds " + datasetMeshes(*data) +
+        ": resume on the run's own dataset, or warm-start a new run (--init-from)");
+  std::string recorded;
+  try {
+    const YAML::Node n = YAML::Load(metadata);
+    if (n.IsMap() && n["training"] && n["training"].IsScalar())
+      recorded = n["training"].as<std::string>();
+  } catch (const YAML::Exception&) {
+  }
+  if (const std::string changed = changedSettings(recorded, config); !changed.empty())
+    throw std::runtime_error("checkpoint " + checkpoint.string() +
+                             " was trained with other settings (" + changed +
+                             "): a resume continues the run as it was started (only threads, "
+                             "checkpoint, validation counts and a longer --steps may change); "
+                             "warm-start a new run from it (--init-from) to train otherwise");
+  if (!recorded.empty()) {
+    const YAML::Node was = YAML::Load(recorded);
+    if (was["steps"] && was["steps"].as<int64_t>() != config.steps)
+      std::cerr << "note: the run was started for " << was["steps"].as<int64_t>()
+                << " steps and now trains to " << config.steps
+                << " (the learning rate's cosine follows the new length)\n";
+  }
   const std::string parent =
       config.init_from.empty() ? metadataField(metadata, "init_from") : config.init_from;
   if (config.init_from.empty() && !parent.empty())
     card_perception = cardPerceptionSection(parent, model_config.hasLatentCode());
   if (const std::string kept = runCardPerceptionSection(out / "model.yaml"); !kept.empty())
     card_perception = kept;
+  config.init_from = parent;  // the card's training section names the run's parent
   return parent;
 }
 
@@ -786,7 +859,7 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   auto save_checkpoint = [&](int64_t step) {
     requireFinite(model, step);
     log.flush();
-    saveCvae(checkpoint.string(), model, checkpointMetadata(*impl_->data, init_from),
+    saveCvae(checkpoint.string(), model, checkpointMetadata(*impl_->data, init_from, tc),
              [&](torch::serialize::OutputArchive& archive) {
                torch::serialize::OutputArchive adam;
                optimizer.save(adam);
