@@ -530,7 +530,8 @@ TrainingReport CvaeTrainer::validateModel(const std::vector<std::string>& datase
 Cvae CvaeTrainer::Impl::loadOrCreate(bool resuming, const fs::path& checkpoint,
                                      std::string* trained_on) const {
   const CvaeConfig& mc = model_config;
-  Cvae model = resuming ? loadCvae(checkpoint.string(), &mc, trained_on) : Cvae(mc);
+  // A resumed network is compared with the config's in restore(), which names what differs.
+  Cvae model = resuming ? loadCvae(checkpoint.string(), nullptr, trained_on) : Cvae(mc);
   if (!resuming && !config.init_from.empty()) {
     const std::vector<std::string> fresh = warmStartCvae(model, config.init_from);
     std::cerr << "warm start from " << config.init_from << ": ";
@@ -556,10 +557,13 @@ int64_t CvaeTrainer::Impl::restore(Cvae& model, torch::optim::Adam& optimizer,
   } catch (const std::invalid_argument&) {
     CvaeConfig network = model->config();  // the checkpoint's network with this config's losses
     network.copyLossSettings(mc);
+    const std::string architecture = network.architecture;
     throw std::runtime_error(
-        "checkpoint " + checkpoint.string() +
-        " has another network than the config: " + differingLines(network.toYaml(), mc.toYaml()) +
-        " (a resume needs the same network; --init-from warm-starts another)");
+        "checkpoint " + checkpoint.string() + " has another network than the config: " +
+        differingLines(network.toYaml(), mc.toYaml()) + " (a resume needs the same network" +
+        (architecture != mc.architecture ? ": --architecture " + architecture + " resumes it"
+                                         : "") +
+        "; --init-from warm-starts another)");
   }
   if (!same) std::cerr << "the checkpoint's loss settings are replaced by the config's\n";
   // The checkpoint holds its step and the optimizer's state (resumeFrom checked its format).
