@@ -107,7 +107,8 @@ void writeModelIntegrity(const std::string& model_path, const ModelIntegrity& m)
   e << YAML::EndMap << YAML::EndMap;
   const std::string section =
       "# checked whenever the model is loaded: the file's SHA-256 and format, then what the\n"
-      "# pipeline's defaults perceive on a rendered box (simstack_check_model --stamp wrote it)\n" +
+      "# pipeline's defaults perceive on a rendered box (simstack_train or simstack_check_model\n"
+      "# --stamp writes it)\n" +
       std::string(e.c_str()) + "\n";
   writeTopLevelSection(modelCardPath(model_path), "integrity", section, "model card");
 }
