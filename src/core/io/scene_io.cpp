@@ -201,18 +201,29 @@ void writeLabelledCloudPcd(const std::string& path, const Points3& points,
     throw std::runtime_error("cannot write " + path);
 }
 
-Points3 readLabelledPoints(const std::string& path, uint32_t label) {
-  checkPcdHeader(path);
-  pcl::PCLPointCloud2 header;
-  if (pcl::io::loadPCDFile(path, header) != 0)
+namespace {
+
+/// The labelled cloud at `path` (its header checked by the caller), refused by name when the
+/// file has no label field: PCL would fill it with zeros after a warning.
+pcl::PointCloud<pcl::PointXYZL> readLabelledCloud(const std::string& path) {
+  pcl::PCLPointCloud2 blob;
+  if (pcl::io::loadPCDFile(path, blob) != 0)
     throw std::runtime_error("cannot read the labelled cloud " + path);
-  if (std::none_of(header.fields.begin(), header.fields.end(),
+  if (std::none_of(blob.fields.begin(), blob.fields.end(),
                    [](const pcl::PCLPointField& f) { return f.name == "label"; }))
     throw std::runtime_error(path +
                              " has no label field (x y z label, as simstack_reconstruct "
                              "writes instances.pcd)");
   pcl::PointCloud<pcl::PointXYZL> cloud;
-  pcl::fromPCLPointCloud2(header, cloud);
+  pcl::fromPCLPointCloud2(blob, cloud);
+  return cloud;
+}
+
+}  // namespace
+
+Points3 readLabelledPoints(const std::string& path, uint32_t label) {
+  checkPcdHeader(path);
+  const pcl::PointCloud<pcl::PointXYZL> cloud = readLabelledCloud(path);
   Points3 out;
   for (const pcl::PointXYZL& p : cloud)
     if (p.label == label && std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z))
@@ -408,6 +419,12 @@ double cornerOffsetPx(const PinholeCamera& fitted, const PinholeCamera& given) {
   return most;
 }
 
+std::runtime_error noPinhole(const std::string& path) {
+  return std::runtime_error(path +
+                            ": its points fit no pinhole camera looking along +z with x right "
+                            "and y down (another frame, or not a depth image?)");
+}
+
 std::string intrinsicsText(const PinholeCamera& c) {
   std::ostringstream out;
   out << "fx " << c.fx << ", fy " << c.fy << ", cx " << c.cx << ", cy " << c.cy;
@@ -423,15 +440,13 @@ void checkOrganizedIntrinsics(const std::string& path, const pcl::PointCloud<Poi
                               const PinholeCamera& camera) {
   const OrganizedFit fit = fitOrganized(cloud);
   if (fit.points == 0) return;
-  if (!fit.fitted)
-    throw std::runtime_error(path +
-                             ": its points fit no pinhole camera looking along +z with x "
-                             "right and y down (another frame?)");
-  if (cornerOffsetPx(*fit.fitted, camera) <= kOrganizedTolerance) return;
+  if (!fit.fitted) throw noPinhole(path);
+  const double offset = cornerOffsetPx(*fit.fitted, camera);
+  if (offset <= kOrganizedTolerance) return;
   std::ostringstream out;
   out << path << ": its points do not fit the camera " << intrinsicsText(camera) << " (rays "
-      << cornerOffsetPx(*fit.fitted, camera) << " px off at the image's corners); they fit "
-      << intrinsicsText(*fit.fitted) << ": other intrinsics?";
+      << offset << " px off at the image's corners); they fit " << intrinsicsText(*fit.fitted)
+      << ": other intrinsics?";
   throw std::runtime_error(out.str());
 }
 
@@ -448,10 +463,7 @@ std::optional<PinholeCamera> organizedCamera(const std::string& path,
     sized->width = static_cast<int>(cloud.width), sized->height = static_cast<int>(cloud.height);
   }
   if (fit.points == 0) return sized;
-  if (!fit.fitted || fit.median_residual_px > kOrganizedTolerance)
-    throw std::runtime_error(path +
-                             ": its points fit no pinhole camera looking along +z with x "
-                             "right and y down (another frame, or not a depth image?)");
+  if (!fit.fitted || fit.median_residual_px > kOrganizedTolerance) throw noPinhole(path);
   if (sized && cornerOffsetPx(*fit.fitted, *sized) <= kOrganizedTolerance) return sized;
   return fit.fitted;
 }
@@ -519,20 +531,7 @@ DepthImage readDepthPcd(const std::string& path, const PinholeCamera* camera,
       throw std::runtime_error("cannot read cloud " + path);
     return depthOf(path, cloud, camera, &point_of_pixel, own_camera);
   }
-  // PCL fills a field the file lacks with zeros and only prints a warning: every pixel would
-  // read as unlabelled.
-  pcl::PCLPointCloud2 header;
-  Eigen::Vector4f origin;
-  Eigen::Quaternionf orientation;
-  int version = 0, type = 0;
-  unsigned int offset = 0;
-  if (pcl::PCDReader().readHeader(path, header, origin, orientation, version, type, offset) != 0)
-    throw std::runtime_error("cannot read the header of cloud " + path);
-  if (std::none_of(header.fields.begin(), header.fields.end(),
-                   [](const pcl::PCLPointField& f) { return f.name == "label"; }))
-    throw std::runtime_error(path + " has no label field: its objects are not labelled");
-  pcl::PointCloud<pcl::PointXYZL> cloud;
-  if (pcl::io::loadPCDFile(path, cloud) != 0) throw std::runtime_error("cannot read cloud " + path);
+  const pcl::PointCloud<pcl::PointXYZL> cloud = readLabelledCloud(path);
   DepthImage depth = depthOf(path, cloud, camera, &point_of_pixel, own_camera);
   *labels = Image<uint32_t>(depth.width, depth.height, 0);
   for (size_t i = 0; i < point_of_pixel.size(); ++i)

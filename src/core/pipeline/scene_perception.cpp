@@ -552,8 +552,8 @@ PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
 }  // namespace
 
 ScenePerception::ScenePerception(const PerceptionConfig& config) : impl_(new Impl) {
-  validatePerceptionConfig(
-      config, false);  // the ranges before the slow model load, then what the model needs
+  // The ranges before the slow model load, then what the model needs.
+  validatePerceptionConfig(config, false);
   impl_->model = std::make_unique<CvaeInference>(config.model_path, cappedThreads(config.threads));
   validatePerceptionConfig(config, impl_->model->config().hasLatentCode());
   impl_->config = forModel(config, impl_->model->config());

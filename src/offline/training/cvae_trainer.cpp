@@ -778,13 +778,7 @@ std::string CvaeTrainer::Impl::resumeFrom(const std::string& metadata, const fs:
         "checkpoint " + checkpoint.string() + " was trained on piles of " + meshes + "; " +
         data->name() + " holds " + datasetMeshes(*data) +
         ": resume on the run's own dataset, or warm-start a new run (--init-from)");
-  std::string recorded;
-  try {
-    const YAML::Node n = YAML::Load(metadata);
-    if (n.IsMap() && n["training"] && n["training"].IsScalar())
-      recorded = n["training"].as<std::string>();
-  } catch (const YAML::Exception&) {
-  }
+  const std::string recorded = metadataField(metadata, "training");
   if (const std::string changed = changedSettings(recorded, config); !changed.empty())
     throw std::runtime_error("checkpoint " + checkpoint.string() +
                              " was trained with other settings (" + changed +
