@@ -5,10 +5,13 @@
 
 For every test set: Chamfer distance on the visible (VS) and full (FS) surface against the
 visible share of the pile's surface (the paper's Figure 5), IoU and the share of stable piles
-against the same bins, one line per method. Files of the same test set (dataset seed, scenes and
-views), such as a later run of one more method, are drawn into one figure, named after the
-first of them; files without methods (the real-data report) are skipped. The summaries of
-simstack_evaluate --summary are enough (the per-view rows are not read).
+against the same bins, one line per method. Files of one test set under one protocol (dataset
+seed, scenes, views, posed views per estimate, camera, noise, sensor, image and view seed), such
+as a later run of one more method, are drawn into one figure, named after the first of them; a
+method name met twice in a figure is told apart by its file's name. Files that are not
+simstack_evaluate results on rendered views (a --real report, a simstack_evaluate_grasps file)
+are skipped with a note. The summaries of simstack_evaluate --summary are enough (the per-view
+rows are not read).
 """
 import argparse
 import json
@@ -39,28 +42,59 @@ def value(b, key, scale=1.0):
     return None if v is None else v * scale
 
 
+def methods_of(paths, sets):
+    """The methods of a figure's files, in order; a name met again gets its file's name."""
+    methods = {}
+    for path, r in zip(paths, sets):
+        stem = os.path.splitext(os.path.basename(path))[0]
+        for name, method in r["methods"].items():
+            shown = name if name not in methods else f"{name} ({stem})"
+            if shown != name:
+                print(f"plot_evaluation: {path}: {name} is also in an earlier file; drawn as '{shown}'")
+            methods[shown] = method
+    return methods
+
+
+def colours_of(names):
+    """The fixed colour of each known method; the others take colours no method uses."""
+    fixed = {name: STYLE[name][0] for name in names if name in STYLE}
+    free = [f"C{i}" for i in range(10) if f"C{i}" not in {c for _, (c, _) in STYLE.items()}]
+    free += [c for c in ("black", "olive", "teal", "navy", "maroon") if c not in free]
+    out = {}
+    for name in names:
+        out[name] = fixed.get(name) or free[len([n for n in out if n not in fixed]) % len(free)]
+    return out
+
+
 def plot_set(paths, sets, out_dir):
     results = sets[0]
     name = os.path.splitext(os.path.basename(paths[0]))[0]
-    methods = {}
-    for r in sets:
-        methods.update(r["methods"])
+    methods = methods_of(paths, sets)
+    colours = colours_of(list(methods))
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
     for method_name, method in methods.items():
-        colour, label = STYLE.get(method_name, (None, method_name))
+        colour = colours[method_name]
+        base = method_name.split(" (")[0]
+        label = STYLE[base][1] + method_name[len(base):] if base in STYLE else method_name
         rows, x = bins_of(method)
         for key, style, suffix in (("chamfer_visible_m", "--", "VS"), ("chamfer_full_m", "-", "FS")):
             axes[0].plot(x, [value(b, key, 1000.0) for b in rows], style, marker="o", color=colour,
                          label=f"{label} {suffix}")
         axes[1].plot(x, [value(b, "iou") for b in rows], marker="o", color=colour, label=label)
-        axes[2].plot(x, [value(b, "stable", 100.0) for b in rows], marker="o", color=colour, label=label)
+        stable = [value(b, "stable", 100.0) for b in rows]
+        if any(v is not None for v in stable):  # runs with --no-stability have none
+            axes[2].plot(x, stable, marker="o", color=colour, label=label)
+    if not axes[2].lines:
+        axes[2].text(0.5, 0.5, "no stability test in these runs", ha="center", va="center",
+                     transform=axes[2].transAxes)
     axes[0].set_ylabel("Chamfer distance (mm)")
     axes[1].set_ylabel("occupancy IoU")
     axes[2].set_ylabel("stable piles (%)")
     for ax in axes:
         ax.set_xlabel("visible share of the pile surface")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        if ax.lines:
+            ax.legend(fontsize=8)
     per = results.get("views_per_estimate", 1)
     fig.suptitle(f"{name}: {results['scenes']} scenes x {results['views']} views"
                  + (f" of {per} posed views each" if per > 1 else "")
@@ -89,12 +123,19 @@ def main():
                 results = json.load(f)
             if not isinstance(results, dict):
                 sys.exit(f"plot_evaluation: {path}: not a simstack_evaluate result (a JSON object)")
-            if "methods" not in results:
-                print(f"plot_evaluation: {path}: no methods (real-data report?), skipped")
+            if "real_dir" in results:
+                print(f"plot_evaluation: {path}: a --real report (no rendered views to bin), skipped")
+                continue
+            methods = results.get("methods")
+            if not isinstance(methods, dict) or not all(
+                    isinstance(m, dict) and "by_visible_ratio" in m for m in methods.values()):
+                print(f"plot_evaluation: {path}: not a simstack_evaluate result on rendered views, skipped")
                 continue
             # Runs of one test set under one protocol share a figure.
             key = (results["dataset_seed"], results["scenes"], results["views"],
-                   results.get("views_per_estimate", 1), results.get("overhead", False))
+                   results.get("views_per_estimate", 1), results.get("overhead", False),
+                   results.get("noise"), results.get("sensor"), results.get("image"),
+                   json.dumps(results.get("intrinsics")), results.get("seed"))
         except (OSError, KeyError, json.JSONDecodeError) as e:
             sys.exit(f"plot_evaluation: {path}: {e}")
         paths, sets = groups.setdefault(key, ([], []))

@@ -294,8 +294,11 @@ cp "$dir/two.h5" "$dir/keep.h5"
 expect "evaluate --output naming its --dataset" "is the input file" "$bin/simstack_evaluate" \
   --dataset "$dir/keep.h5" --output "$dir/./keep.h5" --scenes 1 --views 1 --no-classical --no-stability
 cmp -s "$dir/two.h5" "$dir/keep.h5" || { echo "FAIL evaluate: the dataset was replaced"; fail=1; }
-expect "evaluate --summary naming --output" "is the input file" "$bin/simstack_evaluate" \
+expect "evaluate --summary naming --output" "is the --output file" "$bin/simstack_evaluate" \
   --dataset "$dir/keep.h5" --output "$dir/same.json" --summary "$dir/same.json" --scenes 1
+# The same file by two relative names, neither there yet.
+expect "evaluate --summary ./X beside --output X" "is the --output file" bash -c \
+  "cd '$dir' && exec '$bin/simstack_evaluate' --dataset keep.h5 --output fresh.json --summary ./fresh.json --scenes 1"
 expect "evaluate --summary empty" "path is empty" "$bin/simstack_evaluate" \
   --dataset "$dir/keep.h5" --output "$dir/s.json" --summary "" --scenes 1
 expect "generate --views-dir empty" "path is empty" "$bin/simstack_generate" --scenes 1 \
@@ -316,6 +319,11 @@ mkdir -p "$dir/dircard/m.yaml"
 cp "$pkg/models/simstack_r32_fc.pt" "$dir/dircard/m.pt"
 expect "check_model with a directory as card" "it is a directory" "$bin/simstack_check_model" \
   "$dir/dircard/m.pt"
+cp "$pkg/models/simstack_r32_fc.yaml" "$dir/dircard/card.yaml"
+expect "check_model given a card" "is a model card, not a model" "$bin/simstack_check_model" \
+  "$dir/dircard/card.yaml"
+expect "check_model --stamp given a card" "is a model card, not a model" \
+  "$bin/simstack_check_model" --stamp "$dir/dircard/card.yaml"
 want_rc=105 expect "tune_hough --refinement 100" "refinement" "$bin/simstack_tune_hough" \
   --dataset "$dir/keep.h5" --output "$dir/hough.yaml" --refinement 100
 want_rc=105 expect "tune_hough --bandwidth nan" "bandwidth" "$bin/simstack_tune_hough" \

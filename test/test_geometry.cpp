@@ -186,6 +186,20 @@ TEST(PinholeCamera, IntrinsicsOfAnotherImageSizeAreRefusedButAWindowIsNot) {
   EXPECT_NO_THROW(half.validate());
 }
 
+TEST(PinholeCamera, AnUnsetMatrixIsNamedAsSuchNotAsAnotherImageSize) {
+  PinholeCamera unset;  // a camera_info whose K is all zeros
+  unset.fx = unset.fy = unset.cx = unset.cy = 0.0;
+  try {
+    unset.validate();
+    FAIL() << "an all-zero camera matrix was accepted";
+  } catch (const std::invalid_argument& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("fx = 0 must be > 0"), std::string::npos) << what;
+    EXPECT_NE(what.find("fy = 0 must be > 0"), std::string::npos) << what;
+    EXPECT_EQ(what.find("middle half"), std::string::npos) << what;
+  }
+}
+
 TEST(ConvexHull, CubeInsideTest) {
   std::vector<Vec3> pts;
   for (int i = 0; i < 8; ++i) pts.emplace_back(i & 1 ? 1 : -1, i & 2 ? 1 : -1, i & 4 ? 1 : -1);

@@ -119,7 +119,14 @@ test -s "$dir/rs_views/scene_000000_view_0_depth.png"
 if "$tool" --scenes 1 --seed 3 --resolution 16 --output "$dir/x.h5" --sensor realsense 2> "$dir/err.txt"; then
   echo "accepted --sensor without --noise"; exit 1; fi
 grep -q "noise" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
-if "$tool" --scenes 1 --seed 3 --resolution 16 --output "$dir/x.h5" --noise --sensor kinect2 2> "$dir/err.txt"; then
+if "$tool" --scenes 1 --seed 3 --resolution 16 --output "$dir/x.h5" --views 1 --noise --sensor kinect2 2> "$dir/err.txt"; then
   echo "accepted --sensor kinect2"; exit 1; fi
 grep -q "kinect2" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
+# The views' options do nothing without views: refused, not ignored.
+for option in --noise --pictures "--views-dir $dir/vd"; do
+  # shellcheck disable=SC2086  # the option and its value are two words
+  if "$tool" --scenes 1 --seed 3 --resolution 16 --output "$dir/x.h5" $option 2> "$dir/err.txt"; then
+    echo "accepted $option without --views"; exit 1; fi
+  grep -q -- "--views" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
+done
 echo "simstack_generate ok"

@@ -408,6 +408,41 @@ TEST(CvaeTrainer, ACheckpointIsOneFileThatOutlivesStaleSideFiles) {
   EXPECT_EQ(lines(x + "/state.yaml").at(0), "step: 6");
 }
 
+TEST(CvaeTrainer, AStopCheckpointsItsStepAndAFinishedRunKeepsItsModel) {
+  // Asked to stop after step 1 (checkpoints every 2): the step is not lost.
+  const TrainingScratch scratch("simstack_stop");
+  const std::string& run = scratch.dirs[0];
+  int asked = 0;
+  try {
+    CvaeTrainer(scratch.data, tiny(), scratch.tc, run, "test").run(false, {}, [&] {
+      ++asked;
+      return true;
+    });
+    ADD_FAILURE() << "a run asked to stop trained on";
+  } catch (const TrainingStopped& e) {
+    EXPECT_EQ(e.step, 1);
+    EXPECT_NE(std::string(e.what()).find("--resume"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(asked, 1);
+  EXPECT_EQ(lines(run + "/state.yaml").at(0), "step: 1");
+  EXPECT_FALSE(fs::exists(run + "/model.pt"));
+  const TrainingReport finished =
+      CvaeTrainer(scratch.data, tiny(), scratch.tc, run, "test").run(true);
+  EXPECT_EQ(finished.steps_trained, 3);
+  // Resumed once more with nothing to train: the model and its card stay as written, and the
+  // report gives the card's figures (the posterior of the steps that trained it included).
+  const std::vector<std::string> card = lines(run + "/model.yaml");
+  const torch::Tensor before = probe(run + "/model.pt");
+  const TrainingReport again = CvaeTrainer(scratch.data, tiny(), scratch.tc, run, "test").run(true);
+  EXPECT_EQ(again.steps_trained, 0);
+  EXPECT_EQ(lines(run + "/model.yaml"), card);
+  EXPECT_TRUE(torch::equal(probe(run + "/model.pt"), before));
+  EXPECT_NEAR(again.total, finished.total, 1e-6 * std::abs(finished.total));
+  EXPECT_NEAR(again.validation_iou, finished.validation_iou, 1e-9);
+  ASSERT_TRUE(std::isfinite(finished.posterior_mu_rms));
+  EXPECT_NEAR(again.posterior_mu_rms, finished.posterior_mu_rms, 1e-6);
+}
+
 TEST(CvaeTrainer, ACheckpointWithoutAFormatVersionIsRefusedWithTheWayOn) {
   const TrainingScratch scratch("simstack_ckpt_format");
   const std::string& x = scratch.dirs[0];

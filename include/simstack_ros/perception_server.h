@@ -142,9 +142,12 @@ class PerceptionServer {
   ros::SteadyTime last_info_arrival_;       ///< when camera_info last came, alone
   ros::Time last_info_stamp_;               ///< and its stamp
   long infos_since_frame_ = 0;              ///< camera_info messages since the last frame
+  ros::SteadyTime last_image_arrival_;      ///< when a depth image last came, alone
+  ros::Time last_image_stamp_;              ///< and its stamp
+  long images_since_frame_ = 0;             ///< depth images since the last frame
   long processed_before_ = 0;
   ros::SteadyTime rate_since_;
-  ObjectTracker tracker_;  ///< ids kept across frames (node/track_*); under mutex_
+  ObjectTracker tracker_;  ///< ids kept across frames (~track_*); under mutex_
   double warm_up_s_ = 0.0;
   int warm_up_objects_ = 0;
   int decompose_samples_ = 1;  ///< as configured at start (samples may change live)

@@ -227,6 +227,12 @@ PerceptionServer::~PerceptionServer() {
 }
 
 void PerceptionServer::onImage(const sensor_msgs::ImageConstPtr& image) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);  // watched alone too, for silenceCause
+    last_image_arrival_ = ros::SteadyTime::now();
+    last_image_stamp_ = image->header.stamp;
+    ++images_since_frame_;
+  }
   std::optional<std::pair<sensor_msgs::ImageConstPtr, sensor_msgs::CameraInfoConstPtr>> pair;
   {
     std::lock_guard<std::mutex> lock(pairing_mutex_);
@@ -256,7 +262,7 @@ void PerceptionServer::onFrame(const sensor_msgs::ImageConstPtr& image,
     std::lock_guard<std::mutex> lock(mutex_);
     ++received_;
     last_arrival_ = ros::SteadyTime::now();
-    infos_since_frame_ = 0;
+    infos_since_frame_ = images_since_frame_ = 0;
     if (mailbox_) ++dropped_;
     mailbox_ = Frame{image, info};
   }
@@ -676,21 +682,33 @@ double PerceptionServer::silenceSeconds(const ros::SteadyTime& now) const {
 }
 
 std::string PerceptionServer::silenceCause(const ros::SteadyTime& now) const {
-  // image_transport hands on an image only with the camera_info of exactly its stamp. One
-  // camera_info after the last frame may be that frame's own, come after its image: camera_info
-  // flows when two or more came since, the last within input_timeout_s.
-  const bool info_flows =
-      infos_since_frame_ >= 2 && (now - last_info_arrival_).toSec() < node_.input_timeout_s;
+  // Every message counted here came after the last frame and found no partner of its stamp
+  // (a message that completes a pair is uncounted by onFrame).
+  const bool recent_info =
+      infos_since_frame_ > 0 && (now - last_info_arrival_).toSec() < node_.input_timeout_s;
+  const bool recent_image =
+      images_since_frame_ > 0 && (now - last_image_arrival_).toSec() < node_.input_timeout_s;
   const uint32_t image_publishers = image_sub_.getNumPublishers();
   const uint32_t info_publishers = info_sub_.getNumPublishers();
   std::ostringstream out;
   out << std::fixed << std::setprecision(3);
-  if (info_flows && image_publishers > 0)
+  if (images_since_frame_ > 0 && infos_since_frame_ > 0)
+    out << "depth images and camera_info arrive but their stamps never match ("
+        << images_since_frame_ << " image(s) and " << infos_since_frame_
+        << " camera_info since the last frame, the last "
+        << "stamped " << last_image_stamp_.toSec() << " and " << last_info_stamp_.toSec()
+        << "): each image is taken with the camera_info of exactly its stamp";
+  else if (recent_info)
     out << "camera_info arrives (the last stamped " << last_info_stamp_.toSec()
-        << ") but no depth image with its exact stamp: each image is taken with the "
-           "camera_info of the same stamp";
-  else if (info_flows)
-    out << "camera_info arrives but nothing publishes the depth image";
+        << ") but no depth image"
+        << (image_publishers > 0 ? " from its publisher(s)"
+                                 : ": nothing publishes " + image_sub_.getTopic());
+  else if (recent_image)
+    out << "depth images arrive (the last stamped " << last_image_stamp_.toSec()
+        << ") but no camera_info"
+        << (info_publishers > 0 ? " from its publisher(s)"
+                                : " (nothing publishes " + info_sub_.getTopic() + ")")
+        << "; each image is taken with its camera_info";
   else if (image_publishers > 0 && info_publishers == 0)
     out << "nothing publishes " << info_sub_.getTopic() << " while the depth image has "
         << image_publishers << " publisher(s): each image is taken with its camera_info";

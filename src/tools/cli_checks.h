@@ -71,21 +71,26 @@ inline const CLI::Validator WritablePath(
 /// Throws std::runtime_error when the file `output` (given as `option`) would replace one of
 /// `inputs`, by the same or another name (a link, "./", ".."): an evaluation's --output naming
 /// its --dataset would otherwise put its results where the test piles were. Empty names are
-/// skipped.
+/// skipped. `what` names the others in the message ("the input file", "the --output file").
 inline void requireNotAnInput(const std::string& option, const std::string& output,
-                              const std::vector<std::string>& inputs) {
+                              const std::vector<std::string>& inputs,
+                              const std::string& what = "the input file") {
   namespace fs = std::filesystem;
   if (output.empty()) return;
+  // Absolute first: weakly_canonical keeps a relative name none of whose parts exists as it
+  // is ("a.json"), but makes one with an existing part absolute ("./a.json").
+  const auto normal = [](const std::string& p, std::error_code& ec) {
+    return fs::weakly_canonical(fs::absolute(p, ec), ec);
+  };
   std::error_code ec;
-  const fs::path out = fs::weakly_canonical(output, ec);
+  const fs::path out = normal(output, ec);
   for (const std::string& input : inputs) {
     if (input.empty()) continue;
     std::error_code ec_in;
-    const bool same = fs::exists(output) && fs::exists(input)
-                          ? fs::equivalent(output, input, ec_in)
-                          : !ec && out == fs::weakly_canonical(input, ec_in);
+    const bool same = fs::exists(output) && fs::exists(input) ? fs::equivalent(output, input, ec_in)
+                                                              : !ec && out == normal(input, ec_in);
     if (same && !ec_in)
-      throw std::runtime_error(option + " " + output + " is the input file " + input +
+      throw std::runtime_error(option + " " + output + " is " + what + " " + input +
                                ", which it would replace: give another path");
   }
 }

@@ -53,6 +53,8 @@ class PerceptionOptions {
   /// The files named by --config and --model, or without --model the config's own model, with
   /// the models' cards: for outputs to be checked against.
   std::vector<std::string> inputFiles() const;
+  /// The perception config file (--config, or the package's).
+  const std::string& configPath() const { return config_path_; }
 
  private:
   std::string config_path_ = packageFile("config/perception.yaml");

@@ -13,14 +13,17 @@ namespace simstack {
 
 class ProgressBar {
  public:
-  /// `first`: the count already done when the bar starts (a resumed job), so that the time
-  /// left is estimated from this run's pace.
-  ProgressBar(std::string label, long total, long first = 0)
+  /// `first`: the count already done when this run began (a resumed job), so that the time
+  /// left is estimated from this run's pace; `elapsed_s`: the seconds this run has already
+  /// spent (a bar made at the first report of the work).
+  ProgressBar(std::string label, long total, long first = 0, double elapsed_s = 0.0)
       : label_(std::move(label)),
         total_(total),
         first_(first),
         tty_(isatty(fileno(stderr))),
-        start_(std::chrono::steady_clock::now()) {}
+        start_(std::chrono::steady_clock::now() -
+               std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                   std::chrono::duration<double>(elapsed_s))) {}
   /// Shows `done` of `total`, with an optional suffix (e.g. current losses).
   void update(long done, const std::string& suffix = "") {
     const auto now = std::chrono::steady_clock::now();

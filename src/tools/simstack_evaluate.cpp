@@ -36,8 +36,8 @@ struct ResultFiles {
   ResultFiles(const std::string& output, const std::string& summary,
               std::vector<std::string> inputs) {
     requireNotAnInput("--output", output, inputs);
-    inputs.push_back(output);
     requireNotAnInput("--summary", summary, inputs);
+    requireNotAnInput("--summary", summary, {output}, "the --output file");
     results.emplace(output);
     if (!summary.empty()) this->summary.emplace(summary);
   }

@@ -98,17 +98,21 @@ nlohmann::json trialRows(const std::vector<CandidateTrial>& trials) {
 nlohmann::json pickRows(const std::vector<PickResult>& picks) {
   nlohmann::json rows = nlohmann::json::array();
   for (const PickResult& p : picks) {
-    nlohmann::json row = {{"scene", p.scene},
-                          {"target", p.target},
-                          {"method", p.method},
-                          {"chooser", p.chooser},
-                          {"found", p.found},
-                          {"grasped", p.grasped},
-                          {"mean_displacement_m", p.outcome.mean_displacement_m},
-                          {"max_displacement_m", p.outcome.max_displacement_m},
-                          {"toppled", p.outcome.toppled},
-                          {"freed", p.outcome.target_freed},
-                          {"failed", p.outcome.failed()}};
+    // A pick never pulled (no match, or nothing sealable) has no pull to report: null, not a
+    // gentle 0 mm or a seal that broke.
+    const nlohmann::json none;
+    nlohmann::json row = {
+        {"scene", p.scene},
+        {"target", p.target},
+        {"method", p.method},
+        {"chooser", p.chooser},
+        {"found", p.found},
+        {"grasped", p.grasped},
+        {"mean_displacement_m", p.grasped ? nlohmann::json(p.outcome.mean_displacement_m) : none},
+        {"max_displacement_m", p.grasped ? nlohmann::json(p.outcome.max_displacement_m) : none},
+        {"toppled", p.grasped ? nlohmann::json(p.outcome.toppled) : none},
+        {"freed", p.outcome.target_freed},
+        {"failed", p.grasped ? nlohmann::json(p.outcome.failed()) : none}};
     // The matched estimate's error; null for the oracle and for a target the method missed.
     const bool estimated = p.found && p.method != "truth";
     const EstimateError& e = p.error;
@@ -184,7 +188,7 @@ int main(int argc, char** argv) {
   app.add_option("--candidates", o.ranking.candidates.max_candidates, "candidates per ranking")
       ->capture_default_str()
       ->check(CLI::Range(1, 1024));
-  app.add_option("--sim-threads", o.ranking.threads, "threads simulating pulls")
+  app.add_option("--sim-threads", o.ranking.threads, "threads simulating pulls (0 = all cores)")
       ->capture_default_str()
       ->check(CLI::Range(0, 1024));
   app.add_option("--hypotheses", o.hypotheses,
@@ -211,6 +215,12 @@ int main(int argc, char** argv) {
     requireNotAnInput("--output", output, inputs);
     StagedFile staged(output);  // a bad --output is found (its directory made) before the work
     const DatasetReader reader(dataset);
+    // The pulls are simulated in the true pile's superquadrics: piles with meshes (household
+    // containers) are refused before the models load.
+    if (!reader.info().mesh_names.empty())
+      throw std::runtime_error("dataset " + dataset +
+                               " holds mesh objects (household or YCB piles): the grasp "
+                               "evaluation simulates pulls on superquadric piles only");
     // As the node runs them: hypothesis 0 is the mean scene, H of them decomposed.
     std::vector<std::unique_ptr<EvaluatedMethod>> methods;
     for (const PerceptionConfig& c : perception.configs())

@@ -69,12 +69,17 @@ struct ViewCamera {
 void addViewOptions(CLI::App& app, GenerationOptions* o, ViewCamera* camera) {
   app.add_option("--views", o->views, "rendered views per scene written beside the dataset")
       ->check(FiniteNonNegative);
+  // The options of the views do nothing without them: refused, not ignored.
   app.add_option("--views-dir", o->views_dir, "where views go (default: <output stem>_views/)")
-      ->check(WritablePath);
+      ->check(WritablePath)
+      ->needs("--views");
   app.add_flag("--pictures", o->pictures,
-               "also write colour depth and shaded PNG pictures of each view");
-  CLI::Option* noise_flag = app.add_flag(
-      "--noise", o->noise, "sensor noise and missing pixels in the rendered views (--sensor's)");
+               "also write colour depth and shaded PNG pictures of each view")
+      ->needs("--views");
+  CLI::Option* noise_flag =
+      app.add_flag("--noise", o->noise,
+                   "sensor noise and missing pixels in the rendered views (--sensor's)")
+          ->needs("--views");
   addSensorOption(app, &o->sensor, "with --noise, ")->needs(noise_flag);
   app.add_option("--width", camera->width,
                  "view width (pixels): fx scales with the width, fy with the height, so keep 4:3 "
@@ -176,6 +181,14 @@ int main(int argc, char** argv) {
               << 100.0 * o.scenes / s.attempts << " % accepted), " << o.scenes / s.seconds
               << " scenes/s on " << s.threads << " threads; " << 100.0 * s.undone_share
               << " % of the physics went to drops and piles that were undone\n";
+    std::cout << "  piles by object count:";
+    const char* sep = " ";
+    for (size_t k = 0; k < s.piles_with.size(); ++k)
+      if (s.piles_with[k] > 0) {
+        std::cout << sep << s.piles_with[k] << " of " << k;
+        sep = ", ";
+      }
+    std::cout << "\n";
     if (s.skipped > 0)
       std::cout << "  " << s.skipped
                 << " scenes drawn again: no pile could be made from their seed\n";

@@ -1,7 +1,10 @@
 // simstack_train: trains the C-VAE (or the FC baseline) on a dataset from simstack_generate.
 #include <CLI/CLI.hpp>
 
+#include <unistd.h>
+
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -117,6 +120,78 @@ void addOptions(CLI::App& app, Options& o) {
       ->check(CLI::ExistingDirectory);
 }
 
+/// The signal that asked training to stop (0: none).
+volatile std::sig_atomic_t g_stop_signal = 0;
+
+extern "C" void onStopSignal(int signal) {
+  g_stop_signal = signal;
+  static const char kSaid[] =
+      "\nsimstack_train: stopping after this step, its checkpoint written (Ctrl-C again: at "
+      "once)\n";
+  const ssize_t written = write(STDERR_FILENO, kSaid, sizeof(kSaid) - 1);
+  (void)written;
+  std::signal(signal, SIG_DFL);  // a second Ctrl-C ends the process as usual
+}
+
+/// While it lives, Ctrl-C and SIGTERM ask training to stop after its step (the step's
+/// checkpoint written) instead of ending it, and a step's work is not lost.
+class StopOnSignal {
+ public:
+  StopOnSignal()
+      : int_(std::signal(SIGINT, onStopSignal)), term_(std::signal(SIGTERM, onStopSignal)) {}
+  ~StopOnSignal() {
+    std::signal(SIGINT, int_);
+    std::signal(SIGTERM, term_);
+  }
+  StopOnSignal(const StopOnSignal&) = delete;
+  StopOnSignal& operator=(const StopOnSignal&) = delete;
+
+ private:
+  void (*int_)(int);
+  void (*term_)(int);
+};
+
+/// Trains with a progress bar, Ctrl-C stopping at a checkpoint; prints the figures and stamps
+/// the model's card. The exit status.
+int trainAndStamp(CvaeTrainer& trainer, const std::string& architecture,
+                  const TrainConfig& training, const Options& o) {
+  std::unique_ptr<ProgressBar> bar;
+  bool validated = false;  // in this process: until then there is no IoU to show
+  StopOnSignal stop_on_signal;
+  const auto progress = [&](const TrainingProgress& p) {
+    if (!bar)
+      bar = std::make_unique<ProgressBar>("training " + architecture, p.steps, p.first_step,
+                                          p.seconds);
+    validated = validated || p.step % training.validate_every == 0 || p.step == p.steps;
+    char iou[16] = " -";
+    if (validated) std::snprintf(iou, sizeof(iou), " %.3f", p.validation_iou);
+    char suffix[160];
+    std::snprintf(suffix, sizeof(suffix),
+                  " loss %.0f (tsdf %.0f votes %.0f mmd %.2g) val IoU%s  %.1f samples/s", p.loss,
+                  p.tsdf, p.votes, p.mmd, iou, p.samples_per_second);
+    bar->update(p.step, suffix);
+  };
+  TrainingReport r;
+  try {
+    r = trainer.run(o.resume, progress, [] { return g_stop_signal != 0; });
+  } catch (const TrainingStopped& e) {
+    if (bar) bar->finish();
+    std::cerr << "simstack_train: " << e.what() << "\n";
+    return 128 + g_stop_signal;
+  }
+  if (bar) bar->finish();
+  if (r.steps_trained == 0)
+    std::printf("nothing to train: the run had reached step %lld; its model stays as written\n",
+                static_cast<long long>(r.steps));
+  printTrained(architecture, o.output, r);
+  // The card records what the file is, so that every later load can tell it was not damaged.
+  const std::string model_file = (std::filesystem::path(o.output) / "model.pt").string();
+  const ModelIntegrity m = stampModel(model_file);
+  std::printf("self-test on a rendered box: %d object(s), %d occupied voxels (card: %s)\n",
+              m.self_test_objects, m.self_test_occupied_voxels, modelCardPath(model_file).c_str());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -180,30 +255,7 @@ int main(int argc, char** argv) {
     for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
     CvaeTrainer trainer(o.datasets, model, training, o.output, command, o.mesh_dir);
     if (!trainer.note().empty()) std::printf("note: %s\n", trainer.note().c_str());
-    std::unique_ptr<ProgressBar> bar;
-    bool validated = false;  // in this process: until then there is no IoU to show
-    const TrainingReport r = trainer.run(o.resume, [&](const TrainingProgress& p) {
-      if (!bar)
-        bar =
-            std::make_unique<ProgressBar>("training " + model.architecture, p.steps, p.first_step);
-      validated = validated || p.step % training.validate_every == 0 || p.step == p.steps;
-      char iou[16] = " -";
-      if (validated) std::snprintf(iou, sizeof(iou), " %.3f", p.validation_iou);
-      char suffix[160];
-      std::snprintf(suffix, sizeof(suffix),
-                    " loss %.0f (tsdf %.0f votes %.0f mmd %.2g) val IoU%s  %.1f samples/s", p.loss,
-                    p.tsdf, p.votes, p.mmd, iou, p.samples_per_second);
-      bar->update(p.step, suffix);
-    });
-    if (bar) bar->finish();
-    printTrained(model.architecture, o.output, r);
-    // The card records what the file is, so that every later load can tell it was not damaged.
-    const std::string model_file = (std::filesystem::path(o.output) / "model.pt").string();
-    const ModelIntegrity m = stampModel(model_file);
-    std::printf("self-test on a rendered box: %d object(s), %d occupied voxels (card: %s)\n",
-                m.self_test_objects, m.self_test_occupied_voxels,
-                modelCardPath(model_file).c_str());
-    return 0;
+    return trainAndStamp(trainer, model.architecture, training, o);
   } catch (const std::exception& e) {
     std::cerr << "simstack_train: error: " << e.what() << "\n";
     return 1;

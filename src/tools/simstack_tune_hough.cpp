@@ -66,21 +66,31 @@ void reportPerDataset(const std::vector<std::string>& datasets,
   }
 }
 
-/// The best `top` settings, then the model's own.
-void printScores(size_t views, const PerceptionConfig& pc, const std::vector<HoughScore>& scores,
-                 const HoughScore& own, int top) {
+/// Whether the perception config file sets hough: (then it overrides every model card's).
+bool configSetsHough(const std::string& config_path) {
+  return static_cast<bool>(loadYamlFile(config_path, "perception config")["hough"]);
+}
+
+/// The best `top` settings, then the one in effect (the model's own, or the config's).
+void printScores(size_t views, const PerceptionConfig& pc, const std::string& config_path,
+                 const std::vector<HoughScore>& scores, const HoughScore& own, int top) {
   std::cout << "\n"
             << views << " views, model " << pc.model_path << "\n\n"
             << houghScoreHeader() << "\n";
   for (int i = 0; i < std::min<int>(top, scores.size()); ++i)
     std::cout << houghScoreRow(scores[i]) << "\n";
-  std::string source = "defaults: no model card";
-  if (!pc.model_card_path.empty()) {
+  std::string source = "the model's setting (defaults: no model card)";
+  if (configSetsHough(config_path)) {
+    source = "the setting in effect (the hough: of " + config_path +
+             ", which overrides the model card's)";
+  } else if (!pc.model_card_path.empty()) {
     const YAML::Node card = loadYamlFile(pc.model_card_path, "model card");
-    source = card["perception"]["hough"] ? pc.model_card_path
-                                         : "defaults: " + pc.model_card_path + " has no hough:";
+    source = "the model's setting (" +
+             (card["perception"]["hough"] ? pc.model_card_path
+                                          : "defaults: " + pc.model_card_path + " has no hough:") +
+             ")";
   }
-  std::cout << "\nthe model's setting (" << source << "):\n" << houghScoreRow(own) << "\n";
+  std::cout << "\n" << source << ":\n" << houghScoreRow(own) << "\n";
 }
 
 /// The chosen setting as a model card's perception: section, under a comment saying where it
@@ -110,7 +120,7 @@ void addSweepOptions(CLI::App& app, HoughSweep& sweep) {
          FiniteNonNegative);
   values("--min-vote-norm", sweep.min_norms,
          "vote lengths to try below which a voxel casts no ray (blunt, unsure votes)",
-         FiniteNonNegative & CLI::Range(0.0, 1.0));
+         finiteNumber([](double v) { return v >= 0.0 && v < 1.0; }, "in [0, 1)", "[0,1)"));
   // hough.experimental: variants measured and not kept.
   values("--experimental-reversed-stop", sweep.reversed_stops,
          "experimental: consecutive voxels of reversed votes that stop a ray (0 = off) to try",
@@ -184,7 +194,7 @@ int main(int argc, char** argv) {
     const HoughScore before = scores.front();
     std::stable_sort(scores.begin(), scores.end(), betterHoughScore);
 
-    printScores(views.size(), pc, scores, before, top);
+    printScores(views.size(), pc, perception.configPath(), scores, before, top);
     if (datasets.size() > 1) reportPerDataset(datasets, views, ends, scores.front(), before, pc);
     const std::string chosen = chosenSection(datasets, views.size(), scores.front(), pc.samples);
     std::ofstream f(written.path());
@@ -193,9 +203,11 @@ int main(int argc, char** argv) {
     if (!f) throw std::runtime_error("cannot write " + output);
     written.commit();
     std::cout << "\nchosen setting written to " << output << ": paste its perception: section "
-              << "into " << modelCardPath(pc.model_path)
-              << " in place of the card's own (a hough: section in the perception config "
-                 "overrides every model's)\n";
+              << "into " << modelCardPath(pc.model_path) << " in place of the card's own";
+    if (configSetsHough(perception.configPath()))
+      std::cout << ", and remove the hough: of " << perception.configPath()
+                << ", which overrides every model's";
+    std::cout << "\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_tune_hough: error: " << e.what() << "\n";

@@ -32,8 +32,11 @@ std::string sha256OfFile(const std::string& path);
 /// for a malformed one.
 std::optional<ModelIntegrity> readModelIntegrity(const std::string& model_path);
 /// Checks the model file against its card's `integrity:` (SHA-256, format); nothing to check
-/// without one. std::runtime_error naming the file, the card and the check that failed.
+/// without one. std::runtime_error naming the file, the card and the check that failed, or
+/// saying that a card (.yaml) was given where its model belongs (requireModelNotCard).
 void verifyModelFile(const std::string& model_path);
+/// std::runtime_error when `model_path` names a model card (.yaml, .yml) rather than a model.
+void requireModelNotCard(const std::string& model_path);
 /// Writes `integrity` as the `integrity:` section of the card of `model_path` (creating the
 /// card when there is none), the rest of the card kept.
 void writeModelIntegrity(const std::string& model_path, const ModelIntegrity& integrity);

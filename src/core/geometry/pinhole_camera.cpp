@@ -18,11 +18,15 @@ void PinholeCamera::validate() const {
     const auto check_centre = [&](const char* name, double c, int side, const char* along) {
       if (std::isfinite(c) && std::abs(c - 0.5 * (side - 1)) >= 0.25 * side)
         err << name << " = " << c << " lies outside the middle half of the " << side << "-pixel-"
-            << along << " image (intrinsics of another image size? for a crop of a larger image, "
-            << "give the whole image and a mask); ";
+            << along << " image (intrinsics of another image size, or of a larger image this one "
+            << "was cut from?); ";
     };
-    check_centre("cx", cx, width, "wide");
-    check_centre("cy", cy, height, "high");
+    // Zero or missing focal lengths (an unset K) say all there is to say.
+    const bool focal_set = std::isfinite(fx) && fx > 0.0 && std::isfinite(fy) && fy > 0.0;
+    if (focal_set) {
+      check_centre("cx", cx, width, "wide");
+      check_centre("cy", cy, height, "high");
+    }
     // A focal length that gives a field of view outside 2-175 degrees is a unit mistake (e.g.
     // normalized intrinsics, or intrinsics of another image size).
     const auto fov_deg = [](double side, double f) {

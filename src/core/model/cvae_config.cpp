@@ -215,12 +215,13 @@ void TrainConfig::validate() const {
   require(final_learning_rate > 0.0 && final_learning_rate <= learning_rate,
           "final_learning_rate must be > 0 and <= learning_rate");
   require(steps >= 1, "steps must be >= 1");
-  require(threads >= 1, "threads must be >= 1");
+  require(threads >= 1 && threads <= 256, "threads must lie in [1, 256]");
   require(checkpoint_every >= 1 && validate_every >= 1,
           "checkpoint_every and validate_every must be >= 1");
   require(validation_scenes >= 1, "validation_scenes must be >= 1");
   require(validation_views >= 1, "validation_views must be >= 1");
-  require(validation_samples >= 2, "validation_samples must be >= 2");
+  require(validation_samples >= 2 && validation_samples <= 256,
+          "validation_samples must lie in [2, 256]");
   require(image_width >= 16 && image_height >= 16, "image size must be at least 16x16");
   require(overhead_share >= 0.0 && overhead_share <= 1.0, "overhead_share must lie in [0, 1]");
   parseSensorModel(sensor_model);  // throws naming the value and the choices

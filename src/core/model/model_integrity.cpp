@@ -76,7 +76,16 @@ std::optional<ModelIntegrity> readModelIntegrity(const std::string& model_path) 
   return m;
 }
 
+void requireModelNotCard(const std::string& model_path) {
+  const std::filesystem::path p(model_path);
+  if (p.extension() == ".yaml" || p.extension() == ".yml")
+    throw std::runtime_error(model_path + " is a model card, not a model: give the model file " +
+                             "it describes (" +
+                             std::filesystem::path(p).replace_extension(".pt").string() + ")");
+}
+
 void verifyModelFile(const std::string& model_path) {
+  requireModelNotCard(model_path);
   const std::optional<ModelIntegrity> m = readModelIntegrity(model_path);
   if (!m) return;
   const std::string card = modelCardPath(model_path);

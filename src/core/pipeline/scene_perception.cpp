@@ -891,6 +891,7 @@ ModelSelfTest checkModel(const std::string& model_path) {
 }
 
 ModelIntegrity stampModel(const std::string& model_path) {
+  requireModelNotCard(model_path);  // its own card would be written over it
   // The card keeps what it had until the model has loaded and passed its self-test: a damaged
   // or foreign file is not stamped as good.
   const std::string card = modelCardPath(model_path);

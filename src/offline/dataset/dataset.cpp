@@ -304,7 +304,7 @@ DatasetReader::DatasetReader(const std::string& path, const std::string& mesh_di
                                " holds mesh objects (YCB piles): reading it needs the directory "
                                "of their meshes, which simstack_evaluate, simstack_train and "
                                "simstack_tune_hough take (--ycb DIR); the grasp evaluation takes "
-                               "superquadric and household piles only");
+                               "superquadric piles only");
     }
     impl_->catalogue = loadMeshCatalogue(mesh_dir, impl_->info.mesh_names);
   }

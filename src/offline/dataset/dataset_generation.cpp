@@ -228,7 +228,10 @@ GenerationSummary generateDataset(const GenerationOptions& o,
       const SceneResult r = workers.take(i);
       writer->write(i, r.pile.scene, r.gt);
       summary.attempts += r.pile.attempts;
-      summary.objects += static_cast<long>(r.pile.scene.objects.size());
+      const size_t count = r.pile.scene.objects.size();
+      summary.objects += static_cast<long>(count);
+      if (summary.piles_with.size() <= count) summary.piles_with.resize(count + 1, 0);
+      ++summary.piles_with[count];
       const auto& st = r.pile.object_steps;
       undone_steps += st.undone_drops + st.rejected_piles;
       all_steps += st.placed + st.undone_drops + st.rest_checks + st.rejected_piles;

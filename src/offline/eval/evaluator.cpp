@@ -4,6 +4,7 @@
 #include <cmath>
 #include <iomanip>
 #include <random>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -33,13 +34,30 @@ double stddev(const std::vector<double>& v) {
   const double m = mean(v);
   double s = 0;
   for (double x : v) s += (x - m) * (x - m);
-  return v.size() > 1 ? std::sqrt(s / (v.size() - 1)) : 0.0;
+  return v.size() > 1 ? std::sqrt(s / (v.size() - 1)) : std::nan("");  // null in the JSON
 }
 std::vector<double> finiteValues(const std::vector<Row>& rows, const std::string& metric) {
   std::vector<double> v;
   for (const Row& r : rows)
     if (r.count(metric) && std::isfinite(r.at(metric))) v.push_back(r.at(metric));
   return v;
+}
+
+/// The per-view rows, their indices and counts as whole numbers.
+json rowsJson(const std::vector<Row>& rows) {
+  static const std::set<std::string> kWhole = {"scene",        "view",  "objects",
+                                               "objects_seen", "count", "fits_at_bound"};
+  json out = json::array();
+  for (const Row& r : rows) {
+    json row = json::object();
+    for (const auto& [key, value] : r)
+      if (kWhole.count(key) && std::isfinite(value))
+        row[key] = static_cast<long long>(std::llround(value));
+      else
+        row[key] = value;
+    out.push_back(std::move(row));
+  }
+  return out;
 }
 
 /// One scene's ground truth for the protocol: the true surface, and its samples.
@@ -272,7 +290,7 @@ json resultsJson(const EvaluationResults& r, bool with_views) {
     j["model"] = m.info.model;
     j["samples"] = m.info.samples;
     if (!m.info.config_yaml.empty()) j["config"] = m.info.config_yaml;
-    if (with_views) j["views"] = json(m.rows);
+    if (with_views) j["views"] = rowsJson(m.rows);
     out["methods"][m.name] = j;
   }
   return out;

@@ -19,8 +19,9 @@ std::vector<SuperquadricShape> trueShapes(const Scene& scene, int index) {
   std::vector<SuperquadricShape> out;
   for (const SceneObject& o : scene.objects) {
     if (o.shape->kind() != ObjectShape::Kind::kSuperquadric)
-      throw std::invalid_argument("scene " + std::to_string(index) +
-                                  ": the grasp evaluation needs superquadric piles, not meshes");
+      throw std::invalid_argument(
+          "scene " + std::to_string(index) +
+          ": the grasp evaluation simulates pulls on superquadric piles only, not meshes");
     out.push_back(o.superquadricTable());
   }
   return out;
@@ -344,7 +345,7 @@ nlohmann::json graspSummary(const std::vector<PickResult>& picks) {
     out.push_back(
         {{"method", method},
          {"chooser", chooser},
-         {"picks", n},
+         {"picks", static_cast<long>(n)},
          {"pulled_share", share(pulled, n)},
          {"freed_share", share(freed, n)},
          {"seal_broke_share", share(broke, pulled)},

@@ -15,6 +15,7 @@
 #include <fstream>
 #include <mutex>
 #include <numeric>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <thread>
@@ -450,6 +451,8 @@ struct CvaeTrainer::Impl {
   std::string resumeFrom(const std::string& metadata, const fs::path& out);
   int64_t restore(Cvae& model, torch::optim::Adam& optimizer, const fs::path& out) const;
   void validate(Cvae& model, const TrainingSampleBuilder& builder, TrainingReport* report) const;
+  void saveCheckpoint(Cvae& model, torch::optim::Adam& optimizer, const std::string& init_from,
+                      int64_t step) const;
   void writeModelFiles(const fs::path& out, Cvae& model, const TrainingReport& report,
                        bool posterior_measured) const;
 };
@@ -822,9 +825,77 @@ void requireFinite(Cvae& model, int64_t step) {
                                "as it was");
 }
 
+/// The figures in the card of a model a run already wrote at `steps` (<out>/model.pt and
+/// model.yaml), or nothing when there is no such model or its card cannot be read.
+std::optional<TrainingReport> writtenReport(const fs::path& out, int64_t steps) {
+  if (!fs::exists(out / "model.pt") || !fs::exists(out / "model.yaml")) return std::nullopt;
+  try {
+    const YAML::Node p = YAML::LoadFile((out / "model.yaml").string())["provenance"];
+    if (!p || !p["steps"] || p["steps"].as<int64_t>() != steps) return std::nullopt;
+    TrainingReport r;
+    r.steps = steps;
+    const YAML::Node l = p["final_losses"], v = p["validation"], q = p["posterior"];
+    const auto read = [](const YAML::Node& map, const char* key, double* to) {
+      if (map && map[key]) *to = map[key].as<double>();
+    };
+    for (const auto& [key, to] :
+         std::vector<std::pair<const char*, double*>>{{"total", &r.total},
+                                                      {"tsdf", &r.tsdf},
+                                                      {"partial", &r.partial},
+                                                      {"votes", &r.votes},
+                                                      {"mmd", &r.mmd},
+                                                      {"occupancy", &r.occupancy},
+                                                      {"iou", &r.iou}})
+      read(l, key, to);
+    for (const auto& [key, to] : std::vector<std::pair<const char*, double*>>{
+             {"iou", &r.validation_iou},
+             {"iou_se", &r.validation_iou_se},
+             {"bce", &r.validation_bce},
+             {"disagreement", &r.validation_disagreement},
+             {"posterior_code_iou", &r.validation_posterior_iou},
+             {"single_code_iou", &r.validation_single_iou},
+             {"best_code_iou", &r.validation_best_iou},
+             {"disagreement_seen", &r.validation_disagreement_seen},
+             {"disagreement_unseen", &r.validation_disagreement_unseen},
+             {"unseen_share_of_disagreement", &r.validation_unseen_share}})
+      read(v, key, to);
+    read(q, "mu_rms", &r.posterior_mu_rms);
+    read(q, "sigma", &r.posterior_sigma);
+    read(p, "samples_per_second", &r.samples_per_second);
+    return r;
+  } catch (const YAML::Exception&) {
+    return std::nullopt;
+  }
+}
+
 }  // namespace
 
-TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& progress) {
+// One file holds the network, the optimizer's state and the step, written beside its place
+// and renamed into it: a run stopped by an error or a kill resumes from the previous
+// checkpoint or from this one, never from parts of both. state.yaml repeats the step for
+// people and scripts.
+void CvaeTrainer::Impl::saveCheckpoint(Cvae& model, torch::optim::Adam& optimizer,
+                                       const std::string& init_from, int64_t step) const {
+  requireFinite(model, step);
+  const fs::path out(output_dir);
+  saveCvae((out / "checkpoint.pt").string(), model, checkpointMetadata(*data, init_from, config),
+           [&](torch::serialize::OutputArchive& archive) {
+             torch::serialize::OutputArchive adam;
+             optimizer.save(adam);
+             archive.write("simstack_optimizer", adam);
+             archive.write("simstack_step", torch::IValue(step));
+           });
+  const fs::path state_tmp = out / "state.yaml.tmp";
+  {
+    std::ofstream state(state_tmp.string());
+    state << "step: " << step << "\n";
+    if (!state.flush()) throw std::runtime_error("cannot write " + state_tmp.string());
+  }
+  fs::rename(state_tmp, out / "state.yaml");
+}
+
+TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& progress,
+                                const std::function<bool()>& stop) {
   const TrainConfig& tc = impl_->config;
   const CvaeConfig& mc = impl_->model_config;
   const fs::path out(impl_->output_dir);
@@ -850,27 +921,9 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
                                       tc.sensor_noise, tc.overhead_share,
                                       parseSensorModel(tc.sensor_model));
   TrainingLog log(out / "train_log.csv", resume && start > 0, start);
-  // One file holds the network, the optimizer's state and the step, written beside its place
-  // and renamed into it: a run stopped by an error or a kill resumes from the previous
-  // checkpoint or from this one, never from parts of both. state.yaml repeats the step for
-  // people and scripts.
   auto save_checkpoint = [&](int64_t step) {
-    requireFinite(model, step);
     log.flush();
-    saveCvae(checkpoint.string(), model, checkpointMetadata(*impl_->data, init_from, tc),
-             [&](torch::serialize::OutputArchive& archive) {
-               torch::serialize::OutputArchive adam;
-               optimizer.save(adam);
-               archive.write("simstack_optimizer", adam);
-               archive.write("simstack_step", torch::IValue(step));
-             });
-    const fs::path state_tmp = out / "state.yaml.tmp";
-    {
-      std::ofstream state(state_tmp.string());
-      state << "step: " << step << "\n";
-      if (!state.flush()) throw std::runtime_error("cannot write " + state_tmp.string());
-    }
-    fs::rename(state_tmp, out / "state.yaml");
+    impl_->saveCheckpoint(model, optimizer, init_from, step);
   };
 
   TrainingReport report;
@@ -910,16 +963,30 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
       if (validating) impl_->validate(model, builder, &report);
       if ((step + 1) % 10 == 0 || validating)
         log.write(step + 1, recent.losses.back(), report, validating, !recent.posterior.empty());
-      if ((step + 1) % tc.checkpoint_every == 0) save_checkpoint(step + 1);
+      const bool checkpointed = (step + 1) % tc.checkpoint_every == 0;
+      if (checkpointed) save_checkpoint(step + 1);
       if (progress) {
         const auto& a = recent.losses.back();
         progress({step + 1, tc.steps, start, a.total, a.tsdf, a.votes, a.mmd, report.validation_iou,
-                  report.samples_per_second});
+                  report.samples_per_second, seconds});
+      }
+      if (stop && step + 1 < tc.steps && stop()) {
+        if (!checkpointed) save_checkpoint(step + 1);
+        throw TrainingStopped("stopped at step " + std::to_string(step + 1) + " of " +
+                                  std::to_string(tc.steps) + ": " + checkpoint.string() +
+                                  " holds it; --resume continues the run",
+                              step + 1);
       }
     }
   }
-  save_checkpoint(tc.steps);
   report.steps = tc.steps;
+  report.steps_trained = trained;
+  if (trained == 0) {
+    // The run had reached its steps: a model it wrote stays as it is (its card's losses and
+    // posterior are those of the steps that trained it).
+    if (std::optional<TrainingReport> written = writtenReport(out, tc.steps)) return *written;
+  }
+  save_checkpoint(tc.steps);
   if (trained == 0) {
     // Nothing left to train (a resumed run that had reached its steps): still report the
     // figures of the model being written, from the log and a fresh validation.

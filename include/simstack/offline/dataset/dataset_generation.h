@@ -48,6 +48,9 @@ struct GenerationOptions {
 
 struct GenerationSummary {
   long objects = 0;
+  /// Piles by object count (index: objects). Piles of more objects are rejected more often,
+  /// so the counts of MIN:MAX lean towards MIN.
+  std::vector<int> piles_with;
   long attempts = 0;        ///< piles drawn for the accepted ones
   int skipped = 0;          ///< scenes drawn again because no pile could be made from their seed
   double undone_share = 0;  ///< share of the physics spent on drops and piles undone

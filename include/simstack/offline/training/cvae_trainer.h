@@ -9,6 +9,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -18,6 +19,8 @@ namespace simstack {
 
 struct TrainingReport {
   int64_t steps = 0;
+  /// Steps trained by this run (0: a resumed run that had reached its steps).
+  int64_t steps_trained = 0;
   /// Mean of the last 50 steps; occupancy and iou are reported also when their weight is 0.
   double total = 0, tsdf = 0, partial = 0, votes = 0, mmd = 0, occupancy = 0, iou = 0;
   /// IoU and BCE of the expected occupancy of `validation_samples` prior codes (the mean of the
@@ -56,8 +59,15 @@ struct TrainingProgress {
   double loss = 0, tsdf = 0, votes = 0, mmd = 0;  ///< this step's losses
   double validation_iou = 0;                      ///< the latest validation (0 before the first)
   double samples_per_second = 0;
+  double seconds = 0;  ///< since this run began training (its first batch included)
 };
 using TrainingProgressCallback = std::function<void(const TrainingProgress&)>;
+
+/// Thrown by CvaeTrainer::run when asked to stop: the checkpoint holds the step it names.
+struct TrainingStopped : std::runtime_error {
+  TrainingStopped(const std::string& what, int64_t at) : std::runtime_error(what), step(at) {}
+  int64_t step;  ///< the step the checkpoint holds
+};
 
 /// Adam's step size at optimiser step `step`: a cosine from learning_rate at 0 down to
 /// final_learning_rate at training.steps.
@@ -84,8 +94,12 @@ class CvaeTrainer {
   const std::string& note() const;
   /// Trains to training.steps (from the last checkpoint when `resume`) and writes
   /// <output>/model.pt and its card <output>/model.yaml. `progress`, when given, is called
-  /// after every step from the calling thread.
-  TrainingReport run(bool resume, const TrainingProgressCallback& progress = {});
+  /// after every step from the calling thread. `stop`, when given, is asked after every step:
+  /// true writes a checkpoint at that step and throws TrainingStopped. A resumed run that had
+  /// reached its steps and written its model leaves model.pt and its card as they are and
+  /// reports the card's figures.
+  TrainingReport run(bool resume, const TrainingProgressCallback& progress = {},
+                     const std::function<bool()>& stop = {});
 
   /// The validation of a run (the last `training.validation_scenes` scenes of the dataset, each
   /// from `training.validation_views` viewpoints) for a trained model file, without training:
