@@ -5,6 +5,7 @@ them best first (README, "Grasps").
     scripts/rank_grasps.py --target 0            # an object id of the latest ~objects
     scripts/rank_grasps.py --target top          # the object whose centre is highest
     scripts/rank_grasps.py --target 1 --candidates 32 --hypotheses 3 --json grasps.json
+    scripts/rank_grasps.py --point 0.6,0.1,0.05 --point-frame base_link   # nearest this point
 
 The ranking runs as the grasp server's action (feedback with --progress; Ctrl-C cancels it on
 the server). The scene is the latest ObjectArray the grasp server received (launch/grasps.launch); with
@@ -22,7 +23,7 @@ import time
 import genpy
 import rosgraph
 import rospy
-from geometry_msgs.msg import PoseStamped, Vector3
+from geometry_msgs.msg import PointStamped, PoseStamped, Vector3
 from simstack import grasp_client
 
 
@@ -84,7 +85,12 @@ def progress(done, total, best):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--target", required=True, help="object id, or 'top' for the highest")
+    which = parser.add_mutually_exclusive_group(required=True)
+    which.add_argument("--target", help="object id, or 'top' for the highest")
+    which.add_argument("--point", help="X,Y,Z (metres, in --point-frame): the object whose surface "
+                                       "is nearest this point")
+    parser.add_argument("--point-frame", default="",
+                        help="tf frame of --point (required with it), e.g. base_link")
     parser.add_argument("--candidates", type=int, default=0, help="grasps to simulate (0: the node's)")
     parser.add_argument("--pull-distance", type=float, default=0.10, help="metres")
     parser.add_argument("--pull-speed", type=float, default=0.20, help="metres per second")
@@ -127,7 +133,22 @@ def main():
         if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
             parser.error("--json %s: %s is not a writable directory" % (args.json, folder))
     target = None
-    if args.target != "top":
+    point = None
+    if args.point is not None:
+        try:
+            xyz = [float(v) for v in args.point.split(",")]
+        except ValueError:
+            xyz = []
+        if len(xyz) != 3 or not all(math.isfinite(v) for v in xyz):
+            parser.error("--point must be X,Y,Z (three finite numbers), not %r" % args.point)
+        if not args.point_frame:
+            parser.error("--point needs --point-frame (the tf frame it is given in)")
+        point = PointStamped()
+        point.header.frame_id = args.point_frame
+        point.point.x, point.point.y, point.point.z = xyz
+    elif args.point_frame:
+        parser.error("--point-frame goes with --point")
+    elif args.target != "top":
         try:
             target = int(args.target)
         except ValueError:
@@ -148,7 +169,7 @@ def main():
             target = grasp_client.top_object(scene)
         res = grasp_client.rank_grasps(scene, target, args.camera, args.candidates,
                                        args.pull_distance, args.pull_speed, args.hypotheses,
-                                       args.timeout, args.frame, args.pregrasp,
+                                       args.timeout, args.frame, args.pregrasp, target_point=point,
                                        feedback=progress if args.progress else None,
                                        result_timeout=args.result_timeout)
     except grasp_client.GraspServiceError as e:

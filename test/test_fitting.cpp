@@ -435,10 +435,10 @@ TEST(JointRefinement, RemovesOverlapsAcrossExponentsAndPoses) {
   }
 }
 
-/// The points of each instance in test/data/collapsing_pile.txt, and the instance whose joint
-/// refinement collapses.
-std::vector<Points3> collapsingPile(int* target) {
-  std::ifstream f(std::string(SIMSTACK_SOURCE_DIR) + "/test/data/collapsing_pile.txt");
+/// The points of each instance in test/data/<name> (collapsing_pile.txt, flattening_pile.txt),
+/// and the instance whose joint refinement collapses or flattens.
+std::vector<Points3> recordedPile(const std::string& name, int* target) {
+  std::ifstream f(std::string(SIMSTACK_SOURCE_DIR) + "/test/data/" + name);
   std::string line;
   while (f.peek() == '#') std::getline(f, line);
   f >> *target;
@@ -456,7 +456,7 @@ TEST(JointRefinement, AShapeItWouldShrinkAwayKeepsItsOwnFit) {
   // and eq. 5's volume weight lets the joint solve remove the collision by shrinking it to the
   // fitter's bound, an object the camera saw left as a point no grasp can take.
   int target = -1;
-  const std::vector<Points3> pts = collapsingPile(&target);
+  const std::vector<Points3> pts = recordedPile("collapsing_pile.txt", &target);
   ASSERT_EQ(pts.size(), 4u);
   ASSERT_EQ(target, 3);
   FitConfig config;
@@ -477,6 +477,31 @@ TEST(JointRefinement, AShapeItWouldShrinkAwayKeepsItsOwnFit) {
   EXPECT_LE(fits[target]->volume(), own[target].volume() * (1 + 1e-9));
 }
 
+TEST(JointRefinement, AShapeItWouldFlattenKeepsItsOwnFit) {
+  // A recorded synthetic test view: the joint solve clears a collision by pressing one object
+  // into a 1 cm slab across points that span 3 cm; one axis at the bound, the others not.
+  int target = -1;
+  const std::vector<Points3> pts = recordedPile("flattening_pile.txt", &target);
+  ASSERT_EQ(pts.size(), 4u);
+  ASSERT_EQ(target, 1);
+  FitConfig config;
+  config.one_sided_volume_exponent = 0.5;  // as config/perception.yaml
+  std::vector<SuperquadricShape> own;
+  for (const Points3& p : pts) own.push_back(fitSuperquadric(p, config));
+  const std::vector<SuperquadricShape> joint = refineJointly(pts, own, config);
+  ASSERT_TRUE(flattenedFit(joint[target], pts[target], config.min_scale_m))
+      << "the recorded case no longer flattens: scales " << joint[target].scale_m.transpose();
+  ASSERT_FALSE(collapsedFit(joint[target], pts[target]));
+  const auto fits = fitInstances(pts, config, true);
+  for (size_t k = 0; k < pts.size(); ++k) {
+    ASSERT_TRUE(fits[k]);
+    EXPECT_FALSE(flattenedFit(*fits[k], pts[k], config.min_scale_m))
+        << k << ": " << fits[k]->scale_m.transpose();
+    EXPECT_FALSE(collapsedFit(*fits[k], pts[k])) << k;
+  }
+  EXPECT_LT((fits[target]->centroid() - own[target].centroid()).norm(), 1e-9);
+}
+
 TEST(SuperquadricFit, ACollapsedShapeIsOneFarBelowItsPointsExtent) {
   const SuperquadricShape box =
       makeShape(Vec3(0.10, 0.05, 0.02), Vec3(8, 8, 8), Vec3(0, 0, 0.02), Vec3(0, 0, 1), 0.3);
@@ -495,9 +520,39 @@ TEST(SuperquadricFit, ACollapsedShapeIsOneFarBelowItsPointsExtent) {
   EXPECT_TRUE(fitAtBound(dot, pts, config));
   EXPECT_FALSE(fitAtBound(box, pts, config));
   EXPECT_FALSE(fitAtBound(dot, noisySurface(small, 200, 0.0002, 5), config));
+  // A thin rod is at the bound for a rod's points (they stay within its thickness), not for
+  // the box's, which spread 5 cm and more across it.
   SuperquadricShape rod = dot;
   rod.scale_m.x() = 0.1;
-  EXPECT_FALSE(fitAtBound(rod, pts, config));
+  EXPECT_FALSE(fitAtBound(rod, noisySurface(rod, 300, 0.0005, 6), config));
+  EXPECT_TRUE(fitAtBound(rod, pts, config));
+}
+
+TEST(SuperquadricFit, AShapeFlattenedAcrossItsPointsIsToldFromAThinObject) {
+  // A box 10 x 5 x 4 cm fitted as a 1 cm slab through it (semi-axis at the 5 mm bound), as on
+  // recorded test views; a 1 cm plate's own points lie within its thickness.
+  const SuperquadricShape box =
+      makeShape(Vec3(0.05, 0.025, 0.02), Vec3(8, 8, 8), Vec3(0, 0, 0.02), Vec3(1, 1, 0), 0.4);
+  const Points3 pts = noisySurface(box, 500, 0.0005, 7);
+  SuperquadricShape slab = box;
+  slab.scale_m.z() = 0.005;
+  EXPECT_TRUE(flattenedFit(slab, pts, 0.005));
+  EXPECT_FALSE(flattenedFit(box, pts, 0.005));
+  EXPECT_FALSE(collapsedFit(slab, pts)) << "the all-axes rule alone misses a slab";
+  const FitConfig config;
+  EXPECT_TRUE(fitAtBound(slab, pts, config));
+  SuperquadricShape plate = slab;
+  plate.scale_m = Vec3(0.06, 0.06, 0.005);
+  EXPECT_FALSE(flattenedFit(plate, noisySurface(plate, 500, 0.001, 8), 0.005));
+  // Off the bound the rule does not apply: a slab of 2 cm semi-axis is the fitter's choice.
+  slab.scale_m.z() = 0.02;
+  EXPECT_FALSE(flattenedFit(slab, pts, 0.005));
+  // The per-instance fit that flattens is replaced by the points' oriented box.
+  FitConfig one = config;
+  one.threads = 1;
+  const auto fits = fitEachInstance({pts}, one);
+  ASSERT_TRUE(fits[0]);
+  EXPECT_FALSE(flattenedFit(*fits[0], pts, config.min_scale_m)) << fits[0]->scale_m.transpose();
 }
 
 TEST(JointRefinement, RejectsBadConfig) {

@@ -371,6 +371,28 @@ if "$bin/simstack_make_bag" --output "$dir/s.bag" --views 1 --repeats 1 --seed 0
     grep -q "seed 10)"; then echo "ok   make_bag --seed 010 is seed 10"; else
   echo "FAIL make_bag --seed 010 is not seed 10"; fail=1; fi
 [ ! -e "$dir/nan.bag" ] && [ ! -e "$dir/same.bag" ] || { echo "FAIL make_bag left a bag"; fail=1; }
+# A depth file's bag: its frames with the view file's camera and table pose; the pile's
+# options and a depth without a camera are refused.
+"$bin/simstack_make_bag" --depth "$good" --table-pose "$view.yaml" --frames 3 \
+  --output "$dir/file.bag" > /dev/null || { echo "FAIL make_bag --depth"; fail=1; }
+/usr/bin/python3 - "$dir/file.bag" <<'PY' || fail=1
+import sys
+import rosbag
+counts = {}
+with rosbag.Bag(sys.argv[1]) as bag:
+    for topic, msg, _ in bag.read_messages():
+        counts[topic] = counts.get(topic, 0) + 1
+        if topic.endswith("image_rect") and msg.encoding != "16UC1":
+            sys.exit("FAIL make_bag --depth: encoding %s" % msg.encoding)
+want = {"/tf": 3, "/camera/depth/camera_info": 3, "/camera/depth/image_rect": 3}
+if counts != want:
+    sys.exit("FAIL make_bag --depth: %s, not %s" % (counts, want))
+print("ok   make_bag --depth: 3 frames of the depth file")
+PY
+expect "make_bag --depth with --seed" "excludes" "$bin/simstack_make_bag" --depth "$good" \
+  --seed 3 --output "$dir/x.bag"
+expect "make_bag --depth without a camera" "--intrinsics is needed" "$bin/simstack_make_bag" \
+  --depth "$good" --output "$dir/x.bag"
 # An existing device, pipe or socket is not replaced by an output file.
 mkfifo "$dir/pipe"
 expect "generate --output naming a pipe" "not a regular file" "$bin/simstack_generate" \

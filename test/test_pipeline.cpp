@@ -1041,6 +1041,8 @@ TEST(RealScenes, NoFitCollapsesOnRealOrSyntheticScenes) {
       ++objects;
       EXPECT_FALSE(collapsedFit(e.superquadric, e.points))
           << what << ": scales " << e.superquadric.scale_m.transpose();
+      EXPECT_FALSE(flattenedFit(e.superquadric, e.points, c.fit.min_scale_m))
+          << what << ": scales " << e.superquadric.scale_m.transpose();
       if (2 * initialGuess(e.points).scale_m.maxCoeff() > kCollapseSpanM) {
         EXPECT_GT(e.superquadric.scale_m.maxCoeff(), 2 * c.fit.min_scale_m) << what;
       }

@@ -252,10 +252,15 @@ TEST(GraspConversions, ToolPoseLooksIntoTheSurfaceInTheAskedFrameAndArrowsShowTh
   base.frame_id = "base_link";
   Transform T_base_table = Transform::Identity();
   T_base_table.translation() = Vec3(0.5, 0.0, 0.7);
-  Transform T_scene_table = Transform::Identity();  // the scene's frame: the table turned
-  T_scene_table.linear() = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitZ()).toRotationMatrix();
-  const Grasp m = graspMsg(g, base, T_base_table, T_scene_table, 0.05);
-  EXPECT_NEAR(m.approach.y, 1.0, 1e-9);  // the approach in the scene's frame
+  Transform T_base_turned = T_base_table;  // the table turned in the poses' frame
+  T_base_turned.linear() = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitZ()).toRotationMatrix();
+  const Grasp turned = graspMsg(g, base, T_base_turned, 0.05);
+  EXPECT_NEAR(turned.approach.y, 1.0, 1e-9);  // the approach in the poses' frame, as the tool's
+  const Transform Tz = transformFromPose(turned.tool_pose.pose);
+  EXPECT_TRUE((Tz.linear() * Vec3::UnitZ())
+                  .isApprox(-Vec3(turned.approach.x, turned.approach.y, turned.approach.z), 1e-9));
+  const Grasp m = graspMsg(g, base, T_base_table, 0.05);
+  EXPECT_NEAR(m.approach.x, 1.0, 1e-9);
   EXPECT_EQ(m.tool_pose.header.frame_id, "base_link");
   EXPECT_EQ(m.pregrasp_pose.header.frame_id, "base_link");
   const Transform T = transformFromPose(m.tool_pose.pose);
@@ -270,10 +275,9 @@ TEST(GraspConversions, ToolPoseLooksIntoTheSurfaceInTheAskedFrameAndArrowsShowTh
   RankedGrasp held = g, failed = g;
   held.freed_share = 0.5;
   failed.failed_share = 0.5;
-  const Transform I = Transform::Identity();
-  EXPECT_TRUE(graspMsg(g, base, T_base_table, I, 0.05).held);
-  EXPECT_TRUE(graspMsg(g, base, T_base_table, I, 0.05).freed);
-  EXPECT_FALSE(graspMsg(held, base, T_base_table, I, 0.05).freed);
+  EXPECT_TRUE(graspMsg(g, base, T_base_table, 0.05).held);
+  EXPECT_TRUE(graspMsg(g, base, T_base_table, 0.05).freed);
+  EXPECT_FALSE(graspMsg(held, base, T_base_table, 0.05).freed);
   std_msgs::Header h;
   const auto markers = graspMarkers(h, {g, held, failed, failed}, T_base_table);
   const geometry_msgs::Point& tip = markers.markers[1].points[1];  // at the contact, in h's frame

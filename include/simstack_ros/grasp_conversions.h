@@ -45,11 +45,10 @@ enum class GraspOutcome { kHeldAndFreed, kHeld, kFailed };
 GraspOutcome graspOutcome(const RankedGrasp& grasp);
 
 /// One ranked grasp (ranked in the table frame) as a message: its tool and pre-grasp poses
-/// (toolPose(), pregraspPose()) in `pose_header`'s frame, mapped there by `T_pose_table`; the
-/// approach in the scene's frame, `T_scene_table`.
+/// (toolPose(), pregraspPose()) and its approach in `pose_header`'s frame, mapped there by
+/// `T_pose_table`.
 Grasp graspMsg(const RankedGrasp& grasp, const std_msgs::Header& pose_header,
-               const Transform& T_pose_table, const Transform& T_scene_table,
-               double pregrasp_distance_m);
+               const Transform& T_pose_table, double pregrasp_distance_m);
 
 /// DELETEALL, then each grasp as an arrow pointing at its contact along -approach (namespace
 /// "grasps"), coloured by outcome: green held and freed, yellow held but not freed, red the

@@ -62,12 +62,22 @@ def scene_age(scene):
     return None if now.is_zero() else (now - scene.header.stamp).to_sec()
 
 
+def _namespace(camera):
+    """`camera` as a namespace: without leading, trailing or doubled slashes ("/cell/kinect/"
+    is cell/kinect); GraspServiceError when nothing is left."""
+    parts = [p for p in str(camera).split("/") if p]
+    if not parts:
+        raise GraspServiceError("camera namespace %r names nothing" % (camera,))
+    return "/".join(parts)
+
+
 def latest_scene(camera="camera", timeout=10.0, max_age=None):
     """The latest ObjectArray on /<camera>/perception/objects. It is latched, so it comes at once
     however old it is: refused when its stamp is more than `max_age` seconds behind the clock
     (None: the grasp server's ~max_scene_age_s, 10 s when unset; 0: any age), or when it holds
     no object."""
     _require_node()
+    camera = _namespace(camera)
     topic = "/%s/perception/objects" % camera
     try:
         scene = rospy.wait_for_message(topic, ObjectArray, timeout=timeout)
@@ -243,7 +253,7 @@ def rank_grasps(scene, target_id, camera="camera", candidates=0, pull_distance_m
         _check_number(name, value)
     if result_timeout is not None:
         _check_number("result_timeout", result_timeout)
-    name = "/%s/grasps/rank_grasps_action" % camera
+    name = "/%s/grasps/rank_grasps_action" % _namespace(camera)
     goal = RankGraspsGoal(target_id=0 if target_id is None else target_id, candidates=candidates,
                           pull_distance_m=pull_distance_m, pull_speed_mps=pull_speed_mps,
                           hypotheses=hypotheses, target_frame=target_frame,

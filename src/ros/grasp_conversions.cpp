@@ -107,10 +107,10 @@ Points3 measuredSurface(const Object& object, const Transform& T_table_frame) {
 }
 
 Grasp graspMsg(const RankedGrasp& g, const std_msgs::Header& pose_header,
-               const Transform& T_pose_table, const Transform& T_scene_table,
-               double pregrasp_distance_m) {
+               const Transform& T_pose_table, double pregrasp_distance_m) {
   Grasp m;
-  const Vec3 z = T_scene_table.linear() * g.candidate.approach_table.normalized();
+  // In the poses' frame, as the tool pose: one grasp's fields are read together.
+  const Vec3 z = T_pose_table.linear() * g.candidate.approach_table.normalized();
   const Transform tool = T_pose_table * toolPose(g.candidate);
   m.tool_pose.header = m.pregrasp_pose.header = pose_header;
   m.tool_pose.pose = poseMsg(tool);

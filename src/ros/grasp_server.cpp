@@ -98,6 +98,15 @@ bool GraspServer::lookup(const std::string& target, const std::string& source,
     std::snprintf(seconds, sizeof(seconds), "%.3f", stamp.toSec());
     *why = "no transform '" + target + "' <- '" + source + "' at the scene's stamp " + seconds +
            " s: " + e.what();
+    // A frame tf never heard of, though the scene names it: this node has had no tf at all
+    // for it (started after a bag ended, or tf published elsewhere).
+    for (const std::string& frame : {target, source})
+      if (!tf_buffer_._frameExists(frame)) {
+        *why += " (this grasp server's tf has never received '" + frame +
+                "': was tf published while it ran? a bag that ended before it started left it "
+                "none)";
+        break;
+      }
     return false;
   }
 }
@@ -342,17 +351,14 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
     if (feedback)
       progress = [&](int done, int total, const RankedGrasp* best) {
         std::optional<Grasp> msg;
-        if (best)
-          msg =
-              graspMsg(*best, p.pose_header, p.T_pose_table, p.T_scene_table, p.grasps.pregrasp_m);
+        if (best) msg = graspMsg(*best, p.pose_header, p.T_pose_table, p.grasps.pregrasp_m);
         return feedback(done, total, msg ? &*msg : nullptr);
       };
     const GraspRanking ranking =
         rankGrasps(p.grasps.scenes, p.target, p.grasps.cameras, p.grasps.config, progress,
                    p.measured_target, p.measured_from);
     for (const RankedGrasp& g : ranking.grasps)
-      res.grasps.push_back(
-          graspMsg(g, p.pose_header, p.T_pose_table, p.T_scene_table, p.grasps.pregrasp_m));
+      res.grasps.push_back(graspMsg(g, p.pose_header, p.T_pose_table, p.grasps.pregrasp_m));
     for (const SceneDrift& d : ranking.baseline)
       res.baseline_displacement_m.push_back(static_cast<float>(d.max_displacement_m));
     res.candidates_seen = static_cast<uint32_t>(ranking.candidates.visible);

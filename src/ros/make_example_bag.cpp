@@ -1,7 +1,8 @@
-// simstack_make_bag: a rosbag of synthetic depth frames of one generated pile, seen from a ring
-// of viewpoints: depth/image_rect (16UC1, mm), depth/camera_info and tf from the table to the
-// camera, as a depth camera on a robot would publish them. test/data/example_pile.bag was made
-// with the defaults (README, "Running in ROS").
+// simstack_make_bag: a rosbag of depth frames, depth/image_rect (16UC1, mm), depth/camera_info
+// and tf from the table to the camera, as a depth camera on a robot would publish them: of one
+// generated pile seen from a ring of viewpoints (test/data/example_pile.bag was made with the
+// defaults; README, "Running in ROS"), or of one depth file repeated (--depth: a real scene
+// replayed into the node).
 #include <geometry_msgs/TransformStamped.h>
 #include <rosbag/bag.h>
 #include <sensor_msgs/CameraInfo.h>
@@ -16,12 +17,15 @@
 #include <cmath>
 #include <cstring>
 #include <iostream>
+#include <optional>
 #include <regex>
 #include <utility>
 
 #include "cli_checks.h"
+#include "depth_files.h"
 #include "simstack/io/staged_output.h"
 #include "simstack/offline/piles/pile_generator.h"
+#include "simstack/pipeline/table_plane.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack_ros/conversions.h"
 
@@ -55,92 +59,177 @@ std::string badNames(const std::string& camera_ns, const std::string& table_fram
   return "";
 }
 
+/// Where the frames go: topics under /<camera>/depth/, tf table -> camera.
+struct BagNames {
+  std::string camera_ns = "camera", table_frame = "table",
+              camera_frame = "camera_depth_optical_frame";
+};
+
+/// One frame: tf table -> camera, camera_info and the depth image, all at `stamp`.
+void writeFrame(rosbag::Bag* bag, const BagNames& names, int seq, const ros::Time& stamp,
+                const PinholeCamera& camera, const Transform& T_table_camera,
+                const DepthImage& depth) {
+  std_msgs::Header header;
+  header.seq = seq;
+  header.stamp = stamp;
+  header.frame_id = names.camera_frame;
+  geometry_msgs::TransformStamped t = tf2::eigenToTransform(T_table_camera);
+  t.header.stamp = stamp;
+  t.header.frame_id = names.table_frame;
+  t.child_frame_id = names.camera_frame;
+  tf2_msgs::TFMessage tf;
+  tf.transforms.push_back(t);
+  bag->write("/tf", stamp, tf);
+  bag->write("/" + names.camera_ns + "/depth/camera_info", stamp, cameraInfoMsg(header, camera));
+  bag->write("/" + names.camera_ns + "/depth/image_rect", stamp, depthImageMsg(header, depth));
+}
+
+/// The depth file's frames: `frames` copies `interval_s` apart, the table from its view file
+/// or estimated (RANSAC) as the tools do; says which.
+int writeDepthFileFrames(rosbag::Bag* bag, const BagNames& names, const std::string& depth_path,
+                         std::optional<double> depth_scale, const std::string& intrinsics,
+                         const std::string& pose_path, int frames, double interval_s) {
+  const DepthView view = readDepthFileView(depth_path, depth_scale, intrinsics, pose_path, "");
+  Transform T_table_camera = view.T_table_camera.value_or(Transform::Identity());
+  if (!view.T_table_camera) {
+    const TablePlane plane = estimateTablePlane(view.depth, view.camera);
+    T_table_camera = plane.T_table_camera;
+    std::cout << "table plane estimated from " << depth_path << " (" << plane.inliers << " of "
+              << plane.points << " sampled points on it); the camera "
+              << T_table_camera.translation().z() << " m above it\n";
+  }
+  for (int f = 0; f < frames; ++f)
+    writeFrame(bag, names, f, ros::Time(1.0 + f * interval_s), view.camera, T_table_camera,
+               view.depth);
+  return frames;
+}
+
 }  // namespace
 
-int main(int argc, char** argv) {
-  std::string output, camera_ns = "camera", table_frame = "table",
-                      camera_frame = "camera_depth_optical_frame";
+/// The options of the generated pile's ring of views.
+struct RingOptions {
   uint64_t seed = 2021;
   int views = 6, repeats = 2;
-  double interval_s = 0.5, distance_m = 0.75, elevation_deg = 50.0;
+  double distance_m = 0.75, elevation_deg = 50.0;
   bool noise = true;
+};
+
+/// The ring of views of one generated pile, `repeats` frames each.
+int writeRingFrames(rosbag::Bag* bag, const BagNames& names, const RingOptions& o,
+                    double interval_s, size_t* objects) {
+  const Scene scene = PileGenerator(PileConfig()).generate(o.seed).scene;
+  *objects = scene.objects.size();
+  const DepthRenderer renderer(scene);
+  const Vec3 centre = scene.surfaceCentroid();
+  const PinholeCamera camera;
+  const double elevation = o.elevation_deg * M_PI / 180.0;
+  int frame = 0;
+  for (int v = 0; v < o.views; ++v) {
+    const double azimuth = 2.0 * M_PI * v / o.views;
+    const Vec3 eye =
+        centre + o.distance_m * Vec3(std::cos(elevation) * std::cos(azimuth),
+                                     std::cos(elevation) * std::sin(azimuth), std::sin(elevation));
+    const Transform T_table_camera = lookAt(eye, Vec3(centre.x(), centre.y(), 0.05));
+    for (int r = 0; r < o.repeats; ++r, ++frame) {
+      const RenderResult image = renderer.render(
+          camera, T_table_camera,
+          o.noise ? SensorNoiseConfig::kinect(o.seed * 1000 + frame) : SensorNoiseConfig());
+      writeFrame(bag, names, frame, ros::Time(1.0 + frame * interval_s), camera, T_table_camera,
+                 image.depth);
+    }
+  }
+  return frame;
+}
+
+int main(int argc, char** argv) {
+  std::string output, depth_path, intrinsics, pose_path;
+  BagNames names;
+  RingOptions ring;
+  int frames = 10;
+  double interval_s = 0.5, depth_scale = 0.001;
   CLI::App app{
-      "Write a rosbag of one generated pile seen from a ring of viewpoints: depth images "
-      "(16UC1, mm), camera_info and tf table -> camera, to replay into the perception node."};
+      "Write a rosbag of depth images (16UC1, mm), camera_info and tf table -> camera, to replay "
+      "into the perception node: one generated pile seen from a ring of viewpoints, or one depth "
+      "file (--depth) repeated."};
   app.add_option("--output", output, "bag file")->required()->check(WritablePath);
-  app.add_option("--seed", seed, "pile seed (simstack_generate's scene seeds)")
+  CLI::Option* depth =
+      app.add_option("--depth", depth_path,
+                     "a depth file instead of a generated pile: 16-bit PNG, "
+                     "32-bit float TIFF in metres, or PCD (as simstack_reconstruct)")
+          ->check(CLI::ExistingFile);
+  app.add_option("--intrinsics", intrinsics,
+                 "with --depth: fx,fy,cx,cy in pixels (or --table-pose)")
+      ->needs(depth);
+  const CLI::Option* scale_option =
+      app.add_option("--depth-scale", depth_scale,
+                     "with --depth: metres per unit of a 16-bit PNG (default: the --table-pose "
+                     "view file's, else 0.001)")
+          ->check(FinitePositive)
+          ->needs(depth);
+  app.add_option("--table-pose", pose_path,
+                 "with --depth: its view file (T_table_camera and intrinsics); without it the "
+                 "table plane is estimated from the depth (RANSAC)")
+      ->check(CLI::ExistingFile)
+      ->needs(depth);
+  app.add_option("--frames", frames, "with --depth: frames written")
       ->capture_default_str()
+      ->check(CLI::Range(1, 10000))
+      ->needs(depth);
+  const auto ring_option = [&](CLI::Option* o) {
+    return o->capture_default_str()->excludes(depth);
+  };
+  ring_option(app.add_option("--seed", ring.seed, "pile seed (simstack_generate's scene seeds)"))
       ->transform(SeedNumber);
-  app.add_option("--views", views, "viewpoints on the ring")
-      ->capture_default_str()
+  ring_option(app.add_option("--views", ring.views, "viewpoints on the ring"))
       ->check(CLI::Range(1, 64));
-  app.add_option("--repeats", repeats, "frames per viewpoint")
-      ->capture_default_str()
+  ring_option(app.add_option("--repeats", ring.repeats, "frames per viewpoint"))
       ->check(CLI::Range(1, 100));
   app.add_option("--interval", interval_s, "seconds between frames")
       ->capture_default_str()
       ->check(FinitePositive)
       ->check(CLI::Range(0.01, 10.0));
-  app.add_option("--distance", distance_m, "camera distance from the pile's centre (m)")
-      ->capture_default_str()
+  ring_option(
+      app.add_option("--distance", ring.distance_m, "camera distance from the pile's centre (m)"))
       ->check(FinitePositive)
       ->check(CLI::Range(0.3, 3.0));
-  app.add_option("--elevation", elevation_deg, "camera elevation above the table (degrees)")
-      ->capture_default_str()
+  ring_option(app.add_option("--elevation", ring.elevation_deg,
+                             "camera elevation above the table (degrees)"))
       ->check(FinitePositive)
       ->check(CLI::Range(5.0, 90.0));
-  app.add_option("--camera", camera_ns, "camera namespace of the topics")->capture_default_str();
-  app.add_option("--table-frame", table_frame, "tf frame of the table")->capture_default_str();
-  app.add_option("--camera-frame", camera_frame, "tf frame of the depth camera (optical)")
+  app.add_option("--camera", names.camera_ns, "camera namespace of the topics")
       ->capture_default_str();
-  app.add_flag("--noise,!--no-noise", noise, "Kinect-like sensor noise (on by default)");
+  app.add_option("--table-frame", names.table_frame, "tf frame of the table")
+      ->capture_default_str();
+  app.add_option("--camera-frame", names.camera_frame, "tf frame of the depth camera (optical)")
+      ->capture_default_str();
+  app.add_flag("--noise,!--no-noise", ring.noise,
+               "Kinect-like sensor noise in the generated pile's views (default: on)")
+      ->excludes(depth);
   CLI11_PARSE(app, argc, argv);
-  const std::string bad = badNames(camera_ns, table_frame, camera_frame);
+  const std::string bad = badNames(names.camera_ns, names.table_frame, names.camera_frame);
   if (!bad.empty()) {
     std::cerr << "simstack_make_bag: error: " << bad << "\n";
     return 105;  // as CLI11's refusals of an option's value
   }
   try {
-    const Scene scene = PileGenerator(PileConfig()).generate(seed).scene;
-    const DepthRenderer renderer(scene);
-    const Vec3 centre = scene.surfaceCentroid();
-    const PinholeCamera camera;
     StagedFile staged(output);  // an earlier bag stays whole until this one is
     rosbag::Bag bag(staged.path(), rosbag::bagmode::Write);
     bag.setCompression(rosbag::compression::BZ2);
-    const double elevation = elevation_deg * M_PI / 180.0;
-    int frame = 0;
-    for (int v = 0; v < views; ++v) {
-      const double azimuth = 2.0 * M_PI * v / views;
-      const Vec3 eye =
-          centre + distance_m * Vec3(std::cos(elevation) * std::cos(azimuth),
-                                     std::cos(elevation) * std::sin(azimuth), std::sin(elevation));
-      const Transform T_table_camera = lookAt(eye, Vec3(centre.x(), centre.y(), 0.05));
-      for (int r = 0; r < repeats; ++r, ++frame) {
-        std_msgs::Header header;
-        header.seq = frame;
-        header.stamp = ros::Time(1.0 + frame * interval_s);
-        header.frame_id = camera_frame;
-        const RenderResult image = renderer.render(
-            camera, T_table_camera,
-            noise ? SensorNoiseConfig::kinect(seed * 1000 + frame) : SensorNoiseConfig());
-        geometry_msgs::TransformStamped t = tf2::eigenToTransform(T_table_camera);
-        t.header.stamp = header.stamp;
-        t.header.frame_id = table_frame;
-        t.child_frame_id = camera_frame;
-        tf2_msgs::TFMessage tf;
-        tf.transforms.push_back(t);
-        bag.write("/tf", header.stamp, tf);
-        bag.write("/" + camera_ns + "/depth/camera_info", header.stamp,
-                  cameraInfoMsg(header, camera));
-        bag.write("/" + camera_ns + "/depth/image_rect", header.stamp,
-                  depthImageMsg(header, image.depth));
-      }
-    }
+    size_t objects = 0;
+    const int written =
+        depth_path.empty()
+            ? writeRingFrames(&bag, names, ring, interval_s, &objects)
+            : writeDepthFileFrames(
+                  &bag, names, depth_path,
+                  scale_option->count() ? std::optional<double>(depth_scale) : std::nullopt,
+                  intrinsics, pose_path, frames, interval_s);
     bag.close();
     staged.commit();
-    std::cout << "wrote " << frame << " frames (" << views << " viewpoints, "
-              << scene.objects.size() << " objects, seed " << seed << ") to " << output << "\n";
+    if (depth_path.empty())
+      std::cout << "wrote " << written << " frames (" << ring.views << " viewpoints, " << objects
+                << " objects, seed " << ring.seed << ") to " << output << "\n";
+    else
+      std::cout << "wrote " << written << " frames of " << depth_path << " to " << output << "\n";
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_make_bag: error: " << e.what() << "\n";

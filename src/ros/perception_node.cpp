@@ -34,6 +34,32 @@ void removeWrittenBack(const std::string& ns, const std::set<std::string>& befor
   for (const std::string& name : parametersUnder(ns))
     if (!before.count(name)) ros::param::del(name);
 }
+/// Says which parameters under `ns` were there before the node started and were not given on
+/// its command line (`_name:=value`): outside roslaunch (which passes __log:= and sets its
+/// parameters just before), they are an earlier run's, left on the master, and silently lay
+/// another model or setting over the package config.
+void warnLeftOverParameters(const std::string& ns, const std::set<std::string>& before,
+                            const std::vector<std::string>& args) {
+  std::set<std::string> given;
+  for (const std::string& a : args) {
+    if (a.rfind("__log:=", 0) == 0) return;  // started by roslaunch
+    if (a.size() > 1 && a[0] == '_' && a[1] != '_' && a.find(":=") != std::string::npos)
+      given.insert(ns + "/" + a.substr(1, a.find(":=") - 1));
+  }
+  std::string left;
+  int count = 0;
+  for (const std::string& name : before)
+    if (!given.count(name)) {
+      if (count < 5) left += (count ? ", " : "") + name.substr(ns.size() + 1);
+      ++count;
+    }
+  if (count > 0)
+    ROS_WARN(
+        "simstack perception: %d parameter(s) under %s were set before this node started and not "
+        "on its command line (%s%s): they are laid over the package config. Left by an earlier "
+        "launch on this master? `rosparam delete %s` clears them.",
+        count, ns.c_str(), left.c_str(), count > 5 ? ", ..." : "", ns.c_str());
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -46,9 +72,11 @@ int main(int argc, char** argv) {
   }
   // Our own SIGINT handler, so that the parameters can be cleaned up while the master is
   // still reachable.
+  const std::vector<std::string> args(argv, argv + argc);  // before ros::init takes its own
   ros::init(argc, argv, "perception", ros::init_options::NoSigintHandler);
   ros::NodeHandle nh, pnh("~");  // topics under <namespace>/perception/, as launched
   const std::set<std::string> before = parametersUnder(pnh.getNamespace());
+  warnLeftOverParameters(pnh.getNamespace(), before, args);
   std::signal(SIGINT, requestStop);
   std::signal(SIGTERM, requestStop);
   std::unique_ptr<simstack::PerceptionServer> server;

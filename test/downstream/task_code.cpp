@@ -54,9 +54,8 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "no grasp ranked: %s\n", ranking.message.c_str());
       return 1;
     }
-    srv.response.grasps.push_back(simstack::graspMsg(ranking.grasps.front(), header,
-                                                     simstack::Transform::Identity(),
-                                                     simstack::Transform::Identity(), 0.05));
+    srv.response.grasps.push_back(
+        simstack::graspMsg(ranking.grasps.front(), header, simstack::Transform::Identity(), 0.05));
     std::printf("one box perceived %.3f m from where it stands; %zu grasps ranked\n", off,
                 ranking.grasps.size());
     return 0;

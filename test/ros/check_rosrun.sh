@@ -34,6 +34,10 @@ if ! timeout 120 rostopic echo -n 1 /camera/perception/ready 2> /dev/null | grep
   exit 1
 fi
 echo "rosrun simstack perception_node: ready"
+# A parameter set before the start and not on the command line is named: an earlier launch's
+# leftovers would otherwise change the model or settings without a word.
+grep -q "1 parameter(s) under /camera/perception were set before this node started and not on its command line (tf_timeout_s)" "$ROS_HOME/node.log" ||
+  { echo "the node did not name the parameter set before it started; its log:"; tail -20 "$ROS_HOME/node.log"; exit 1; }
 node_pid=${ROS_SESSION_PIDS[-1]}
 rosparam get /camera/perception/samples > /dev/null ||
   { echo "the node wrote no ~samples back (dynamic_reconfigure)"; exit 1; }

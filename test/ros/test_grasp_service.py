@@ -110,6 +110,8 @@ class GraspService(unittest.TestCase):
         eye = request(use_camera_pose=True)
         eye.camera_pose.position.x = float("nan")
         self.expect_rejected(eye, "camera_pose.position is not finite")
+        unset = request(use_camera_pose=True)  # the pose left at zeros: on the table plane
+        self.expect_rejected(unset, "m above the table plane, where no camera sees the pile")
         self.expect_rejected(request(), "no scene has arrived", self.lonely)
         twice = copy.deepcopy(self.scene)
         self.assertGreater(len(twice.objects), 1)
@@ -321,6 +323,15 @@ class GraspService(unittest.TestCase):
         for field in Grasp.__slots__:
             self.assertIn(field, written["grasps"][0])
         self.assertEqual(len(written["grasps"][0]["tool_pose"]), 7)
+        # The target by a point in a tf frame; a namespace written with slashes works alike.
+        code, out = self.script("--point", "0,0,0.05", "--point-frame", "table", "--candidates",
+                                "8", "--camera", "/camera/")
+        self.assertEqual(code, 0, out)
+        self.assertRegex(out, r"object \d+: .*grasps ranked")
+        self.assertNotIn("not a legal ROS graph resource name", out)
+        code, out = self.script("--point", "0,0,0.05")
+        self.assertNotEqual(code, 0, out)
+        self.assertIn("--point needs --point-frame", out)
 
     def test_9_the_script_refuses_a_stale_latched_scene(self):
         # A latched scene arrives at once however old it is; the bag's clock reads 1 s or more.

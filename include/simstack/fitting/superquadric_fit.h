@@ -114,7 +114,8 @@ bool collapsedFit(const SuperquadricShape& shape, const Points3& points_table);
 
 /// Stage one for a scene: fitSuperquadric for each point set of at least `min_points` points (in
 /// parallel over `threads`; smaller sets and sets that cannot be fitted get std::nullopt), the
-/// points' oriented box (initialGuess) where the fit collapses (collapsedFit).
+/// points' oriented box (initialGuess) where the fit collapses or flattens (collapsedFit,
+/// flattenedFit).
 std::vector<std::optional<SuperquadricShape>> fitEachInstance(const std::vector<Points3>& points,
                                                               const FitConfig& config,
                                                               int min_points = 30);
@@ -124,20 +125,27 @@ std::vector<std::optional<SuperquadricShape>> fitEachInstance(const std::vector<
 void refineInstances(const std::vector<Points3>& points, const FitConfig& config,
                      std::vector<std::optional<SuperquadricShape>>* fits);
 
+/// True when `shape` is flattened for `points_table`: a semi-axis at the fitter's lower bound
+/// (at most 1.5 x `min_scale_m`) along which the middle 90 % of the points spans more than
+/// kCollapseSpanM (a box fitted as a slab through it; a thin plate's points stay within its
+/// thickness).
+bool flattenedFit(const SuperquadricShape& shape, const Points3& points_table, double min_scale_m);
+
 /// True when `shape` sits at the fitter's lower bound for an object seen larger: its largest
 /// semi-axis is at most 1.5 x `config.min_scale_m` while `visible_table` (the depth points
-/// measured on the object) spans more than kCollapseSpanM. No shipped fit should; the
-/// evaluations count them (`fits_at_bound`).
+/// measured on the object) spans more than kCollapseSpanM, or it is flattenedFit along one
+/// axis for those points. No shipped fit should; the evaluations count them (`fits_at_bound`).
 bool fitAtBound(const SuperquadricShape& shape, const Points3& visible_table,
                 const FitConfig& config);
 
 /// Both stages for a scene: per-instance fits (in parallel over `threads`), then, when
 /// `joint`, the joint refinement of all fitted shapes. Sets with fewer than `min_points`
 /// points are skipped (std::nullopt). No fit collapses: a per-instance fit that does
-/// (collapsedFit) is replaced by the points' oriented box (initialGuess), and a jointly refined
-/// shape that does, or that keeps less than kLeastJointVolumeShare of its per-instance fit's
-/// volume, by its per-instance fit scaled down about its centre until clear of the others, but
-/// not below 0.3 of its points' extent.
+/// (collapsedFit, or flattenedFit along one axis) is replaced by the points' oriented box
+/// (initialGuess), and a jointly refined shape that does, or that keeps less than
+/// kLeastJointVolumeShare of its per-instance fit's volume, by its per-instance fit scaled down
+/// about its centre until clear of the others, but not below 0.3 of its points' extent, nor to the
+/// bound along an axis they extend along.
 std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Points3>& points,
                                                            const FitConfig& config, bool joint,
                                                            int min_points = 30);

@@ -791,6 +791,30 @@ std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points,
 
 namespace {
 
+/// The extent of the middle 90 % of `points` along the unit `axis`: a few stray points (a
+/// neighbour's edge) do not count.
+double middleSpan(const Points3& points, const Vec3& axis) {
+  if (points.empty()) return 0.0;
+  std::vector<double> along(points.size());
+  for (size_t i = 0; i < points.size(); ++i) along[i] = axis.dot(points[i]);
+  const size_t cut = along.size() / 20;
+  std::nth_element(along.begin(), along.begin() + cut, along.end());
+  const double lo = along[cut];
+  std::nth_element(along.begin(), along.end() - 1 - cut, along.end());
+  return along[along.size() - 1 - cut] - lo;
+}
+
+/// The least factor `shape` may be scaled by for `points`: 0.3 of their extent, and no axis
+/// along which they extend over kCollapseSpanM pressed to the fitter's bound (flattenedFit).
+double leastShrink(const SuperquadricShape& shape, const Points3& points, double min_scale_m) {
+  const double box = initialGuess(points).scale_m.maxCoeff();
+  double least = 0.3 * box / shape.scale_m.maxCoeff();
+  for (int k = 0; k < 3; ++k)
+    if (middleSpan(points, shape.T_table_object.linear().col(k)) > kCollapseSpanM)
+      least = std::max(least, 1.6 * min_scale_m / shape.scale_m[k]);
+  return std::min(1.0, least);
+}
+
 /// `shape` scaled about its centre by the largest factor in [least, 1] (bisection) that leaves
 /// it clear of every shape of `shapes` but the `self`-th (under 0.3 mm rms penetration either
 /// way); `least` when none does.
@@ -834,7 +858,8 @@ std::vector<std::optional<SuperquadricShape>> fitEachInstance(const std::vector<
     try {
       fits[i] = fitSuperquadric(points[i], single);
       // The points' oriented box rather than a shape that lost them.
-      if (collapsedFit(*fits[i], points[i])) fits[i] = initialGuess(points[i], c.initial_exponent);
+      if (collapsedFit(*fits[i], points[i]) || flattenedFit(*fits[i], points[i], c.min_scale_m))
+        fits[i] = initialGuess(points[i], c.initial_exponent);
     } catch (const std::invalid_argument&) {
       // Points that cannot be fitted (all at a few places, or not finite): no superquadric, as
       // for too few points; the config was checked above.
@@ -867,14 +892,13 @@ void refineInstances(const std::vector<Points3>& points, const FitConfig& c,
   if (shapes.empty()) return;
   std::vector<SuperquadricShape> refined = refineJointly(pts, shapes, c);
   for (size_t k = 0; k < index.size(); ++k) {
-    if (!collapsedFit(refined[k], pts[k]) &&
+    if (!collapsedFit(refined[k], pts[k]) && !flattenedFit(refined[k], pts[k], c.min_scale_m) &&
         refined[k].volume() >= kLeastJointVolumeShare * shapes[k].volume())
       continue;
     // The per-instance fit, made smaller until it is clear of the others, as far as its points
     // allow: the joint solve's own way out of a collision, without losing the object.
-    const double box = initialGuess(pts[k]).scale_m.maxCoeff();
-    const double least = std::min(1.0, 0.3 * box / shapes[k].scale_m.maxCoeff());
-    refined[k] = shrunkUntilClear(shapes[k], refined, k, least);
+    refined[k] =
+        shrunkUntilClear(shapes[k], refined, k, leastShrink(shapes[k], pts[k], c.min_scale_m));
   }
   for (size_t k = 0; k < index.size(); ++k) fits[index[k]] = refined[k];
 }
@@ -890,8 +914,18 @@ std::vector<std::optional<SuperquadricShape>> fitInstances(const std::vector<Poi
 bool fitAtBound(const SuperquadricShape& shape, const Points3& visible_table,
                 const FitConfig& config) {
   if (visible_table.size() < 4) return false;
-  return shape.scale_m.maxCoeff() <= 1.5 * config.min_scale_m &&
-         2 * initialGuess(visible_table).scale_m.maxCoeff() > kCollapseSpanM;
+  return (shape.scale_m.maxCoeff() <= 1.5 * config.min_scale_m &&
+          2 * initialGuess(visible_table).scale_m.maxCoeff() > kCollapseSpanM) ||
+         flattenedFit(shape, visible_table, config.min_scale_m);
+}
+
+bool flattenedFit(const SuperquadricShape& shape, const Points3& points_table, double min_scale_m) {
+  if (points_table.size() < 4) return false;
+  for (int k = 0; k < 3; ++k)
+    if (shape.scale_m[k] <= 1.5 * min_scale_m &&
+        middleSpan(points_table, shape.T_table_object.linear().col(k)) > kCollapseSpanM)
+      return true;
+  return false;
 }
 
 bool collapsedFit(const SuperquadricShape& shape, const Points3& points_table) {

@@ -83,6 +83,13 @@ PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConf
                                 std::to_string(request.scenes[0].size()) + "-object scene");
   if (request.camera_table && !request.camera_table->allFinite())
     throw std::invalid_argument("camera_pose.position is not finite");
+  // A camera sees the pile from above: one at or below the table is a pose in another frame,
+  // or one left unset (all zeros), not a target with no surface in sight.
+  if (request.camera_table && !(request.camera_table->z() > 0.0))
+    throw std::invalid_argument("camera_pose.position is " +
+                                number(request.camera_table->z() + 0.0) +
+                                " m above the table plane, where no camera sees the pile: give "
+                                "the camera's position in the scene's frame (it is unset?)");
   PreparedGrasps out;
   const size_t wanted = GraspPolicy::hypothesesFor(request.hypotheses);
   out.scenes.assign(request.scenes.begin(),
