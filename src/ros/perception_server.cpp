@@ -728,12 +728,17 @@ void PerceptionServer::onSilenceCheck() {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     silent = silenceSeconds(now);
-    // The first warning after input_timeout_s, then one every 30 s while it lasts.
+    // The first warning after input_timeout_s, then one every 30 s while it lasts, and one at
+    // once when its cause changes (the cause's words before its details in brackets).
+    const std::string now_cause = silent > 0.0 ? silenceCause(now) : std::string();
+    const std::string kind = now_cause.substr(0, now_cause.find('('));
     if (silent > 0.0 &&
-        (last_silence_warning_.isZero() || (now - last_silence_warning_).toSec() >= 30.0)) {
+        (last_silence_warning_.isZero() || (now - last_silence_warning_).toSec() >= 30.0 ||
+         kind != last_silence_kind_)) {
       warn = true;
       last_silence_warning_ = now;
-      cause = silenceCause(now);
+      last_silence_kind_ = kind;
+      cause = now_cause;
     } else if (silent == 0.0 && !last_silence_warning_.isZero()) {
       resumed = true;
       last_silence_warning_ = ros::SteadyTime();
