@@ -48,7 +48,10 @@ def methods_of(paths, sets):
     for path, r in zip(paths, sets):
         stem = os.path.splitext(os.path.basename(path))[0]
         for name, method in r["methods"].items():
-            shown = name if name not in methods else f"{name} ({stem})"
+            shown, k = name, 1
+            while shown in methods:  # met before: named by its file, then numbered
+                shown = f"{name} ({stem})" if k == 1 else f"{name} ({stem} {k})"
+                k += 1
             if shown != name:
                 print(f"plot_evaluation: {path}: {name} is also in an earlier file; drawn as '{shown}'")
             methods[shown] = method
@@ -135,7 +138,8 @@ def main():
             key = (results["dataset_seed"], results["scenes"], results["views"],
                    results.get("views_per_estimate", 1), results.get("overhead", False),
                    results.get("noise"), results.get("sensor"), results.get("image"),
-                   json.dumps(results.get("intrinsics")), results.get("seed"))
+                   json.dumps(results.get("intrinsics")), results.get("seed"),
+                   results.get("chamfer_points"), results.get("seen_pixels"))
         except (OSError, KeyError, json.JSONDecodeError) as e:
             sys.exit(f"plot_evaluation: {path}: {e}")
         paths, sets = groups.setdefault(key, ([], []))

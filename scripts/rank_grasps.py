@@ -115,7 +115,13 @@ def main():
                         help="print the pulls done as they are simulated (on stderr)")
     parser.add_argument("--json", help="also write the response to this file (every field; poses as "
                         "[x, y, z, qw, qx, qy, qz])")
-    args = parser.parse_args(rospy.myargv()[1:])
+    argv = rospy.myargv()[1:]
+    # A point whose first coordinate is negative ("--point -0.2,0.1,0.05") would read as an
+    # option: it is joined to its option first.
+    for i in range(len(argv) - 2, -1, -1):
+        if argv[i] == "--point" and argv[i + 1].startswith("-"):
+            argv[i:i + 2] = ["--point=" + argv[i + 1]]
+    args = parser.parse_args(argv)
     # The request's counts are uint32: one outside is an argument error, not a traceback.
     for name in ("candidates", "hypotheses", "rows"):
         if not 0 <= getattr(args, name) <= 2**32 - 1:

@@ -20,7 +20,8 @@ assert d["best_in_truth"] is True
 picks = {(p["scene"], p["target"], p["method"], p["chooser"]): p for p in d["picks"]}
 targets = {(s, t) for (s, t, m, c) in picks if m == "truth"}
 assert len(targets) >= 8, targets
-order = lambda p: (not p["failed"], p["freed"])  # the ranking's first two keys
+# The ranking's first two keys; a pick never pulled (failed: null) held nothing.
+order = lambda p: (p["grasped"] and not p["failed"], p["freed"])
 checked = beaten = 0
 for s, t in targets:
     ranked, best = picks[(s, t, "fc", "ranked")], picks[(s, t, "fc", "best in truth")]

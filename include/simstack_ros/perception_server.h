@@ -140,6 +140,7 @@ class PerceptionServer {
   ros::SteadyTime started_, last_arrival_;  ///< when the node started; when the last frame came
   ros::SteadyTime last_silence_warning_;    ///< zero while frames arrive
   std::string last_silence_kind_;           ///< the cause of the last silence warning
+  ros::SteadyTime last_change_warning_;     ///< the last warning said for a changed cause
   ros::SteadyTime last_info_arrival_;       ///< when camera_info last came, alone
   ros::Time last_info_stamp_;               ///< and its stamp
   long infos_since_frame_ = 0;              ///< camera_info messages since the last frame

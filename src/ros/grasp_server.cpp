@@ -98,15 +98,24 @@ bool GraspServer::lookup(const std::string& target, const std::string& source,
     std::snprintf(seconds, sizeof(seconds), "%.3f", stamp.toSec());
     *why = "no transform '" + target + "' <- '" + source + "' at the scene's stamp " + seconds +
            " s: " + e.what();
-    // A frame tf never heard of, though the scene names it: this node has had no tf at all
-    // for it (started after a bag ended, or tf published elsewhere).
-    for (const std::string& frame : {target, source})
-      if (!tf_buffer_._frameExists(frame)) {
-        *why += " (this grasp server's tf has never received '" + frame +
-                "': was tf published while it ran? a bag that ended before it started left it "
-                "none)";
-        break;
+    // A frame tf never heard of: with no frame at all, this node has had no tf (started after
+    // a bag ended); else the name may be misspelt, and the frames it knows are named.
+    std::vector<std::string> known;
+    tf_buffer_._getFrameStrings(known);
+    for (const std::string& frame : {target, source}) {
+      if (tf_buffer_._frameExists(frame)) continue;
+      if (known.empty()) {
+        *why +=
+            " (this grasp server's tf has received no transform at all: was tf published "
+            "while it ran? a bag that ended before it started left it none)";
+      } else {
+        std::string some;
+        for (size_t k = 0; k < known.size() && k < 8; ++k) some += (k ? ", " : "") + known[k];
+        *why += " (its tf knows no frame '" + frame + "'; it knows " + some +
+                (known.size() > 8 ? ", ..." : "") + ")";
       }
+      break;
+    }
     return false;
   }
 }

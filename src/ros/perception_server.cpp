@@ -692,11 +692,11 @@ std::string PerceptionServer::silenceCause(const ros::SteadyTime& now) const {
   const uint32_t info_publishers = info_sub_.getNumPublishers();
   std::ostringstream out;
   out << std::fixed << std::setprecision(3);
-  if (images_since_frame_ > 0 && infos_since_frame_ > 0)
+  if ((recent_image || recent_info) && images_since_frame_ > 0 && infos_since_frame_ > 0)
     out << "depth images and camera_info arrive but their stamps never match ("
-        << images_since_frame_ << " image(s) and " << infos_since_frame_
-        << " camera_info since the last frame, the last "
-        << "stamped " << last_image_stamp_.toSec() << " and " << last_info_stamp_.toSec()
+        << images_since_frame_ << " image(s) and " << infos_since_frame_ << " camera_info since "
+        << (received_ > 0 ? "the last frame" : "the start") << ", the last stamped "
+        << last_image_stamp_.toSec() << " and " << last_info_stamp_.toSec()
         << "): each image is taken with the camera_info of exactly its stamp";
   else if (recent_info)
     out << "camera_info arrives (the last stamped " << last_info_stamp_.toSec()
@@ -732,10 +732,14 @@ void PerceptionServer::onSilenceCheck() {
     // once when its cause changes (the cause's words before its details in brackets).
     const std::string now_cause = silent > 0.0 ? silenceCause(now) : std::string();
     const std::string kind = now_cause.substr(0, now_cause.find('('));
-    if (silent > 0.0 &&
-        (last_silence_warning_.isZero() || (now - last_silence_warning_).toSec() >= 30.0 ||
-         kind != last_silence_kind_)) {
+    // A changed cause is said at once, but at most once a 30 s (a slow stream flips it).
+    const bool changed =
+        kind != last_silence_kind_ &&
+        (last_change_warning_.isZero() || (now - last_change_warning_).toSec() >= 30.0);
+    if (silent > 0.0 && (last_silence_warning_.isZero() ||
+                         (now - last_silence_warning_).toSec() >= 30.0 || changed)) {
       warn = true;
+      if (changed && !last_silence_warning_.isZero()) last_change_warning_ = now;
       last_silence_warning_ = now;
       last_silence_kind_ = kind;
       cause = now_cause;

@@ -80,7 +80,9 @@ inline void requireNotAnInput(const std::string& option, const std::string& outp
   // Absolute first: weakly_canonical keeps a relative name none of whose parts exists as it
   // is ("a.json"), but makes one with an existing part absolute ("./a.json").
   const auto normal = [](const std::string& p, std::error_code& ec) {
-    return fs::weakly_canonical(fs::absolute(p, ec), ec);
+    const fs::path absolute = fs::absolute(p, ec);
+    if (ec) return absolute;
+    return fs::weakly_canonical(absolute, ec);
   };
   std::error_code ec;
   const fs::path out = normal(output, ec);

@@ -97,6 +97,34 @@ void addViewOptions(CLI::App& app, GenerationOptions* o, ViewCamera* camera) {
       ->needs("--views");
 }
 
+/// What was written: scenes, grid, acceptance, piles by object count, redraws, views.
+void printSummary(const GenerationOptions& o, const GenerationSummary& s) {
+  std::cout << std::fixed << std::setprecision(1) << "wrote " << o.scenes << " scenes ("
+            << s.objects << " objects, "
+            << (!o.ycb_dir.empty()        ? "YCB meshes"
+                : o.household_share > 0.0 ? "superquadrics and household shapes"
+                                          : "superquadrics")
+            << ") to " << o.output << "\n"
+            << "  grid " << o.resolution << "^3, " << o.extent_m / o.resolution * 100.0
+            << " cm voxels, truncation " << s.truncation_m * 100.0 << " cm\n"
+            << "  " << s.attempts << " piles drawn for " << o.scenes << " accepted ("
+            << 100.0 * o.scenes / s.attempts << " % accepted), " << o.scenes / s.seconds
+            << " scenes/s on " << s.threads << " threads; " << 100.0 * s.undone_share
+            << " % of the physics went to drops and piles that were undone\n";
+  std::cout << "  piles by object count:";
+  const char* sep = " ";
+  for (size_t k = 0; k < s.piles_with.size(); ++k)
+    if (s.piles_with[k] > 0) {
+      std::cout << sep << s.piles_with[k] << " of " << k;
+      sep = ", ";
+    }
+  std::cout << "\n";
+  if (s.skipped > 0)
+    std::cout << "  " << s.skipped
+              << " scenes drawn again: no pile could be made from their seed\n";
+  if (o.views > 0) std::cout << "  " << o.views << " views per scene in " << s.views_dir << "/\n";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -161,6 +189,9 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
+    if (o.views == 0 && (o.noise || o.pictures || !o.views_dir.empty()))
+      throw std::invalid_argument(
+          "--noise, --pictures and --views-dir are for the rendered views: give --views K > 0");
     std::tie(o.min_objects, o.max_objects) = parseRange(objects);
     std::tie(o.min_size_m, o.max_size_m) = parseSizes(sizes);
     o.camera = camera.intrinsics.empty()
@@ -169,30 +200,7 @@ int main(int argc, char** argv) {
     ProgressBar bar("generating", o.scenes);
     const GenerationSummary s = generateDataset(o, [&](int done, int) { bar.update(done); });
     bar.finish();
-    std::cout << std::fixed << std::setprecision(1) << "wrote " << o.scenes << " scenes ("
-              << s.objects << " objects, "
-              << (!o.ycb_dir.empty()        ? "YCB meshes"
-                  : o.household_share > 0.0 ? "superquadrics and household shapes"
-                                            : "superquadrics")
-              << ") to " << o.output << "\n"
-              << "  grid " << o.resolution << "^3, " << o.extent_m / o.resolution * 100.0
-              << " cm voxels, truncation " << s.truncation_m * 100.0 << " cm\n"
-              << "  " << s.attempts << " piles drawn for " << o.scenes << " accepted ("
-              << 100.0 * o.scenes / s.attempts << " % accepted), " << o.scenes / s.seconds
-              << " scenes/s on " << s.threads << " threads; " << 100.0 * s.undone_share
-              << " % of the physics went to drops and piles that were undone\n";
-    std::cout << "  piles by object count:";
-    const char* sep = " ";
-    for (size_t k = 0; k < s.piles_with.size(); ++k)
-      if (s.piles_with[k] > 0) {
-        std::cout << sep << s.piles_with[k] << " of " << k;
-        sep = ", ";
-      }
-    std::cout << "\n";
-    if (s.skipped > 0)
-      std::cout << "  " << s.skipped
-                << " scenes drawn again: no pile could be made from their seed\n";
-    if (o.views > 0) std::cout << "  " << o.views << " views per scene in " << s.views_dir << "/\n";
+    printSummary(o, s);
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "simstack_generate: error: " << e.what() << "\n";

@@ -3,6 +3,7 @@
 
 #include <unistd.h>
 
+#include <atomic>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -15,6 +16,7 @@
 #include "cli_checks.h"
 #include "progress.h"
 #include "simstack/model/cpu_allocator.h"
+#include "simstack/model/model_integrity.h"
 #include "simstack/offline/training/cvae_trainer.h"
 #include "simstack/pipeline/scene_perception.h"
 
@@ -120,11 +122,13 @@ void addOptions(CLI::App& app, Options& o) {
       ->check(CLI::ExistingDirectory);
 }
 
-/// The signal that asked training to stop (0: none).
-volatile std::sig_atomic_t g_stop_signal = 0;
+/// The signal that asked training to stop (0: none). Lock-free, so the handler may set it
+/// while the training thread reads it.
+std::atomic<int> g_stop_signal{0};
+static_assert(std::atomic<int>::is_always_lock_free);
 
 extern "C" void onStopSignal(int signal) {
-  g_stop_signal = signal;
+  g_stop_signal.store(signal);
   static const char kSaid[] =
       "\nsimstack_train: stopping after this step, its checkpoint written (Ctrl-C again: at "
       "once)\n";
@@ -173,19 +177,27 @@ int trainAndStamp(CvaeTrainer& trainer, const std::string& architecture,
   };
   TrainingReport r;
   try {
-    r = trainer.run(o.resume, progress, [] { return g_stop_signal != 0; });
+    r = trainer.run(o.resume, progress, [] { return g_stop_signal.load() != 0; });
   } catch (const TrainingStopped& e) {
     if (bar) bar->finish();
     std::cerr << "simstack_train: " << e.what() << "\n";
-    return 128 + g_stop_signal;
+    return 128 + g_stop_signal.load();
   }
   if (bar) bar->finish();
-  if (r.steps_trained == 0)
+  const std::string model_file = (std::filesystem::path(o.output) / "model.pt").string();
+  if (r.steps_trained == 0 && readModelIntegrity(model_file)) {
+    // The run's stamped model is checked against its card, not stamped again: a file replaced
+    // since would otherwise be recorded as the run's.
     std::printf("nothing to train: the run had reached step %lld; its model stays as written\n",
                 static_cast<long long>(r.steps));
+    printTrained(architecture, o.output, r);
+    const ModelSelfTest t = checkModel(model_file);
+    std::printf("checked against its card: %d object(s), %d occupied voxels on a rendered box\n",
+                t.objects, t.occupied_voxels);
+    return 0;
+  }
   printTrained(architecture, o.output, r);
   // The card records what the file is, so that every later load can tell it was not damaged.
-  const std::string model_file = (std::filesystem::path(o.output) / "model.pt").string();
   const ModelIntegrity m = stampModel(model_file);
   std::printf("self-test on a rendered box: %d object(s), %d occupied voxels (card: %s)\n",
               m.self_test_objects, m.self_test_occupied_voxels, modelCardPath(model_file).c_str());
@@ -255,7 +267,15 @@ int main(int argc, char** argv) {
     for (int i = 0; i < argc; ++i) command += (i ? " " : "") + std::string(argv[i]);
     CvaeTrainer trainer(o.datasets, model, training, o.output, command, o.mesh_dir);
     if (!trainer.note().empty()) std::printf("note: %s\n", trainer.note().c_str());
-    return trainAndStamp(trainer, model.architecture, training, o);
+    const int status = trainAndStamp(trainer, model.architecture, training, o);
+    // Ended by the signal, as a shell expects of a child it interrupted (a loop of runs stops):
+    // the step's checkpoint, or the finished model, is written by now.
+    if (const int signal = g_stop_signal.load(); signal != 0) {
+      std::fflush(stdout);
+      std::signal(signal, SIG_DFL);
+      std::raise(signal);
+    }
+    return status;
   } catch (const std::exception& e) {
     std::cerr << "simstack_train: error: " << e.what() << "\n";
     return 1;

@@ -68,7 +68,8 @@ void reportPerDataset(const std::vector<std::string>& datasets,
 
 /// Whether the perception config file sets hough: (then it overrides every model card's).
 bool configSetsHough(const std::string& config_path) {
-  return static_cast<bool>(loadYamlFile(config_path, "perception config")["hough"]);
+  const YAML::Node hough = loadYamlFile(config_path, "perception config")["hough"];
+  return hough && hough.IsMap() && hough.size() > 0;  // an empty hough: sets nothing
 }
 
 /// The best `top` settings, then the one in effect (the model's own, or the config's).

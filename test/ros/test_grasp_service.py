@@ -324,8 +324,8 @@ class GraspService(unittest.TestCase):
             self.assertIn(field, written["grasps"][0])
         self.assertEqual(len(written["grasps"][0]["tool_pose"]), 7)
         # The target by a point in a tf frame; a namespace written with slashes works alike.
-        code, out = self.script("--point", "0,0,0.05", "--point-frame", "table", "--candidates",
-                                "8", "--camera", "/camera/")
+        code, out = self.script("--point", "-0.001,0,0.05", "--point-frame", "table",
+                                "--candidates", "8", "--camera", "/camera/")
         self.assertEqual(code, 0, out)
         self.assertRegex(out, r"object \d+: .*grasps ranked")
         self.assertNotIn("not a legal ROS graph resource name", out)
