@@ -60,12 +60,12 @@ def methods_of(paths, sets):
 
 def colours_of(names):
     """The fixed colour of each known method; the others take colours no method uses."""
-    fixed = {name: STYLE[name][0] for name in names if name in STYLE}
-    free = [f"C{i}" for i in range(10) if f"C{i}" not in {c for _, (c, _) in STYLE.items()}]
-    free += [c for c in ("black", "olive", "teal", "navy", "maroon") if c not in free]
-    out = {}
-    for name in names:
-        out[name] = fixed.get(name) or free[len([n for n in out if n not in fixed]) % len(free)]
+    taken = {colour for colour, _ in STYLE.values()}
+    free = [f"C{i}" for i in range(10) if f"C{i}" not in taken]
+    free += ["black", "olive", "teal", "navy", "maroon"]
+    others = [name for name in names if name not in STYLE]
+    out = {name: free[k % len(free)] for k, name in enumerate(others)}
+    out.update({name: STYLE[name][0] for name in names if name in STYLE})
     return out
 
 

@@ -54,8 +54,26 @@ class PerceptionServer {
     sensor_msgs::ImageConstPtr image;
     sensor_msgs::CameraInfoConstPtr info;
   };
+  /// One input stream watched alone, for silenceCause: what came since the last frame.
+  struct InputWatch {
+    ros::SteadyTime arrival;  ///< when a message last came
+    ros::Time stamp;          ///< and its stamp
+    long since_frame = 0;     ///< messages since the last frame
+    void saw(const ros::Time& message_stamp) {
+      arrival = ros::SteadyTime::now();
+      stamp = message_stamp;
+      ++since_frame;
+    }
+    bool recent(const ros::SteadyTime& now, double timeout_s) const {
+      return since_frame > 0 && (now - arrival).toSec() < timeout_s;
+    }
+  };
   void onImage(const sensor_msgs::ImageConstPtr& image);
   void onInfo(const sensor_msgs::CameraInfoConstPtr& info);
+  /// A message of either stream: watched, then offered to the pairing (`pair` adds it there);
+  /// a pair it completes goes to onFrame.
+  template <class Add>
+  void onInput(InputWatch* watch, const ros::Time& stamp, Add pair);
   /// An image with the camera_info of its stamp: into the mailbox.
   void onFrame(const sensor_msgs::ImageConstPtr& image,
                const sensor_msgs::CameraInfoConstPtr& info);
@@ -141,12 +159,7 @@ class PerceptionServer {
   ros::SteadyTime last_silence_warning_;    ///< zero while frames arrive
   std::string last_silence_kind_;           ///< the cause of the last silence warning
   ros::SteadyTime last_change_warning_;     ///< the last warning said for a changed cause
-  ros::SteadyTime last_info_arrival_;       ///< when camera_info last came, alone
-  ros::Time last_info_stamp_;               ///< and its stamp
-  long infos_since_frame_ = 0;              ///< camera_info messages since the last frame
-  ros::SteadyTime last_image_arrival_;      ///< when a depth image last came, alone
-  ros::Time last_image_stamp_;              ///< and its stamp
-  long images_since_frame_ = 0;             ///< depth images since the last frame
+  InputWatch image_watch_, info_watch_;     ///< each stream alone, under mutex_
   long processed_before_ = 0;
   ros::SteadyTime rate_since_;
   ObjectTracker tracker_;  ///< ids kept across frames (~track_*); under mutex_

@@ -226,34 +226,28 @@ PerceptionServer::~PerceptionServer() {
   reconfigure_.reset();
 }
 
-void PerceptionServer::onImage(const sensor_msgs::ImageConstPtr& image) {
+template <class Add>
+void PerceptionServer::onInput(InputWatch* watch, const ros::Time& stamp, Add pair) {
   {
-    std::lock_guard<std::mutex> lock(mutex_);  // watched alone too, for silenceCause
-    last_image_arrival_ = ros::SteadyTime::now();
-    last_image_stamp_ = image->header.stamp;
-    ++images_since_frame_;
+    std::lock_guard<std::mutex> lock(mutex_);
+    watch->saw(stamp);
   }
-  std::optional<std::pair<sensor_msgs::ImageConstPtr, sensor_msgs::CameraInfoConstPtr>> pair;
+  std::optional<std::pair<sensor_msgs::ImageConstPtr, sensor_msgs::CameraInfoConstPtr>> frame;
   {
     std::lock_guard<std::mutex> lock(pairing_mutex_);
-    pair = pairing_.addFirst(image->header.stamp.toNSec(), image);
+    frame = pair();
   }
-  if (pair) onFrame(pair->first, pair->second);
+  if (frame) onFrame(frame->first, frame->second);
+}
+
+void PerceptionServer::onImage(const sensor_msgs::ImageConstPtr& image) {
+  onInput(&image_watch_, image->header.stamp,
+          [&] { return pairing_.addFirst(image->header.stamp.toNSec(), image); });
 }
 
 void PerceptionServer::onInfo(const sensor_msgs::CameraInfoConstPtr& info) {
-  {
-    std::lock_guard<std::mutex> lock(mutex_);  // watched alone too, for silenceCause
-    last_info_arrival_ = ros::SteadyTime::now();
-    last_info_stamp_ = info->header.stamp;
-    ++infos_since_frame_;
-  }
-  std::optional<std::pair<sensor_msgs::ImageConstPtr, sensor_msgs::CameraInfoConstPtr>> pair;
-  {
-    std::lock_guard<std::mutex> lock(pairing_mutex_);
-    pair = pairing_.addSecond(info->header.stamp.toNSec(), info);
-  }
-  if (pair) onFrame(pair->first, pair->second);
+  onInput(&info_watch_, info->header.stamp,
+          [&] { return pairing_.addSecond(info->header.stamp.toNSec(), info); });
 }
 
 void PerceptionServer::onFrame(const sensor_msgs::ImageConstPtr& image,
@@ -262,7 +256,7 @@ void PerceptionServer::onFrame(const sensor_msgs::ImageConstPtr& image,
     std::lock_guard<std::mutex> lock(mutex_);
     ++received_;
     last_arrival_ = ros::SteadyTime::now();
-    infos_since_frame_ = images_since_frame_ = 0;
+    info_watch_.since_frame = image_watch_.since_frame = 0;
     if (mailbox_) ++dropped_;
     mailbox_ = Frame{image, info};
   }
@@ -684,27 +678,26 @@ double PerceptionServer::silenceSeconds(const ros::SteadyTime& now) const {
 std::string PerceptionServer::silenceCause(const ros::SteadyTime& now) const {
   // Every message counted here came after the last frame and found no partner of its stamp
   // (a message that completes a pair is uncounted by onFrame).
-  const bool recent_info =
-      infos_since_frame_ > 0 && (now - last_info_arrival_).toSec() < node_.input_timeout_s;
-  const bool recent_image =
-      images_since_frame_ > 0 && (now - last_image_arrival_).toSec() < node_.input_timeout_s;
+  const bool recent_info = info_watch_.recent(now, node_.input_timeout_s);
+  const bool recent_image = image_watch_.recent(now, node_.input_timeout_s);
   const uint32_t image_publishers = image_sub_.getNumPublishers();
   const uint32_t info_publishers = info_sub_.getNumPublishers();
   std::ostringstream out;
   out << std::fixed << std::setprecision(3);
-  if ((recent_image || recent_info) && images_since_frame_ > 0 && infos_since_frame_ > 0)
+  if ((recent_image || recent_info) && image_watch_.since_frame > 0 && info_watch_.since_frame > 0)
     out << "depth images and camera_info arrive but their stamps never match ("
-        << images_since_frame_ << " image(s) and " << infos_since_frame_ << " camera_info since "
-        << (received_ > 0 ? "the last frame" : "the start") << ", the last stamped "
-        << last_image_stamp_.toSec() << " and " << last_info_stamp_.toSec()
+        << image_watch_.since_frame << " image(s) and " << info_watch_.since_frame
+        << " camera_info since " << (received_ > 0 ? "the last frame" : "the start")
+        << ", the last stamped " << image_watch_.stamp.toSec() << " and "
+        << info_watch_.stamp.toSec()
         << "): each image is taken with the camera_info of exactly its stamp";
   else if (recent_info)
-    out << "camera_info arrives (the last stamped " << last_info_stamp_.toSec()
+    out << "camera_info arrives (the last stamped " << info_watch_.stamp.toSec()
         << ") but no depth image"
         << (image_publishers > 0 ? " from its publisher(s)"
                                  : ": nothing publishes " + image_sub_.getTopic());
   else if (recent_image)
-    out << "depth images arrive (the last stamped " << last_image_stamp_.toSec()
+    out << "depth images arrive (the last stamped " << image_watch_.stamp.toSec()
         << ") but no camera_info"
         << (info_publishers > 0 ? " from its publisher(s)"
                                 : " (nothing publishes " + info_sub_.getTopic() + ")")

@@ -69,17 +69,13 @@ struct ViewCamera {
 void addViewOptions(CLI::App& app, GenerationOptions* o, ViewCamera* camera) {
   app.add_option("--views", o->views, "rendered views per scene written beside the dataset")
       ->check(FiniteNonNegative);
-  // The options of the views do nothing without them: refused, not ignored.
+  // The options of the views do nothing without them: refused in main, not ignored.
   app.add_option("--views-dir", o->views_dir, "where views go (default: <output stem>_views/)")
-      ->check(WritablePath)
-      ->needs("--views");
+      ->check(WritablePath);
   app.add_flag("--pictures", o->pictures,
-               "also write colour depth and shaded PNG pictures of each view")
-      ->needs("--views");
-  CLI::Option* noise_flag =
-      app.add_flag("--noise", o->noise,
-                   "sensor noise and missing pixels in the rendered views (--sensor's)")
-          ->needs("--views");
+               "also write colour depth and shaded PNG pictures of each view");
+  CLI::Option* noise_flag = app.add_flag(
+      "--noise", o->noise, "sensor noise and missing pixels in the rendered views (--sensor's)");
   addSensorOption(app, &o->sensor, "with --noise, ")->needs(noise_flag);
   app.add_option("--width", camera->width,
                  "view width (pixels): fx scales with the width, fy with the height, so keep 4:3 "

@@ -19,6 +19,7 @@
 #include <set>
 #include <sstream>
 #include <thread>
+#include <tuple>
 
 #include "simstack/io/staged_output.h"
 #include "simstack/io/yaml_file.h"
@@ -834,34 +835,30 @@ std::optional<TrainingReport> writtenReport(const fs::path& out, int64_t steps) 
     if (!p || !p["steps"] || p["steps"].as<int64_t>() != steps) return std::nullopt;
     TrainingReport r;
     r.steps = steps;
-    const YAML::Node l = p["final_losses"], v = p["validation"], q = p["posterior"];
-    const auto read = [](const YAML::Node& map, const char* key, double* to) {
-      if (map && map[key]) *to = map[key].as<double>();
-    };
-    for (const auto& [key, to] :
-         std::vector<std::pair<const char*, double*>>{{"total", &r.total},
-                                                      {"tsdf", &r.tsdf},
-                                                      {"partial", &r.partial},
-                                                      {"votes", &r.votes},
-                                                      {"mmd", &r.mmd},
-                                                      {"occupancy", &r.occupancy},
-                                                      {"iou", &r.iou}})
-      read(l, key, to);
-    for (const auto& [key, to] : std::vector<std::pair<const char*, double*>>{
-             {"iou", &r.validation_iou},
-             {"iou_se", &r.validation_iou_se},
-             {"bce", &r.validation_bce},
-             {"disagreement", &r.validation_disagreement},
-             {"posterior_code_iou", &r.validation_posterior_iou},
-             {"single_code_iou", &r.validation_single_iou},
-             {"best_code_iou", &r.validation_best_iou},
-             {"disagreement_seen", &r.validation_disagreement_seen},
-             {"disagreement_unseen", &r.validation_disagreement_unseen},
-             {"unseen_share_of_disagreement", &r.validation_unseen_share}})
-      read(v, key, to);
-    read(q, "mu_rms", &r.posterior_mu_rms);
-    read(q, "sigma", &r.posterior_sigma);
-    read(p, "samples_per_second", &r.samples_per_second);
+    // (section of the card's provenance, field, report member)
+    const std::vector<std::tuple<const char*, const char*, double*>> fields = {
+        {"final_losses", "total", &r.total},
+        {"final_losses", "tsdf", &r.tsdf},
+        {"final_losses", "partial", &r.partial},
+        {"final_losses", "votes", &r.votes},
+        {"final_losses", "mmd", &r.mmd},
+        {"final_losses", "occupancy", &r.occupancy},
+        {"final_losses", "iou", &r.iou},
+        {"validation", "iou", &r.validation_iou},
+        {"validation", "iou_se", &r.validation_iou_se},
+        {"validation", "bce", &r.validation_bce},
+        {"validation", "disagreement", &r.validation_disagreement},
+        {"validation", "posterior_code_iou", &r.validation_posterior_iou},
+        {"validation", "single_code_iou", &r.validation_single_iou},
+        {"validation", "best_code_iou", &r.validation_best_iou},
+        {"validation", "disagreement_seen", &r.validation_disagreement_seen},
+        {"validation", "disagreement_unseen", &r.validation_disagreement_unseen},
+        {"validation", "unseen_share_of_disagreement", &r.validation_unseen_share},
+        {"posterior", "mu_rms", &r.posterior_mu_rms},
+        {"posterior", "sigma", &r.posterior_sigma}};
+    for (const auto& [section, key, to] : fields)
+      if (p[section] && p[section][key]) *to = p[section][key].as<double>();
+    if (p["samples_per_second"]) r.samples_per_second = p["samples_per_second"].as<double>();
     return r;
   } catch (const YAML::Exception&) {
     return std::nullopt;
