@@ -370,6 +370,12 @@ want_rc=105 expect "make_bag --table-frame /table" "no leading '/'" \
 if "$bin/simstack_make_bag" --output "$dir/s.bag" --views 1 --repeats 1 --seed 010 |
     grep -q "seed 10)"; then echo "ok   make_bag --seed 010 is seed 10"; else
   echo "FAIL make_bag --seed 010 is not seed 10"; fail=1; fi
+# Every integer option reads decimal: 010 is ten, 0x10 is refused.
+if "$bin/simstack_generate" --scenes 010 --seed 1 --resolution 16 --output "$dir/ten.h5" |
+    grep -q "wrote 10 scenes"; then echo "ok   generate --scenes 010 is ten scenes"; else
+  echo "FAIL generate --scenes 010 is not ten scenes"; fail=1; fi
+want_rc=105 expect "generate --scenes 0x10" "'0x10' is not a whole number in decimal" \
+  "$bin/simstack_generate" --scenes 0x10 --seed 1 --output "$dir/hex.h5"
 [ ! -e "$dir/nan.bag" ] && [ ! -e "$dir/same.bag" ] || { echo "FAIL make_bag left a bag"; fail=1; }
 # A depth file's bag: its frames with the view file's camera and table pose; the pile's
 # options and a depth without a camera are refused.

@@ -205,6 +205,7 @@ int main(int argc, char** argv) {
   app.add_flag("--noise,!--no-noise", ring.noise,
                "Kinect-like sensor noise in the generated pile's views (default: on)")
       ->excludes(depth);
+  readIntegersInDecimal(app);
   CLI11_PARSE(app, argc, argv);
   const std::string bad = badNames(names.camera_ns, names.table_frame, names.camera_frame);
   if (!bad.empty()) {

@@ -7,6 +7,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <exception>
 #include <filesystem>
@@ -58,6 +59,33 @@ inline const CLI::Validator SeedNumber(
              ")";
     },
     "SEED");
+
+/// A whole number as a person writes it: "010" is ten and "-07" minus seven, where CLI11 would
+/// read a leading 0 as octal; "0x10" and "0b1" are refused. The sign is left to the option's own
+/// checks (SeedNumber for an unsigned one, which CLI11 would wrap from -1 to 2^64 - 1).
+inline const CLI::Validator DecimalInteger(
+    [](std::string& text) -> std::string {
+      const size_t signs = !text.empty() && (text[0] == '-' || text[0] == '+');
+      const std::string body = text.substr(signs);
+      if (body.empty() || body.find_first_not_of("0123456789") != std::string::npos) {
+        if (body.size() > 1 && body[0] == '0' && std::isalpha(static_cast<unsigned char>(body[1])))
+          return "'" + text.substr(0, 40) + "' is not a whole number in decimal";
+        return {};  // not a number at all: CLI11's conversion names it
+      }
+      const std::string digits = body.substr(std::min(body.find_first_not_of('0'), body.size()));
+      text = digits.empty() ? "0" : text.substr(0, signs) + digits;
+      return {};
+    },
+    "");
+
+/// Gives every integer option of `app` DecimalInteger, ahead of its own checks: call it after
+/// the last add_option, before parsing.
+inline void readIntegersInDecimal(CLI::App& app) {
+  for (CLI::Option* option : app.get_options()) {
+    const std::string type = option->get_type_name();
+    if (type.rfind("INT", 0) == 0 || type.rfind("UINT", 0) == 0) option->transform(DecimalInteger);
+  }
+}
 
 /// A path to write: not empty, no control characters, names within the file system's limits
 /// (unwritablePath).

@@ -192,6 +192,7 @@ int main(int argc, char** argv) {
       ->check(FinitePositive);
   app.add_flag("--no-classical", no_classical, "skip the classical baseline");
   app.add_flag("--no-stability", no_stability, "skip the physics stability test");
+  readIntegersInDecimal(app);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
   if (dataset.empty() == real_dir.empty()) {

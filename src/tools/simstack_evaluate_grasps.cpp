@@ -205,6 +205,7 @@ int main(int argc, char** argv) {
   app.add_flag("--no-classical", no_classical, "skip the classical baseline");
   bool superquadric_seal = false;
   addSealOptions(app, &o, &superquadric_seal);
+  readIntegersInDecimal(app);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
   o.noise = !no_noise;

@@ -182,6 +182,7 @@ int main(int argc, char** argv) {
   app.add_option("--threads", o.threads, "worker threads")
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
+  readIntegersInDecimal(app);
   CLI11_PARSE(app, argc, argv);
 
   try {

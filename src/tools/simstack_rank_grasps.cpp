@@ -185,6 +185,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 1.0));
   app.add_option("--output", output, "directory for grasps.json and grasps.png (created)")
       ->check(WritablePath);
+  readIntegersInDecimal(app);
   CLI11_PARSE(app, argc, argv);
 
   try {

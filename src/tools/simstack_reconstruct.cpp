@@ -59,6 +59,7 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   app.add_option("--output", output, "output directory (created)")->required()->check(WritablePath);
   const PerceptionOptions perception(app);
+  readIntegersInDecimal(app);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
 

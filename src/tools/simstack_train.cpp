@@ -213,6 +213,7 @@ int main(int argc, char** argv) {
       "Views and "
       "partial TSDFs are rendered on the fly; checkpoints in OUTPUT resume with --resume."};
   addOptions(app, o);
+  readIntegersInDecimal(app);
   CLI11_PARSE(app, argc, argv);
   if (o.output.empty() && o.validate_only.empty()) {
     std::cerr << "simstack_train: error: --output is required (unless --validate-only)\n";

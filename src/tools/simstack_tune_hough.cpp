@@ -171,6 +171,7 @@ int main(int argc, char** argv) {
   app.add_flag("--noise", noise, "Kinect-like sensor noise in the rendered views");
   addSweepOptions(app, sweep);
   app.add_option("--top", top, "rows of the table")->capture_default_str()->check(FinitePositive);
+  readIntegersInDecimal(app);
   CLI11_PARSE(app, argc, argv);
   keepFreedMemoryForReuse();  // the network runs in this process
   try {
