@@ -267,6 +267,23 @@ TEST(StagedOutput, ACommittedFileReplacesTheTargetAndAnAbandonedOneLeavesNoTrace
   EXPECT_THROW(StagedDirectory(out, "tool_b"), std::runtime_error);
   EXPECT_TRUE(fs::exists(mine + "/notes.txt"));
   EXPECT_TRUE(fs::exists(out + "/new.yaml"));
+  // Nor a file put into an earlier result since (a run's own input kept there), in a subdirectory
+  // too; once it is moved out, the result is replaced again.
+  for (const std::string& added : {out + "/my_depth.png", out + "/sub/notes.txt"}) {
+    fs::create_directories(fs::path(added).parent_path());
+    std::ofstream(added) << "mine";
+    try {
+      StagedDirectory staged(out, "tool_a");
+      ADD_FAILURE() << "replaces " << out << " holding " << added;
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(fs::path(added).lexically_relative(out).string()),
+                std::string::npos)
+          << e.what();
+    }
+    EXPECT_TRUE(fs::exists(added));
+    fs::remove(added);
+  }
+  EXPECT_NO_THROW(StagedDirectory(out, "tool_a"));
   fs::create_directories(dir / "empty");
   EXPECT_NO_THROW(StagedDirectory((dir / "empty").string(), "tool_a"));
   // Nor the working directory, or one holding it: the caller would be left in a deleted one.

@@ -594,6 +594,7 @@ TEST(SceneFiles, SuperquadricsMeshesAndGridsRoundTrip) {
        "'scale' must be a list of 3 numbers"},
       {"objects:\n  - {" + object + ", colour: red}\n", "unknown key 'colour' in object 0"},
       {"bogus: 1\nobjects:\n  - {" + object + "}\n", "unknown key 'bogus'"},
+      {"frame: [1, 2]\nobjects:\n  - {" + object + "}\n", "frame is not a name"},
       {"objects:\n  - {id: 0, " + object + "}\n  - {id: 0, " + object + "}\n",
        "id 0 is given twice"},
       {"just text\n", "no 'objects' list"},

@@ -548,7 +548,7 @@ TEST(GraspRanking, RejectsBadScenesAndSettings) {
   bad = good, bad[2].T_table_object.translation().x() = std::nan("");
   rejects(bad, 0, config, "object 2: pose");
   bad = std::vector<SuperquadricShape>(1000, good[0]);  // hours of pulls for one request
-  rejects(bad, 0, config, "a scene of 1000 objects");
+  rejects(bad, 0, config, "the scene's 1000 objects: at most");
   GraspRankingConfig c = config;
   c.pull.pull_distance_m = 0.0;
   rejects(good, 0, c, "pull_distance_m");
@@ -562,6 +562,20 @@ TEST(GraspRanking, RejectsBadScenesAndSettings) {
   c = config, c.pull.cup_stiffness_hz = 10.0;
   rejects(good, 0, c, "cup_stiffness_hz must be at most 9.5");
   EXPECT_THROW(rankGrasps({}, 0, {}, config), std::invalid_argument);
+  // Cameras and measured points that are not finite name themselves.
+  const auto rejectsInput = [&](const std::vector<Vec3>& cameras, const Points3& measured,
+                                const std::optional<Vec3>& from, const std::string& expected) {
+    try {
+      rankGrasps({good}, 0, cameras, config, {}, measured, from);
+      ADD_FAILURE() << "accepted: " << expected;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+    }
+  };
+  const Vec3 nan_point(std::nan(""), 0.0, 1.0);
+  rejectsInput({Vec3(0, 0, 1), nan_point}, {}, std::nullopt, "camera position 1 is not finite");
+  rejectsInput({}, {}, nan_point, "measuring camera's position is not finite");
+  rejectsInput({}, {Vec3(0, 0, 0.1), nan_point}, std::nullopt, "measured point 1 of 2");
 }
 
 // config/grasps.yaml holds every setting at its default (the server without the file ranks as

@@ -268,6 +268,18 @@ TEST(TablePlane, RecoversTheTableOfARenderedScene) {
   EXPECT_GT(top.z(), 0.0);
 }
 
+TEST(TablePlane, HolesInStepWithTheSampleStrideLeaveTheTableFound) {
+  RenderedPile p = renderPile(11);
+  const int stride = TablePlaneConfig().pixel_stride;
+  for (int v = 0; v < p.camera.height; ++v)
+    for (int u = 0; u < p.camera.width; u += stride) p.view.depth.at(u, v) = 0.0f;
+  const TablePlane plane = estimateTablePlane(p.view.depth, p.camera);
+  const Vec3 z_true = p.T_table_camera.linear().transpose() * Vec3::UnitZ();
+  const Vec3 z_est = plane.T_table_camera.linear().transpose() * Vec3::UnitZ();
+  EXPECT_GT(z_true.dot(z_est), std::cos(M_PI / 180.0));
+  EXPECT_GT(plane.points, 1000);
+}
+
 TEST(TablePlane, FailsClearlyWithoutDepth) {
   PinholeCamera camera;
   const DepthImage empty(camera.width, camera.height, std::nanf(""));

@@ -5,6 +5,7 @@
 #include <cstring>
 #include <limits>
 
+#include "simstack/io/image_io.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack_ros/conversions.h"
 #include "simstack_ros/grasp_conversions.h"
@@ -55,6 +56,14 @@ TEST(Conversions, BadImagesAreRejectedWithAReason) {
   EXPECT_THROW(depthFromImage(short_data), std::invalid_argument);
   auto empty = image(sensor_msgs::image_encodings::TYPE_16UC1, 0, 0, 2);
   EXPECT_THROW(depthFromImage(empty), std::invalid_argument);
+  // Wider than the tools read: refused by its size, before its pixels are read.
+  auto wide = image(sensor_msgs::image_encodings::TYPE_16UC1, kMaxDepthImageSide + 1, 2, 2);
+  try {
+    depthFromImage(wide);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("4097x2, larger than"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Conversions, MasksAreMono8) {
@@ -141,6 +150,16 @@ TEST(Conversions, CameraInfoWithRoiAndBinningDescribesThePublishedImage) {
   sensor_msgs::RegionOfInterest offsets_only;
   offsets_only.x_offset = 100;
   EXPECT_TRUE(refused(offsets_only));
+  sensor_msgs::CameraInfo binned_away = info;  // binning wider than the window
+  binned_away.binning_x = binned_away.binning_y = 4000000000u;
+  try {
+    cameraFromInfo(binned_away);
+    ADD_FAILURE() << "accepted binning of 4e9";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("binning 4000000000x4000000000 is larger than its "),
+              std::string::npos)
+        << e.what();
+  }
   // The top-left corner, without the principal point: a window, its own camera unchecked but
   // for its full image's.
   sensor_msgs::CameraInfo corner = info;
@@ -368,6 +387,12 @@ TEST(Conversions, MalformedSurfaceCloudsAreRefused) {
   cloud.point_step = 8;                              // z beyond the point
   cloud.data.assign(16, 0);
   EXPECT_THROW(measuredSurface(object, I), std::invalid_argument);
+  // A size whose width x height x point_step passes 2^64 (wrapping to 0) is refused too.
+  cloud.width = cloud.height = 1u << 31;
+  cloud.point_step = 16;
+  object.measured_points = 4000000000u;
+  EXPECT_THROW(measuredSurface(object, I), std::invalid_argument);
+  cloud.width = 2, cloud.height = 1, object.measured_points = 2;
   cloud.point_step = 12;
   cloud.data.assign(24, 0);
   cloud.fields[1].datatype = sensor_msgs::PointField::FLOAT64;

@@ -14,6 +14,20 @@
 #include "simstack/pipeline/scene_perception.h"
 
 namespace simstack {
+namespace {
+
+/// Refuses an image larger than the tools read (kMaxDepthImageSide a side), before any work: an
+/// 8192 x 8192 frame would hold the node for half a minute and 3.7 GB.
+void requireReadableSize(const sensor_msgs::Image& msg, const std::string& what) {
+  if (msg.width > static_cast<uint32_t>(kMaxDepthImageSide) ||
+      msg.height > static_cast<uint32_t>(kMaxDepthImageSide))
+    throw std::invalid_argument(what + " is " + std::to_string(msg.width) + "x" +
+                                std::to_string(msg.height) +
+                                ", larger than a depth image can be here (" +
+                                std::to_string(kMaxDepthImageSide) + " pixels a side)");
+}
+
+}  // namespace
 
 Image<uint8_t> maskFromImage(const sensor_msgs::Image& msg) {
   namespace enc = sensor_msgs::image_encodings;
@@ -21,6 +35,7 @@ Image<uint8_t> maskFromImage(const sensor_msgs::Image& msg) {
     throw std::invalid_argument("mask encoding '" + msg.encoding +
                                 "' is not supported (use mono8 or 8UC1, 0 = ignore)");
   if (msg.width == 0 || msg.height == 0) throw std::invalid_argument("mask image is empty");
+  requireReadableSize(msg, "mask image");
   if (msg.step < msg.width || msg.data.size() < static_cast<size_t>(msg.step) * msg.height)
     throw std::invalid_argument("mask image holds " + std::to_string(msg.data.size()) +
                                 " bytes with step " + std::to_string(msg.step) + ", expected " +
@@ -43,6 +58,7 @@ DepthImage depthFromImage(const sensor_msgs::Image& msg) {
   }
   if (msg.is_bigendian) throw std::invalid_argument("big-endian depth images are not supported");
   if (msg.width == 0 || msg.height == 0) throw std::invalid_argument("depth image is empty");
+  requireReadableSize(msg, "depth image");
   const size_t bytes = mm ? 2 : 4;
   if (msg.step < msg.width * bytes) {
     throw std::invalid_argument("depth image step " + std::to_string(msg.step) +
@@ -92,6 +108,16 @@ PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg) {
                                 std::to_string(roi.x_offset) + ", " + std::to_string(roi.y_offset) +
                                 ") does not lie within its " + std::to_string(info.width) + "x" +
                                 std::to_string(info.height) + " image");
+  // Binning larger than the image (or its window) leaves no pixel: say so by name, not as the
+  // empty camera image_geometry would make of it.
+  const uint64_t seen_width = has_roi ? roi.width : info.width,
+                 seen_height = has_roi ? roi.height : info.height;
+  if (seen_width > 0 && seen_height > 0 &&
+      (info.binning_x > seen_width || info.binning_y > seen_height))
+    throw std::invalid_argument("camera_info's binning " + std::to_string(info.binning_x) + "x" +
+                                std::to_string(info.binning_y) + " is larger than its " +
+                                std::to_string(seen_width) + "x" + std::to_string(seen_height) +
+                                (has_roi ? " ROI" : " image"));
   // The image is rectified already (depth/image_rect): its ROI is a window of it, not one of
   // the raw image to be carried through the distortion model (image_proc's crop_decimate sets
   // do_rectify when it crops).

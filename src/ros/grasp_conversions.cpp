@@ -79,7 +79,9 @@ Points3 measuredSurface(const Object& object, const Transform& T_table_frame) {
   const size_t n = static_cast<size_t>(cloud.width) * cloud.height;
   if (object.measured_points == 0) return {};
   const std::string what = "object " + std::to_string(object.id) + ": surface cloud";
-  if (object.measured_points > n || cloud.data.size() < n * cloud.point_step)
+  // Divided, not multiplied: width x height x point_step can pass 2^64 and wrap to a small size.
+  const size_t held = cloud.point_step == 0 ? 0 : cloud.data.size() / cloud.point_step;
+  if (object.measured_points > n || n > held)
     throw std::invalid_argument(what + " holds " + std::to_string(n) + " points (" +
                                 std::to_string(cloud.data.size()) + " bytes), not the " +
                                 std::to_string(object.measured_points) + " measured_points says");

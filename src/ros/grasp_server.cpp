@@ -213,8 +213,11 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
     }
   }
   if (scene->objects.empty()) {
+    char stamp[32];
+    std::snprintf(stamp, sizeof(stamp), "%u.%09u", scene->header.stamp.sec,
+                  scene->header.stamp.nsec);
     res.message = "the request has no objects and the latest scene on " + topic + " (stamp " +
-                  number(scene->header.stamp.toSec()) + " s) has none either";
+                  stamp + " s) has none either";
     return false;
   }
   if (const std::string why = badIds(*scene); !why.empty()) {

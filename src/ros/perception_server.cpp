@@ -296,8 +296,9 @@ void PerceptionServer::skip(const Frame& frame, const std::string& why) {
     last_error_ = why;
     failing_ = true;
   }
-  if (warn)
-    ROS_WARN("simstack perception: frame %u of %s skipped: %s", frame.image->header.seq,
+  if (warn)  // by stamp: header.seq is the publisher's count, which the node's counts are not
+    ROS_WARN("simstack perception: the frame stamped %u.%09u on %s skipped: %s",
+             frame.image->header.stamp.sec, frame.image->header.stamp.nsec,
              image_sub_.getTopic().c_str(), why.c_str());
 }
 

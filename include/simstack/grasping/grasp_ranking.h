@@ -112,7 +112,8 @@ PullOutcome executeGrasp(const PullSimulator& simulator,
 /// matching it (hypotheses without one are left out, said in the message); a candidate is
 /// carried into a hypothesis along its approach axis onto that hypothesis's target (a miss is
 /// a failed pull there). `camera_positions` empty: the five default cameras. Throws
-/// std::invalid_argument for a bad target, shape or config.
+/// std::invalid_argument for a bad target, shape or config, or a camera position or measured
+/// point that is not finite.
 /// Called after each pull with the pulls done, their total and the best grasp among the
 /// candidates whose every pull is done (nullptr before the first); from the threads simulating,
 /// one call at a time. Returning false stops the ranking: pulls not yet begun are not

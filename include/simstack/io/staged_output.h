@@ -22,9 +22,10 @@ bool pathHolds(const std::string& outer, const std::string& inner);
 
 /// A directory: commit() replaces the target directory whole, so that no file of an earlier
 /// run stays beside the new ones. It holds a marker file (`.simstack-output`) naming `owner`, the
-/// tool that wrote it; an existing non-empty target without that owner's marker (the user's
-/// files, another tool's result), or one holding the working directory, is refused at
-/// construction. "out/" is "out".
+/// tool that wrote it and listing the files it wrote. Refused at construction: an existing
+/// non-empty target without that owner's marker (the user's files, another tool's result), one
+/// holding files its run did not write (put there since: they would be removed), and one
+/// holding the working directory. "out/" is "out".
 class StagedDirectory {
  public:
   StagedDirectory(const std::string& target, const std::string& owner);

@@ -151,7 +151,7 @@ std::string checkScene(const std::vector<SuperquadricShape>& scene,
                        const std::vector<uint32_t>& ids) {
   // Each pull simulates every object: a scene of thousands would hold a request for hours.
   if (scene.size() > kMaxGraspSceneObjects)
-    return "a scene of " + std::to_string(scene.size()) + " objects; at most " +
+    return std::to_string(scene.size()) + " objects: at most " +
            std::to_string(kMaxGraspSceneObjects) + " are simulated";
   for (size_t i = 0; i < scene.size(); ++i) {
     const SuperquadricShape& sq = scene[i];
@@ -216,12 +216,24 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
                         const RankingProgress& progress, const Points3& measured_target,
                         const std::optional<Vec3>& measured_from) {
   if (hypotheses.empty()) throw std::invalid_argument("no scene to rank grasps in");
-  for (const auto& scene : hypotheses)
-    if (const std::string why = checkScene(scene); !why.empty()) throw std::invalid_argument(why);
+  for (size_t h = 0; h < hypotheses.size(); ++h)
+    if (const std::string why = checkScene(hypotheses[h]); !why.empty())
+      throw std::invalid_argument(
+          (h == 0 ? std::string("the scene's ") : "hypothesis " + std::to_string(h) + "'s ") + why);
   if (target < 0 || target >= static_cast<int>(hypotheses[0].size()))
     throw std::invalid_argument("target " + std::to_string(target) + " is not an object of the " +
                                 std::to_string(hypotheses[0].size()) + "-object scene");
   config.pull.validate();
+  const auto finite = [](const Vec3& p) { return p.allFinite(); };
+  for (size_t k = 0; k < camera_positions.size(); ++k)
+    if (!finite(camera_positions[k]))
+      throw std::invalid_argument("camera position " + std::to_string(k) + " is not finite");
+  if (measured_from && !finite(*measured_from))
+    throw std::invalid_argument("the measuring camera's position is not finite");
+  if (const auto bad = std::find_if_not(measured_target.begin(), measured_target.end(), finite);
+      bad != measured_target.end())
+    throw std::invalid_argument("measured point " + std::to_string(bad - measured_target.begin()) +
+                                " of " + std::to_string(measured_target.size()) + " is not finite");
   const int threads = threadCount(config.threads);
   GraspRanking out;
   const auto& scene0 = hypotheses[0];

@@ -85,6 +85,8 @@ std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path, st
   if (!root.IsMap() || !root["objects"] || !root["objects"].IsSequence())
     throw std::runtime_error(path + ": no 'objects' list");
   requireKnownKeys(root, {"frame", "camera", "objects"}, "the file", path);
+  if (root["frame"] && !root["frame"].IsScalar())
+    throw std::runtime_error(path + ": frame is not a name (the table frame the file is in)");
   if (camera) {
     camera->reset();
     if (root["camera"]) {

@@ -89,6 +89,35 @@ std::string ownerOf(const fs::path& dir) {
   return owner;
 }
 
+/// The files under `dir` (relative, sorted), the marker left out.
+std::vector<std::string> filesUnder(const fs::path& dir) {
+  std::vector<std::string> files;
+  std::error_code ec;
+  for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->is_directory(ec)) continue;
+    const std::string name = it->path().lexically_relative(dir).string();
+    if (name != kMarker) files.push_back(name);
+  }
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
+/// The files an earlier result in `dir` holds that its run did not write, as the marker lists
+/// them after the owner's line (none is known of a marker without the list).
+std::vector<std::string> filesAddedTo(const fs::path& dir) {
+  std::ifstream in(dir / kMarker);
+  std::string line;
+  std::getline(in, line);
+  std::vector<std::string> written;
+  while (std::getline(in, line)) written.push_back(line);
+  if (written.empty()) return {};
+  std::sort(written.begin(), written.end());
+  std::vector<std::string> added;
+  for (const std::string& file : filesUnder(dir))
+    if (!std::binary_search(written.begin(), written.end(), file)) added.push_back(file);
+  return added;
+}
+
 }  // namespace
 
 std::string unwritablePath(const std::string& path) {
@@ -126,6 +155,20 @@ StagedDirectory::StagedDirectory(const std::string& target, const std::string& o
         (other.empty() ? std::string(" (it has no ") + kMarker + ")" : " but of " + other) +
         ": choose another directory, or empty it");
   }
+  // Files put into an earlier result since (the inputs of this run, say) would go with it.
+  if (fs::is_directory(t) && ownerOf(t) == owner) {
+    const std::vector<std::string> added = filesAddedTo(t);
+    if (!added.empty()) {
+      std::string names;
+      for (size_t k = 0; k < std::min<size_t>(added.size(), 3); ++k)
+        names += (k ? ", " : "") + added[k];
+      if (added.size() > 3) names += " and " + std::to_string(added.size() - 3) + " more";
+      throw std::runtime_error(target + " holds files its earlier " + owner +
+                               " run did not write (" + names +
+                               "), which replacing it would remove: move them out, or choose "
+                               "another directory");
+    }
+  }
   // Replacing the working directory (or one holding it) would leave the caller in a deleted one.
   if (pathHolds(target, "."))
     throw std::runtime_error(target +
@@ -152,6 +195,14 @@ StagedDirectory::~StagedDirectory() {
 
 void StagedDirectory::commit() {
   std::error_code ec;
+  {
+    // The marker lists what this run wrote, so that a later run can tell a file added since.
+    const std::string owner = ownerOf(staged_);
+    std::ofstream marker(fs::path(staged_) / kMarker, std::ios::trunc);
+    marker << owner << "\n";
+    for (const std::string& file : filesUnder(staged_)) marker << file << "\n";
+    if (!marker) throw std::runtime_error("cannot write in " + staged_);
+  }
   std::string old;
   if (fs::exists(target_)) {
     old = uniqueDirectory(target_ + ".old");

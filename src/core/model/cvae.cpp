@@ -669,6 +669,7 @@ void saveCvae(const std::string& path, Cvae& model, const std::string& metadata,
 }
 
 Cvae loadCvae(const std::string& path, const CvaeConfig* expect, std::string* metadata) {
+  if (path.empty()) throw std::runtime_error("no model file named (model_path is empty)");
   if (!std::filesystem::exists(path)) throw std::runtime_error("model file not found: " + path);
   verifyModelFile(path);  // the card's SHA-256 and format, before a damaged file is parsed
   torch::serialize::InputArchive archive;

@@ -148,17 +148,37 @@ TablePlane estimateTablePlane(const DepthImage& depth, const PinholeCamera& came
     throw std::invalid_argument("table plane: the depth image is " + std::to_string(depth.width) +
                                 "x" + std::to_string(depth.height) + " but the camera is " +
                                 std::to_string(camera.width) + "x" + std::to_string(camera.height));
+  const auto usable = [&](int u, int v) {
+    const float d = depth.at(u, v);
+    return validDepth(d) && d <= config.max_depth_m;
+  };
+  const auto add = [&](Cloud* cloud, int u, int v) {
+    const Vec3 p = camera.backproject(u, v, depth.at(u, v));
+    cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  };
   Cloud::Ptr cloud(new Cloud);
-  for (int v = 0; v < depth.height; v += config.pixel_stride)
-    for (int u = 0; u < depth.width; u += config.pixel_stride) {
-      const float d = depth.at(u, v);
-      if (!validDepth(d) || d > config.max_depth_m) continue;
-      const Vec3 p = camera.backproject(u, v, d);
-      cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  size_t valid = 0;
+  for (int v = 0; v < depth.height; ++v)
+    for (int u = 0; u < depth.width; ++u) {
+      if (!usable(u, v)) continue;
+      ++valid;
+      if (u % config.pixel_stride == 0 && v % config.pixel_stride == 0) add(cloud.get(), u, v);
     }
+  // Holes in step with the stride (every 4th column missing) leave the lattice nearly empty:
+  // then every stride^2-th valid pixel instead.
+  const size_t per_sample = static_cast<size_t>(config.pixel_stride) * config.pixel_stride;
+  if (2 * cloud->size() < valid / per_sample) {
+    cloud->clear();
+    size_t k = 0;
+    for (int v = 0; v < depth.height; ++v)
+      for (int u = 0; u < depth.width; ++u)
+        if (usable(u, v) && k++ % per_sample == 0) add(cloud.get(), u, v);
+  }
   if (cloud->size() < 50)
-    throw std::runtime_error("table plane: only " + std::to_string(cloud->size()) +
-                             " valid depth points; cannot estimate the table");
+    throw std::runtime_error("table plane: only " + std::to_string(valid) +
+                             " valid depth pixels (nearer than max_depth_m " +
+                             std::to_string(config.max_depth_m).substr(0, 5) +
+                             " m); cannot estimate the table");
   const Plane plane = tablePlane(cloud, config, workspace);
   TablePlane out;
   out.points = plane.points;

@@ -33,6 +33,10 @@ void writeAttr(H5::H5Object& obj, const std::string& name, int64_t v) {
   obj.createAttribute(name, H5::PredType::NATIVE_INT64, H5::DataSpace())
       .write(H5::PredType::NATIVE_INT64, &v);
 }
+void writeAttr(H5::H5Object& obj, const std::string& name, uint64_t v) {
+  obj.createAttribute(name, H5::PredType::NATIVE_UINT64, H5::DataSpace())
+      .write(H5::PredType::NATIVE_UINT64, &v);
+}
 void writeAttr(H5::H5Object& obj, const std::string& name, const std::string& v) {
   H5::StrType type(H5::PredType::C_S1, H5T_VARIABLE);
   obj.createAttribute(name, type, H5::DataSpace()).write(type, v);
@@ -50,6 +54,20 @@ int64_t readAttr<int64_t>(const H5::H5Object& obj, const std::string& name) {
   int64_t v = 0;
   obj.openAttribute(name).read(H5::PredType::NATIVE_INT64, &v);
   return v;
+}
+/// An unsigned attribute; one stored signed (a file written before seeds were stored unsigned)
+/// keeps its bits.
+template <>
+uint64_t readAttr<uint64_t>(const H5::H5Object& obj, const std::string& name) {
+  const H5::Attribute attr = obj.openAttribute(name);
+  if (attr.getIntType().getSign() == H5T_SGN_NONE) {
+    uint64_t v = 0;
+    attr.read(H5::PredType::NATIVE_UINT64, &v);
+    return v;
+  }
+  int64_t v = 0;
+  attr.read(H5::PredType::NATIVE_INT64, &v);
+  return static_cast<uint64_t>(v);
 }
 template <>
 std::string readAttr<std::string>(const H5::H5Object& obj, const std::string& name) {
@@ -184,7 +202,7 @@ DatasetWriter::DatasetWriter(const std::string& path, const DatasetInfo& info)
     writeAttr(root, "extent_m", info.extent_m);
     writeAttr(root, "voxel_size_m", info.extent_m / info.resolution);
     writeAttr(root, "truncation_m", info.truncation_m);
-    writeAttr(root, "seed", static_cast<int64_t>(info.seed));
+    writeAttr(root, "seed", static_cast<uint64_t>(info.seed));
     writeAttr(root, "min_objects", static_cast<int64_t>(info.min_objects));
     writeAttr(root, "max_objects", static_cast<int64_t>(info.max_objects));
     writeAttr(root, "max_objects_per_scene", static_cast<int64_t>(info.max_objects_per_scene));
@@ -268,7 +286,7 @@ DatasetReader::DatasetReader(const std::string& path, const std::string& mesh_di
     info.resolution = static_cast<int>(readAttr<int64_t>(root, "resolution"));
     info.extent_m = readAttr<double>(root, "extent_m");
     info.truncation_m = readAttr<double>(root, "truncation_m");
-    info.seed = static_cast<uint64_t>(readAttr<int64_t>(root, "seed"));
+    info.seed = readAttr<uint64_t>(root, "seed");
     info.min_objects = static_cast<int>(readAttr<int64_t>(root, "min_objects"));
     info.max_objects = static_cast<int>(readAttr<int64_t>(root, "max_objects"));
     info.max_objects_per_scene = static_cast<int>(readAttr<int64_t>(root, "max_objects_per_scene"));
