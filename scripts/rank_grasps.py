@@ -179,7 +179,7 @@ def main():
                                        feedback=progress if args.progress else None,
                                        result_timeout=args.result_timeout)
     except grasp_client.GraspServiceError as e:
-        sys.exit("rank_grasps: %s" % e)
+        sys.exit("rank_grasps: %s%s" % ("" if e.status is None else e.status_name + ": ", e))
     print("object %d: %s (%d pulls in %d %s, %.2f s)" % (
         res.target_id, res.message, res.pulls, res.hypotheses_used,
         "hypothesis" if res.hypotheses_used == 1 else "hypotheses", res.time_s))

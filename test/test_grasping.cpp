@@ -640,17 +640,19 @@ TEST(GraspRequest, TheSceneMustRestOnTheTableAndThePullStayInBounds) {
   EXPECT_EQ(ok.config.candidates.max_candidates, policy.max_candidates);
   EXPECT_EQ(ok.config.pull.pull_distance_m, request.pull_distance_m);
   EXPECT_EQ(ok.pregrasp_m, policy.pregrasp_distance_m);
-  const auto refused = [&](GraspRequest r, const std::string& says) {
+  // The request's own faults are BadGraspRequest, the scene's plain invalid_argument.
+  const auto refused = [&](GraspRequest r, const std::string& says, bool the_requests = true) {
     try {
       prepareGrasps(r, GraspRankingConfig(), policy);
       ADD_FAILURE() << "accepted; expected: " << says;
     } catch (const std::invalid_argument& e) {
       EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+      EXPECT_EQ(dynamic_cast<const BadGraspRequest*>(&e) != nullptr, the_requests) << e.what();
     }
   };
   GraspRequest sunk = request, raised = request;
   for (SuperquadricShape& sq : sunk.scenes[0]) sq.T_table_object.translation().z() -= 0.3;
-  refused(sunk, "would stand in the table");
+  refused(sunk, "would stand in the table", false);
   for (SuperquadricShape& sq : raised.scenes[0]) sq.T_table_object.translation().z() += 0.3;
   EXPECT_NE(prepareGrasps(raised, GraspRankingConfig(), policy).notes.find("fall before any pull"),
             std::string::npos);
@@ -666,9 +668,9 @@ TEST(GraspRequest, TheSceneMustRestOnTheTableAndThePullStayInBounds) {
   // A bad shape is named by its object's id where the request gives the ids.
   GraspRequest named = request;
   named.scenes[0][1].scale_m.x() = std::numeric_limits<double>::quiet_NaN();
-  refused(named, "the scene's object 1: semi-axes");
+  refused(named, "the scene's object 1: semi-axes", false);
   named.ids = {12, 7};
-  refused(named, "the scene's object 7: semi-axes");
+  refused(named, "the scene's object 7: semi-axes", false);
   GraspRequest many = request;
   many.candidates = 1000;
   many.hypotheses = 3;
@@ -680,7 +682,7 @@ TEST(GraspRequest, TheSceneMustRestOnTheTableAndThePullStayInBounds) {
   EXPECT_EQ(clamped.scenes.size(), 2u);
   GraspRequest bad_hypothesis = many;
   bad_hypothesis.scenes[1][0].scale_m.x() = -1.0;
-  refused(bad_hypothesis, "hypothesis 1 (of the scene's hypotheses), object 0: semi-axes");
+  refused(bad_hypothesis, "hypothesis 1 (of the scene's hypotheses), object 0: semi-axes", false);
 }
 
 TEST(GraspRequest, APointNamesTheObjectItIsDeepestInOrTheNearestSurface) {

@@ -76,9 +76,10 @@ class GraspServer {
   bool lookup(const std::string& target, const std::string& source, const ros::Time& stamp,
               Transform* T_target_source, std::string* why);
   /// The index of the object whose superquadric surface is nearest `point`; false with the
-  /// reason when the point cannot be placed or lies far from every object.
+  /// reason and its RankGrasps status when the point cannot be placed or lies far from every
+  /// object.
   bool nearestToPoint(const geometry_msgs::PointStamped& point, const ObjectArray& scene,
-                      int* target, std::string* why);
+                      int* target, uint8_t* status, std::string* why);
 
   ros::NodeHandle nh_, pnh_;
   GraspServerConfig config_;

@@ -25,11 +25,28 @@ import uuid
 import actionlib
 import rospy
 from actionlib_msgs.msg import GoalID
-from simstack.msg import ObjectArray, RankGraspsAction, RankGraspsGoal
+from simstack.msg import ObjectArray, RankGraspsAction, RankGraspsGoal, RankGraspsResult
+
+_STATUS_NAMES = {getattr(RankGraspsResult, n): n for n in (
+    "SUCCEEDED", "NO_SCENE", "STALE_SCENE", "EMPTY_SCENE", "UNKNOWN_TARGET", "TF_UNAVAILABLE",
+    "BAD_REQUEST", "BAD_SCENE", "CANCELLED", "INTERNAL_ERROR")}
 
 
 class GraspServiceError(RuntimeError):
-    """The scene or the ranking could not be had; the message says why."""
+    """The scene or the ranking could not be had; the message says why, and `status` what task
+    code can branch on: one of RankGraspsResult's constants (STALE_SCENE: perceive again;
+    UNKNOWN_TARGET: choose another; TF_UNAVAILABLE, BAD_REQUEST, BAD_SCENE, ...), the server's
+    when it answered and this client's own check's otherwise. None when no answer came: no
+    server, no result in time, rospy shut down, or an exception of the feedback callback."""
+
+    def __init__(self, message, status=None):
+        RuntimeError.__init__(self, message)
+        self.status = status
+
+    @property
+    def status_name(self):
+        """The status's constant name ("STALE_SCENE"), or None."""
+        return None if self.status is None else _STATUS_NAMES.get(self.status, str(self.status))
 
 
 def _require_node():
@@ -67,7 +84,8 @@ def _namespace(camera):
     is cell/kinect); GraspServiceError when nothing is left."""
     parts = [p for p in str(camera).split("/") if p]
     if not parts:
-        raise GraspServiceError("camera namespace %r names nothing" % (camera,))
+        raise GraspServiceError("camera namespace %r names nothing" % (camera,),
+                                RankGraspsResult.BAD_REQUEST)
     return "/".join(parts)
 
 
@@ -82,7 +100,7 @@ def latest_scene(camera="camera", timeout=10.0, max_age=None):
     try:
         scene = rospy.wait_for_message(topic, ObjectArray, timeout=timeout)
     except rospy.ROSException as e:
-        raise GraspServiceError("no scene on %s: %s" % (topic, e))
+        raise GraspServiceError("no scene on %s: %s" % (topic, e), RankGraspsResult.NO_SCENE)
     if max_age is None:
         max_age = float(rospy.get_param("/%s/grasps/max_scene_age_s" % camera, 10.0))
     age = scene_age(scene)
@@ -91,9 +109,10 @@ def latest_scene(camera="camera", timeout=10.0, max_age=None):
             topic, age, max_age,
             "a day or more apart: is one of this client and the perception on simulated time "
             "(/use_sim_time) and the other not?" if age > 86400 else
-            "is the perception still running?"))
+            "is the perception still running?"), RankGraspsResult.STALE_SCENE)
     if not scene.objects:
-        raise GraspServiceError("the latest scene on %s has no objects" % topic)
+        raise GraspServiceError("the latest scene on %s has no objects" % topic,
+                                RankGraspsResult.EMPTY_SCENE)
     return scene
 
 
@@ -120,7 +139,7 @@ def top_object(scene):
     """The id of the object whose centre is highest above the table (whatever the scene's
     frame): on a pile, one nothing rests on."""
     if not scene.objects:
-        raise GraspServiceError("the scene has no objects")
+        raise GraspServiceError("the scene has no objects", RankGraspsResult.EMPTY_SCENE)
     return max(scene.objects,
                key=lambda o: _height_above_table(scene, o.superquadric.pose.position)).id
 
@@ -129,12 +148,13 @@ def _check_count(name, value):
     """A uint32 field of the goal: a whole number in [0, 2^32)."""
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2 ** 32:
         raise GraspServiceError("%s must be a whole number from 0 to %d, not %r" % (
-            name, 2 ** 32 - 1, value))
+            name, 2 ** 32 - 1, value), RankGraspsResult.BAD_REQUEST)
 
 
 def _check_number(name, value):
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise GraspServiceError("%s must be a finite number, not %r" % (name, value))
+        raise GraspServiceError("%s must be a finite number, not %r" % (name, value),
+                                RankGraspsResult.BAD_REQUEST)
 
 
 # The goals in progress, cancelled on the server when rospy shuts down (its own Ctrl-C handler
@@ -244,7 +264,7 @@ def rank_grasps(scene, target_id, camera="camera", candidates=0, pull_distance_m
     a KeyboardInterrupt the ranking is cancelled on the server first."""
     _require_node()
     if target_id is None and target_point is None:
-        raise GraspServiceError("give a target_id, or a target_point")
+        raise GraspServiceError("give a target_id, or a target_point", RankGraspsResult.BAD_REQUEST)
     _check_count("target_id", 0 if target_id is None else target_id)
     _check_count("candidates", candidates)
     _check_count("hypotheses", hypotheses)
@@ -349,7 +369,7 @@ def _run_goal(sent, name, goal, timeout, result_timeout, feedback):
     if res is None:
         raise GraspServiceError("%s: no result (the server stopped?)" % name)
     if not res.success:
-        raise GraspServiceError(res.message)
+        raise GraspServiceError(res.message, res.status)
     return res
 
 

@@ -121,9 +121,10 @@ bool GraspServer::lookup(const std::string& target, const std::string& source,
 }
 
 bool GraspServer::nearestToPoint(const geometry_msgs::PointStamped& point, const ObjectArray& scene,
-                                 int* target, std::string* why) {
+                                 int* target, uint8_t* status, std::string* why) {
   Vec3 p(point.point.x, point.point.y, point.point.z);
   if (!p.allFinite()) {
+    *status = RankGrasps::Response::BAD_REQUEST;
     *why = "target_point is not finite";
     return false;
   }
@@ -132,6 +133,7 @@ bool GraspServer::nearestToPoint(const geometry_msgs::PointStamped& point, const
   if (frame != scene_frame) {
     Transform T_scene_point;
     if (!lookup(scene_frame, frame, scene.header.stamp, &T_scene_point, why)) {
+      *status = RankGrasps::Response::TF_UNAVAILABLE;
       *why = "target_point: " + *why;
       return false;
     }
@@ -143,6 +145,7 @@ bool GraspServer::nearestToPoint(const geometry_msgs::PointStamped& point, const
   double distance = INFINITY;
   *target = objectAtPoint(shapes, p, &distance);
   if (*target < 0) {
+    *status = RankGrasps::Response::UNKNOWN_TARGET;
     *why = "no object's surface lies within " + number(kMaxTargetPointM) + " m of target_point (" +
            number(p.x()) + ", " + number(p.y()) + ", " + number(p.z()) + ") in '" + scene_frame +
            "': the nearest is " + number(distance) + " m away";
@@ -164,14 +167,16 @@ bool GraspServer::placeRequest(const RankGrasps::Request& req, const ObjectArray
   if (req.target_point.header.frame_id.empty() && (q.x != 0.0 || q.y != 0.0 || q.z != 0.0)) {
     // Without a frame the point means nothing; ranking target_id instead would pick an object
     // the caller did not name.
+    res.status = RankGrasps::Response::BAD_REQUEST;
     res.message =
         "target_point has no header.frame_id: give the point's frame, or leave the point at 0 to "
         "choose the target by target_id";
     return false;
   }
   if (!req.target_point.header.frame_id.empty()) {
-    if (!nearestToPoint(req.target_point, scene, target, &res.message)) return false;
+    if (!nearestToPoint(req.target_point, scene, target, &res.status, &res.message)) return false;
   } else if (*target < 0) {
+    res.status = RankGrasps::Response::UNKNOWN_TARGET;
     res.message =
         "unknown target id " + std::to_string(req.target_id) + " (the scene's ids: " + ids + ")";
     return false;
@@ -183,8 +188,10 @@ bool GraspServer::placeRequest(const RankGrasps::Request& req, const ObjectArray
     out->pose_header.frame_id = tf2Frame(req.target_frame);
     Transform T_pose_scene;
     if (!lookup(out->pose_header.frame_id, res.header.frame_id, res.header.stamp, &T_pose_scene,
-                &res.message))
+                &res.message)) {
+      res.status = RankGrasps::Response::TF_UNAVAILABLE;
       return false;
+    }
     out->T_pose_table = T_pose_scene * out->T_scene_table;
   }
   return true;
@@ -201,6 +208,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   }
   const std::string topic = nh_.resolveName(config_.objects_topic);
   if (!scene) {
+    res.status = RankGrasps::Response::NO_SCENE;
     res.message = "the request has no objects and no scene has arrived on " + topic +
                   " yet (is the perception running? its log says why not)";
     return false;
@@ -208,11 +216,15 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   if (req.scene.objects.empty() && !scene->header.stamp.isZero()) {
     const double age = (ros::Time::now() - scene->header.stamp).toSec();
     if (const std::string why = staleScene(age, config_.policy.max_scene_age_s); !why.empty()) {
+      res.status = RankGrasps::Response::STALE_SCENE;
       res.message = "the latest scene on " + topic + " is " + why;
       return false;
     }
   }
+  res.header = scene->header;
+  res.header.frame_id = tf2Frame(res.header.frame_id);  // markers in rviz
   if (scene->objects.empty()) {
+    res.status = RankGrasps::Response::EMPTY_SCENE;
     char stamp[32];
     std::snprintf(stamp, sizeof(stamp), "%u.%09u", scene->header.stamp.sec,
                   scene->header.stamp.nsec);
@@ -220,6 +232,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
                   stamp + " s) has none either";
     return false;
   }
+  res.status = RankGrasps::Response::BAD_SCENE;  // what an invalid_argument from here is about
   if (const std::string why = badIds(*scene); !why.empty()) {
     res.message = (req.scene.objects.empty() ? "the latest scene on " + topic + ": "
                                              : std::string("the request's scene: ")) +
@@ -233,9 +246,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   request.hypotheses = req.hypotheses;
   request.pregrasp_m = req.pregrasp_distance_m;
   checkGraspBounds(request, config_.policy);  // before any work (throws; caught by serve())
-  res.header = scene->header;
-  res.header.frame_id = tf2Frame(res.header.frame_id);  // markers in rviz
-  out->T_scene_table = tableInFrame(*scene);            // throws for a bad pose (caught by serve())
+  out->T_scene_table = tableInFrame(*scene);  // throws for a bad pose (caught by serve())
   if (!placeRequest(req, *scene, res, out)) return false;
   // The scenes asked for only (table frame; throws for a bad pose).
   request.scenes = graspScenes(*scene, GraspPolicy::hypothesesFor(req.hypotheses));
@@ -326,6 +337,7 @@ void GraspServer::runGoal(GoalHandle goal, const std::atomic<bool>& cancelled) {
   const bool was_cancelled = cancelled;  // read once: a cancel may still come
   RankGraspsResult result;
   result.success = res.success && !was_cancelled;  // cancelled after the last pull: none either
+  result.status = was_cancelled ? uint8_t{RankGraspsResult::CANCELLED} : res.status;
   result.message = res.message;
   result.header = res.header;
   result.target_id = res.target_id;
@@ -349,7 +361,9 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
   std::lock_guard<std::mutex> lock(rank_mutex_);
   const auto start = std::chrono::steady_clock::now();
   res.success = false;
+  res.status = RankGrasps::Response::INTERNAL_ERROR;
   if (cancelled && *cancelled) {
+    res.status = RankGrasps::Response::CANCELLED;
     res.message = "cancelled while it waited for the ranking before it";
     return;
   }
@@ -380,13 +394,21 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
     res.message += std::to_string(ranking.grasps.size()) + " grasps ranked" +
                    (ranking.message.empty() ? "" : "; " + ranking.message);
     res.success = !ranking.stopped;  // cancelled: the grasps so far, not a ranking
+    res.status =
+        ranking.stopped ? RankGrasps::Response::CANCELLED : RankGrasps::Response::SUCCEEDED;
     markers_pub_.publish(graspMarkers(res.header, ranking.grasps, p.T_scene_table));
     ROS_INFO("simstack grasp_server: object %u: %zu grasps ranked, %d pulls in %zu hypotheses",
              res.target_id, ranking.grasps.size(), ranking.pulls, ranking.hypotheses.size());
-  } catch (const std::invalid_argument& e) {
+  } catch (const BadGraspRequest& e) {
+    res.status = RankGrasps::Response::BAD_REQUEST;
+    res.message = e.what();
+    ROS_WARN("simstack grasp_server: %s", e.what());
+  } catch (const std::invalid_argument& e) {  // the scene's: prepare() and rankGrasps check it
+    res.status = RankGrasps::Response::BAD_SCENE;
     res.message = e.what();
     ROS_WARN("simstack grasp_server: %s", e.what());
   } catch (const std::exception& e) {
+    res.status = RankGrasps::Response::INTERNAL_ERROR;
     res.message = std::string("ranking failed: ") + e.what();
     ROS_ERROR("simstack grasp_server: %s", res.message.c_str());
   }

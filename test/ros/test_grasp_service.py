@@ -69,17 +69,20 @@ class GraspService(unittest.TestCase):
         arrows = [m for m in markers[-1].markers if m.ns == "grasps" and m.type == Marker.ARROW]
         self.assertEqual(len(arrows), len(res.grasps))
 
-    def expect_rejected(self, req, words, service=None):
+    def expect_rejected(self, req, words, status, service=None):
         res = (service or self.rank)(req)
         self.assertFalse(res.success, "accepted: %s" % words)
         self.assertIn(words, res.message)
+        self.assertEqual(res.status, status, "%s: %s" % (words, res.message))
         self.assertEqual(len(res.grasps), 0)
 
     def test_2_bad_requests_are_answered_and_the_service_keeps_serving(self):
-        self.expect_rejected(request(target_id=99), "unknown target id 99")
-        self.expect_rejected(request(pull_distance_m=0.0), "pull_distance_m")
-        self.expect_rejected(request(pull_distance_m=-0.1), "pull_distance_m")
-        self.expect_rejected(request(pull_speed_mps=float("nan")), "pull_speed_mps")
+        bad_request, bad_scene = RankGraspsResponse.BAD_REQUEST, RankGraspsResponse.BAD_SCENE
+        self.expect_rejected(request(target_id=99), "unknown target id 99",
+                             RankGraspsResponse.UNKNOWN_TARGET)
+        self.expect_rejected(request(pull_distance_m=0.0), "pull_distance_m", bad_request)
+        self.expect_rejected(request(pull_distance_m=-0.1), "pull_distance_m", bad_request)
+        self.expect_rejected(request(pull_speed_mps=float("nan")), "pull_speed_mps", bad_request)
 
         def nan_axis(sq):
             sq.semi_axes.x = float("nan")
@@ -106,32 +109,35 @@ class GraspService(unittest.TestCase):
                               (negative_axis, "semi-axes"), (low_exponent, "exponents"),
                               (infinite_exponent, "exponents"), (long_quaternion, "quaternion"),
                               (nan_position, "not finite")):
-            self.expect_rejected(request(scene=self.scene_with(change)), words)
+            self.expect_rejected(request(scene=self.scene_with(change)), words, bad_scene)
         eye = request(use_camera_pose=True)
         eye.camera_pose.position.x = float("nan")
-        self.expect_rejected(eye, "camera_pose.position is not finite")
+        self.expect_rejected(eye, "camera_pose.position is not finite", bad_request)
         unset = request(use_camera_pose=True)  # the pose left at zeros: on the table plane
-        self.expect_rejected(unset, "m above the table plane, where no camera sees the pile")
-        self.expect_rejected(request(), "no scene has arrived", self.lonely)
+        self.expect_rejected(unset, "m above the table plane, where no camera sees the pile",
+                             bad_request)
+        self.expect_rejected(request(), "no scene has arrived", RankGraspsResponse.NO_SCENE,
+                             self.lonely)
         twice = copy.deepcopy(self.scene)
         self.assertGreater(len(twice.objects), 1)
         twice.objects[1].id = twice.objects[0].id
-        self.expect_rejected(request(scene=twice), "appears twice")
+        self.expect_rejected(request(scene=twice), "appears twice", bad_scene)
         nowhere = copy.deepcopy(self.scene)
         nowhere.header.frame_id = ""
-        self.expect_rejected(request(scene=nowhere), "frame_id")
+        self.expect_rejected(request(scene=nowhere), "frame_id", bad_scene)
         frameless = request()
         frameless.target_point.point.x = 0.1
-        self.expect_rejected(frameless, "target_point has no header.frame_id")
+        self.expect_rejected(frameless, "target_point has no header.frame_id", bad_request)
         # A hand-built object whose surface cloud lacks the points measured_points announces.
         hollow = copy.deepcopy(self.scene)
         seen = max(hollow.objects, key=lambda o: o.measured_points)
         self.assertGreater(seen.measured_points, 0)
         seen.surface.point_step = 0
         seen.surface.data = b""
-        self.expect_rejected(request(scene=hollow, target_id=seen.id), "surface cloud")
+        self.expect_rejected(request(scene=hollow, target_id=seen.id), "surface cloud", bad_scene)
         res = self.rank(request())
         self.assertTrue(res.success, res.message)
+        self.assertEqual(res.status, RankGraspsResponse.SUCCEEDED)
         self.assertGreater(len(res.grasps), 0)
 
     def test_2b_a_scene_off_the_table_plane_is_said_or_refused(self):
@@ -155,7 +161,8 @@ class GraspService(unittest.TestCase):
         self.assertTrue(raised.success, raised.message)
         self.assertIn("lowest surface is at z = 0.", raised.message)
         self.assertIn("fall before any pull", raised.message)
-        self.expect_rejected(request(scene=moved(-0.3)), "would stand in the table")
+        self.expect_rejected(request(scene=moved(-0.3)), "would stand in the table",
+                             RankGraspsResponse.BAD_SCENE)
         self.assertNotIn("lowest surface", self.rank(request(scene=self.scene)).message)
 
     def test_3_too_many_candidates_are_clamped_and_said(self):
@@ -230,6 +237,7 @@ class GraspService(unittest.TestCase):
         stale = rank_until(lambda: rospy.Time(0, 1000), lambda a: "s old" in a.message)
         self.assertFalse(stale.success, "a stale scene was ranked")
         self.assertIn("s old (max_scene_age_s 0.8)", stale.message)
+        self.assertEqual(stale.status, RankGraspsResponse.STALE_SCENE)
         fresh = rank_until(rospy.Time.now, lambda a: a.success)
         self.assertTrue(fresh.success, fresh.message)
         self.assertGreater(len(fresh.grasps), 0)
@@ -371,14 +379,18 @@ class GraspService(unittest.TestCase):
         held = grasp_client.held_grasps(res)
         self.assertTrue(all(g.failed_share == 0.0 and g.held for g in held))
         self.assertEqual(held, [g for g in res.grasps if g.failed_share == 0.0])
-        with self.assertRaisesRegex(grasp_client.GraspServiceError, "unknown target id 99"):
+        with self.assertRaisesRegex(grasp_client.GraspServiceError, "unknown target id 99") as e:
             grasp_client.rank_grasps(scene, 99)
-        with self.assertRaisesRegex(grasp_client.GraspServiceError, "no scene on /nowhere"):
+        self.assertEqual(e.exception.status_name, "UNKNOWN_TARGET")
+        with self.assertRaisesRegex(grasp_client.GraspServiceError, "no scene on /nowhere") as e:
             grasp_client.latest_scene("nowhere", timeout=1.0)
+        self.assertEqual(e.exception.status, RankGraspsResponse.NO_SCENE)
         # A server that never comes: refused on time, and nothing left polling for it.
         threads = threading.active_count()
-        with self.assertRaisesRegex(grasp_client.GraspServiceError, "no grasp server at /nowhere"):
+        with self.assertRaisesRegex(grasp_client.GraspServiceError,
+                                    "no grasp server at /nowhere") as e:
             grasp_client.rank_grasps(scene, target, camera="nowhere", timeout=0.5)
+        self.assertIsNone(e.exception.status)
         time.sleep(0.5)
         self.assertLessEqual(threading.active_count(), threads, threading.enumerate())
 

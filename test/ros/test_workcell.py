@@ -212,6 +212,7 @@ class Workcell(unittest.TestCase):
         result = client.get_result()
         self.assertEqual(client.get_state(), GoalStatus.PREEMPTED, result.message)
         self.assertFalse(result.success)
+        self.assertEqual(result.status, result.CANCELLED)
         self.assertIn("stopped after", result.message)
         self.assertLess(result.pulls, feedback[-1].pulls_total)
         self.assertLess(waited, 10.0, "cancel answered after %.3f s" % waited)

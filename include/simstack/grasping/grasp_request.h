@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -63,16 +64,24 @@ struct PreparedGrasps {
   std::string notes;  ///< what the caller should be told, "; "-joined (empty when nothing)
 };
 
+/// A refusal of what the request itself asks (a pull, stand-off or camera out of bounds, a
+/// target not in the scene), as against the scene it is about: the caller can tell the two
+/// apart (the grasp service's BAD_REQUEST and BAD_SCENE).
+class BadGraspRequest : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
+};
+
 /// The request's own numbers against `policy` (pull distance and speed, pre-grasp stand-off):
-/// throws std::invalid_argument saying which and the allowed range. prepareGrasps runs it
+/// throws BadGraspRequest saying which and the allowed range. prepareGrasps runs it
 /// first; a caller may run it before the work of converting the scene.
 void checkGraspBounds(const GraspRequest& request, const GraspPolicy& policy);
 
 /// Checks `request` against `policy` and prepares the ranking on `base`'s cup, seal, physics and
-/// threads. Throws std::invalid_argument saying what is wrong and the allowed range: a pull
-/// distance or speed out of bounds, a pre-grasp stand-off out of bounds, an unknown target, a
-/// scene or hypothesis checkScene refuses (the scene's objects named by their ids, a
-/// hypothesis's by index), a scene below the table.
+/// threads. Throws saying what is wrong and the allowed range: BadGraspRequest for a pull
+/// distance or speed, a pre-grasp stand-off or a camera out of bounds, or an unknown target;
+/// std::invalid_argument for a scene or hypothesis checkScene refuses (the scene's objects
+/// named by their ids, a hypothesis's by index) or a scene below the table.
 PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConfig& base,
                              const GraspPolicy& policy);
 

@@ -57,19 +57,16 @@ void GraspPolicy::validate() const {
 void checkGraspBounds(const GraspRequest& request, const GraspPolicy& policy) {
   if (!positiveFinite(request.pull_distance_m) ||
       request.pull_distance_m > policy.max_pull_distance_m)
-    throw std::invalid_argument("pull_distance_m must lie in (0, " +
-                                number(policy.max_pull_distance_m) + "] m, not " +
-                                number(request.pull_distance_m) + " (e.g. 0.1)");
+    throw BadGraspRequest("pull_distance_m must lie in (0, " + number(policy.max_pull_distance_m) +
+                          "] m, not " + number(request.pull_distance_m) + " (e.g. 0.1)");
   if (!positiveFinite(request.pull_speed_mps) || request.pull_speed_mps > policy.max_pull_speed_mps)
-    throw std::invalid_argument("pull_speed_mps must lie in (0, " +
-                                number(policy.max_pull_speed_mps) + "] m/s, not " +
-                                number(request.pull_speed_mps) + " (e.g. 0.2)");
+    throw BadGraspRequest("pull_speed_mps must lie in (0, " + number(policy.max_pull_speed_mps) +
+                          "] m/s, not " + number(request.pull_speed_mps) + " (e.g. 0.2)");
   if (!std::isfinite(request.pregrasp_m) || request.pregrasp_m < 0.0 ||
       request.pregrasp_m > policy.max_pregrasp_m)
-    throw std::invalid_argument("pregrasp_distance_m must lie in [0, " +
-                                number(policy.max_pregrasp_m) + "] m, not " +
-                                number(request.pregrasp_m) + " (0: the server's " +
-                                number(policy.pregrasp_distance_m) + ")");
+    throw BadGraspRequest("pregrasp_distance_m must lie in [0, " + number(policy.max_pregrasp_m) +
+                          "] m, not " + number(request.pregrasp_m) + " (0: the server's " +
+                          number(policy.pregrasp_distance_m) + ")");
 }
 
 PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConfig& base,
@@ -78,18 +75,16 @@ PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConf
   if (request.scenes.empty() || request.scenes[0].empty())
     throw std::invalid_argument("the scene has no objects");
   if (request.target < 0 || request.target >= static_cast<int>(request.scenes[0].size()))
-    throw std::invalid_argument("target " + std::to_string(request.target) +
-                                " is not an object of the " +
-                                std::to_string(request.scenes[0].size()) + "-object scene");
+    throw BadGraspRequest("target " + std::to_string(request.target) + " is not an object of the " +
+                          std::to_string(request.scenes[0].size()) + "-object scene");
   if (request.camera_table && !request.camera_table->allFinite())
-    throw std::invalid_argument("camera_pose.position is not finite");
+    throw BadGraspRequest("camera_pose.position is not finite");
   // A camera sees the pile from above: one at or below the table is a pose in another frame,
   // or one left unset (all zeros), not a target with no surface in sight.
   if (request.camera_table && !(request.camera_table->z() > 0.0))
-    throw std::invalid_argument("camera_pose.position is " +
-                                number(request.camera_table->z() + 0.0) +
-                                " m above the table plane, where no camera sees the pile: give "
-                                "the camera's position in the scene's frame (it is unset?)");
+    throw BadGraspRequest("camera_pose.position is " + number(request.camera_table->z() + 0.0) +
+                          " m above the table plane, where no camera sees the pile: give "
+                          "the camera's position in the scene's frame (it is unset?)");
   PreparedGrasps out;
   const size_t wanted = GraspPolicy::hypothesesFor(request.hypotheses);
   out.scenes.assign(request.scenes.begin(),
