@@ -59,11 +59,18 @@ std::string graspTable(const GraspRanking& r, int rows) {
   if (n < static_cast<int>(r.grasps.size())) out << "  ... " << r.grasps.size() - n << " more\n";
   for (size_t h = 0; h < r.baseline.size(); ++h) {
     std::snprintf(line, sizeof line,
-                  "baseline (hypothesis %d left alone): objects moved %.1f mm at most, %.1f mm "
-                  "on average\n",
+                  "baseline (hypothesis %d left alone, once settled): objects moved %.1f mm at "
+                  "most, %.1f mm on average",
                   r.hypotheses[h], 1e3 * r.baseline[h].max_displacement_m,
                   1e3 * r.baseline[h].mean_displacement_m);
     out << line;
+    // A scene given above its table falls while it settles, before the baseline and any pull.
+    if (r.baseline[h].presettle_displacement_m > 0.005) {
+      std::snprintf(line, sizeof line, "; while settling, up to %.0f mm",
+                    1e3 * r.baseline[h].presettle_displacement_m);
+      out << line;
+    }
+    out << "\n";
   }
   return out.str();
 }
