@@ -139,7 +139,8 @@ class ScenePerception {
   /// frame). Throws std::invalid_argument for unusable input (no view, image and camera sizes
   /// differ, a later view without pose) and std::runtime_error when no table pose is given and none
   /// can be estimated. A scene with nothing on the table gives hypotheses without instances.
-  /// Not thread-safe (one model state): use one ScenePerception per thread.
+  /// Calls from several threads run one at a time (one model state): for frames perceived in
+  /// parallel, one ScenePerception per thread.
   SceneEstimate perceive(const std::vector<DepthView>& views) const;
   SceneEstimate perceive(const DepthView& view) const {
     return perceive(std::vector<DepthView>{view});
@@ -151,8 +152,9 @@ class ScenePerception {
   SceneEstimate warmUp() const;
 
   /// Replaces the settings, keeping the model and the thread count (std::invalid_argument for
-  /// another model or thread count, or a bad value; the settings in use then stay). Not
-  /// thread-safe: call it between perceive() calls.
+  /// another model or thread count, or a bad value; the settings in use then stay). Waits for a
+  /// perceive() under way on another thread; the next one uses the new settings. config()'s
+  /// reference is not to be read beside it.
   void updateSettings(const PerceptionConfig& config);
   /// The settings updateSettings(config) would put in effect (an FC model's single sample),
   /// changing nothing; throws std::invalid_argument where it would. Safe beside a perceive() or

@@ -8,6 +8,7 @@
 #include <iterator>
 #include <limits>
 #include <map>
+#include <mutex>
 #include <optional>
 #include <random>
 #include <sstream>
@@ -505,6 +506,7 @@ struct ScenePerception::Impl {
   std::unique_ptr<CvaeInference> model;
   std::string model_path;  ///< as config's, but never written after construction
   int threads = 1;         ///< the same
+  std::mutex mutex;        ///< one perceive() or updateSettings() at a time: one model state
 };
 
 namespace {
@@ -575,7 +577,9 @@ PerceptionConfig ScenePerception::settingsInEffect(const PerceptionConfig& confi
 }
 
 void ScenePerception::updateSettings(const PerceptionConfig& config) {
-  impl_->config = settingsInEffect(config);
+  const PerceptionConfig in_effect = settingsInEffect(config);
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  impl_->config = in_effect;
 }
 
 ScenePerception::~ScenePerception() = default;
@@ -780,6 +784,7 @@ Vec2 bareTableCentre(const DepthView& view, const Transform& T_table_camera,
 }  // namespace
 
 SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_given) const {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
   const PerceptionConfig& c = impl_->config;
   const CvaeConfig& mc = impl_->model->config();
   if (views_given.empty()) throw std::invalid_argument("perceive: no depth view given");
