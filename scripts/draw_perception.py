@@ -80,16 +80,22 @@ def main():
     fig = plt.figure(figsize=(depth.shape[1] / 100, depth.shape[0] / 100), dpi=100)
     ax = fig.add_axes([0, 0, 1, 1])
     ax.imshow(base)
+    # Every object's triangles in one list, drawn far to near, so that a hidden object's stay
+    # behind the one in front of it.
+    tris, depths, faces = [], [], []
     for m in frame["markers"].markers:
         if m.ns != "superquadrics":
             continue
         pts = np.array([[p.x, p.y, p.z, 1.0] for p in m.points]).T
         cam = (T_camera_table @ pose_matrix(m.pose) @ pts)[:3]
         uv = (K @ cam)[:2] / np.maximum(cam[2], 1e-6)
-        tris = uv.T.reshape(-1, 3, 2)
-        depth_order = np.argsort(-cam[2].reshape(-1, 3).mean(axis=1))
-        ax.add_collection(PolyCollection(tris[depth_order], facecolors=[(*colours[m.id + 1], 0.55)],
-                                         edgecolors="none"))
+        tris.append(uv.T.reshape(-1, 3, 2))
+        depths.append(cam[2].reshape(-1, 3).mean(axis=1))
+        faces += [(*colours[m.id + 1], 0.55)] * len(tris[-1])
+    if tris:
+        order = np.argsort(-np.concatenate(depths))
+        ax.add_collection(PolyCollection(np.concatenate(tris)[order],
+                                         facecolors=[faces[i] for i in order], edgecolors="none"))
     ax.set_xlim(0, depth.shape[1])
     ax.set_ylim(depth.shape[0], 0)
     ax.axis("off")

@@ -84,7 +84,8 @@ def progress(done, total, best):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "),
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     which = parser.add_mutually_exclusive_group(required=True)
     which.add_argument("--target", help="object id, or 'top' for the highest")
     which.add_argument("--point", help="X,Y,Z (metres, in --point-frame): the object whose surface "

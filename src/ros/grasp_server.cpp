@@ -397,8 +397,9 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
     res.status =
         ranking.stopped ? RankGrasps::Response::CANCELLED : RankGrasps::Response::SUCCEEDED;
     markers_pub_.publish(graspMarkers(res.header, ranking.grasps, p.T_scene_table));
-    ROS_INFO("simstack grasp_server: object %u: %zu grasps ranked, %d pulls in %zu hypotheses",
-             res.target_id, ranking.grasps.size(), ranking.pulls, ranking.hypotheses.size());
+    ROS_INFO("simstack grasp_server: object %u: %zu grasps ranked, %d pulls in %zu %s",
+             res.target_id, ranking.grasps.size(), ranking.pulls, ranking.hypotheses.size(),
+             ranking.hypotheses.size() == 1 ? "hypothesis" : "hypotheses");
   } catch (const BadGraspRequest& e) {
     res.status = RankGrasps::Response::BAD_REQUEST;
     res.message = e.what();

@@ -709,6 +709,8 @@ std::string PerceptionServer::silenceCause(const ros::SteadyTime& now) const {
   else if (image_publishers > 0)
     out << "both topics have publishers but nothing comes (a paused or ended bag, a stopped "
            "camera?)";
+  else if (received_ > 0)
+    out << "nothing publishes them any more: the camera stopped, or the bag ended";
   else
     out << "is the camera running, and its namespace the one given?";
   return out.str();

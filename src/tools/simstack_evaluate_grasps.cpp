@@ -236,7 +236,7 @@ int main(int argc, char** argv) {
     std::vector<EvaluatedMethod*> run;
     for (const auto& m : methods) run.push_back(m.get());
     const int n = o.scenes > 0 ? std::min(o.scenes, reader.size()) : reader.size();
-    ProgressBar bar("grasps on " + std::to_string(n) + " piles", n);
+    ProgressBar bar("grasps on " + std::to_string(n) + (n == 1 ? " pile" : " piles"), n);
     const std::vector<PickResult> picks =
         evaluateGrasps(reader, run, o, [&](int done, int) { bar.update(done); });
     bar.finish();

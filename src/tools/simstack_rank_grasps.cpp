@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <optional>
@@ -213,10 +214,12 @@ int main(int argc, char** argv) {
                                             prepared.config, {}, measured, camera);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    char took[32];
+    std::snprintf(took, sizeof took, "%.2f", seconds);
     std::cout << "object " << target_id << ": " << ranking.candidates.visible << " of "
               << ranking.candidates.surface_samples << " surface samples seen, "
               << ranking.candidates.sealable << " sealable; " << ranking.grasps.size()
-              << " grasps ranked (" << ranking.pulls << " pulls in " << seconds << " s)\n";
+              << " grasps ranked (" << ranking.pulls << " pulls in " << took << " s)\n";
     if (!ranking.message.empty()) std::cout << ranking.message << "\n";
     std::cout << graspTable(ranking, rows);
     if (!output.empty()) {

@@ -92,16 +92,18 @@ int main(int argc, char** argv) {
                       ? " (no card beside it: the config's samples and Hough setting)"
                       : " (card " + config.model_card_path + ")")
               << "\n";
-    std::cout << views.size() << (views.size() == 1 ? " view" : " views") << "; table "
-              << (est.table_estimated ? "estimated by RANSAC" : "from " + pose_path) << "\n"
-              << est.instances().size() << " objects in " << est.tiles
-              << (est.tiles == 1 ? " tile" : " tiles")
-              << (est.tiles_cropped ? " (workspace.max_tiles reached: the pile is cut)" : "")
-              << std::fixed << std::setprecision(1) << "; timings (ms): table " << t.table_ms
-              << ", tsdf " << t.tsdf_ms << ", network " << t.network_ms << ", instances "
-              << t.instances_ms << ", mesh " << t.mesh_ms << ", fitting " << t.fitting_ms
-              << ", total " << t.total_ms << "\nwrote "
-              << (fs::path(output) / "").lexically_normal().string() << "{";
+    std::cout
+        << views.size() << (views.size() == 1 ? " view" : " views") << "; table "
+        << (est.table_estimated ? "estimated by RANSAC" : "from " + pose_path) << "\n"
+        << est.instances().size() << " objects in " << est.tiles
+        << (est.tiles == 1 ? " tile" : " tiles")
+        << (est.tiles_cropped ? " (workspace.max_tiles reached: the pile is cut)" : "")
+        << std::fixed << std::setprecision(1)
+        << "; timings (ms, one frame with the network's first pass, slower than a node's next "
+           "frames): table "
+        << t.table_ms << ", tsdf " << t.tsdf_ms << ", network " << t.network_ms << ", instances "
+        << t.instances_ms << ", mesh " << t.mesh_ms << ", fitting " << t.fitting_ms << ", total "
+        << t.total_ms << "\nwrote " << (fs::path(output) / "").lexically_normal().string() << "{";
     for (size_t i = 0; i < files.size(); ++i) std::cout << (i ? ", " : "") << files[i];
     std::cout << "}\n";
     return 0;

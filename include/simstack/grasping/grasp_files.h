@@ -22,7 +22,8 @@ void writeGraspJson(const std::string& path, const GraspRanking& ranking, int ta
                     double pregrasp_distance_m);
 
 /// The scene seen from above and in front (640x480), with the first `top` grasps as arrows
-/// pointing at their contacts, coloured from green (best) to red, numbered.
+/// pointing at their contacts, numbered by rank, coloured by outcome as the grasp server's
+/// markers are: green held and freed in every hypothesis, yellow held, red the seal broke.
 void writeGraspPicture(const std::string& path, const std::vector<SuperquadricShape>& scene,
                        const std::vector<RankedGrasp>& grasps, int top);
 

@@ -21,6 +21,25 @@ namespace simstack {
 /// The most latent samples a frame may ask for.
 constexpr int kMaxSamples = 64;
 
+/// A second split for crowded piles: a hypothesis in which the first split finds `min_objects`
+/// instances or more is split again with a smaller mean-shift radius, which keeps small
+/// neighbours' centres apart (config/perception_clutter.yaml's settings, applied where they
+/// help: docs/experiments.md, "Instances: Hough voting").
+struct CrowdedConfig {
+  int min_objects = 5;           ///< 0: off
+  double bandwidth_m = 0.03;     ///< in place of hough.bandwidth_m
+  int min_instance_voxels = 15;  ///< in place of hough.min_instance_voxels
+  /// In place of segments.max_unseen_points (kept 0 where it is 0: several views reach the
+  /// hypothesis).
+  int max_unseen_points = 100;
+  /// Throws std::invalid_argument naming the field ("crowded.bandwidth_m ...").
+  void validate() const;
+  bool operator==(const CrowdedConfig& o) const {
+    return min_objects == o.min_objects && bandwidth_m == o.bandwidth_m &&
+           min_instance_voxels == o.min_instance_voxels && max_unseen_points == o.max_unseen_points;
+  }
+};
+
 struct PerceptionConfig {
   std::string model_path;       ///< a model written by simstack_train (required)
   std::string model_card_path;  ///< the card samples and hough came from ("" = defaults)
@@ -65,6 +84,7 @@ struct PerceptionConfig {
   HoughConfig hough;              ///< the model's (model card)
   SurfaceSegmentConfig segments;  ///< the split along the observed surface's convex patches
   SurfaceInstanceConfig surface_instances;  ///< objects found on the measured surface alone
+  CrowdedConfig crowded;                    ///< the second split of crowded piles
   /// The fitter's settings, but without its one-sided solve: on the pipeline's instances
   /// (network surfaces cut where objects touch, the classical baseline's visible points) it
   /// measured neutral to slightly worse (docs/results.md).

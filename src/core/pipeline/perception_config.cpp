@@ -99,6 +99,13 @@ void surfaceInstanceFields(C& c, F&& f) {
   f("fit_overlap_share", c.fit_overlap_share);
 }
 template <class C, class F>
+void crowdedFields(C& c, F&& f) {
+  f("min_objects", c.min_objects);
+  f("bandwidth_m", c.bandwidth_m);
+  f("min_instance_voxels", c.min_instance_voxels);
+  f("max_unseen_points", c.max_unseen_points);
+}
+template <class C, class F>
 void fitFields(C& c, F&& f) {
   f("min_scale_m", c.min_scale_m);
   f("max_scale_m", c.max_scale_m);
@@ -305,6 +312,8 @@ PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& p
       root, "surface_instances", &c.surface_instances,
       [](auto& x, auto&& f) { surfaceInstanceFields(x, f); }, path);
   readSection(
+      root, "crowded", &c.crowded, [](auto& x, auto&& f) { crowdedFields(x, f); }, path);
+  readSection(
       root, "fitting", &c.fit, [](auto& x, auto&& f) { fitFields(x, f); }, path);
   readSection(
       root, "table", &c.table, [](auto& x, auto&& f) { tableFields(x, f); }, path);
@@ -315,6 +324,21 @@ PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& p
 }
 
 }  // namespace
+
+void CrowdedConfig::validate() const {
+  if (min_objects < 0 || min_objects > 255)
+    throw std::invalid_argument("crowded.min_objects must lie in [0, 255] (0: off), not " +
+                                std::to_string(min_objects));
+  if (!(bandwidth_m > 0.0 && bandwidth_m <= 1.0))
+    throw std::invalid_argument("crowded.bandwidth_m must lie in (0, 1] m, not " +
+                                std::to_string(bandwidth_m));
+  if (min_instance_voxels < 1)
+    throw std::invalid_argument("crowded.min_instance_voxels must be >= 1, not " +
+                                std::to_string(min_instance_voxels));
+  if (max_unseen_points < 0)
+    throw std::invalid_argument("crowded.max_unseen_points must be >= 0, not " +
+                                std::to_string(max_unseen_points));
+}
 
 RefineOptions refineOptions(const PerceptionConfig& c) {
   return {c.refine_iterations, c.refine_learning_rate, c.symmetries,      c.refine_prior_weight,
@@ -359,6 +383,7 @@ void checkRanges(const PerceptionConfig& config, bool latent) {
   config.workspace.validate();
   config.segments.validate();
   config.surface_instances.validate();
+  config.crowded.validate();
   config.hough.validate();
   config.table.validate();
 }
@@ -379,8 +404,8 @@ void validatePerceptionConfig(const PerceptionConfig& config, bool latent) {
 }
 
 const std::vector<std::string>& perceptionConfigSections() {
-  static const std::vector<std::string> sections{"hough",   "segments", "surface_instances",
-                                                 "fitting", "table",    "workspace"};
+  static const std::vector<std::string> sections{
+      "hough", "segments", "surface_instances", "crowded", "fitting", "table", "workspace"};
   return sections;
 }
 
@@ -465,6 +490,7 @@ std::string perceptionYaml(const PerceptionConfig& config) {
   writeSection(e, "segments", c.segments, [](auto& x, auto&& f) { segmentFields(x, f); });
   writeSection(e, "surface_instances", c.surface_instances,
                [](auto& x, auto&& f) { surfaceInstanceFields(x, f); });
+  writeSection(e, "crowded", c.crowded, [](auto& x, auto&& f) { crowdedFields(x, f); });
   writeSection(e, "fitting", c.fit, [](auto& x, auto&& f) { fitFields(x, f); });
   writeSection(e, "table", c.table, [](auto& x, auto&& f) { tableFields(x, f); });
   writeSection(e, "workspace", c.workspace, [](auto& x, auto&& f) { workspaceFields(x, f); });
