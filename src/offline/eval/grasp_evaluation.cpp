@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "simstack/render/depth_renderer.h"
+#include "simstack/seeds.h"
 
 namespace simstack {
 namespace {
@@ -82,11 +83,22 @@ const RankedGrasp* bestInTruth(const GraspRanking& r, const PullSimulator& truth
   return best;
 }
 
+/// The random chooser's stream for one pick: from the seed, the scene, the target and the
+/// method's name alone, so that a pick does not depend on the other methods or scenes of a run.
+std::mt19937_64 pickStream(uint64_t seed, int scene, int target, const std::string& method) {
+  uint64_t h = 1469598103934665603ull;  // FNV-1a of the name
+  for (const char c : method) h = (h ^ static_cast<unsigned char>(c)) * 1099511628211ull;
+  return std::mt19937_64(splitMix64(splitMix64(splitMix64(seed) ^ static_cast<uint64_t>(scene)) ^
+                                    static_cast<uint64_t>(target)) ^
+                         h);
+}
+
 // The picks of every chooser for one method's estimate of one target.
 void pickOnEstimate(const std::vector<SuperquadricShape>& truth, const PullSimulator& truth_sim,
                     int scene, int target, const std::string& method,
                     const MethodEstimate& estimate, const GraspEvaluationOptions& options,
-                    std::mt19937_64& rng, std::vector<PickResult>* out) {
+                    std::vector<PickResult>* out) {
+  std::mt19937_64 rng = pickStream(options.seed, scene, target, method);
   const int k =
       matchObject(truth[target], estimate.superquadrics, options.ranking.match_distance_m);
   std::vector<std::vector<SuperquadricShape>> scenes{estimate.superquadrics};
@@ -155,8 +167,7 @@ std::vector<PickResult> evaluateScene(const SceneRecord& rec, int index,
     if (!p.grasped) p.outcome.cup_held = false;
     out.push_back(p);
     for (size_t m = 0; m < methods.size(); ++m)
-      pickOnEstimate(truth, truth_sim, index, t, methods[m]->name(), estimates[m], options, rng,
-                     &out);
+      pickOnEstimate(truth, truth_sim, index, t, methods[m]->name(), estimates[m], options, &out);
   }
   return out;
 }
