@@ -219,15 +219,19 @@ expect "generate with no pile possible" "no pile accepted" "$bin/simstack_genera
 [ -z "$(ls "$dir"/g.h5* 2> /dev/null)" ] || { echo "FAIL generate: a partial file stayed"; fail=1; }
 
 # Results are atomic: nothing on the table is a result with no objects; a second run replaces
-# the first's directory whole; a failed run leaves the earlier result as it was; an output
-# that cannot be made fails before the work.
+# the first's directory (test_dataset's StagedOutput: whole); a failed run leaves the earlier
+# result as it was; an output that cannot be made fails before the work.
 convert -size 640x480 xc:'#03E803E803E8' -depth 16 -colorspace gray "$dir/plane.png" ||
   { echo "FAIL setup: convert"; exit 1; }
 succeed "nothing on the table" "$reconstruct" --depth "$dir/plane.png" --intrinsics $K --output "$dir/empty"
 grep -q "^0 objects" "$dir/out.txt" || { echo "FAIL nothing on the table: no '0 objects' line"; fail=1; }
+# A file put into the result since is not removed by a rerun: the rerun is refused, naming it.
 touch "$dir/empty/instance_7.ply"
+expect "rerun over a file added since" "did not write (instance_7.ply)" "$reconstruct" \
+  --depth "$dir/plane.png" --intrinsics $K --output "$dir/empty"
+[ -e "$dir/empty/instance_7.ply" ] || { echo "FAIL rerun: the added file was removed"; fail=1; }
+rm "$dir/empty/instance_7.ply"
 succeed "rerun into the same directory" "$reconstruct" --depth "$dir/plane.png" --intrinsics $K --output "$dir/empty"
-[ ! -e "$dir/empty/instance_7.ply" ] || { echo "FAIL rerun: a stale file stayed"; fail=1; }
 cp "$dir/empty/superquadrics.yaml" "$dir/before.yaml"
 expect "failed run into an earlier result" "field of view" "$reconstruct" --depth "$dir/plane.png" \
   --intrinsics 0.82,1.09,0.5,0.5 --output "$dir/empty"
