@@ -451,19 +451,28 @@ std::vector<Points3> recordedPile(const std::string& name, int* target) {
   return out;
 }
 
+/// A recorded pile with the fits as config/perception.yaml makes them: each instance's own, then
+/// the joint refinement of those.
+struct RecordedFits {
+  explicit RecordedFits(const std::string& name) : pts(recordedPile(name, &target)) {
+    config.one_sided_volume_exponent = 0.5;  // as config/perception.yaml
+    for (const Points3& p : pts) own.push_back(fitSuperquadric(p, config));
+    joint = refineJointly(pts, own, config);
+  }
+  int target = -1;
+  std::vector<Points3> pts;
+  FitConfig config;
+  std::vector<SuperquadricShape> own, joint;
+};
+
 TEST(JointRefinement, AShapeItWouldShrinkAwayKeepsItsOwnFit) {
   // A recorded synthetic test view: the network completed a hidden object into its neighbours,
   // and eq. 5's volume weight lets the joint solve remove the collision by shrinking it to the
   // fitter's bound, an object the camera saw left as a point no grasp can take.
-  int target = -1;
-  const std::vector<Points3> pts = recordedPile("collapsing_pile.txt", &target);
+  const RecordedFits r("collapsing_pile.txt");
+  const auto& [target, pts, config, own, joint] = r;
   ASSERT_EQ(pts.size(), 4u);
   ASSERT_EQ(target, 3);
-  FitConfig config;
-  config.one_sided_volume_exponent = 0.5;  // as config/perception.yaml
-  std::vector<SuperquadricShape> own;
-  for (const Points3& p : pts) own.push_back(fitSuperquadric(p, config));
-  const std::vector<SuperquadricShape> joint = refineJointly(pts, own, config);
   ASSERT_TRUE(collapsedFit(joint[target], pts[target]))
       << "the recorded case no longer collapses: scales " << joint[target].scale_m.transpose();
   const auto fits = fitInstances(pts, config, true);
@@ -480,15 +489,10 @@ TEST(JointRefinement, AShapeItWouldShrinkAwayKeepsItsOwnFit) {
 TEST(JointRefinement, AShapeItWouldFlattenKeepsItsOwnFit) {
   // A recorded synthetic test view: the joint solve clears a collision by pressing one object
   // into a 1 cm slab across points that span 3 cm; one axis at the bound, the others not.
-  int target = -1;
-  const std::vector<Points3> pts = recordedPile("flattening_pile.txt", &target);
+  const RecordedFits r("flattening_pile.txt");
+  const auto& [target, pts, config, own, joint] = r;
   ASSERT_EQ(pts.size(), 4u);
   ASSERT_EQ(target, 1);
-  FitConfig config;
-  config.one_sided_volume_exponent = 0.5;  // as config/perception.yaml
-  std::vector<SuperquadricShape> own;
-  for (const Points3& p : pts) own.push_back(fitSuperquadric(p, config));
-  const std::vector<SuperquadricShape> joint = refineJointly(pts, own, config);
   ASSERT_TRUE(flattenedFit(joint[target], pts[target], config.min_scale_m))
       << "the recorded case no longer flattens: scales " << joint[target].scale_m.transpose();
   ASSERT_FALSE(collapsedFit(joint[target], pts[target]));

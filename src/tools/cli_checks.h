@@ -43,7 +43,7 @@ inline const CLI::Validator FiniteNonNegative =
     finiteNumber([](double v) { return v >= 0.0; }, ">= 0", "FINITE>=0");
 
 /// A seed: a whole number >= 0 (CLI11 reads "-1" into an unsigned as 2^64 - 1), given as
-/// ->transform(SeedNumber): leading zeros are dropped, as CLI11 would read 010 as octal 8.
+/// ->transform(SeedNumber); readIntegersInDecimal drops its leading zeros first.
 inline const CLI::Validator SeedNumber(
     [](std::string& text) -> std::string {
       // Up to 2^64 - 1: a larger one would be clamped, two seeds giving the same data.
@@ -52,7 +52,6 @@ inline const CLI::Validator SeedNumber(
       if (!text.empty() && text.find_first_not_of("0123456789") == std::string::npos &&
           (digits.size() < largest.size() ||
            (digits.size() == largest.size() && digits <= largest))) {
-        text = digits.empty() ? "0" : digits;  // CLI11 reads a leading 0 as octal: 010 is 8
         return {};
       }
       return "'" + text.substr(0, 40) + "' is not a seed (a whole number from 0 to " + largest +

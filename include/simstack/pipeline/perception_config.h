@@ -34,10 +34,6 @@ struct CrowdedConfig {
   int max_unseen_points = 100;
   /// Throws std::invalid_argument naming the field ("crowded.bandwidth_m ...").
   void validate() const;
-  bool operator==(const CrowdedConfig& o) const {
-    return min_objects == o.min_objects && bandwidth_m == o.bandwidth_m &&
-           min_instance_voxels == o.min_instance_voxels && max_unseen_points == o.max_unseen_points;
-  }
 };
 
 struct PerceptionConfig {
