@@ -10,6 +10,7 @@
 #include <fstream>
 #include <limits>
 #include <optional>
+#include <set>
 #include <thread>
 
 #include "simstack/instances/instance_finder.h"
@@ -1057,6 +1058,17 @@ TEST(RealScenes, InstancesWhoseOwnFitsOverlapHeavilyAreOneObject) {
     return out;
   };
   EXPECT_EQ(measured(joined), measured(apart));
+  // Every depth point measured on an instance (the surface its seals are judged on) holds the
+  // fitter's share of them, and more where the fitter took only points_per_instance.
+  size_t beyond_the_fitters = 0;
+  for (const InstanceEstimate& e : joined.instances()) {
+    std::set<std::array<double, 3>> all;
+    for (const Vec3& p : e.measured) all.insert({p.x(), p.y(), p.z()});
+    for (int i = 0; i < e.measured_points; ++i)
+      EXPECT_EQ(all.count({e.points[i].x(), e.points[i].y(), e.points[i].z()}), 1u) << i;
+    beyond_the_fitters += e.measured.size() - e.measured_points;
+  }
+  EXPECT_GT(beyond_the_fitters, 0u);
   EXPECT_EQ(count(22, 0.8), 3u);
   EXPECT_EQ(count(22, 0.5), 1u);
 }

@@ -321,6 +321,8 @@ TEST(Conversions, OutputsAreWrittenInTheFrameTheTableIsPlacedIn) {
   box.superquadric.T_table_object.translation() = Vec3(0.1, 0.0, 0.03);
   box.points = {Vec3(0.1, 0.0, 0.06), Vec3(0.1, 0.0, 0.0)};
   box.measured_points = 1;  // the first point was measured, the second predicted
+  // Every point measured on it: the fitter's one and one it was not given.
+  box.measured = {Vec3(0.1, 0.0, 0.06), Vec3(0.11, 0.0, 0.06)};
   est.hypotheses[0].instances.push_back(box);
   est.hypotheses[0].decomposed = true;
   est.occupancy_probability = Grid3<float>(GridSpec::sceneGrid(Vec2::Zero(), 0.64, 4), 0.0f);
@@ -341,9 +343,15 @@ TEST(Conversions, OutputsAreWrittenInTheFrameTheTableIsPlacedIn) {
       graspScenes(msg, 1)[0][0].T_table_object.isApprox(box.superquadric.T_table_object, 1e-6));
   // The grasp service reads the measured points back, in the table frame.
   const Points3 measured = measuredSurface(msg.objects[0], T_base_table.inverse());
-  ASSERT_EQ(measured.size(), 1u);
+  ASSERT_EQ(measured.size(), 2u);
   EXPECT_TRUE(measured[0].isApprox(Vec3(0.1, 0.0, 0.06), 1e-6));
+  EXPECT_TRUE(measured[1].isApprox(Vec3(0.11, 0.0, 0.06), 1e-6));
+  // The surface: the measured points, then the fitter's samples of the unseen part.
   const sensor_msgs::PointCloud2 surface = msg.objects[0].surface;
+  ASSERT_EQ(surface.width * surface.height, 3u);
+  float last[3];
+  std::memcpy(last, surface.data.data() + 2 * surface.point_step, sizeof(last));
+  EXPECT_NEAR(last[2], 0.7f, 1e-6);
   float xyz[3];
   std::memcpy(xyz, surface.data.data(), sizeof(xyz));
   EXPECT_NEAR(xyz[0], 0.4f, 1e-6);

@@ -362,8 +362,13 @@ ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& 
     o.id = objectId(ids, k);
     o.superquadric = superquadricMsg(moved(instances[k].superquadric, T_frame_table));
     o.mesh = superquadricMesh(instances[k].superquadric);
-    o.surface = pointCloud(header, moved(instances[k].points, T_frame_table));
-    o.measured_points = static_cast<uint32_t>(instances[k].measured_points);
+    // Every depth point measured on it (the seal is judged there), then the fitter's samples of
+    // the surface the camera did not see.
+    const InstanceEstimate& e = instances[k];
+    Points3 surface = e.measured;
+    surface.insert(surface.end(), e.points.begin() + e.measured_points, e.points.end());
+    o.surface = pointCloud(header, moved(surface, T_frame_table));
+    o.measured_points = static_cast<uint32_t>(e.measured.size());
     o.voxels = static_cast<uint32_t>(instances[k].voxels);
     o.visible_fraction = static_cast<float>(instances[k].visible_fraction);
     o.truncated = instances[k].truncated;

@@ -27,16 +27,24 @@ namespace {
 /// What --validate-only prints: the validation's measures of one model file.
 void printValidation(const std::string& model, const std::string& dataset,
                      const TrainConfig& training, const TrainingReport& r) {
+  // A model without a latent code (FC: no posterior) gives one estimate per view.
+  if (!std::isfinite(r.validation_posterior_iou)) {
+    std::printf(
+        "validation of %s: the last %d scenes of %s x %d views, one estimate each (the model "
+        "has no latent code)\n  IoU %.4f +- %.4f (standard error over scenes), BCE %.4f\n",
+        model.c_str(), training.validation_scenes, dataset.c_str(), training.validation_views,
+        r.validation_iou, r.validation_iou_se, r.validation_bce);
+    return;
+  }
   std::printf(
       "validation of %s: the last %d scenes of %s x %d views, %d codes each\n"
       "  IoU of the codes' mean occupancy %.4f +- %.4f (standard error over scenes), "
-      "BCE %.4f\n  IoU of one code %.4f, of the best of %d (oracle) %.4f",
+      "BCE %.4f\n  IoU of one code %.4f, of the best of %d (oracle) %.4f, of the posterior mean "
+      "(encoder seeing the truth) %.4f",
       model.c_str(), training.validation_scenes, dataset.c_str(), training.validation_views,
       training.validation_samples, r.validation_iou, r.validation_iou_se, r.validation_bce,
-      r.validation_single_iou, training.validation_samples, r.validation_best_iou);
-  if (std::isfinite(r.validation_posterior_iou))
-    std::printf(", of the posterior mean (encoder seeing the truth) %.4f",
-                r.validation_posterior_iou);
+      r.validation_single_iou, training.validation_samples, r.validation_best_iou,
+      r.validation_posterior_iou);
   std::printf(
       "\n  hypotheses disagree on %.2f %% of their occupied voxels: %.2f %% where the view "
       "observed, %.2f %% where it did not; %.1f %% of the disagreement is unobserved\n",

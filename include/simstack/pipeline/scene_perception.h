@@ -34,6 +34,9 @@ struct InstanceEstimate {
   /// The first this many of `points` are depth points the views measured on it (its seen
   /// surface, where a suction cup's seal is judged); 0 without observed_points.
   int measured_points = 0;
+  /// Every depth point the views measured on it (at segments.pixel_stride), table frame: the
+  /// surface a suction cup's seal is judged on. Empty without observed_points.
+  Points3 measured;
   Vec3 vote_centre = Vec3::Zero();  ///< Hough centre
   int voxels = 0;
   /// Share of `mesh`'s area that the first view's camera sees (0..1): the rest was completed.

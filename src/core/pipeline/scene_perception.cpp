@@ -366,6 +366,11 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   // superquadric (too few points, outside the workspace) are no object's.
   for (int& label : h->labels.data)
     if (label >= 0) label = reported[label];
+  for (const MeasuredView& view : measured_views)
+    for (const Vec3& p : view.points_table) {
+      const int voxel = nearestLabelledVoxel(h->labels, p);
+      if (voxel >= 0) h->instances[h->labels.data[voxel]].measured.push_back(p);
+    }
   h->decomposed = true;
   if (timings) timings->fitting_ms += msSince(t);
 }

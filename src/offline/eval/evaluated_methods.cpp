@@ -72,9 +72,10 @@ MethodEstimate NetworkMethod::estimateViews(const std::vector<DepthView>& views,
   out.fits_at_bound = 0;
   for (const InstanceEstimate& e : est.instances()) {
     out.superquadrics.push_back(e.superquadric);
-    out.measured_surfaces.emplace_back(e.points.begin(), e.points.begin() + e.measured_points);
+    out.measured_surfaces.push_back(e.measured);
     *out.fits_at_bound +=
-        fitAtBound(e.superquadric, out.measured_surfaces.back(), perception_->config().fit);
+        fitAtBound(e.superquadric, Points3(e.points.begin(), e.points.begin() + e.measured_points),
+                   perception_->config().fit);
   }
   for (size_t h = 1; h < est.hypotheses.size() && est.hypotheses[h].decomposed; ++h) {
     out.further_superquadrics.emplace_back();
