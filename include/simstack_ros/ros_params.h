@@ -32,7 +32,8 @@ struct NodeConfig {
   std::string output_dir;
   /// Objects, markers, instances, occupancy and labels latched: a late subscriber gets the last.
   bool latch = true;
-  TrackerConfig tracking;  ///< ~track_max_centre_distance_m, ~track_max_size_ratio
+  TrackerConfig tracking;  ///< ~track_max_centre_distance_m, ~track_max_size_ratio,
+                           ///< ~track_min_overlap_share, ~track_max_missed_frames
   /// Broadcast each object's superquadric pose on tf as <object_frame_prefix>object_<id>, a
   /// child of the output frame at the frame's stamp.
   bool publish_object_tf = true;

@@ -85,6 +85,8 @@ void nodeFields(C& c, F&& f) {
   f("object_frame_prefix", c.object_frame_prefix);
   f("track_max_centre_distance_m", c.tracking.max_centre_distance_m);
   f("track_max_size_ratio", c.tracking.max_size_ratio);
+  f("track_min_overlap_share", c.tracking.min_overlap_share);
+  f("track_max_missed_frames", c.tracking.max_missed_frames);
 }
 
 const std::set<std::string>& nodeParameters() {

@@ -38,6 +38,10 @@ void TrackerConfig::validate() const {
     refuse("max_centre_distance_m must be finite and > 0", max_centre_distance_m);
   if (!(std::isfinite(max_size_ratio) && max_size_ratio >= 1.0))
     refuse("max_size_ratio must be finite and >= 1", max_size_ratio);
+  if (!(min_overlap_share > 0.0 && min_overlap_share <= 1.0))
+    refuse("min_overlap_share must lie in (0, 1]", min_overlap_share);
+  if (max_missed_frames < 0 || max_missed_frames > 1000)
+    refuse("max_missed_frames must lie in [0, 1000]", max_missed_frames);
 }
 
 ObjectTracker::ObjectTracker(const TrackerConfig& config) : config_(config) { config_.validate(); }
@@ -46,7 +50,7 @@ std::vector<uint32_t> ObjectTracker::assign(const std::vector<SuperquadricShape>
   std::vector<Track> now(objects.size());
   for (size_t i = 0; i < objects.size(); ++i)
     now[i] = {0, objects[i], objects[i].T_table_object.translation(), sortedAxes(objects[i])};
-  // Pass 0: centres within the gate; pass 1: shapes that hold each other's centres.
+  // Pass 0: centres within the gate; pass 1: shapes that overlap.
   std::vector<std::tuple<int, double, size_t, size_t>> pairs;  // pass, distance, new, previous
   for (size_t i = 0; i < now.size(); ++i)
     for (size_t j = 0; j < previous_.size(); ++j) {
@@ -55,8 +59,7 @@ std::vector<uint32_t> ObjectTracker::assign(const std::vector<SuperquadricShape>
       const double d = (now[i].centre - previous_[j].centre).norm();
       if (d <= config_.max_centre_distance_m)
         pairs.emplace_back(0, d, i, j);
-      else if (now[i].shape.contains(previous_[j].centre) &&
-               previous_[j].shape.contains(now[i].centre))
+      else if (sharedVolumeShare(now[i].shape, previous_[j].shape) >= config_.min_overlap_share)
         pairs.emplace_back(1, d, i, j);
     }
   std::sort(pairs.begin(), pairs.end());
@@ -71,6 +74,12 @@ std::vector<uint32_t> ObjectTracker::assign(const std::vector<SuperquadricShape>
     if (!matched_new[i]) now[i].id = next_id_++;
     ids[i] = now[i].id;
   }
+  // The objects this frame missed wait, as last estimated, until they have been missed too often.
+  for (size_t j = 0; j < previous_.size(); ++j)
+    if (!matched_old[j] && previous_[j].missed < config_.max_missed_frames) {
+      now.push_back(previous_[j]);
+      ++now.back().missed;
+    }
   previous_ = std::move(now);
   return ids;
 }
