@@ -204,6 +204,19 @@ TEST(Conversions, DepthAndCameraInfoRoundTrip) {
   EXPECT_EQ(c.width, 640);
 }
 
+TEST(GraspConversions, RequestNumbersAreTheDecimalsWritten) {
+  EXPECT_EQ(asWritten(0.1f), 0.1);
+  EXPECT_EQ(asWritten(0.2f), 0.2);
+  EXPECT_EQ(asWritten(0.05f), 0.05);
+  EXPECT_EQ(asWritten(0.123f), 0.123);
+  EXPECT_NE(static_cast<double>(0.1f), 0.1);  // what a plain conversion would rank on
+  EXPECT_EQ(asWritten(1e-30f), 1e-30);
+  EXPECT_TRUE(std::isnan(asWritten(std::nanf(""))));
+  EXPECT_EQ(asWritten(-std::numeric_limits<float>::infinity()),
+            -std::numeric_limits<double>::infinity());
+  EXPECT_EQ(asWritten(std::numeric_limits<float>::max()), 3.4028235e38);
+}
+
 TEST(GraspConversions, ScenesComeFromObjectsThenHypotheses) {
   ObjectArray msg;
   SuperquadricShape sq;

@@ -15,6 +15,11 @@
 
 namespace simstack {
 
+/// The number a float32 request field was written as: its shortest decimal, as a double (0.1f
+/// is 0.1, not 0.100000001490116). A pull 1.5 nm longer changes some simulated outcomes, so the
+/// service ranks on the numbers the caller gave, as simstack_rank_grasps does.
+double asWritten(float value);
+
 /// The core superquadric of a message; rejects a quaternion that is not finite and of unit
 /// norm (within 1e-3), naming `what`. The shape's values are checked by checkScene().
 SuperquadricShape superquadricFromMsg(const simstack::Superquadric& msg, const std::string& what);

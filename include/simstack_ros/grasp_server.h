@@ -51,6 +51,8 @@ class GraspServer {
   using GoalHandle = actionlib::ActionServer<RankGraspsAction>::GoalHandle;
   /// The action's goal: accepted, then ranked on a thread of its own (one ranking at a time,
   /// with the service's), with feedback; a cancel stops the pulls.
+  /// Takes the last ranking's arrows off ~grasps (a refused request has none).
+  void clearMarkers();
   void onGoal(GoalHandle goal);
   void onCancel(GoalHandle goal);
   void runGoal(GoalHandle goal, const std::atomic<bool>& cancelled);
@@ -89,6 +91,7 @@ class GraspServer {
   ros::CallbackQueue action_queue_;  ///< the action's goals and cancels, by action_spinner_
   ros::Subscriber objects_sub_;
   ros::Publisher markers_pub_;
+  std::string markers_frame_;  ///< of the arrows ~grasps shows; empty: none
   ros::ServiceServer rank_srv_;
   std::unique_ptr<actionlib::ActionServer<RankGraspsAction>> action_;
   std::mutex goals_mutex_;                                               ///< guards the two below

@@ -3,7 +3,9 @@
 #include <sensor_msgs/point_cloud2_iterator.h>
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
+#include <cstdlib>
 #include <stdexcept>
 #include <string>
 
@@ -25,6 +27,13 @@ Transform rigidFromPose(const geometry_msgs::Pose& p, const std::string& what) {
     throw std::invalid_argument(what + ": orientation quaternion has norm " +
                                 std::to_string(q.norm()) + ", not 1");
   return transformFromPose(p);
+}
+
+double asWritten(float value) {
+  char text[64];
+  const std::to_chars_result r = std::to_chars(text, text + sizeof(text) - 1, value);
+  *r.ptr = '\0';
+  return std::strtod(text, nullptr);
 }
 
 SuperquadricShape superquadricFromMsg(const simstack::Superquadric& m, const std::string& what) {

@@ -240,11 +240,11 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
     return false;
   }
   GraspRequest request;
-  request.pull_distance_m = req.pull_distance_m;
-  request.pull_speed_mps = req.pull_speed_mps;
+  request.pull_distance_m = asWritten(req.pull_distance_m);
+  request.pull_speed_mps = asWritten(req.pull_speed_mps);
   request.candidates = req.candidates;
   request.hypotheses = req.hypotheses;
-  request.pregrasp_m = req.pregrasp_distance_m;
+  request.pregrasp_m = asWritten(req.pregrasp_distance_m);
   checkGraspBounds(request, config_.policy);  // before any work (throws; caught by serve())
   out->T_scene_table = tableInFrame(*scene);  // throws for a bad pose (caught by serve())
   if (!placeRequest(req, *scene, res, out)) return false;
@@ -371,6 +371,7 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
     PreparedRequest p;
     if (!prepare(req, res, &p)) {
       ROS_WARN("simstack grasp_server: %s", res.message.c_str());
+      clearMarkers();
       return;
     }
     RankingProgress progress;
@@ -391,12 +392,15 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
     res.candidates_sealable = static_cast<uint32_t>(ranking.candidates.sealable);
     res.hypotheses_used = static_cast<uint32_t>(ranking.hypotheses.size());
     res.pulls = static_cast<uint32_t>(ranking.pulls);
-    res.message += std::to_string(ranking.grasps.size()) + " grasps ranked" +
+    res.message += (ranking.stopped ? "cancelled: " + std::to_string(ranking.grasps.size()) +
+                                          " grasps with all their pulls done, not a ranking"
+                                    : std::to_string(ranking.grasps.size()) + " grasps ranked") +
                    (ranking.message.empty() ? "" : "; " + ranking.message);
     res.success = !ranking.stopped;  // cancelled: the grasps so far, not a ranking
     res.status =
         ranking.stopped ? RankGrasps::Response::CANCELLED : RankGrasps::Response::SUCCEEDED;
     markers_pub_.publish(graspMarkers(res.header, ranking.grasps, p.T_scene_table));
+    markers_frame_ = res.header.frame_id;
     ROS_INFO("simstack grasp_server: object %u: %zu grasps ranked, %d pulls in %zu %s",
              res.target_id, ranking.grasps.size(), ranking.pulls, ranking.hypotheses.size(),
              ranking.hypotheses.size() == 1 ? "hypothesis" : "hypotheses");
@@ -413,7 +417,18 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
     res.message = std::string("ranking failed: ") + e.what();
     ROS_ERROR("simstack grasp_server: %s", res.message.c_str());
   }
+  // A refused request has no grasps: the last ranking's arrows are not its answer.
+  if (!res.success && res.status != RankGrasps::Response::CANCELLED) clearMarkers();
   res.time_s = std::chrono::duration<float>(std::chrono::steady_clock::now() - start).count();
+}
+
+void GraspServer::clearMarkers() {
+  if (markers_frame_.empty()) return;  // none published
+  std_msgs::Header header;
+  header.frame_id = markers_frame_;
+  header.stamp = ros::Time::now();
+  markers_pub_.publish(graspMarkers(header, {}, Transform::Identity()));
+  markers_frame_.clear();
 }
 
 }  // namespace simstack

@@ -524,7 +524,8 @@ void PerceptionServer::process(const Frame& frame) {
           "simstack perception: frame stamped %.3f s is %.3f s older than the last one on "
           "%s (a bag restarted?): the accumulated views are cleared",
           frame.image->header.stamp.toSec(), arrival.back_s, image_sub_.getTopic().c_str());
-    if (arrival.went_back) tracker_.reset();  // a restarted bag: its objects are new
+    // A bag that loops shows the same pile again: the tracker keeps the ids of objects found
+    // where they were (its gates tell another pile's objects apart).
     if (reset_requested_) {
       views_.clear();
       tracker_.reset();

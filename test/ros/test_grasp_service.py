@@ -64,10 +64,18 @@ class GraspService(unittest.TestCase):
         deadline = time.time() + 10.0  # wall clock: the looping bag's clock jumps back
         while not markers and time.time() < deadline:
             time.sleep(0.1)
-        sub.unregister()
         self.assertTrue(markers, "no ~grasps markers")
         arrows = [m for m in markers[-1].markers if m.ns == "grasps" and m.type == Marker.ARROW]
         self.assertEqual(len(arrows), len(res.grasps))
+        # A refused request has no grasps: the arrows of the last ranking are taken off.
+        shown = len(markers)
+        self.assertFalse(self.rank(request(target_id=99)).success)
+        deadline = time.time() + 10.0
+        while len(markers) == shown and time.time() < deadline:
+            time.sleep(0.1)
+        sub.unregister()
+        self.assertGreater(len(markers), shown, "no ~grasps markers after a refusal")
+        self.assertEqual([m.action for m in markers[-1].markers], [Marker.DELETEALL])
 
     def expect_rejected(self, req, words, status, service=None):
         res = (service or self.rank)(req)

@@ -75,14 +75,14 @@ struct SceneDrift {
 /// are independent and deterministic). Thread-safe: run pulls from several threads.
 class PullSimulator {
  public:
-  /// Throws std::invalid_argument for a bad config or shape.
+  /// Throws std::invalid_argument for a bad config or shape. The order of `scene` changes
+  /// nothing simulated: objects are indexed as in it.
   PullSimulator(const std::vector<SuperquadricShape>& scene, const PullConfig& config);
 
-  /// The scene after settling (start of every run).
-  const std::vector<Transform>& settledPoses() const { return settled_; }
   const SceneDrift& drift() const { return drift_; }
 
-  /// Pulls `target` at `contact_table` (of the settled scene) along `approach_table`.
+  /// Pulls `target` (an index into the scene given) at `contact_table` (of the settled scene)
+  /// along `approach_table`.
   PullOutcome pull(int target, const Vec3& contact_table, const Vec3& approach_table) const;
   /// The same for a contact and approach given on the scene as perceived: both move with the
   /// target into the settled scene first.
@@ -92,8 +92,13 @@ class PullSimulator {
  private:
   std::unique_ptr<PhysicsWorld> world(const std::vector<Transform>& poses) const;
 
+  /// Index into the simulated order of the given scene's object `target`; throws when out of
+  /// range.
+  int slot(int target) const;
+
   PullConfig config_;
-  std::vector<SuperquadricShape> scene_;
+  std::vector<int> slot_;  ///< of each object of the given scene, its index as simulated
+  std::vector<SuperquadricShape> scene_;  ///< in the simulated order
   std::vector<std::vector<Vec3>> hulls_;
   std::vector<double> volumes_;
   std::vector<Transform> settled_;  ///< after presettling

@@ -164,7 +164,8 @@ std::string staleScene(double age_s, double max_age_s) {
          (age_s > 86400.0 ? "a day or more apart: is one of this node and the scene's publisher "
                             "on simulated time (/use_sim_time) and the other not? "
                           : "is the perception still running? ") +
-         "Send the scene in the request, or raise ~max_scene_age_s (0: any age)";
+         "Rank on a fresh frame; raise ~max_scene_age_s (0: any age) only where nothing moves "
+         "the pile meanwhile";
 }
 
 }  // namespace simstack

@@ -1,7 +1,10 @@
 #include "simstack/grasping/suction_pull.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <limits>
+#include <numeric>
 #include <stdexcept>
 #include <string>
 
@@ -47,6 +50,28 @@ void check(const PullConfig& c) {
     throw std::invalid_argument("pull_distance_m / pull_speed_mps is over 60 s");
 }
 
+/// The order the objects enter the physics in: from the bottom up (as a pile is built, which
+/// Bullet, solving contacts in insertion order, holds most still), then by their other
+/// parameters; not by their place in the caller's list, so that a pile listed otherwise is
+/// simulated alike.
+std::vector<int> canonicalOrder(const std::vector<SuperquadricShape>& scene) {
+  std::vector<std::array<double, 19>> keys;
+  for (const SuperquadricShape& sq : scene) {
+    std::array<double, 19> k{};
+    k[0] = std::numeric_limits<double>::infinity();  // its lowest point
+    for (const Vec3& v : sq.meshObject(16).vertices)
+      k[0] = std::min(k[0], (sq.T_table_object * v).z());
+    const Eigen::Matrix4d m = sq.T_table_object.matrix();
+    for (int i = 0; i < 12; ++i) k[1 + i] = m(i % 3, 3 - i / 3);  // position, then rotation
+    for (int i = 0; i < 3; ++i) k[13 + i] = sq.scale_m[i], k[16 + i] = sq.exponents[i];
+    keys.push_back(k);
+  }
+  std::vector<int> order(scene.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return keys[a] < keys[b]; });
+  return order;
+}
+
 double angleBetween(const Transform& a, const Transform& b) {
   return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle();
 }
@@ -75,12 +100,19 @@ int PullConfig::settleSteps() const {
   return static_cast<int>(std::ceil(settle_s / physics.timestep_s));
 }
 
-PullSimulator::PullSimulator(const std::vector<SuperquadricShape>& scene, const PullConfig& config)
-    : config_(config), scene_(scene) {
+PullSimulator::PullSimulator(const std::vector<SuperquadricShape>& given, const PullConfig& config)
+    : config_(config), slot_(given.size()) {
   config.validate();
-  for (const SuperquadricShape& sq : scene) {
+  for (const SuperquadricShape& sq : given)
     if (!sq.T_table_object.matrix().allFinite())
       throw std::invalid_argument("an object's pose is not finite");
+  const std::vector<int> order = canonicalOrder(given);
+  for (size_t k = 0; k < order.size(); ++k) {
+    slot_[order[k]] = static_cast<int>(k);
+    scene_.push_back(given[order[k]]);
+  }
+  const std::vector<SuperquadricShape>& scene = scene_;
+  for (const SuperquadricShape& sq : scene) {
     const auto shape = ObjectShape::fromSuperquadric(sq);
     hulls_.push_back(shape->hullPoints());
     volumes_.push_back(shape->volume());
@@ -113,15 +145,21 @@ std::unique_ptr<PhysicsWorld> PullSimulator::world(const std::vector<Transform>&
   return w;
 }
 
-PullOutcome PullSimulator::pullPerceived(int target, const Vec3& contact,
-                                         const Vec3& approach) const {
-  const Transform moved = settled_.at(target) * scene_.at(target).T_table_object.inverse();
-  return pull(target, moved * contact, moved.linear() * approach);
+int PullSimulator::slot(int target) const {
+  if (target < 0 || target >= static_cast<int>(slot_.size()))
+    throw std::invalid_argument("pull target out of range");
+  return slot_[target];
 }
 
-PullOutcome PullSimulator::pull(int target, const Vec3& contact, const Vec3& approach) const {
-  if (target < 0 || target >= static_cast<int>(scene_.size()))
-    throw std::invalid_argument("pull target out of range");
+PullOutcome PullSimulator::pullPerceived(int given_target, const Vec3& contact,
+                                         const Vec3& approach) const {
+  const int target = slot(given_target);
+  const Transform moved = settled_[target] * scene_[target].T_table_object.inverse();
+  return pull(given_target, moved * contact, moved.linear() * approach);
+}
+
+PullOutcome PullSimulator::pull(int given_target, const Vec3& contact, const Vec3& approach) const {
+  const int target = slot(given_target);
   const Vec3 a = approach.normalized();
   auto w = world(settled_);
   w->attachCup(target, contact, config_.cup_stiffness_hz);

@@ -158,10 +158,12 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, int n, ui
 /// triangles that no ray from a view's camera meets first). The measured points outnumber the seen
 /// part's share of `n`: they are the surface itself, where the network's mesh is up to a voxel off,
 /// and the fits weigh them accordingly (docs/experiments.md, "Fitting"). When the views hold fewer
-/// of them than that share, samples of the seen mesh make up the difference.
+/// of them than that share, samples of the seen mesh make up the difference. `measured_all`:
+/// every depth point on each instance's voxels, of which the fitter takes at most `n`.
 std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Grid3<int>& labels,
                                const std::vector<MeasuredView>& views, int n, uint64_t seed,
-                               std::vector<int>* measured_counts) {
+                               std::vector<int>* measured_counts,
+                               std::vector<Points3>* measured_all) {
   TriangleMesh all;
   std::vector<size_t> first(parts.size() + 1, 0);
   for (size_t k = 0; k < parts.size(); ++k) {
@@ -179,6 +181,7 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Gri
       if (k >= 0 && k < static_cast<int>(parts.size())) measured[k].push_back(p);
     }
   }
+  *measured_all = measured;
   std::vector<Points3> points(parts.size());
   measured_counts->assign(parts.size(), 0);
   for (size_t k = 0; k < parts.size(); ++k) {
@@ -220,7 +223,7 @@ std::vector<Points3> fitPoints(const std::vector<TriangleMesh>& parts, const Gri
 int joinOverlappingFits(const PerceptionConfig& config, const FitConfig& fit,
                         InstanceSegmentation* seg, std::vector<TriangleMesh>* parts,
                         std::vector<Points3>* points, std::vector<int>* measured_counts,
-                        std::vector<bool>* outside,
+                        std::vector<Points3>* measured_all, std::vector<bool>* outside,
                         std::vector<std::optional<SuperquadricShape>>* fits) {
   const SurfaceInstanceConfig& c = config.surface_instances;
   if (!c.enabled || c.fit_overlap_share <= 0.0) return 0;
@@ -256,6 +259,9 @@ int joinOverlappingFits(const PerceptionConfig& config, const FitConfig& fit,
     points->erase(points->begin() + drop);
     (*measured_counts)[keep] = ma + mb;
     measured_counts->erase(measured_counts->begin() + drop);
+    (*measured_all)[keep].insert((*measured_all)[keep].end(), (*measured_all)[drop].begin(),
+                                 (*measured_all)[drop].end());
+    measured_all->erase(measured_all->begin() + drop);
     outside->erase(outside->begin() + drop);  // an instance left outside has no fit: never joined
     fits->erase(fits->begin() + drop);
     (*fits)[keep] = fitEachInstance({kept}, fit, config.min_instance_points).front();
@@ -331,10 +337,11 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   for (size_t k = 0; k < parts.size(); ++k)
     if (outside[k]) parts[k] = TriangleMesh();
   std::vector<int> measured_counts(parts.size(), 0);
+  std::vector<Points3> measured_all(parts.size());
   std::vector<Points3> points =
       config.observed_points && !measured_views.empty()
           ? fitPoints(parts, h->labels, measured_views, config.points_per_instance, config.seed,
-                      &measured_counts)
+                      &measured_counts, &measured_all)
           : fitPoints(parts, config.points_per_instance, config.seed);
   if (timings) timings->mesh_ms += msSince(t);
 
@@ -343,8 +350,8 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   fit.threads = std::max(1, config.threads);
   std::vector<std::optional<SuperquadricShape>> fits =
       fitEachInstance(points, fit, config.min_instance_points);
-  if (joinOverlappingFits(config, fit, &seg, &parts, &points, &measured_counts, &outside, &fits) >
-      0)
+  if (joinOverlappingFits(config, fit, &seg, &parts, &points, &measured_counts, &measured_all,
+                          &outside, &fits) > 0)
     keepInsideLabels();
   if (config.joint_refinement) refineInstances(points, fit, &fits);
   h->instances.clear();
@@ -358,6 +365,7 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
     e.mesh = parts[k].empty() ? superquadricsMesh({*fits[k]}) : parts[k];
     e.points = points[k];
     e.measured_points = measured_counts[k];
+    e.measured = std::move(measured_all[k]);
     e.vote_centre = seg.centres_table[k];
     e.voxels = seg.voxel_counts[k];
     h->instances.push_back(std::move(e));
@@ -366,11 +374,6 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   // superquadric (too few points, outside the workspace) are no object's.
   for (int& label : h->labels.data)
     if (label >= 0) label = reported[label];
-  for (const MeasuredView& view : measured_views)
-    for (const Vec3& p : view.points_table) {
-      const int voxel = nearestLabelledVoxel(h->labels, p);
-      if (voxel >= 0) h->instances[h->labels.data[voxel]].measured.push_back(p);
-    }
   h->decomposed = true;
   if (timings) timings->fitting_ms += msSince(t);
 }
