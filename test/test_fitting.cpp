@@ -103,7 +103,7 @@ TEST(SurfaceDistance, IsTheRaysForMixedExponentsNearAndFar) {
   }
   EXPECT_EQ(checked, 18000);
   // A point inside a shape of very unequal exponents from which Halley's steps alone cycle
-  // between two iterates (the search then ended 0.17 m off).
+  // between two iterates, 0.17 m from the answer.
   const SuperquadricShape sq =
       makeShape(Vec3(0.0122, 0.102, 0.0076), Vec3(76, 2.15, 86), Vec3::Zero(), Vec3::UnitZ(), 0.0);
   const Vec3 p(0.004, -0.003, -0.0019);
@@ -111,8 +111,8 @@ TEST(SurfaceDistance, IsTheRaysForMixedExponentsNearAndFar) {
 }
 
 TEST(SurfaceDistance, StaysFiniteForExtremeExponentsAndScales) {
-  // Exponents 1 and 100 with a 5 mm axis: |q/a|^e spans 1e-200..1e178 (a NaN in the evaluation
-  // runs before the distance was computed in logs).
+  // Exponents 1 and 100 with a 5 mm axis: |q/a|^e spans 1e-200..1e178, past double's range
+  // unless the distance is computed in logs.
   const SuperquadricShape sq =
       makeShape(Vec3(0.005, 0.03, 0.07), Vec3(1, 100, 3.6), Vec3(0, 0, 0.07), Vec3(1, 1, 0), 1.2);
   for (const Vec3& p :

@@ -101,7 +101,7 @@ TEST(Cvae, LossesMatchHandComputedValues) {
   const auto vt = torch::zeros({1, 3, 2, 1, 1});
   EXPECT_NEAR(voteLoss(vp, vt).item<double>(), 3.0, 1e-5);
   // Only voxel 1 lies inside an object (unit target (0, 1, 0)): error (0, -1, 0), norm 1; the
-  // free voxel 0 no longer counts.
+  // free voxel 0 does not count.
   const auto vt_in = torch::tensor({0.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f}).view({1, 3, 2, 1, 1});
   EXPECT_NEAR(voteLoss(vp, vt_in, false).item<double>(), 3.0 + 1.0, 1e-5);
   EXPECT_NEAR(voteLoss(vp, vt_in, true).item<double>(), 1.0, 1e-5);

@@ -885,9 +885,8 @@ TEST(ScenePerception, ShippedModelsProveThemselvesAndADifferentSelfTestIsRefused
 TEST(ScenePerception, EveryShippedModelSeesNothingOnAnEmptyTable) {
   // Generated piles always hold objects; a bare table must still give no object in any
   // hypothesis, seen from the side, obliquely or from above. The grid goes on the table the
-  // camera sees: on the camera's own footprint (the former rule) a ninth of it was seen from
-  // the first eye, and the networks filled the rest with objects (`fc` one; the C-VAE built on
-  // it some in three of eight hypotheses). SIMSTACK_EXTRA_MODEL names one more file to check
+  // camera sees: a grid on the camera's own footprint is seen a ninth from the first eye, and
+  // the networks fill the rest with objects. SIMSTACK_EXTRA_MODEL names one more file to check
   // (a training run's, say).
   std::vector<std::string> models;
   for (const auto& f : std::filesystem::directory_iterator(SIMSTACK_SOURCE_DIR "/models"))

@@ -60,8 +60,8 @@ void reportPerDataset(const std::vector<std::string>& datasets,
       std::cout << "no views\n";
       continue;
     }
-    const double a = scoreHoughSetting(part, chosen.hough, pc.segments).exact;
-    const double b = scoreHoughSetting(part, own.hough, pc.segments).exact;
+    const double a = scoreHoughSetting(part, chosen.hough, pc.segments, pc.crowded).exact;
+    const double b = scoreHoughSetting(part, own.hough, pc.segments, pc.crowded).exact;
     std::cout << std::fixed << std::setprecision(1) << 100 * a << " % / " << 100 * b << " %\n";
   }
 }
@@ -190,8 +190,9 @@ int main(int argc, char** argv) {
         pooledViews(datasets, mesh_dir, pc, scenes, views_per_scene, seed, noise, &ends);
     ProgressBar bar2("scoring " + std::to_string(candidates.size()) + " settings",
                      static_cast<long>(candidates.size()));
-    std::vector<HoughScore> scores = scoreHoughSettings(
-        views, candidates, pc.segments, pc.threads, [&](long done, long) { bar2.update(done); });
+    std::vector<HoughScore> scores =
+        scoreHoughSettings(views, candidates, pc.segments, pc.crowded, pc.threads,
+                           [&](long done, long) { bar2.update(done); });
     bar2.finish();
     const HoughScore before = scores.front();
     std::stable_sort(scores.begin(), scores.end(), betterHoughScore);

@@ -40,7 +40,8 @@ class DerivedWeights {
 
 /// Conv3d(3x3x3) + BatchNorm (or GroupNorm) + PReLU. At inference (no grad) the convolution
 /// calls oneDNN directly: libtorch 1.13's CPU build skips it for 3D convolutions otherwise
-/// (6-7x slower); with BatchNorm in eval mode, the normalisation is folded into it.
+/// (docs/experiments.md, "Runtime"); with BatchNorm in eval mode, the normalisation is folded into
+/// it.
 class ConvBlockImpl : public torch::nn::Module {
  public:
   ConvBlockImpl(int in, int out, int stride, bool group_norm = false);

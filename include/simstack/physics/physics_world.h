@@ -64,9 +64,6 @@ class PhysicsWorld {
   int settle(int max_steps, const std::function<void(int)>& after_step = {});
   bool atRest() const;
   Transform pose(int index) const;
-  void setPose(int index, const Transform& T_table_object);
-  Vec3 linearVelocity(int index) const;
-  void setVelocity(int index, const Vec3& linear_mps, const Vec3& angular_radps);
   /// Applies a force (N) at a table-frame point for the next step.
   void applyForce(int index, const Vec3& force_n, const Vec3& point_table);
   /// Mass of an object (kg).
@@ -84,7 +81,6 @@ class PhysicsWorld {
   void moveCup(const Vec3& contact_table);
   /// Load on the held object during the last step (zero without a cup).
   CupLoad cupLoad() const;
-  bool cupAttached() const;
   /// Lets go of the object (a seal that broke).
   void releaseCup();
 

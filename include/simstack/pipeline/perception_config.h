@@ -10,6 +10,7 @@
 
 #include "simstack/fitting/superquadric_fit.h"
 #include "simstack/instances/hough_voting.h"
+#include "simstack/instances/instance_finder.h"  // CrowdedConfig
 #include "simstack/instances/surface_instances.h"
 #include "simstack/instances/surface_segments.h"
 #include "simstack/model/cvae_config.h"  // modelCardPath
@@ -20,21 +21,6 @@ namespace simstack {
 
 /// The most latent samples a frame may ask for.
 constexpr int kMaxSamples = 64;
-
-/// A second split for crowded piles: a hypothesis in which the first split finds `min_objects`
-/// instances or more is split again with a smaller mean-shift radius, which keeps small
-/// neighbours' centres apart (config/perception_clutter.yaml's settings, applied where they
-/// help: docs/experiments.md, "Instances: Hough voting").
-struct CrowdedConfig {
-  int min_objects = 5;           ///< 0: off
-  double bandwidth_m = 0.03;     ///< in place of hough.bandwidth_m
-  int min_instance_voxels = 15;  ///< in place of hough.min_instance_voxels
-  /// In place of segments.max_unseen_points (kept 0 where it is 0: several views reach the
-  /// hypothesis).
-  int max_unseen_points = 100;
-  /// Throws std::invalid_argument naming the field ("crowded.bandwidth_m ...").
-  void validate() const;
-};
 
 struct PerceptionConfig {
   std::string model_path;       ///< a model written by simstack_train (required)

@@ -112,9 +112,6 @@ struct Scene {
 
   /// Area-weighted centroid of all object surfaces: the x/y centre of the scene grid.
   Vec3 surfaceCentroid() const;
-  /// Surface samples of every object in the table frame; `object_index` (if given) receives the
-  /// object of each sample.
-  std::vector<SurfacePoint> surfaceSamplesTable(std::vector<int>* object_index = nullptr) const;
 };
 
 }  // namespace simstack

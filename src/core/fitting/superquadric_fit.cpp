@@ -27,8 +27,8 @@ using Params = std::array<double, kParams>;
 // Ceres solves in an unbounded space: scale a = a_min + (a_max - a_min) sigmoid(u) and exponent
 // e = e_min + (e_max - e_min) sigmoid(v), so that the bounds (positive size, convex shape, the
 // ranges of the config) hold by construction and no trial step can overflow. Bounds inside
-// Ceres cost a projected line search per step, three Jacobian evaluations per iteration on
-// network surfaces, and made the joint refinement five times slower. Box-like surfaces push
+// Ceres cost a projected line search per step (three Jacobian evaluations per iteration on
+// network surfaces). Box-like surfaces push
 // exponents to the top of their range, where the sigmoid flattens instead of overflowing.
 struct Bounds {
   double min_scale, max_scale, min_exponent, max_exponent;

@@ -125,8 +125,9 @@ void CvaeInference::checkInput(const Grid3<float>& partial_tsdf_m, const Grid3<f
   }
   if (!(weight.spec == g)) throw std::invalid_argument("partial TSDF and weight grids differ");
   if (samples < 1) throw std::invalid_argument("need at least one sample");
-  // Setting the thread count rebuilds libtorch's thread pool even when the count is unchanged:
-  // doing it every frame took 1-6 ms and left the next forward pass 1.6x slower (cold threads).
+  // Setting the thread count rebuilds libtorch's thread pool even when the count is unchanged,
+  // and the next forward pass then runs on cold threads: only a change is set
+  // (docs/benchmarks.md).
   if (torch::get_num_threads() != impl_->threads) torch::set_num_threads(impl_->threads);
 }
 

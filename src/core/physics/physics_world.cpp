@@ -170,25 +170,6 @@ Transform PhysicsWorld::pose(int index) const {
   return fromBt(impl_->bodies.at(index)->getWorldTransform());
 }
 
-void PhysicsWorld::setPose(int index, const Transform& T_table_object) {
-  auto& b = impl_->bodies.at(index);
-  b->setWorldTransform(toBt(T_table_object));
-  b->getMotionState()->setWorldTransform(toBt(T_table_object));
-  b->activate(true);
-}
-
-Vec3 PhysicsWorld::linearVelocity(int index) const {
-  const btVector3 v = impl_->bodies.at(index)->getLinearVelocity();
-  return {v.x(), v.y(), v.z()};
-}
-
-void PhysicsWorld::setVelocity(int index, const Vec3& v, const Vec3& w) {
-  auto& b = impl_->bodies.at(index);
-  b->setLinearVelocity(btVector3(v.x(), v.y(), v.z()));
-  b->setAngularVelocity(btVector3(w.x(), w.y(), w.z()));
-  b->activate(true);
-}
-
 void PhysicsWorld::applyForce(int index, const Vec3& f, const Vec3& point_table) {
   auto& b = impl_->bodies.at(index);
   const btVector3 rel =
@@ -266,8 +247,6 @@ CupLoad PhysicsWorld::cupLoad() const {
       Vec3(t.x(), t.y(), t.z()) + (T_table_object.translation() - contact).cross(load.force_n);
   return load;
 }
-
-bool PhysicsWorld::cupAttached() const { return impl_->cup_joint != nullptr; }
 
 void PhysicsWorld::releaseCup() { impl_->removeCupJoint(); }
 

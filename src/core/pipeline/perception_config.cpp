@@ -325,21 +325,6 @@ PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& p
 
 }  // namespace
 
-void CrowdedConfig::validate() const {
-  if (min_objects < 0 || min_objects > 255)
-    throw std::invalid_argument("crowded.min_objects must lie in [0, 255] (0: off), not " +
-                                std::to_string(min_objects));
-  if (!(bandwidth_m > 0.0 && bandwidth_m <= 1.0))
-    throw std::invalid_argument("crowded.bandwidth_m must lie in (0, 1] m, not " +
-                                std::to_string(bandwidth_m));
-  if (min_instance_voxels < 1)
-    throw std::invalid_argument("crowded.min_instance_voxels must be >= 1, not " +
-                                std::to_string(min_instance_voxels));
-  if (max_unseen_points < 0)
-    throw std::invalid_argument("crowded.max_unseen_points must be >= 0, not " +
-                                std::to_string(max_unseen_points));
-}
-
 RefineOptions refineOptions(const PerceptionConfig& c) {
   return {c.refine_iterations, c.refine_learning_rate, c.symmetries,      c.refine_prior_weight,
           c.refine_starts,     c.refine_evidence,      c.refine_on_passes};

@@ -277,22 +277,7 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
   HoughConfig hough = config.hough;
   hough.threads = std::max(1, config.threads);
   InstanceSegmentation seg =
-      InstanceFinder(hough, config.segments).find(h->tsdf_m, h->votes, segments);
-  // A crowded pile split again with a smaller radius (CrowdedConfig), unless those settings are
-  // the ones in effect already.
-  const CrowdedConfig& crowded = config.crowded;
-  SurfaceSegmentConfig close_segments = config.segments;
-  if (close_segments.max_unseen_points > 0)
-    close_segments.max_unseen_points = crowded.max_unseen_points;
-  const bool other_settings = crowded.bandwidth_m != hough.bandwidth_m ||
-                              crowded.min_instance_voxels != hough.min_instance_voxels ||
-                              close_segments.max_unseen_points != config.segments.max_unseen_points;
-  if (crowded.min_objects > 0 && seg.size() >= crowded.min_objects && other_settings) {
-    HoughConfig close = hough;
-    close.bandwidth_m = crowded.bandwidth_m;
-    close.min_instance_voxels = crowded.min_instance_voxels;
-    seg = InstanceFinder(close, close_segments).find(h->tsdf_m, h->votes, segments);
-  }
+      InstanceFinder(hough, config.segments, config.crowded).find(h->tsdf_m, h->votes, segments);
   // The first view's depth points that no instance explains: objects of their own.
   if (!measured_views.empty()) {
     const Points3& points = measured_views.front().points_table;

@@ -156,17 +156,4 @@ Vec3 Scene::surfaceCentroid() const {
   return weight > 0.0 ? Vec3(sum / weight) : Vec3::Zero();
 }
 
-std::vector<SurfacePoint> Scene::surfaceSamplesTable(std::vector<int>* object_index) const {
-  std::vector<SurfacePoint> out;
-  if (object_index) object_index->clear();
-  for (size_t k = 0; k < objects.size(); ++k) {
-    const auto& T = objects[k].T_table_object;
-    for (const auto& s : objects[k].shape->surfaceSamples()) {
-      out.push_back({T * s.position, T.linear() * s.normal});
-      if (object_index) object_index->push_back(static_cast<int>(k));
-    }
-  }
-  return out;
-}
-
 }  // namespace simstack

@@ -17,9 +17,8 @@ namespace simstack {
 
 const char* const kObjectColumns =
     "kind(0=superquadric,1=mesh),catalogue_index,a1,a2,a3,r,s,t,x,y,z,qw,qx,qy,qz";
-// 1: the first generators (the version was not bumped when their piles changed);
-// 2: drops also settle by the displacement rule;
-// 3: a drop is abandoned once the pile sticks out of the grid's sides.
+// Written into every dataset: piles of another version are another generator's (its rules for
+// when a drop has settled or is abandoned differ).
 const char* const kGeneratorVersion = "simstack-generate-3";
 namespace {
 

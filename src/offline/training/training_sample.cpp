@@ -23,7 +23,7 @@ TrainingSampleBuilder::TrainingSampleBuilder(const CvaeConfig& config, const Pin
 }
 
 TrainingSample TrainingSampleBuilder::build(const SceneRecord& record, std::mt19937_64& rng) const {
-  // With no overhead share the random stream is the one it always was.
+  // With no overhead share no extra draw is made: the stream is that of the side views alone.
   const bool overhead = overhead_share_ > 0.0 &&
                         std::uniform_real_distribution<double>(0.0, 1.0)(rng) < overhead_share_;
   const Transform T =

@@ -40,7 +40,7 @@ TuningView tuningView(const ScenePerception& perception, const InstanceFinder& f
   for (size_t i = 0; i < g.truth.size(); ++i) g.truth[i] = static_cast<int>(gt.labels.data[i]) - 1;
   g.objects = static_cast<int>(rec.scene.objects.size());
   g.segments = finder.segmentView(view.depth, view.camera, *view.T_table_camera,
-                                  perception.config().min_pile_height_m);
+                                  perception.config().min_pile_height_m, &est.grid);
   return g;
 }
 
@@ -102,8 +102,8 @@ std::vector<HoughConfig> houghCandidates(const HoughConfig& current, const Hough
 }
 
 HoughScore scoreHoughSetting(const std::vector<TuningView>& views, const HoughConfig& hough,
-                             const SurfaceSegmentConfig& segments) {
-  const InstanceFinder finder(hough, segments);
+                             const SurfaceSegmentConfig& segments, const CrowdedConfig& crowded) {
+  const InstanceFinder finder(hough, segments, crowded);
   HoughScore s;
   s.hough = hough;
   for (const TuningView& v : views) {
@@ -127,7 +127,8 @@ HoughScore scoreHoughSetting(const std::vector<TuningView>& views, const HoughCo
 
 std::vector<HoughScore> scoreHoughSettings(const std::vector<TuningView>& views,
                                            const std::vector<HoughConfig>& candidates,
-                                           const SurfaceSegmentConfig& segments, int threads,
+                                           const SurfaceSegmentConfig& segments,
+                                           const CrowdedConfig& crowded, int threads,
                                            const std::function<void(long, long)>& progress) {
   if (views.empty()) throw std::runtime_error("no validation view to score the settings on");
   std::vector<HoughScore> scores(candidates.size());
@@ -137,7 +138,7 @@ std::vector<HoughScore> scoreHoughSettings(const std::vector<TuningView>& views,
 #pragma omp parallel for schedule(dynamic) num_threads(threads)
   for (long i = 0; i < n; ++i) {
     try {
-      scores[i] = scoreHoughSetting(views, candidates[i], segments);
+      scores[i] = scoreHoughSetting(views, candidates[i], segments, crowded);
     } catch (...) {
 #pragma omp critical
       if (!failure) failure = std::current_exception();

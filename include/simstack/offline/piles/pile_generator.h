@@ -37,8 +37,7 @@ struct PileConfig {
   /// Share of the objects of a superquadric pile drawn from household shapes (household.h):
   /// half of them containers, half flat, thin or small superquadrics. 0 = the paper's piles.
   double household_share = 0.0;
-  /// Per drop (8.3 s). Measured before the displacement rule of generate() existed: drops that
-  /// needed longer were 4 % of drops and 17 % of steps.
+  /// Per drop (8.3 s); the displacement rule of generate() ends most drops well before it.
   int max_settle_steps = 2000;
   /// A drop is abandoned once the new object has touched the table and no other object at this
   /// many consecutive checks (one per 60 steps), moving or not: it has come off the pile.

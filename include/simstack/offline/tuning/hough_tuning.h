@@ -52,12 +52,15 @@ struct HoughScore {
   HoughConfig hough;
   double exact = 0, abs_error = 0, under = 0, over = 0, agreement = 0;  ///< over the views
 };
+/// The views' instances as InstanceFinder finds them with `hough` (then, where crowded, with
+/// `crowded`'s settings), scored against the truth.
 HoughScore scoreHoughSetting(const std::vector<TuningView>& views, const HoughConfig& hough,
-                             const SurfaceSegmentConfig& segments);
+                             const SurfaceSegmentConfig& segments, const CrowdedConfig& crowded);
 /// Scores of every candidate, in their order, on `threads` threads. `progress(done, total)`.
 std::vector<HoughScore> scoreHoughSettings(const std::vector<TuningView>& views,
                                            const std::vector<HoughConfig>& candidates,
-                                           const SurfaceSegmentConfig& segments, int threads,
+                                           const SurfaceSegmentConfig& segments,
+                                           const CrowdedConfig& crowded, int threads,
                                            const std::function<void(long, long)>& progress = {});
 /// More views counted exactly; on a tie, the better voxel agreement.
 bool betterHoughScore(const HoughScore& a, const HoughScore& b);
