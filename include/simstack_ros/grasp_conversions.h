@@ -44,11 +44,6 @@ Points3 measuredSurface(const Object& object, const Transform& T_table_frame);
 /// transform; std::nullopt otherwise (points of several views, a message made by hand).
 std::optional<Vec3> measuringCamera(const ObjectArray& msg);
 
-/// What a grasp's pulls did: held and freed the target in every hypothesis; held in every one
-/// but did not always free it; or the seal broke in some.
-enum class GraspOutcome { kHeldAndFreed, kHeld, kFailed };
-GraspOutcome graspOutcome(const RankedGrasp& grasp);
-
 /// One ranked grasp (ranked in the table frame) as a message: its tool and pre-grasp poses
 /// (toolPose(), pregraspPose()) and its approach in `pose_header`'s frame, mapped there by
 /// `T_pose_table`.

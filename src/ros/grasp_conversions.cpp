@@ -13,11 +13,6 @@
 
 namespace simstack {
 
-GraspOutcome graspOutcome(const RankedGrasp& g) {
-  if (!g.held()) return GraspOutcome::kFailed;
-  return g.freed() ? GraspOutcome::kHeldAndFreed : GraspOutcome::kHeld;
-}
-
 Transform rigidFromPose(const geometry_msgs::Pose& p, const std::string& what) {
   const Quat q(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z);
   const Vec3 t(p.position.x, p.position.y, p.position.z);
@@ -174,11 +169,10 @@ visualization_msgs::MarkerArray graspMarkers(const std_msgs::Header& header,
     arrow.scale.x = 0.004;  // shaft diameter
     arrow.scale.y = 0.008;  // head diameter
     arrow.scale.z = 0.012;  // head length
-    // By outcome: held and freed green, held but not freed yellow, the seal broke red.
-    const GraspOutcome outcome = graspOutcome(grasps[i]);
-    arrow.color.r = outcome == GraspOutcome::kHeldAndFreed ? 0.0f : 1.0f;
-    arrow.color.g = outcome == GraspOutcome::kFailed ? 0.0f : 1.0f;
-    arrow.color.b = 0.0f, arrow.color.a = 1.0f;
+    const Vec3 colour = outcomeColour(graspOutcome(grasps[i]));
+    arrow.color.r = static_cast<float>(colour.x());
+    arrow.color.g = static_cast<float>(colour.y());
+    arrow.color.b = static_cast<float>(colour.z()), arrow.color.a = 1.0f;
     out.markers.push_back(arrow);
     if (i >= 3) continue;
     visualization_msgs::Marker text = arrow;

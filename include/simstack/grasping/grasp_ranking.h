@@ -76,6 +76,14 @@ struct RankedGrasp {
   bool freed() const { return !outcomes.empty() && freed_share == 1.0; }
 };
 
+/// What a grasp's pulls did: held and freed the target in every hypothesis; held in every one
+/// but did not always free it; or the seal broke in some.
+enum class GraspOutcome { kHeldAndFreed, kHeld, kFailed };
+GraspOutcome graspOutcome(const RankedGrasp& grasp);
+/// The colour every picture and marker of a grasp takes (r, g, b in [0, 1]): green held and
+/// freed, yellow held, red the seal broke.
+Vec3 outcomeColour(GraspOutcome outcome);
+
 struct GraspRanking {
   std::vector<RankedGrasp> grasps;   ///< best first
   CandidateSet candidates;           ///< the candidate search (counts) on hypothesis 0

@@ -146,9 +146,7 @@ void writeGraspPicture(const std::string& path, const std::vector<SuperquadricSh
     PictureArrow a;
     a.tip_table = grasps[i].candidate.contact_table;
     a.tail_table = a.tip_table + 0.06 * grasps[i].candidate.approach_table;
-    // As the grasp server's markers: green held and freed, yellow held, red the seal broke.
-    const bool held = grasps[i].held(), freed = held && grasps[i].freed();
-    a.colour = Eigen::Vector3f(freed ? 0.0f : 1.0f, held ? 1.0f : 0.0f, 0.0f);
+    a.colour = outcomeColour(graspOutcome(grasps[i])).cast<float>();
     a.label = std::to_string(i + 1);
     arrows.push_back(a);
   }

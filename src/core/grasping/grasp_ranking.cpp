@@ -211,6 +211,16 @@ bool rankedBefore(const RankedGrasp& a, const RankedGrasp& b) {
   return a.peak_load < b.peak_load;
 }
 
+GraspOutcome graspOutcome(const RankedGrasp& g) {
+  if (!g.held()) return GraspOutcome::kFailed;
+  return g.freed() ? GraspOutcome::kHeldAndFreed : GraspOutcome::kHeld;
+}
+
+Vec3 outcomeColour(GraspOutcome outcome) {
+  return {outcome == GraspOutcome::kHeldAndFreed ? 0.0 : 1.0,
+          outcome == GraspOutcome::kFailed ? 0.0 : 1.0, 0.0};
+}
+
 GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypotheses, int target,
                         const std::vector<Vec3>& camera_positions, const GraspRankingConfig& config,
                         const RankingProgress& progress, const Points3& measured_target,
