@@ -146,11 +146,6 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
                         const RankingProgress& progress = {}, const Points3& measured_target = {},
                         const std::optional<Vec3>& measured_from = std::nullopt);
 
-/// The lowest point of the scene's surfaces: z in the table frame, metres (infinity for an
-/// empty scene). A pile resting on the table has it near 0; the simulation's table is at z = 0,
-/// so a scene far above it falls before any pull, and one below it stands in the table.
-double sceneBottom(const std::vector<SuperquadricShape>& scene);
-
 /// Objects in a scene the grasp simulation accepts at most (a pile's labels are 8-bit).
 constexpr size_t kMaxGraspSceneObjects = 255;
 

@@ -73,6 +73,11 @@ struct SceneDrift {
 
 /// A scene's bodies, built once and simulated many times (each run in a fresh world, so runs
 /// are independent and deterministic). Thread-safe: run pulls from several threads.
+/// The lowest point of the scene's surfaces: z in the table frame, metres (infinity for an
+/// empty scene). A pile resting on the table has it near 0; the simulation's table is at z = 0,
+/// so a scene far above it falls before any pull, and one below it stands in the table.
+double sceneBottom(const std::vector<SuperquadricShape>& scene);
+
 class PullSimulator {
  public:
   /// Throws std::invalid_argument for a bad config or shape. The order of `scene` changes

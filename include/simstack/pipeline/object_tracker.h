@@ -6,9 +6,9 @@
 /// one gets a new id, and the ids of objects that vanished are retired (never given again).
 /// Objects left over by the centre gate are matched when their shapes overlap: two solids share
 /// no volume, but one object's estimates from two views can lie further apart than the gate (a
-/// long flat object half hidden, estimated along its hidden length). An object
-/// a frame misses (merged with a neighbour in one view, say) keeps its id for a few frames: found
-/// again within them, near where it was last seen, it takes its id back.
+/// long flat object half hidden, estimated along its hidden length). An object a frame misses
+/// (merged with a neighbour in one view, say) keeps its id for a few frames: found again within
+/// them, near where it was last seen, it takes its id back.
 
 #include <cstdint>
 #include <vector>

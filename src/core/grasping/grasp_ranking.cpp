@@ -330,12 +330,4 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
   return out;
 }
 
-double sceneBottom(const std::vector<SuperquadricShape>& scene) {
-  double bottom = std::numeric_limits<double>::infinity();
-  for (const SuperquadricShape& sq : scene)
-    for (const Vec3& v : sq.meshObject(16).vertices)
-      bottom = std::min(bottom, (sq.T_table_object * v).z());
-  return bottom;
-}
-
 }  // namespace simstack

@@ -58,9 +58,7 @@ std::vector<int> canonicalOrder(const std::vector<SuperquadricShape>& scene) {
   std::vector<std::array<double, 19>> keys;
   for (const SuperquadricShape& sq : scene) {
     std::array<double, 19> k{};
-    k[0] = std::numeric_limits<double>::infinity();  // its lowest point
-    for (const Vec3& v : sq.meshObject(16).vertices)
-      k[0] = std::min(k[0], (sq.T_table_object * v).z());
+    k[0] = sceneBottom({sq});
     const Eigen::Matrix4d m = sq.T_table_object.matrix();
     for (int i = 0; i < 12; ++i) k[1 + i] = m(i % 3, 3 - i / 3);  // position, then rotation
     for (int i = 0; i < 3; ++i) k[13 + i] = sq.scale_m[i], k[16 + i] = sq.exponents[i];
@@ -77,6 +75,14 @@ double angleBetween(const Transform& a, const Transform& b) {
 }
 
 }  // namespace
+
+double sceneBottom(const std::vector<SuperquadricShape>& scene) {
+  double bottom = std::numeric_limits<double>::infinity();
+  for (const SuperquadricShape& sq : scene)
+    for (const Vec3& v : sq.meshObject(16).vertices)
+      bottom = std::min(bottom, (sq.T_table_object * v).z());
+  return bottom;
+}
 
 void PullConfig::validate() const { check(*this); }
 
@@ -111,8 +117,7 @@ PullSimulator::PullSimulator(const std::vector<SuperquadricShape>& given, const 
     slot_[order[k]] = static_cast<int>(k);
     scene_.push_back(given[order[k]]);
   }
-  const std::vector<SuperquadricShape>& scene = scene_;
-  for (const SuperquadricShape& sq : scene) {
+  for (const SuperquadricShape& sq : scene_) {
     const auto shape = ObjectShape::fromSuperquadric(sq);
     hulls_.push_back(shape->hullPoints());
     volumes_.push_back(shape->volume());
@@ -122,7 +127,7 @@ PullSimulator::PullSimulator(const std::vector<SuperquadricShape>& given, const 
   auto w = world(settled_);
   const int max_steps = static_cast<int>(std::ceil(config.presettle_s / config.physics.timestep_s));
   drift_.settled = max_steps == 0 || w->settle(max_steps) >= 0;
-  for (size_t i = 0; i < scene.size(); ++i) {
+  for (size_t i = 0; i < scene_.size(); ++i) {
     const Transform p = w->pose(static_cast<int>(i));
     drift_.presettle_displacement_m = std::max(
         drift_.presettle_displacement_m, (p.translation() - settled_[i].translation()).norm());
@@ -131,10 +136,10 @@ PullSimulator::PullSimulator(const std::vector<SuperquadricShape>& given, const 
   // The reference every pull is measured against: the same time, no pull.
   w = world(settled_);
   w->step(config.pullSteps() + config.settleSteps());
-  for (size_t i = 0; i < scene.size(); ++i) {
+  for (size_t i = 0; i < scene_.size(); ++i) {
     alone_.push_back(w->pose(static_cast<int>(i)));
     const double d = (alone_[i].translation() - settled_[i].translation()).norm();
-    drift_.mean_displacement_m += d / scene.size();
+    drift_.mean_displacement_m += d / scene_.size();
     drift_.max_displacement_m = std::max(drift_.max_displacement_m, d);
   }
 }
