@@ -14,6 +14,7 @@
 #include <set>
 #include <thread>
 
+#include "simstack/fitting/superquadric_fit.h"
 #include "simstack/instances/instance_finder.h"
 #include "simstack/model/cvae_inference.h"
 #include "simstack/model/model_integrity.h"
@@ -343,7 +344,7 @@ double distanceToScene(const Scene& scene, const Vec3& p) {
   for (const SceneObject& o : scene.objects) {
     SuperquadricShape sq = o.shape->superquadric();
     sq.T_table_object = o.T_table_object;
-    best = std::min(best, std::abs(sq.radialDistance(p)));
+    best = std::min(best, std::abs(surfaceDistance(sq, p)));
   }
   return best;
 }
@@ -833,6 +834,18 @@ TEST(ScenePerception, AModelWithoutACodeGivesOneHypothesis) {
   config.model_path = kModel;
   config.samples = 2;
   EXPECT_THROW(ScenePerception{config}, std::invalid_argument);
+  // A live lowering of samples lowers decompose_samples with it; raising samples again gives
+  // back the decompose_samples asked for.
+  config.samples = 4;
+  config.decompose_samples = 3;
+  {
+    const ScenePerception cvae(config);
+    PerceptionConfig fewer = cvae.config();
+    fewer.samples = 2;
+    EXPECT_EQ(cvae.settingsInEffect(fewer).decompose_samples, 2);
+    fewer.samples = 8;
+    EXPECT_EQ(cvae.settingsInEffect(fewer).decompose_samples, 3);
+  }
   // Tiles whose widest scene, times the Hough refinement, has more fine cells than the voting
   // indexes: refused when the model is loaded, not on the first wide pile.
   config.samples = 3;

@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 #include <sensor_msgs/image_encodings.h>
+#include <tf2_eigen/tf2_eigen.h>
 
 #include <cmath>
 #include <cstring>
@@ -22,6 +23,11 @@ sensor_msgs::Image image(const std::string& encoding, int w, int h, int bytes) {
   m.step = w * bytes;
   m.data.assign(static_cast<size_t>(m.step) * h, 0);
   return m;
+}
+Transform fromPose(const geometry_msgs::Pose& p) {
+  Transform T;
+  tf2::fromMsg(p, T);
+  return T;
 }
 }  // namespace
 
@@ -244,9 +250,9 @@ TEST(GraspConversions, ScenesComeFromObjectsThenHypotheses) {
   T_base_table.linear() = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()).toRotationMatrix();
   T_base_table.translation() = Vec3(0.5, 0.0, 0.7);
   ObjectArray in_base = msg;
-  in_base.table_in_frame = poseMsg(T_base_table);
-  in_base.objects[0].superquadric.pose = poseMsg(T_base_table * sq.T_table_object);
-  in_base.hypotheses[0].superquadrics[1].pose = poseMsg(T_base_table * sq.T_table_object);
+  in_base.table_in_frame = tf2::toMsg(T_base_table);
+  in_base.objects[0].superquadric.pose = tf2::toMsg(T_base_table * sq.T_table_object);
+  in_base.hypotheses[0].superquadrics[1].pose = tf2::toMsg(T_base_table * sq.T_table_object);
   const auto back = graspScenes(in_base, 2);
   EXPECT_TRUE(back[0][0].T_table_object.isApprox(sq.T_table_object, 1e-9));
   EXPECT_TRUE(back[1][1].T_table_object.isApprox(sq.T_table_object, 1e-9));
@@ -265,7 +271,7 @@ TEST(GraspConversions, TheMeasuringCameraIsTheOneViewsCamera) {
   T_table_camera.translation() = Vec3(0.3, -0.4, 0.9);
   ObjectArray msg;
   msg.views = 1;
-  msg.table_pose = poseMsg(T_table_camera.inverse());
+  msg.table_pose = tf2::toMsg(T_table_camera.inverse());
   const std::optional<Vec3> camera = measuringCamera(msg);
   ASSERT_TRUE(camera.has_value());
   EXPECT_TRUE(camera->isApprox(T_table_camera.translation(), 1e-9));
@@ -288,17 +294,17 @@ TEST(GraspConversions, ToolPoseLooksIntoTheSurfaceInTheAskedFrameAndArrowsShowTh
   T_base_turned.linear() = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitZ()).toRotationMatrix();
   const Grasp turned = graspMsg(g, base, T_base_turned, 0.05);
   EXPECT_NEAR(turned.approach.y, 1.0, 1e-9);  // the approach in the poses' frame, as the tool's
-  const Transform Tz = transformFromPose(turned.tool_pose.pose);
+  const Transform Tz = fromPose(turned.tool_pose.pose);
   EXPECT_TRUE((Tz.linear() * Vec3::UnitZ())
                   .isApprox(-Vec3(turned.approach.x, turned.approach.y, turned.approach.z), 1e-9));
   const Grasp m = graspMsg(g, base, T_base_table, 0.05);
   EXPECT_NEAR(m.approach.x, 1.0, 1e-9);
   EXPECT_EQ(m.tool_pose.header.frame_id, "base_link");
   EXPECT_EQ(m.pregrasp_pose.header.frame_id, "base_link");
-  const Transform T = transformFromPose(m.tool_pose.pose);
+  const Transform T = fromPose(m.tool_pose.pose);
   EXPECT_TRUE((T.linear() * Vec3::UnitZ()).isApprox(-Vec3::UnitX(), 1e-9));  // into the surface
   EXPECT_TRUE(T.translation().isApprox(Vec3(0.6, 0.2, 1.0)));
-  const Transform P = transformFromPose(m.pregrasp_pose.pose);
+  const Transform P = fromPose(m.pregrasp_pose.pose);
   EXPECT_TRUE(P.translation().isApprox(Vec3(0.65, 0.2, 1.0), 1e-9));
   EXPECT_FALSE(m.held);  // no pull simulated
   PullOutcome ok;
@@ -347,7 +353,7 @@ TEST(Conversions, OutputsAreWrittenInTheFrameTheTableIsPlacedIn) {
   base.frame_id = "base_link";
   const ObjectArray msg = objectArrayMsg(base, est, 1, 1, 4, {7}, T_base_table);
   ASSERT_EQ(msg.objects.size(), 1u);
-  EXPECT_TRUE(transformFromPose(msg.table_in_frame).isApprox(T_base_table, 1e-9));
+  EXPECT_TRUE(fromPose(msg.table_in_frame).isApprox(T_base_table, 1e-9));
   const geometry_msgs::Point& c = msg.objects[0].superquadric.pose.position;
   EXPECT_NEAR(c.x, 0.4, 1e-9);
   EXPECT_NEAR(c.z, 0.73, 1e-9);

@@ -46,8 +46,6 @@ PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg);
 sensor_msgs::Image depthImageMsg(const std_msgs::Header& header, const DepthImage& depth);
 sensor_msgs::CameraInfo cameraInfoMsg(const std_msgs::Header& header, const PinholeCamera& camera);
 
-geometry_msgs::Pose poseMsg(const Transform& T);
-Transform transformFromPose(const geometry_msgs::Pose& pose);
 /// The message of a core superquadric (same frame).
 simstack::Superquadric superquadricMsg(const SuperquadricShape& sq);
 

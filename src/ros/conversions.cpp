@@ -2,6 +2,8 @@
 
 #include <image_geometry/pinhole_camera_model.h>
 #include <sensor_msgs/image_encodings.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
+#include <tf2_eigen/tf2_eigen.h>
 
 #include <algorithm>
 #include <cmath>
@@ -152,36 +154,27 @@ PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg) {
   return c;
 }
 
-}  // namespace simstack
-
-namespace simstack {
 namespace {
 
-/// An empty cloud of `points` points with float32 fields of the given names.
-sensor_msgs::PointCloud2 cloudWithFields(const std_msgs::Header& header, size_t points,
-                                         const std::vector<std::string>& names) {
+constexpr int kFloat = sensor_msgs::PointField::FLOAT32;
+
+/// A cloud of `points` points (one row, dense) whose fields `set` declares on the modifier.
+template <class SetFields>
+sensor_msgs::PointCloud2 emptyCloud(const std_msgs::Header& header, size_t points, SetFields set) {
   sensor_msgs::PointCloud2 cloud;
   cloud.header = header;
-  cloud.height = 1;
-  cloud.width = static_cast<uint32_t>(points);
-  cloud.is_bigendian = false;
   cloud.is_dense = true;
-  for (size_t i = 0; i < names.size(); ++i) {
-    sensor_msgs::PointField f;
-    f.name = names[i];
-    f.offset = static_cast<uint32_t>(4 * i);
-    f.datatype = sensor_msgs::PointField::FLOAT32;
-    f.count = 1;
-    cloud.fields.push_back(f);
-  }
-  cloud.point_step = static_cast<uint32_t>(4 * names.size());
-  cloud.row_step = cloud.point_step * cloud.width;
-  cloud.data.resize(static_cast<size_t>(cloud.row_step));
+  sensor_msgs::PointCloud2Modifier modifier(cloud);
+  set(modifier);
+  modifier.resize(points);
   return cloud;
 }
 
-void putFloats(sensor_msgs::PointCloud2* cloud, size_t point, std::initializer_list<float> v) {
-  std::memcpy(cloud->data.data() + point * cloud->point_step, v.begin(), 4 * v.size());
+/// Writes the next point's consecutive float32 fields, from the one `at` points to.
+void putFloats(sensor_msgs::PointCloud2Iterator<float>* at, std::initializer_list<float> v) {
+  size_t k = 0;
+  for (const float f : v) (*at)[k++] = f;
+  ++*at;
 }
 
 /// rviz's packed rgb: 0x00RRGGBB read as the bytes of a float.
@@ -244,27 +237,6 @@ sensor_msgs::CameraInfo cameraInfoMsg(const std_msgs::Header& header, const Pinh
   return info;
 }
 
-geometry_msgs::Pose poseMsg(const Transform& T) {
-  geometry_msgs::Pose p;
-  p.position.x = T.translation().x();
-  p.position.y = T.translation().y();
-  p.position.z = T.translation().z();
-  const Quat q(T.linear());
-  p.orientation.w = q.w();
-  p.orientation.x = q.x();
-  p.orientation.y = q.y();
-  p.orientation.z = q.z();
-  return p;
-}
-
-Transform transformFromPose(const geometry_msgs::Pose& p) {
-  Transform T = Transform::Identity();
-  T.translation() = Vec3(p.position.x, p.position.y, p.position.z);
-  T.linear() =
-      Quat(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z).toRotationMatrix();
-  return T;
-}
-
 simstack::Superquadric superquadricMsg(const SuperquadricShape& sq) {
   simstack::Superquadric m;
   m.semi_axes.x = sq.scale_m.x();
@@ -273,16 +245,18 @@ simstack::Superquadric superquadricMsg(const SuperquadricShape& sq) {
   m.exponents.x = sq.exponents.x();
   m.exponents.y = sq.exponents.y();
   m.exponents.z = sq.exponents.z();
-  m.pose = poseMsg(sq.T_table_object);
+  m.pose = tf2::toMsg(sq.T_table_object);
   return m;
 }
 
 sensor_msgs::PointCloud2 pointCloud(const std_msgs::Header& header, const Points3& points) {
-  sensor_msgs::PointCloud2 cloud = cloudWithFields(header, points.size(), {"x", "y", "z"});
-  for (size_t i = 0; i < points.size(); ++i)
-    putFloats(&cloud, i,
-              {static_cast<float>(points[i].x()), static_cast<float>(points[i].y()),
-               static_cast<float>(points[i].z())});
+  sensor_msgs::PointCloud2 cloud = emptyCloud(header, points.size(), [](auto& m) {
+    m.setPointCloud2Fields(3, "x", 1, kFloat, "y", 1, kFloat, "z", 1, kFloat);
+  });
+  sensor_msgs::PointCloud2Iterator<float> at(cloud, "x");
+  for (const Vec3& p : points)
+    putFloats(&at,
+              {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())});
   return cloud;
 }
 
@@ -341,8 +315,8 @@ ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& 
   checkIds(ids, est.instances().size());
   ObjectArray out;
   out.header = header;
-  out.table_pose = poseMsg(est.T_table_camera.inverse());
-  out.table_in_frame = poseMsg(T_frame_table);
+  out.table_pose = tf2::toMsg(est.T_table_camera.inverse());
+  out.table_in_frame = tf2::toMsg(T_frame_table);
   out.table_estimated = est.table_estimated;
   out.views = static_cast<uint32_t>(views);
   out.samples = static_cast<uint32_t>(samples);
@@ -388,16 +362,18 @@ sensor_msgs::PointCloud2 instancesCloud(const std_msgs::Header& header, const Sc
   checkIds(ids, est.instances().size());
   size_t n = 0;
   for (const InstanceEstimate& e : est.instances()) n += e.points.size();
-  sensor_msgs::PointCloud2 cloud = cloudWithFields(header, n, {"x", "y", "z", "label", "rgb"});
-  size_t i = 0;
+  sensor_msgs::PointCloud2 cloud = emptyCloud(header, n, [](auto& m) {
+    m.setPointCloud2Fields(5, "x", 1, kFloat, "y", 1, kFloat, "z", 1, kFloat, "label", 1, kFloat,
+                           "rgb", 1, kFloat);
+  });
+  sensor_msgs::PointCloud2Iterator<float> at(cloud, "x");
   for (size_t k = 0; k < est.instances().size(); ++k) {
     const uint32_t id = objectId(ids, k);
     const float rgb = packedColour(colourIndex(id));
     for (const Vec3& q : est.instances()[k].points) {
       const Vec3 p = T_frame_table * q;
-      putFloats(&cloud, i++,
-                {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()),
-                 static_cast<float>(id) + 1.0f, rgb});
+      putFloats(&at, {static_cast<float>(p.x()), static_cast<float>(p.y()),
+                      static_cast<float>(p.z()), static_cast<float>(id) + 1.0f, rgb});
     }
   }
   return cloud;
@@ -410,14 +386,16 @@ sensor_msgs::PointCloud2 occupancyCloud(const std_msgs::Header& header,
   std::vector<int> kept;
   for (int i = 0; i < static_cast<int>(probability.data.size()); ++i)
     if (probability.data[i] >= min_probability) kept.push_back(i);
-  sensor_msgs::PointCloud2 cloud =
-      cloudWithFields(header, kept.size(), {"x", "y", "z", "probability"});
+  sensor_msgs::PointCloud2 cloud = emptyCloud(header, kept.size(), [](auto& m) {
+    m.setPointCloud2Fields(4, "x", 1, kFloat, "y", 1, kFloat, "z", 1, kFloat, "probability", 1,
+                           kFloat);
+  });
+  sensor_msgs::PointCloud2Iterator<float> at(cloud, "x");
   for (size_t j = 0; j < kept.size(); ++j) {
     const Vec3i v = g.unravel(kept[j]);
     const Vec3 c = T_frame_table * g.voxelCentre(v.x(), v.y(), v.z());
-    putFloats(&cloud, j,
-              {static_cast<float>(c.x()), static_cast<float>(c.y()), static_cast<float>(c.z()),
-               probability.data[kept[j]]});
+    putFloats(&at, {static_cast<float>(c.x()), static_cast<float>(c.y()), static_cast<float>(c.z()),
+                    probability.data[kept[j]]});
   }
   return cloud;
 }
@@ -440,7 +418,7 @@ visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
     mesh.id = static_cast<int>(id);
     mesh.type = visualization_msgs::Marker::TRIANGLE_LIST;
     mesh.action = visualization_msgs::Marker::ADD;
-    mesh.pose = poseMsg(T_frame_table * sq.T_table_object);
+    mesh.pose = tf2::toMsg(T_frame_table * sq.T_table_object);
     mesh.scale.x = mesh.scale.y = mesh.scale.z = 1.0;
     mesh.color = colourMsg(colourIndex(id));
     const TriangleMesh m = sq.meshObject(kMeshSubdivisions);

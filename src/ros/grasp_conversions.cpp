@@ -1,6 +1,7 @@
 #include "simstack_ros/grasp_conversions.h"
 
 #include <sensor_msgs/point_cloud2_iterator.h>
+#include <tf2_eigen/tf2_eigen.h>
 
 #include <algorithm>
 #include <charconv>
@@ -21,7 +22,9 @@ Transform rigidFromPose(const geometry_msgs::Pose& p, const std::string& what) {
   if (std::abs(q.norm() - 1.0) > 1e-3)
     throw std::invalid_argument(what + ": orientation quaternion has norm " +
                                 std::to_string(q.norm()) + ", not 1");
-  return transformFromPose(p);
+  Transform T;
+  tf2::fromMsg(p, T);
+  return T;
 }
 
 double asWritten(float value) {
@@ -71,11 +74,11 @@ std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, 
 
 std::optional<Vec3> measuringCamera(const ObjectArray& msg) {
   if (msg.views != 1) return std::nullopt;
-  const geometry_msgs::Pose& p = msg.table_pose;
-  const Eigen::Vector4d q(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z);
-  const Vec3 t(p.position.x, p.position.y, p.position.z);
-  if (!q.allFinite() || !t.allFinite() || std::abs(q.norm() - 1.0) > 1e-3) return std::nullopt;
-  return transformFromPose(p).inverse().translation();  // T_camera_table: the camera in the table
+  try {  // T_camera_table: the camera in the table
+    return rigidFromPose(msg.table_pose, "table_pose").inverse().translation();
+  } catch (const std::invalid_argument&) {
+    return std::nullopt;
+  }
 }
 
 Points3 measuredSurface(const Object& object, const Transform& T_table_frame) {
@@ -119,8 +122,8 @@ Grasp graspMsg(const RankedGrasp& g, const std_msgs::Header& pose_header,
   const Vec3 z = T_pose_table.linear() * g.candidate.approach_table.normalized();
   const Transform tool = T_pose_table * toolPose(g.candidate);
   m.tool_pose.header = m.pregrasp_pose.header = pose_header;
-  m.tool_pose.pose = poseMsg(tool);
-  m.pregrasp_pose.pose = poseMsg(pregraspPose(tool, pregrasp_distance_m));
+  m.tool_pose.pose = tf2::toMsg(tool);
+  m.pregrasp_pose.pose = tf2::toMsg(pregraspPose(tool, pregrasp_distance_m));
   m.held = g.held();
   m.freed = g.freed();
   m.approach.x = z.x(), m.approach.y = z.y(), m.approach.z = z.z();

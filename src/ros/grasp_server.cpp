@@ -7,7 +7,6 @@
 #include <chrono>
 #include <cmath>
 #include <optional>
-#include <set>
 #include <stdexcept>
 #include <string>
 
@@ -16,18 +15,6 @@
 
 namespace simstack {
 namespace {
-
-/// Why a scene's objects cannot be told apart by id or placed ("" when they can).
-std::string badIds(const ObjectArray& scene) {
-  if (scene.header.frame_id.empty())
-    return "the scene has no header.frame_id: its poses are in no known frame";
-  std::set<uint32_t> seen;
-  for (const Object& o : scene.objects)
-    if (!seen.insert(o.id).second)
-      return "object id " + std::to_string(o.id) +
-             " appears twice in the scene: ids must be unique";
-  return "";
-}
 
 /// How long a tf lookup waits for the transform (wall-clock seconds).
 constexpr double kTfWaitS = 0.5;
@@ -233,10 +220,10 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
     return false;
   }
   res.status = RankGrasps::Response::BAD_SCENE;  // what an invalid_argument from here is about
-  if (const std::string why = badIds(*scene); !why.empty()) {
+  if (scene->header.frame_id.empty()) {          // the ids and shapes are checked by the core
     res.message = (req.scene.objects.empty() ? "the latest scene on " + topic + ": "
                                              : std::string("the request's scene: ")) +
-                  why;
+                  "it has no header.frame_id: its poses are in no known frame";
     return false;
   }
   GraspRequest request;

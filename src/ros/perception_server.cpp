@@ -451,7 +451,7 @@ void PerceptionServer::startLiveSettings() {
     std::lock_guard<std::mutex> lock(mutex_);
     PerceptionConfig c = requested_;
     pairLiveSettings(settings, c, kApply);
-    c.decompose_samples = std::min(decompose_samples_, c.samples);
+    c.decompose_samples = decompose_samples_;  // the core lowers it to samples
     // dynamic_reconfigure's range clamp lets NaN through: an occupancy cloud of nothing.
     if (!(settings.occupancy_min > 0.0 && settings.occupancy_min <= 1.0))
       ROS_ERROR(
@@ -600,11 +600,9 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
   // Latched, it is made for every frame (a later subscriber gets the last); else only when
   // someone listens.
   if (node_.latch || labels_pub_.getNumSubscribers() > 0) {
-    DepthView posed = view;
-    posed.T_table_camera = view.T_table_camera.value_or(estimate.T_table_camera);
     const sensor_msgs::Image labels =
         labelImage(camera_header,
-                   pixelInstances(posed, estimate, 0, labelMinHeight(perception_->config())), ids);
+                   pixelInstances(view, estimate, 0, labelMinHeight(perception_->config())), ids);
     if (node_.latch)
       labels_latched_pub_.publish(labels);
     else

@@ -3,12 +3,10 @@
 #include <ros/console.h>
 #include <ros/param.h>
 #include <xmlrpcpp/XmlRpcValue.h>
+#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
-#include <cmath>
-#include <iomanip>
 #include <set>
-#include <sstream>
 #include <stdexcept>
 
 #include "simstack_ros/conversions.h"
@@ -16,48 +14,40 @@
 namespace simstack {
 namespace {
 
-/// XmlRpc (what rosparam loaded from the YAML file) back to YAML text for the core's loader.
-void emit(std::ostream& out, XmlRpc::XmlRpcValue& v, int indent) {
-  const std::string pad(indent, ' ');
+/// XmlRpc (what rosparam loaded from the YAML file) as YAML again, for the core's loaders.
+YAML::Node yamlOf(XmlRpc::XmlRpcValue& v) {
   switch (v.getType()) {
-    case XmlRpc::XmlRpcValue::TypeStruct:
-      for (auto& kv : v) {
-        out << "\n" << pad << kv.first << ":";
-        emit(out, kv.second, indent + 2);
-      }
-      break;
-    case XmlRpc::XmlRpcValue::TypeArray:
-      for (int i = 0; i < v.size(); ++i) {
-        out << "\n" << pad << "-";
-        emit(out, v[i], indent + 2);
-      }
-      break;
+    case XmlRpc::XmlRpcValue::TypeStruct: {
+      YAML::Node map(YAML::NodeType::Map);
+      for (auto& kv : v) map[kv.first] = yamlOf(kv.second);
+      return map;
+    }
+    case XmlRpc::XmlRpcValue::TypeArray: {
+      YAML::Node list(YAML::NodeType::Sequence);
+      for (int i = 0; i < v.size(); ++i) list.push_back(yamlOf(v[i]));
+      return list;
+    }
     case XmlRpc::XmlRpcValue::TypeBoolean:
-      out << " " << (static_cast<bool>(v) ? "true" : "false");
-      break;
+      return YAML::Node(static_cast<bool>(v));
     case XmlRpc::XmlRpcValue::TypeInt:
-      out << " " << static_cast<int>(v);
-      break;
-    case XmlRpc::XmlRpcValue::TypeDouble: {
-      const double d = static_cast<double>(v);  // YAML spells the infinities .inf and -.inf
-      if (std::isinf(d))
-        out << (d > 0 ? " .inf" : " -.inf");
-      else if (std::isnan(d))
-        out << " .nan";
-      else
-        out << " " << std::setprecision(17) << d;
-      break;
-    }
-    case XmlRpc::XmlRpcValue::TypeString: {
-      std::string s = static_cast<std::string>(v), quoted = "\"";
-      for (char c : s)
-        quoted += (c == '"' || c == '\\') ? std::string("\\") + c : std::string(1, c);
-      out << " " << quoted << "\"";
-      break;
-    }
+      return YAML::Node(static_cast<int>(v));
+    case XmlRpc::XmlRpcValue::TypeDouble:
+      return YAML::Node(static_cast<double>(v));
+    case XmlRpc::XmlRpcValue::TypeString:
+      return YAML::Node(static_cast<std::string>(v));
     default:
       throw std::runtime_error("parameter of an unsupported type");
   }
+}
+
+/// The parameters of `all` that `keep` accepts, as the text of one YAML map ("" for none).
+template <class Keep>
+std::string yamlText(XmlRpc::XmlRpcValue& all, Keep keep) {
+  YAML::Node map(YAML::NodeType::Map);
+  if (all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
+    for (auto& kv : all)
+      if (keep(kv.first)) map[kv.first] = yamlOf(kv.second);
+  return map.size() == 0 ? std::string() : YAML::Dump(map);
 }
 
 template <class T>
@@ -154,17 +144,9 @@ PerceptionConfig perceptionConfigFromParams(const ros::NodeHandle& pnh,
                                             const std::string& package_dir) {
   // The package's config, with the pipeline's parameters found under ~ laid over it.
   XmlRpc::XmlRpcValue all = privateParameters(pnh);
-  std::ostringstream yaml;
-  if (all.getType() == XmlRpc::XmlRpcValue::TypeStruct) {
-    checkPrivateNamespace(pnh, all);
-    for (auto& kv : all) {
-      if (!isPipelineParameter(kv.first)) continue;
-      yaml << kv.first << ":";
-      emit(yaml, kv.second, 2);
-      yaml << "\n";
-    }
-  }
-  return overlayPerceptionYaml(package_dir + "/config/perception.yaml", yaml.str(),
+  if (all.getType() == XmlRpc::XmlRpcValue::TypeStruct) checkPrivateNamespace(pnh, all);
+  return overlayPerceptionYaml(package_dir + "/config/perception.yaml",
+                               yamlText(all, isPipelineParameter),
                                "the parameters under " + pnh.getNamespace(), package_dir);
 }
 
@@ -191,17 +173,12 @@ GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
   // file would; objects_topic is the node's own, rank_grasps_action actionlib's (its status
   // list's timeout and the like).
   XmlRpc::XmlRpcValue all = privateParameters(pnh);
-  std::ostringstream yaml;
-  if (all.getType() == XmlRpc::XmlRpcValue::TypeStruct)
-    for (auto& kv : all) {
-      if (kv.first == "objects_topic" || kv.first == "rank_grasps_action") continue;
-      yaml << kv.first << ":";
-      emit(yaml, kv.second, 2);
-      yaml << "\n";
-    }
+  const std::string yaml = yamlText(all, [](const std::string& name) {
+    return name != "objects_topic" && name != "rank_grasps_action";
+  });
   GraspServerConfig c;
   static_cast<GraspSettings&>(c) =
-      parseGraspSettingsYaml(yaml.str(), "the parameters under " + pnh.getNamespace());
+      parseGraspSettingsYaml(yaml, "the parameters under " + pnh.getNamespace());
   read(pnh, "objects_topic", &c.objects_topic);
   c.validate();
   return c;

@@ -10,6 +10,7 @@
 
 #include "cli_checks.h"
 #include "perception_options.h"
+#include "simstack/fitting/superquadric_fit.h"
 #include "simstack/grasping/grasp_files.h"
 #include "simstack/grasping/grasp_request.h"
 #include "simstack/grasping/grasp_settings.h"
@@ -29,9 +30,7 @@ constexpr double kNearShare = 0.25;
 /// How far `p_table` lies outside `sq`, along the ray from its centre (metres; 0 inside: a
 /// cup's inner wall lies inside the superquadric that closes it).
 double outsideBy(const SuperquadricShape& sq, const Vec3& p_table) {
-  const Vec3 p = sq.T_table_object.inverse() * p_table;
-  if (p.norm() < 1e-9) return 0.0;
-  return std::max(0.0, p.norm() - sq.surfacePointAlong(p).norm());
+  return std::max(0.0, surfaceDistance(sq, p_table));
 }
 
 /// The depth points measured on the target: those labelled target_id + 1 in `cloud_path`, or

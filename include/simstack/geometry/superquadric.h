@@ -28,9 +28,6 @@ struct SuperquadricShape {
   double insideOutsideObject(const Vec3& p_object) const;
   /// True when f(p) < 1.
   bool contains(const Vec3& p_table) const { return insideOutside(p_table) < 1.0; }
-  /// The radial distance approximation of the paper's section 3.2.2 (Bardinet et al.):
-  /// d = |OP| (f - 1) / f, positive outside, negative inside, metres.
-  double radialDistance(const Vec3& p_table) const;
   /// The surface point on the ray from the centre through `direction_object` (object frame).
   Vec3 surfacePointAlong(const Vec3& direction_object) const;
   /// Outward unit normal at an object-frame point (gradient of f).

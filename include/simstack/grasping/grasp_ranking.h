@@ -154,8 +154,8 @@ constexpr double kMaxGraspSceneReachM = 100.0;
 
 /// A scene that the grasp simulation accepts: at most kMaxGraspSceneObjects objects, finite
 /// poses with unit rotations within kMaxGraspSceneReachM of the origin, semi-axes in (0, 1] m
-/// and exponents in [1, 200]. Empty string when valid, else what is wrong, naming the object by
-/// its id in `ids` (one per object), else by its index.
+/// and exponents in [1, 200], and `ids` (one per object, when given) unique. Empty string when
+/// valid, else what is wrong, naming the object by its id in `ids`, else by its index.
 std::string checkScene(const std::vector<SuperquadricShape>& scene,
                        const std::vector<uint32_t>& ids = {});
 

@@ -159,9 +159,10 @@ class ScenePerception {
   /// perceive() under way on another thread; the next one uses the new settings. config()'s
   /// reference is not to be read beside it.
   void updateSettings(const PerceptionConfig& config);
-  /// The settings updateSettings(config) would put in effect (an FC model's single sample),
-  /// changing nothing; throws std::invalid_argument where it would. Safe beside a perceive() or
-  /// updateSettings() on another thread: it reads only what those never change.
+  /// The settings updateSettings(config) would put in effect (an FC model's single sample; a
+  /// C-VAE's decompose_samples lowered to samples when above it), changing nothing; throws
+  /// std::invalid_argument where it would. Safe beside a perceive() or updateSettings() on another
+  /// thread: it reads only what those never change.
   PerceptionConfig settingsInEffect(const PerceptionConfig& config) const;
 
   const PerceptionConfig& config() const;

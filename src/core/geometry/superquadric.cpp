@@ -28,14 +28,6 @@ double SuperquadricShape::insideOutside(const Vec3& p_table) const {
   return insideOutsideObject(T_table_object.inverse() * p_table);
 }
 
-double SuperquadricShape::radialDistance(const Vec3& p_table) const {
-  const Vec3 p = T_table_object.inverse() * p_table;
-  const double f = insideOutsideObject(p);
-  if (f <= std::numeric_limits<double>::min()) return -scale_m.minCoeff();
-  if (!std::isfinite(f)) return p.norm();  // |x/a|^e overflowed: (f - 1) / f is 1
-  return p.norm() * (f - 1.0) / f;
-}
-
 Vec3 SuperquadricShape::surfacePointAlong(const Vec3& direction_object) const {
   // Solve f(lambda d) = 1. With u = log(lambda), h(u) = log sum_i c_i exp(e_i u) is convex and
   // increasing, so Newton started where h >= 0 decreases monotonically onto the root.

@@ -10,6 +10,7 @@
 #include <numeric>
 #include <optional>
 #include <random>
+#include <set>
 #include <stdexcept>
 #include <thread>
 
@@ -153,6 +154,12 @@ std::string checkScene(const std::vector<SuperquadricShape>& scene,
   if (scene.size() > kMaxGraspSceneObjects)
     return std::to_string(scene.size()) + " objects: at most " +
            std::to_string(kMaxGraspSceneObjects) + " are simulated";
+  if (ids.size() == scene.size()) {
+    std::set<uint32_t> seen;
+    for (const uint32_t id : ids)
+      if (!seen.insert(id).second)
+        return "object id " + std::to_string(id) + " appears twice: ids must be unique";
+  }
   for (size_t i = 0; i < scene.size(); ++i) {
     const SuperquadricShape& sq = scene[i];
     const std::string name =

@@ -577,11 +577,16 @@ PerceptionConfig ScenePerception::settingsInEffect(const PerceptionConfig& confi
                                 config.model_path);
   if (cappedThreads(config.threads) != impl_->threads)
     throw std::invalid_argument("updateSettings keeps the thread count");
+  const bool latent = impl_->model->config().hasLatentCode();
+  PerceptionConfig c = config;
+  // Fewer samples than hypotheses to decompose decompose them all, rather than being refused:
+  // samples is the setting an operator lowers to speed a frame up.
+  if (latent) c.decompose_samples = std::min(c.decompose_samples, c.samples);
   // A change is judged as itself, not as the file the first settings came from.
-  PerceptionConfig change = config;
+  PerceptionConfig change = c;
   change.source.clear();
-  validatePerceptionConfig(change, impl_->model->config().hasLatentCode());
-  return forModel(config, impl_->model->config());
+  validatePerceptionConfig(change, latent);
+  return forModel(c, impl_->model->config());
 }
 
 void ScenePerception::updateSettings(const PerceptionConfig& config) {
