@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Fails when a folder includes what its layer must not (CMakeLists.txt; docs/design.md,
-# section 2): the runtime (src/core, include/simstack) includes a ROS header; the runtime or
-# the ROS shell includes offline code (src/offline, include/simstack/offline); a file outside
+# section 2): the runtime (src/core, include/simstack and the runtime's tools) includes a ROS
+# header; the runtime or the ROS shell includes offline code (src/offline,
+# include/simstack/offline); a file outside
 # the model and the trainer includes libtorch; a low-level module of the runtime includes the
 # model or the pipeline.
 set -u
@@ -10,19 +11,29 @@ fail=0
 report() {  # report "what" "hits"
   if [ -n "$2" ]; then echo "$1:"; echo "$2"; fail=1; fi
 }
-report "The ROS-free runtime includes ROS headers" "$(grep -rnE \
-  '#include *[<"](ros/|nodelet/|sensor_msgs/|std_msgs/|geometry_msgs/|visualization_msgs/|tf2_ros/|tf2_msgs/|image_transport/|cv_bridge/|pluginlib/|message_filters/|rosbag/|pcl_conversions/|pcl_ros/)' \
-  "$root/src/core" "$root/src/offline" "$root/include/simstack" 2>/dev/null)"
+# The ROS packages of package.xml, and the package's own generated messages (simstack/Name.h).
+ros='(ros|nodelet|pluginlib|image_transport|image_geometry|std_msgs|std_srvs|geometry_msgs'
+ros+='|sensor_msgs|visualization_msgs|shape_msgs|actionlib|actionlib_msgs|tf2|tf2_ros|tf2_eigen'
+ros+='|tf2_msgs|diagnostic_updater|diagnostic_msgs|dynamic_reconfigure|rosbag|xmlrpcpp|cv_bridge'
+ros+='|message_filters|pcl_conversions|pcl_ros)/|simstack/[A-Z]'
+inc='^[[:space:]]*#[[:space:]]*include[[:space:]]*[<"]'
+# The runtime's command-line tools link simstack_core alone (CMakeLists.txt).
+runtime_tools=("$root/src/tools/simstack_rank_grasps.cpp" "$root/src/tools/simstack_check_model.cpp"
+  "$root/src/tools/perception_options.cpp" "$root/src/tools/perception_options.h"
+  "$root/src/tools/depth_files.cpp" "$root/src/tools/depth_files.h" "$root/src/tools/cli_checks.h"
+  "$root/src/tools/progress.h" "$root/src/tools/sensor_option.h")
+report "The ROS-free runtime includes ROS headers" "$(grep -rnE "$inc($ros)" \
+  "$root/src/core" "$root/src/offline" "$root/include/simstack" "${runtime_tools[@]}" 2>/dev/null)"
 # simstack_make_bag is an offline tool that writes a bag (it generates piles), not a node.
 report "The runtime or the ROS shell includes offline code" "$(grep -rnE \
-  '#include *"simstack/offline/' "$root/src/core" "$root/include/simstack" "$root/src/ros" \
-  "$root/include/simstack_ros" 2>/dev/null |
+  "$inc(simstack/offline/|(\\.\\./)+offline/)" "$root/src/core" "$root/include/simstack" \
+  "$root/src/ros" "$root/include/simstack_ros" "${runtime_tools[@]}" 2>/dev/null |
   grep -v -e '/include/simstack/offline/' -e '/src/ros/make_example_bag.cpp:')"
-report "libtorch outside the model and the trainer" "$(grep -rnE '#include *[<"](torch/|ATen/)' \
+report "libtorch outside the model and the trainer" "$(grep -rnE "$inc(torch/|ATen/)" \
   "$root/src" "$root/include" 2>/dev/null | grep -v -e '/src/core/model/' \
   -e '/include/simstack/model/' -e '/src/offline/training/' -e '/include/simstack/offline/training/')"
 report "a low-level runtime module includes the model or the pipeline" "$(grep -rnE \
-  '#include *"simstack/(model|pipeline)/' "$root/src/core" "$root/include/simstack" 2>/dev/null |
+  "$inc"'simstack/(model|pipeline)/' "$root/src/core" "$root/include/simstack" 2>/dev/null |
   grep -v -e '/core/model/' -e '/core/pipeline/' -e '/simstack/model/' -e '/simstack/pipeline/' \
     -e '/include/simstack/offline/')"
 [ $fail -eq 0 ] && echo "layers ok: $(find "$root/src" "$root/include" -name '*.cpp' -o -name '*.h' | wc -l) files checked"

@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "simstack/offline/dataset/viewpoints.h"
 #include "simstack/render/depth_renderer.h"
 
 #include "test_scenes.h"

@@ -20,6 +20,7 @@
 #include "simstack/offline/piles/mesh_catalogue.h"
 #include "simstack/offline/piles/pile_generator.h"
 #include "simstack/offline/training/cvae_trainer.h"
+#include "simstack/offline/training/model_writer.h"
 #include "simstack/offline/training/training_sample.h"
 #include "simstack/render/depth_renderer.h"
 #include "test_scenes.h"

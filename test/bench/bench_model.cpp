@@ -7,6 +7,8 @@
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/model/cvae.h"
 #include "simstack/model/cvae_inference.h"
+#include "simstack/offline/training/cvae_losses.h"
+#include "simstack/offline/training/model_writer.h"
 
 using namespace simstack;
 

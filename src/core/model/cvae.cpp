@@ -2,12 +2,8 @@
 
 #include <ATen/ops/mkldnn_convolution.h>
 
-#include <cerrno>
-#include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <map>
-#include <sstream>
 #include <stdexcept>
 #include <tuple>
 #include <utility>
@@ -16,8 +12,6 @@
 
 namespace simstack {
 namespace {
-
-namespace F = torch::nn::functional;
 
 const int64_t kFormatVersion = modelFormatVersion();
 
@@ -460,212 +454,11 @@ CvaeOutput CvaeImpl::generateFrom(const std::vector<torch::Tensor>& cond, const 
   return decodeWith(cond, mean + torch::exp(0.5 * logvar) * z);
 }
 
-namespace {
-
-/// The loss terms per sample [B], before the batch mean.
-torch::Tensor tsdfTermPerSample(const torch::Tensor& pred, const torch::Tensor& target,
-                                double eps) {
-  return ((pred - target).abs() / (target.abs() + eps)).flatten(1).sum(1);
-}
-
-torch::Tensor occupancyTermPerSample(const torch::Tensor& pred, const torch::Tensor& target,
-                                     double sharpness) {
-  const torch::Tensor occupied = (target <= 0).to(pred.dtype());
-  return F::binary_cross_entropy_with_logits(
-             -sharpness * pred, occupied,
-             F::BinaryCrossEntropyWithLogitsFuncOptions().reduction(torch::kNone))
-      .flatten(1)
-      .sum(1);
-}
-
-/// Lovasz hinge per sample: the Lovasz extension of the Jaccard loss evaluated on the hinge
-/// errors of the occupancy logits, sorted from the worst.
-torch::Tensor iouTermPerSample(const torch::Tensor& pred, const torch::Tensor& target,
-                               double sharpness) {
-  const torch::Tensor logits = (-sharpness * pred).flatten(1);
-  const torch::Tensor occupied = (target <= 0).to(pred.dtype()).flatten(1);
-  const torch::Tensor errors = 1.0 - logits * (2.0 * occupied - 1.0);
-  const auto [sorted, order] = errors.sort(1, /*descending=*/true);
-  torch::Tensor jaccard_step;
-  {
-    torch::NoGradGuard no_grad;
-    const torch::Tensor gt = occupied.gather(1, order);
-    const torch::Tensor total = gt.sum(1, true);
-    const torch::Tensor jaccard = 1.0 - (total - gt.cumsum(1)) / (total + (1.0 - gt).cumsum(1));
-    const int64_t n = jaccard.size(1);
-    jaccard_step = torch::cat(
-        {jaccard.narrow(1, 0, 1), jaccard.narrow(1, 1, n - 1) - jaccard.narrow(1, 0, n - 1)}, 1);
-  }
-  return (F::relu(sorted) * jaccard_step).sum(1);
-}
-
-torch::Tensor voteTermPerSample(const torch::Tensor& pred, const torch::Tensor& target,
-                                bool occupied_only, const torch::Tensor& weight) {
-  // sqrt(. + 1e-12): the norm's gradient is undefined where prediction and target agree.
-  torch::Tensor per_voxel = ((pred - target).pow(2).sum(1) + 1e-12).sqrt();
-  if (occupied_only) per_voxel = per_voxel * (target.pow(2).sum(1) > 0.25).to(per_voxel.dtype());
-  if (weight.defined()) per_voxel = per_voxel * weight.squeeze(1);
-  return per_voxel.flatten(1).sum(1);
-}
-
-}  // namespace
-
-torch::Tensor inverseTsdfWeightedLoss(const torch::Tensor& pred, const torch::Tensor& target,
-                                      double eps) {
-  return tsdfTermPerSample(pred, target, eps).mean();
-}
-
-torch::Tensor occupancyLoss(const torch::Tensor& pred, const torch::Tensor& target,
-                            double sharpness) {
-  return occupancyTermPerSample(pred, target, sharpness).mean();
-}
-
-torch::Tensor iouLoss(const torch::Tensor& pred, const torch::Tensor& target, double sharpness) {
-  return iouTermPerSample(pred, target, sharpness).mean();
-}
-
-torch::Tensor voteLoss(const torch::Tensor& pred, const torch::Tensor& target, bool occupied_only,
-                       const torch::Tensor& weight) {
-  return voteTermPerSample(pred, target, occupied_only, weight).mean();
-}
-
-torch::Tensor mmdLoss(const torch::Tensor& z, const torch::Tensor& prior,
-                      const std::vector<double>& widths) {
-  if (z.size(0) < 2 || prior.size(0) < 2)
-    throw std::invalid_argument("MMD needs at least two codes and two prior samples");
-  if (widths.empty()) throw std::invalid_argument("MMD needs at least one kernel width");
-  const double d = static_cast<double>(z.size(1));
-  auto kernel = [&](const torch::Tensor& a, const torch::Tensor& b) {
-    const torch::Tensor sq = (a.unsqueeze(1) - b.unsqueeze(0)).pow(2).sum(2);
-    torch::Tensor k = torch::zeros_like(sq);
-    for (double w : widths) k = k + torch::exp(-sq / (w * d));
-    return k / static_cast<double>(widths.size());
-  };
-  // Unbiased: a set's kernel with itself leaves out the diagonal (each k(x, x) = 1).
-  auto within = [&](const torch::Tensor& a) {
-    const double n = static_cast<double>(a.size(0));
-    return (kernel(a, a).sum() - n) / (n * (n - 1.0));
-  };
-  return within(z) + within(prior) - 2.0 * kernel(z, prior).mean();
-}
-
-CvaeLosses computeLosses(const CvaeOutput& out, const torch::Tensor& partial,
-                         const torch::Tensor& tsdf, const torch::Tensor& votes, const CvaeConfig& c,
-                         const torch::Tensor& vote_weight) {
-  CvaeLosses l;
-  // k codes per scene (best_of), scene-major: the targets repeat to match.
-  const int64_t scenes = tsdf.size(0), k = out.tsdf.size(0) / scenes;
-  if (k * scenes != out.tsdf.size(0))
-    throw std::invalid_argument("computeLosses: " + std::to_string(out.tsdf.size(0)) +
-                                " predictions for " + std::to_string(scenes) + " scenes");
-  auto repeat = [k](const torch::Tensor& t) {
-    return k > 1 && t.defined() ? t.repeat_interleave(k, 0) : t;
-  };
-  torch::Tensor tsdf_term = tsdfTermPerSample(out.tsdf, repeat(tsdf), c.tsdf_epsilon);
-  torch::Tensor vote_term =
-      voteTermPerSample(out.votes, repeat(votes), c.vote_loss == "occupied", repeat(vote_weight));
-  torch::Tensor occupancy_term;
-  {
-    // Reported also at weight 0, then without a graph: it is not trained.
-    torch::AutoGradMode grad(torch::GradMode::is_enabled() && c.occupancy_weight > 0.0);
-    occupancy_term = occupancyTermPerSample(out.tsdf, repeat(tsdf), c.occupancy_sharpness);
-  }
-  torch::Tensor iou_term;
-  {
-    torch::AutoGradMode grad(torch::GradMode::is_enabled() && c.iou_weight > 0.0);
-    iou_term = iouTermPerSample(out.tsdf, repeat(tsdf), c.occupancy_sharpness);
-  }
-  if (k > 1) {
-    // Each scene keeps the code whose reconstruction scores best; only it is trained.
-    const torch::Tensor score = (c.alpha * tsdf_term + c.gamma * vote_term +
-                                 c.occupancy_weight * occupancy_term + c.iou_weight * iou_term)
-                                    .detach()
-                                    .view({scenes, k});
-    const torch::Tensor best =
-        score.argmin(1) + torch::arange(scenes, score.options().dtype(torch::kLong)) * k;
-    tsdf_term = tsdf_term.index_select(0, best);
-    vote_term = vote_term.index_select(0, best);
-    occupancy_term = occupancy_term.index_select(0, best);
-    iou_term = iou_term.index_select(0, best);
-  }
-  l.tsdf = tsdf_term.mean();
-  l.partial = inverseTsdfWeightedLoss(out.partial_recon, partial.narrow(1, 0, 1), c.tsdf_epsilon);
-  l.votes = vote_term.mean();
-  torch::Tensor latent;  // the weighted latent term of the total
-  if (out.prior_mu.defined()) {
-    // KL(N(mu, e^logvar) || N(prior_mu, e^prior_logvar)) per code dimension, batch mean;
-    // with free bits each dimension counts only above its share of kl_free_nats.
-    const torch::Tensor d = out.mu - out.prior_mu;
-    const torch::Tensor per_dim =
-        (0.5 * (out.prior_logvar - out.logvar +
-                (torch::exp(out.logvar) + d * d) * torch::exp(-out.prior_logvar) - 1.0))
-            .mean(0);
-    l.mmd = per_dim.sum();  // reported as it is
-    latent =
-        c.kl_weight *
-        (c.kl_free_nats > 0.0 ? per_dim.clamp_min(c.kl_free_nats / per_dim.size(0)).sum() : l.mmd);
-  } else {
-    // One code per scene: a scene's best_of codes share its posterior, and the estimator's
-    // pairs within the codes must be independent draws (with all k of them, codes that follow
-    // the prior still score far above zero, and the term pulls every posterior to N(0, I)).
-    const torch::Tensor z =
-        out.z.defined() && k > 1 ? out.z.view({scenes, k, -1}).select(1, 0) : out.z;
-    l.mmd = z.defined() ? mmdLoss(z, torch::randn({c.mmd_prior_samples, z.size(1)}, z.options()),
-                                  c.mmd_kernel_widths)
-                        : torch::zeros({}, tsdf.options());
-    latent = c.delta * l.mmd;
-  }
-  l.occupancy = occupancy_term.mean();
-  l.iou = iou_term.mean();
-  l.total = c.alpha * l.tsdf + c.beta * l.partial + c.gamma * l.votes + latent +
-            c.occupancy_weight * l.occupancy + c.iou_weight * l.iou;
-  return l;
-}
-
-namespace {
-
-/// Every parameter and buffer of the model by name (handles to the model's own tensors).
-std::map<std::string, torch::Tensor> namedTensors(Cvae& model) {
+std::map<std::string, torch::Tensor> cvaeTensors(Cvae& model) {
   std::map<std::string, torch::Tensor> out;
   for (const auto& p : model->named_parameters()) out[p.key()] = p.value();
   for (const auto& b : model->named_buffers()) out[b.key()] = b.value();
   return out;
-}
-
-}  // namespace
-
-void saveCvae(const std::string& path, Cvae& model, const std::string& metadata,
-              const std::function<void(torch::serialize::OutputArchive&)>& extra) {
-  torch::serialize::OutputArchive archive;
-  model->save(archive);
-  if (extra) extra(archive);
-  archive.write("simstack_format", torch::IValue(kFormatVersion));
-  archive.write("simstack_config", torch::IValue(model->config().toYaml()));
-  archive.write("simstack_metadata", torch::IValue(metadata));
-  // Serialized in memory, then written and checked here: libtorch's file writer aborts the
-  // process when a write fails (a full disk) instead of throwing.
-  std::ostringstream bytes(std::ios::binary);
-  try {
-    archive.save_to(bytes);
-  } catch (const c10::Error& e) {
-    throw std::runtime_error("cannot write model " + path + ": " + e.what_without_backtrace());
-  }
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream file(tmp, std::ios::binary | std::ios::trunc);
-    const std::string data = bytes.str();
-    file.write(data.data(), static_cast<std::streamsize>(data.size()));
-    file.flush();
-    if (!file) {
-      const std::string why = std::strerror(errno);
-      file.close();
-      std::error_code ec;
-      std::filesystem::remove(tmp, ec);
-      throw std::runtime_error("cannot write model " + path + " (" + std::to_string(data.size()) +
-                               " bytes): " + why + "; the file there stays as it was");
-    }
-  }
-  std::filesystem::rename(tmp, path);  // a crash never leaves half a file behind
 }
 
 Cvae loadCvae(const std::string& path, const CvaeConfig* expect, std::string* metadata) {
@@ -711,52 +504,26 @@ Cvae loadCvae(const std::string& path, const CvaeConfig* expect, std::string* me
   // Module::load takes each stored tensor as it is, whatever its shape: compare with the shapes
   // the config builds, so that a mismatched file fails here and not in the first forward pass.
   std::map<std::string, std::vector<int64_t>> built;
-  for (const auto& [name, t] : namedTensors(model)) built[name] = t.sizes().vec();
+  for (const auto& [name, t] : cvaeTensors(model)) built[name] = t.sizes().vec();
   try {
     model->load(archive);
   } catch (const c10::Error& e) {
     throw std::runtime_error("model file " + path +
                              ": weights do not match its config: " + e.what_without_backtrace());
   }
-  for (const auto& [name, t] : namedTensors(model))
+  for (const auto& [name, t] : cvaeTensors(model))
     if (t.sizes().vec() != built.at(name))
       throw std::runtime_error("model file " + path + ": tensor " + name + " has shape " +
                                c10::str(t.sizes()) + " but its config builds " +
                                c10::str(c10::IntArrayRef(built.at(name))));
   // A weight that is NaN or infinite makes every output NaN: the network would see nothing.
-  for (const auto& [name, t] : namedTensors(model))
+  for (const auto& [name, t] : cvaeTensors(model))
     if (t.is_floating_point() && !torch::isfinite(t).all().item<bool>())
       throw std::runtime_error("model file " + path + ": tensor " + name +
                                " holds values that are not finite (NaN or infinite): the file is "
                                "damaged");
   if (metadata && archive.try_read("simstack_metadata", meta)) *metadata = meta.toStringRef();
   return model;
-}
-
-std::vector<std::string> warmStartCvae(Cvae& model, const std::string& path) {
-  Cvae source = loadCvae(path);
-  const std::map<std::string, torch::Tensor> from = namedTensors(source);
-  std::vector<std::string> fresh;
-  size_t copied = 0;
-  torch::NoGradGuard no_grad;
-  for (auto& [name, to] : namedTensors(model)) {
-    const auto it = from.find(name);
-    if (it == from.end()) {
-      fresh.push_back(name);
-      continue;
-    }
-    if (it->second.sizes() != to.sizes()) {
-      throw std::runtime_error("warm start from " + path + ": tensor " + name + " has shape " +
-                               c10::str(it->second.sizes()) + ", this network's " +
-                               c10::str(to.sizes()));
-    }
-    to.copy_(it->second);
-    ++copied;
-  }
-  if (copied == 0)
-    throw std::runtime_error("warm start from " + path +
-                             ": the file shares no tensor with this network");
-  return fresh;
 }
 
 }  // namespace simstack

@@ -21,6 +21,7 @@
 #include "simstack/io/image_io.h"
 #include "simstack/io/staged_output.h"
 #include "simstack/offline/dataset/dataset.h"
+#include "simstack/offline/dataset/viewpoints.h"
 #include "simstack/offline/piles/mesh_catalogue.h"
 #include "simstack/offline/piles/pile_generator.h"
 #include "simstack/render/depth_renderer.h"

@@ -10,6 +10,7 @@
 
 #include "simstack/fitting/superquadric_fit.h"
 #include "simstack/offline/dataset/ground_truth.h"
+#include "simstack/offline/dataset/viewpoints.h"
 #include "simstack/offline/eval/occupancy.h"
 #include "simstack/offline/eval/scene_metrics.h"
 #include "simstack/render/depth_renderer.h"

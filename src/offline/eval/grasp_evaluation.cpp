@@ -10,6 +10,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "simstack/offline/dataset/viewpoints.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/seeds.h"
 

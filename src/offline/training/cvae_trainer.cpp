@@ -26,6 +26,8 @@
 #include "simstack/model/cvae.h"
 #include "simstack/offline/dataset/dataset.h"
 #include "simstack/offline/eval/occupancy.h"
+#include "simstack/offline/training/cvae_losses.h"
+#include "simstack/offline/training/model_writer.h"
 #include "simstack/offline/training/training_sample.h"
 #include "simstack/seeds.h"
 

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "simstack/offline/dataset/viewpoints.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack/tsdf/network_input.h"
 #include "simstack/tsdf/projective_tsdf.h"

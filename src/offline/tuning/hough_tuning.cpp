@@ -11,6 +11,7 @@
 
 #include "simstack/instances/instance_finder.h"
 #include "simstack/offline/dataset/ground_truth.h"
+#include "simstack/offline/dataset/viewpoints.h"
 #include "simstack/offline/eval/segmentation.h"
 #include "simstack/pipeline/scene_perception.h"
 #include "simstack/render/depth_renderer.h"

@@ -23,6 +23,7 @@
 #include "simstack/geometry/triangle_mesh.h"
 #include "simstack/geometry/voxel_grid.h"
 #include "simstack/offline/dataset/dataset.h"
+#include "simstack/offline/dataset/viewpoints.h"
 #include "simstack/render/depth_renderer.h"
 
 namespace simstack {

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "simstack/model/cvae_config.h"
+#include "simstack/offline/training/train_config.h"
 
 namespace simstack {
 

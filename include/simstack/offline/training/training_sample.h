@@ -11,6 +11,7 @@
 #include "simstack/geometry/pinhole_camera.h"
 #include "simstack/model/cvae_config.h"
 #include "simstack/offline/dataset/dataset.h"
+#include "simstack/offline/dataset/viewpoints.h"
 #include "simstack/render/depth_renderer.h"
 
 namespace simstack {
