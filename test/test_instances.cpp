@@ -9,7 +9,6 @@
 #include <random>
 #include <string>
 
-#include "simstack/instances/convex_split.h"
 #include "simstack/instances/hough_voting.h"
 #include "simstack/instances/surface_instances.h"
 #include "simstack/instances/surface_segments.h"
@@ -98,8 +97,6 @@ TEST(HoughVoting, RecoversOneToEightCentresWithinOneVoxel) {
   }
 }
 
-// Past its ball's centre a ray meets votes pointing back at it: stopping there (the option
-// experimental.reversed_vote_stop_vox) keeps the centres and spares the far half of every ray.
 /// The fine-cell counts of Hough voting computed the plain way, as the reference: each occupied
 /// voxel's ray starts at the voxel's centre and is stepped one fine cell at a time along its
 /// vote (Amanatides & Woo, parameters accumulated), into a std::map; a ray stops on entering
@@ -192,24 +189,6 @@ TEST(HoughVoting, FineCountsMatchAPlainTraversal) {
         EXPECT_EQ(seg.traversals, visits) << "ref " << ref << " tol " << tolerance;
       }
     }
-  }
-}
-
-TEST(HoughVoting, RaysStoppedWhereVotesTurnBackFindTheSameCentres) {
-  const GridSpec g = GridSpec::sceneGrid(Vec2(0.1, -0.2), 0.64, 32);
-  std::mt19937_64 rng(11);
-  HoughConfig stop;
-  stop.experimental.reversed_vote_stop_vox = 1;
-  for (int k = 1; k <= 8; ++k) {
-    Grid3<float> tsdf;
-    Grid3<Vec3f> votes;
-    const std::vector<Ball> balls = randomBalls(g, k, rng);
-    ballFields(g, balls, &tsdf, &votes);
-    const InstanceSegmentation full = houghInstances(tsdf, votes);
-    const InstanceSegmentation stopped = houghInstances(tsdf, votes, stop);
-    ASSERT_EQ(stopped.size(), k) << "k = " << k;
-    for (double e : centreErrorsVox(g, balls, stopped)) EXPECT_LT(e, 1.0) << "k = " << k;
-    EXPECT_LT(static_cast<double>(stopped.traversals), 0.7 * full.traversals) << "k = " << k;
   }
 }
 
@@ -306,75 +285,6 @@ TEST(HoughVoting, ZeroVotesDoNotCrash) {
 }
 
 }  // namespace
-TEST(ConvexSplit, SolidityOfBoxesAndAnL) {
-  const GridSpec g = GridSpec::sceneGrid(Vec2::Zero(), 0.64, 32);
-  auto box = [](Vec3i lo, Vec3i hi) {
-    std::vector<Vec3i> v;
-    for (int z = lo.z(); z <= hi.z(); ++z)
-      for (int y = lo.y(); y <= hi.y(); ++y)
-        for (int x = lo.x(); x <= hi.x(); ++x) v.push_back(Vec3i(x, y, z));
-    return v;
-  };
-  EXPECT_DOUBLE_EQ(voxelSolidity(box(Vec3i(3, 4, 0), Vec3i(10, 8, 5)), g), 1.0);
-  // An L: a 10 x 6 x 8 box with a 4 x 6 x 3 foot beside it. The hull adds the lattice points
-  // under the plane from the box's top edge (x 9, z 7) to the foot's (x 13, z 2): rows of 3, 2
-  // and 1 voxels above the foot, 6 deep.
-  std::vector<Vec3i> l = box(Vec3i(0, 0, 0), Vec3i(9, 5, 7));
-  const std::vector<Vec3i> foot = box(Vec3i(10, 0, 0), Vec3i(13, 5, 2));
-  l.insert(l.end(), foot.begin(), foot.end());
-  EXPECT_NEAR(voxelSolidity(l, g), 552.0 / (552.0 + 36.0), 1e-12);
-  EXPECT_DOUBLE_EQ(voxelSolidity({Vec3i(1, 1, 1), Vec3i(2, 1, 1), Vec3i(3, 1, 1)}, g), 1.0);
-}
-
-TEST(ConvexSplit, CutsAnLAtItsSeamAndLeavesABoxWhole) {
-  const GridSpec g = GridSpec::sceneGrid(Vec2::Zero(), 0.64, 32);
-  InstanceSegmentation seg;
-  seg.labels = Grid3<int>(g, -1);
-  // Instance 0: the L of two boxes (tall one x in [2, 11], foot x in [12, 17]); instance 1: a
-  // separate box.
-  for (int z = 0; z < 10; ++z)
-    for (int y = 2; y < 8; ++y)
-      for (int x = 2; x < 18; ++x)
-        if (x < 12 || z < 4) seg.labels.at(x, y, z) = 0;
-  for (int z = 0; z < 5; ++z)
-    for (int y = 14; y < 20; ++y)
-      for (int x = 20; x < 26; ++x) seg.labels.at(x, y, z) = 1;
-  seg.centres_table = {Vec3(0, 0, 0.1), Vec3(0.1, 0.1, 0.05)};
-  seg.voxel_counts = {10 * 6 * 10 + 6 * 6 * 4, 6 * 6 * 5};
-  HoughConfig off;
-  InstanceSegmentation untouched = seg;
-  EXPECT_EQ(splitNonConvexInstances(&untouched, off),
-            0);  // experimental.split_below_solidity 0: off
-  HoughConfig config;
-  config.experimental.split_below_solidity = 0.95;
-  config.experimental.split_accept_solidity = 0.95;
-  ASSERT_EQ(splitNonConvexInstances(&seg, config), 1);
-  ASSERT_EQ(seg.size(), 3);
-  EXPECT_EQ(seg.voxel_counts, (std::vector<int>{600, 180, 144}));  // largest first
-  // The tall box, the separate box (its Hough centre kept) and the foot.
-  EXPECT_EQ(seg.labels.at(5, 4, 8), 0);
-  EXPECT_EQ(seg.labels.at(11, 4, 0), 0);
-  EXPECT_EQ(seg.labels.at(12, 4, 0), 2);
-  EXPECT_EQ(seg.labels.at(17, 7, 3), 2);
-  EXPECT_EQ(seg.labels.at(22, 16, 2), 1);
-  EXPECT_TRUE(seg.centres_table[1].isApprox(Vec3(0.1, 0.1, 0.05)));
-  int labelled = 0;
-  for (int l : seg.labels.data) labelled += l >= 0;
-  EXPECT_EQ(labelled, 600 + 144 + 180);
-  // A cut that leaves a part below min_instance_voxels is never made: with 200 the seam cut
-  // (600 + 144) is out, and the cut at z = 4 gives two boxes of 384 and 360 voxels; with 400
-  // no cut of the 744 voxels is allowed.
-  InstanceSegmentation small = untouched;
-  config.min_instance_voxels = 200;
-  ASSERT_EQ(splitNonConvexInstances(&small, config), 1);
-  EXPECT_EQ(small.voxel_counts, (std::vector<int>{384, 360, 180}));
-  EXPECT_EQ(small.labels.at(15, 4, 3), 0);
-  EXPECT_EQ(small.labels.at(5, 4, 4), 1);
-  small = untouched;
-  config.min_instance_voxels = 400;
-  EXPECT_EQ(splitNonConvexInstances(&small, config), 0);
-}
-
 TEST(SurfaceInstances, DepthPointsNoInstanceExplainsBecomeObjects) {
   const GridSpec g = GridSpec::sceneGrid(Vec2(0.0, 0.0), 0.64, 32);
   InstanceSegmentation seg;

@@ -95,38 +95,23 @@ TEST(PerceptionConfig, ShippedYamlHoldsTheDefaultsAndTyposAreErrors) {
   EXPECT_NE(refusal("symetries: 4\n").find("unknown field 'symetries'"), std::string::npos);
   EXPECT_NE(refusal("perception:\n  symmetries: 4\n").find("top level"), std::string::npos);
   EXPECT_NE(refusal("node:\n  table_frame: t\n").find("perception_node.yaml"), std::string::npos);
-  // A dropped variant's setting stands under hough.experimental; directly under hough it is
-  // refused with the place it belongs, and a misspelt one is refused by its full name.
-  EXPECT_NE(refusal("hough:\n  split_below_solidity: 0.8\n").find("under hough.experimental"),
+  // A misspelt section field is refused by its full name.
+  EXPECT_NE(refusal("hough:\n  bandwith_m: 0.04\n").find("unknown field hough.bandwith_m"),
             std::string::npos);
-  EXPECT_NE(refusal("hough:\n  experimental:\n    split_below: 0.8\n")
-                .find("unknown field hough.experimental.split_below"),
-            std::string::npos);
-  // A section written with every field listed (as simstack_tune_hough wrote them) reads when
-  // the dropped variants' settings there hold their defaults.
-  std::ofstream(bad) << "hough:\n  refinement: 6\n  reversed_vote_stop_vox: 0\n"
-                        "  split_accept_solidity: 0.9\n";
-  EXPECT_EQ(loadPerceptionYaml(bad).hough.refinement, 6);
-  EXPECT_NE(refusal("hough:\n  reversed_vote_stop_vox: 0\n  split_max_rounds: 3\n")
-                .find("hough.reversed_vote_stop_vox, hough.split_max_rounds"),
-            std::string::npos);
-  std::ofstream(bad) << "hough:\n  refinement: 6\n  experimental:\n    split_below_solidity: 0.8\n";
+  std::ofstream(bad) << "hough:\n  refinement: 6\n  min_vote_norm: 0.3\n";
   const PerceptionConfig split = loadPerceptionYaml(bad);
   EXPECT_EQ(split.hough.refinement, 6);
-  EXPECT_DOUBLE_EQ(split.hough.experimental.split_below_solidity, 0.8);
-  EXPECT_EQ(split.hough.experimental.split_max_rounds, HoughExperimental().split_max_rounds);
+  EXPECT_DOUBLE_EQ(split.hough.min_vote_norm, 0.3);
   std::ofstream(bad) << perceptionYaml(split);  // the full dump reads back as it was
   EXPECT_EQ(perceptionYaml(loadPerceptionYaml(bad)), perceptionYaml(split));
   std::filesystem::remove(bad);
 }
 
-TEST(PerceptionConfig, ACardSectionNamesExperimentalSettingsOnlyWhenOn) {
+TEST(PerceptionConfig, ACardSectionReadsBackAsTheSettingItCameFrom) {
   HoughConfig h;
   h.refinement = 8;
-  EXPECT_EQ(modelCardPerceptionYaml(1, h).find("experimental"), std::string::npos);
-  h.experimental.reversed_vote_stop_vox = 2;
+  h.min_vote_norm = 0.3;
   const std::string text = modelCardPerceptionYaml(1, h);
-  EXPECT_NE(text.find("experimental"), std::string::npos) << text;
   // The section pasted into a card is read back as the setting it came from.
   const auto dir = std::filesystem::temp_directory_path() / "simstack_card_section";
   std::filesystem::create_directories(dir);
@@ -135,7 +120,7 @@ TEST(PerceptionConfig, ACardSectionNamesExperimentalSettingsOnlyWhenOn) {
   c.model_path = (dir / "m.pt").string();
   applyModelCard(&c);
   EXPECT_EQ(c.hough.refinement, 8);
-  EXPECT_EQ(c.hough.experimental.reversed_vote_stop_vox, 2);
+  EXPECT_DOUBLE_EQ(c.hough.min_vote_norm, 0.3);
   std::filesystem::remove_all(dir);
 }
 

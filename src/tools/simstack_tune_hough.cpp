@@ -122,16 +122,6 @@ void addSweepOptions(CLI::App& app, HoughSweep& sweep) {
   values("--min-vote-norm", sweep.min_norms,
          "vote lengths to try below which a voxel casts no ray (blunt, unsure votes)",
          finiteNumber([](double v) { return v >= 0.0 && v < 1.0; }, "in [0, 1)", "[0,1)"));
-  // hough.experimental: variants measured and not kept.
-  values("--experimental-reversed-stop", sweep.reversed_stops,
-         "experimental: consecutive voxels of reversed votes that stop a ray (0 = off) to try",
-         FiniteNonNegative);
-  values("--experimental-split-below", sweep.split_below,
-         "experimental split test: solidities below which an instance is cut (0 = off) to try",
-         FiniteNonNegative & CLI::Range(0.0, 1.0));
-  values("--experimental-split-accept", sweep.split_accept,
-         "experimental split test: joint solidities of the two parts that keep a cut, to try",
-         FinitePositive & CLI::Range(0.01, 1.0));
 }
 
 }  // namespace

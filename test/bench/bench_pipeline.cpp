@@ -43,8 +43,6 @@ static void BM_HoughVoting(benchmark::State& state) {
   const BenchScene& b = benchScene(static_cast<int>(state.range(0)));
   HoughConfig hc;
   hc.threads = 2;
-  // Its peer: rays stopped where the votes turn back (off in the shipped configs).
-  hc.experimental.reversed_vote_stop_vox = static_cast<int>(state.range(1));
   InstanceSegmentation seg;
   double rays = 0, shift = 0, assign = 0;
   for (auto _ : state) {
@@ -62,13 +60,7 @@ static void BM_HoughVoting(benchmark::State& state) {
   state.counters["candidates"] = seg.candidate_cells;
   state.counters["traversals"] = static_cast<double>(seg.traversals);
 }
-BENCHMARK(BM_HoughVoting)
-    ->ArgNames({"", "reversed_stop"})
-    ->Args({32, 0})
-    ->Args({64, 0})
-    ->Args({64, 1})
-    ->Unit(benchmark::kMillisecond)
-    ->UseRealTime();
+BENCHMARK(BM_HoughVoting)->Arg(32)->Arg(64)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 static void BM_JointFitFourObjects(benchmark::State& state) {
   const BenchScene& b = benchScene(32);

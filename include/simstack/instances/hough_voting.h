@@ -22,27 +22,6 @@ namespace simstack {
 /// 32-bit indices (1625^3 < 2^32).
 constexpr int kMaxHoughFineCells = 1625;
 
-/// Hough settings of variants that were measured and dropped; the defaults turn them off.
-struct HoughExperimental {
-  /// A ray stops after this many consecutive occupied voxels whose votes point back against it
-  /// (it has passed the centre they vote for). 0 = off: rays run to the object's far side.
-  int reversed_vote_stop_vox = 0;
-  /// Split test after the assignment (convex_split.h): instances whose solidity is below this
-  /// are cut in two when the parts reach `split_accept_solidity` together. 0 = off.
-  double split_below_solidity = 0.0;
-  double split_accept_solidity = 0.9;
-  /// Rounds of the test: each round cuts every part not yet settled at most once, so an
-  /// instance ends in at most 2^rounds parts.
-  int split_max_rounds = 2;
-
-  bool operator==(const HoughExperimental& o) const {
-    return reversed_vote_stop_vox == o.reversed_vote_stop_vox &&
-           split_below_solidity == o.split_below_solidity &&
-           split_accept_solidity == o.split_accept_solidity &&
-           split_max_rounds == o.split_max_rounds;
-  }
-};
-
 struct HoughConfig {
   int refinement = 5;         ///< fine cells per voxel along each axis (the paper: 10)
   int min_traversals = 4;     ///< mu: a fine cell with more traversals is a centre vote (paper: 10)
@@ -54,9 +33,6 @@ struct HoughConfig {
   double min_vote_norm = 0.0;
   /// Rays may leave the occupied region for this many voxels (noisy TSDF borders).
   int outside_tolerance_vox = 1;
-  /// Variants tried and not kept (docs/experiments.md, "Instances: Hough voting"): every
-  /// shipped setting leaves them off; they stay to reproduce those measurements.
-  HoughExperimental experimental;
   int threads = 2;
   void validate() const;  ///< std::invalid_argument naming the field and its bad value
 };
@@ -68,7 +44,6 @@ struct InstanceSegmentation {
   int candidate_cells = 0;          ///< fine cells above the traversal threshold
   size_t count_bytes = 0;           ///< memory of the fine counts (all threads)
   size_t traversals = 0;            ///< fine-cell visits counted (all rays)
-  int splits = 0;                   ///< cuts made by the split test
   struct {
     double rays_ms = 0, mean_shift_ms = 0, assign_ms = 0;
   } timings;

@@ -1,7 +1,6 @@
 #include "simstack/instances/hough_voting.h"
 
 #include "simstack/assert.h"
-#include "simstack/instances/convex_split.h"
 
 #include <omp.h>
 
@@ -47,10 +46,9 @@ std::vector<uint64_t> fineAxisTable(int r, int ref, int axis) {
 /// Amanatides & Woo's cell-by-cell traversal (a test compares the counts with one), with two
 /// independent additions per slab as the chain from one step to the next instead of a
 /// comparison, a select and an addition per cell (docs/benchmarks.md).
-template <class Count, class Block, class Reversed>
+template <class Count, class Block>
 size_t marchRay(const Vec3& p, const Vec3& unit, int ref, const std::vector<uint8_t>& occ, int r,
-                int tolerance, int reversed_stop, const std::vector<uint64_t>* axis_tables,
-                Block&& block_of, Reversed&& reversed) {
+                int tolerance, const std::vector<uint64_t>* axis_tables, Block&& block_of) {
   // Components within 1e-12 of zero do not move the ray (as in the cell-by-cell traversal).
   const Vec3 d = unit.unaryExpr([](double c) { return std::abs(c) > 1e-12 ? c : 0.0; });
   int m = 0;
@@ -62,7 +60,7 @@ size_t marchRay(const Vec3& p, const Vec3& unit, int ref, const std::vector<uint
   const uint64_t* const tw = axis_tables[w_axis].data();
   const unsigned fine = static_cast<unsigned>(r * ref);
   size_t visits = 0;
-  int outside = 0, reversed_run = 0;
+  int outside = 0;
   uint32_t current = ~0u;
   Count* block = nullptr;
   // The cell (major, u, w), inside the grid: false when the ray stops before it.
@@ -73,10 +71,6 @@ size_t marchRay(const Vec3& p, const Vec3& unit, int ref, const std::vector<uint
       current = index;
       outside = occ[index] ? 0 : outside + 1;
       if (outside > tolerance) return false;
-      if (reversed_stop > 0) {
-        reversed_run = occ[index] && reversed(static_cast<int>(index)) ? reversed_run + 1 : 0;
-        if (reversed_run >= reversed_stop) return false;
-      }
       block = block_of(static_cast<int>(index));
     }
     ++visits;
@@ -332,14 +326,11 @@ FineCounts countRays(const GridSpec& g, const std::vector<int>& occupied,
       if (dirs[k].squaredNorm() == 0) continue;
       const Vec3 p = (g.unravel(occupied[k]).cast<double>() + Vec3::Constant(0.5)) * ref;
       const Vec3& d = dirs[k];
-      visits[t] += marchRay<FineCount>(
-          p, d, ref, occ, r, config.outside_tolerance_vox,
-          config.experimental.reversed_vote_stop_vox, axis_tables,
-          [&](int voxel) {
-            const int b = block_of[voxel];
-            return b >= 0 ? counts + b * block : nullptr;
-          },
-          [&](int voxel) { return dirs[block_of[voxel]].dot(d) < 0.0; });
+      visits[t] += marchRay<FineCount>(p, d, ref, occ, r, config.outside_tolerance_vox, axis_tables,
+                                       [&](int voxel) {
+                                         const int b = block_of[voxel];
+                                         return b >= 0 ? counts + b * block : nullptr;
+                                       });
     }
   }
   out.team = team;
@@ -490,14 +481,6 @@ void HoughConfig::validate() const {
   // of: from 1 on, next to none would cast a ray and every scene would be empty.
   require(min_vote_norm >= 0 && min_vote_norm < 1, "min_vote_norm", min_vote_norm, "in [0, 1)");
   require(outside_tolerance_vox >= 0, "outside_tolerance_vox", outside_tolerance_vox, ">= 0");
-  const HoughExperimental& x = experimental;
-  require(x.reversed_vote_stop_vox >= 0, "experimental.reversed_vote_stop_vox",
-          x.reversed_vote_stop_vox, ">= 0");
-  require(x.split_below_solidity >= 0 && x.split_below_solidity <= 1,
-          "experimental.split_below_solidity", x.split_below_solidity, "in [0, 1]");
-  require(x.split_accept_solidity > 0 && x.split_accept_solidity <= 1,
-          "experimental.split_accept_solidity", x.split_accept_solidity, "in (0, 1]");
-  require(x.split_max_rounds >= 0, "experimental.split_max_rounds", x.split_max_rounds, ">= 0");
   require(threads >= 1, "threads", threads, ">= 1");
 }
 
@@ -535,7 +518,6 @@ InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3
 
   const auto t2 = Clock::now();
   assignToCentres(g, occupied, dirs, std::move(centres), config, threads, &out);
-  out.splits = splitNonConvexInstances(&out, config);
   out.timings.assign_ms = ms(t2);
   return out;
 }

@@ -50,14 +50,6 @@ void houghFields(C& c, F&& f) {
   f("min_vote_norm", c.min_vote_norm);
   f("outside_tolerance_vox", c.outside_tolerance_vox);
 }
-// `hough.experimental`: variants measured and not kept, off by default.
-template <class C, class F>
-void houghExperimentalFields(C& c, F&& f) {
-  f("reversed_vote_stop_vox", c.reversed_vote_stop_vox);
-  f("split_below_solidity", c.split_below_solidity);
-  f("split_accept_solidity", c.split_accept_solidity);
-  f("split_max_rounds", c.split_max_rounds);
-}
 template <class C, class F>
 void segmentFields(C& c, F&& f) {
   f("enabled", c.enabled);
@@ -171,27 +163,21 @@ void readFields(const YAML::Node& n, const std::string& prefix, C* c, Fields fie
   });
 }
 
-/// The map `n` read as the section `name` ("hough", "hough.experimental"): its fields into `c`,
-/// any other key an error except the `nested` sections, which the caller reads.
+/// The section `name` of `root` ("hough"): its fields into `c`, any other key an error; absent
+/// or empty (every field left out): the defaults.
 template <class C, class Fields>
-void readMap(const YAML::Node& n, const std::string& name, C* c, Fields fields,
-             const std::string& path, const std::set<std::string>& nested = {}) {
+void readSection(const YAML::Node& root, const char* name, C* c, Fields fields,
+                 const std::string& path) {
+  const YAML::Node n = root[name];
+  if (!n || n.IsNull()) return;
   if (!n.IsMap()) throw std::runtime_error(path + ": '" + name + "' must be a map");
-  readFields(n, name + ".", c, fields, path);
-  std::set<std::string> known = nested;
+  readFields(n, std::string(name) + ".", c, fields, path);
+  std::set<std::string> known;
   fields(*c, [&](const char* key, auto&) { known.insert(key); });
   for (const auto& kv : n) {
     const std::string key = kv.first.as<std::string>();
     if (!known.count(key)) throw std::runtime_error(path + ": unknown field " + name + "." + key);
   }
-}
-
-template <class C, class Fields>
-void readSection(const YAML::Node& root, const char* name, C* c, Fields fields,
-                 const std::string& path) {
-  const YAML::Node n = root[name];
-  if (!n || n.IsNull()) return;  // absent, or every field left out: the defaults
-  readMap(n, name, c, fields, path);
 }
 
 /// The fields `fields` names, as keys and values of the map being written.
@@ -210,46 +196,13 @@ void writeSection(YAML::Emitter& e, const char* name, C& c, Fields fields) {
   e << YAML::EndMap;
 }
 
-/// `hough:` with its `experimental:` map. A dropped variant's setting written directly under
-/// `hough:` is refused with the place it belongs, unless every such setting holds its default:
-/// sections that simstack_tune_hough wrote with every field listed read as they did.
 void readHough(const YAML::Node& root, HoughConfig* h, const std::string& path) {
-  const YAML::Node n = root["hough"];
-  if (!n || n.IsNull()) return;
-  std::set<std::string> allowed = {"experimental"};
-  if (n.IsMap()) {
-    HoughExperimental flat;
-    std::string named;
-    houghExperimentalFields(flat, [&](const char* key, auto&) {
-      if (!n[key]) return;
-      allowed.insert(key);
-      named += (named.empty() ? "hough." : ", hough.") + std::string(key);
-    });
-    readFields(
-        n, "hough.", &flat, [](auto& c, auto&& f) { houghExperimentalFields(c, f); }, path);
-    if (!(flat == HoughExperimental()))
-      throw std::runtime_error(path + ": " + named +
-                               ": a dropped variant's setting other than its default stands "
-                               "under hough.experimental");
-  }
-  readMap(
-      n, "hough", h, [](auto& x, auto&& f) { houghFields(x, f); }, path, allowed);
-  const YAML::Node x = n["experimental"];
-  if (x && !x.IsNull())
-    readMap(
-        x, "hough.experimental", &h->experimental,
-        [](auto& c, auto&& f) { houghExperimentalFields(c, f); }, path);
+  readSection(
+      root, "hough", h, [](auto& x, auto&& f) { houghFields(x, f); }, path);
 }
 
-/// `hough:` with its fields, then `experimental:` when `with_experimental` or when any of its
-/// settings is not the default (a section to paste stays short when they are off).
-void writeHough(YAML::Emitter& e, HoughConfig& h, bool with_experimental) {
-  e << YAML::Key << "hough" << YAML::Value << YAML::BeginMap;
-  writeFields(e, h, [](auto& x, auto&& f) { houghFields(x, f); });
-  if (with_experimental || !(h.experimental == HoughExperimental()))
-    writeSection(e, "experimental", h.experimental,
-                 [](auto& x, auto&& f) { houghExperimentalFields(x, f); });
-  e << YAML::EndMap;
+void writeHough(YAML::Emitter& e, HoughConfig& h) {
+  writeSection(e, "hough", h, [](auto& x, auto&& f) { houghFields(x, f); });
 }
 
 /// `samples` of the map `n`; `prefix` names it in errors.
@@ -460,7 +413,7 @@ std::string modelCardPerceptionYaml(int samples, const HoughConfig& hough) {
   e.SetDoublePrecision(10);
   e << YAML::BeginMap << YAML::Key << "perception" << YAML::Value << YAML::BeginMap;
   e << YAML::Key << "samples" << YAML::Value << samples;
-  writeHough(e, h, false);
+  writeHough(e, h);
   e << YAML::EndMap << YAML::EndMap;
   return e.c_str();
 }
@@ -471,7 +424,7 @@ std::string perceptionYaml(const PerceptionConfig& config) {
   e.SetDoublePrecision(10);  // 0.05, not 0.050000000000000003
   e << YAML::BeginMap;
   writeFields(e, c, [](auto& x, auto&& f) { perceptionFields(x, f); });
-  writeHough(e, c.hough, true);
+  writeHough(e, c.hough);
   writeSection(e, "segments", c.segments, [](auto& x, auto&& f) { segmentFields(x, f); });
   writeSection(e, "surface_instances", c.surface_instances,
                [](auto& x, auto&& f) { surfaceInstanceFields(x, f); });

@@ -23,11 +23,7 @@ bool sameSetting(const HoughConfig& a, const HoughConfig& b) {
   return a.refinement == b.refinement && a.min_traversals == b.min_traversals &&
          a.gamma == b.gamma && a.bandwidth_m == b.bandwidth_m &&
          a.min_instance_voxels == b.min_instance_voxels && a.min_vote_norm == b.min_vote_norm &&
-         a.outside_tolerance_vox == b.outside_tolerance_vox &&
-         a.experimental.reversed_vote_stop_vox == b.experimental.reversed_vote_stop_vox &&
-         a.experimental.split_below_solidity == b.experimental.split_below_solidity &&
-         (a.experimental.split_below_solidity == 0 ||
-          a.experimental.split_accept_solidity == b.experimental.split_accept_solidity);
+         a.outside_tolerance_vox == b.outside_tolerance_vox;
 }
 
 TuningView tuningView(const ScenePerception& perception, const InstanceFinder& finder,
@@ -84,21 +80,15 @@ std::vector<HoughConfig> houghCandidates(const HoughConfig& current, const Hough
     for (int mu : s.traversals)
       for (double bw : s.bandwidths)
         for (int mv : s.min_voxels)
-          for (double norm : s.min_norms)
-            for (int stop : s.reversed_stops)
-              for (double below : s.split_below)
-                for (double accept : s.split_accept) {
-                  HoughConfig h = first;
-                  h.experimental.reversed_vote_stop_vox = stop;
-                  h.experimental.split_below_solidity = below;
-                  h.experimental.split_accept_solidity = accept;
-                  h.refinement = ref;
-                  h.min_traversals = mu;
-                  h.bandwidth_m = bw;
-                  h.min_instance_voxels = mv;
-                  h.min_vote_norm = norm;
-                  if (!sameSetting(h, first)) out.push_back(h);
-                }
+          for (double norm : s.min_norms) {
+            HoughConfig h = first;
+            h.refinement = ref;
+            h.min_traversals = mu;
+            h.bandwidth_m = bw;
+            h.min_instance_voxels = mv;
+            h.min_vote_norm = norm;
+            if (!sameSetting(h, first)) out.push_back(h);
+          }
   return out;
 }
 
@@ -157,21 +147,17 @@ bool betterHoughScore(const HoughScore& a, const HoughScore& b) {
 }
 
 std::string houghScoreHeader() {
-  return "| refinement | mu | bandwidth (m) | min voxels | min vote norm | reversed stop | "
-         "split below / accept | count exact | under | over | mean abs error | voxel "
-         "agreement |\n|---|---|---|---|---|---|---|---|---|---|---|---|";
+  return "| refinement | mu | bandwidth (m) | min voxels | min vote norm | count exact | under | "
+         "over | mean abs error | voxel agreement |\n|---|---|---|---|---|---|---|---|---|---|";
 }
 
 std::string houghScoreRow(const HoughScore& s) {
   std::ostringstream o;
   o << "| " << s.hough.refinement << " | " << s.hough.min_traversals << " | " << std::fixed
     << std::setprecision(3) << s.hough.bandwidth_m << " | " << s.hough.min_instance_voxels << " | "
-    << std::setprecision(1) << s.hough.min_vote_norm << " | "
-    << s.hough.experimental.reversed_vote_stop_vox << " | " << std::setprecision(2)
-    << s.hough.experimental.split_below_solidity << " / "
-    << s.hough.experimental.split_accept_solidity << " | " << std::setprecision(1) << 100 * s.exact
-    << " % | " << 100 * s.under << " % | " << 100 * s.over << " % | " << std::setprecision(2)
-    << s.abs_error << " | " << std::setprecision(3) << s.agreement << " |";
+    << std::setprecision(1) << s.hough.min_vote_norm << " | " << 100 * s.exact << " % | "
+    << 100 * s.under << " % | " << 100 * s.over << " % | " << std::setprecision(2) << s.abs_error
+    << " | " << std::setprecision(3) << s.agreement << " |";
   return o.str();
 }
 

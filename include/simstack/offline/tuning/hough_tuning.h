@@ -39,10 +39,6 @@ struct HoughSweep {
   std::vector<int> refinements = {3, 5, 8, 10}, traversals = {2, 3, 4, 5, 7, 10},
                    min_voxels = {10, 15, 25};
   std::vector<double> bandwidths = {0.04, 0.05, 0.06, 0.07}, min_norms = {0.0, 0.3, 0.6};
-  /// `HoughConfig::experimental` values (dropped variants), off unless asked for: their values
-  /// multiply the other settings.
-  std::vector<int> reversed_stops = {0};
-  std::vector<double> split_below = {0.0}, split_accept = {0.9};
 };
 /// `current` first, then every combination of `sweep` that differs from it (other fields of
 /// `current` kept). Each runs on one thread (the settings run in parallel instead).
