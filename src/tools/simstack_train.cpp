@@ -17,6 +17,7 @@
 #include "progress.h"
 #include "simstack/model/cpu_allocator.h"
 #include "simstack/model/model_integrity.h"
+#include "simstack/offline/dataset/dataset.h"
 #include "simstack/offline/training/cvae_trainer.h"
 #include "simstack/pipeline/scene_perception.h"
 
@@ -75,7 +76,7 @@ void printTrained(const std::string& architecture, const std::string& output,
 struct Options {
   std::vector<std::string> datasets;
   std::string config_path, output;
-  bool resume = false;
+  bool resume = false, allow_held_out = false;
   int threads = 0;
   std::string architecture;
   int64_t steps = 0;
@@ -100,6 +101,9 @@ void addOptions(CLI::App& app, Options& o) {
                  "unless --validate-only")
       ->check(WritablePath);
   app.add_flag("--resume", o.resume, "continue from OUTPUT/checkpoint.pt");
+  app.add_flag("--allow-held-out", o.allow_held_out,
+               "train on piles of a held-out test seed all the same (their figures then measure "
+               "what was trained on)");
   app.add_option("--threads", o.threads, "torch threads (overrides training.threads)")
       ->check(CLI::Range(1, 256));
   app.add_option("--architecture", o.architecture,
@@ -248,6 +252,12 @@ int main(int argc, char** argv) {
           CvaeTrainer::validateModel(o.datasets, o.validate_only, training, o.mesh_dir));
       return 0;
     }
+    if (!o.allow_held_out)
+      for (const std::string& d : o.datasets)
+        if (const uint64_t s = DatasetReader(d, o.mesh_dir).info().seed; isHeldOutSeed(s))
+          throw std::runtime_error(d + " holds held-out piles (seed " + std::to_string(s) +
+                                   ", docs/results.md): train on piles of another seed, or pass "
+                                   "--allow-held-out");
     // A forgotten --resume must not start over in a run's directory (its checkpoint lost).
     if (!o.resume && (std::filesystem::exists(std::filesystem::path(o.output) / "state.yaml") ||
                       std::filesystem::exists(std::filesystem::path(o.output) / "checkpoint.pt")))

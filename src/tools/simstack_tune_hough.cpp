@@ -18,6 +18,7 @@
 #include "simstack/io/staged_output.h"
 #include "simstack/io/yaml_file.h"
 #include "simstack/model/cpu_allocator.h"
+#include "simstack/offline/dataset/dataset.h"
 #include "simstack/offline/tuning/hough_tuning.h"
 
 using namespace simstack;
@@ -131,7 +132,7 @@ int main(int argc, char** argv) {
   std::string output, mesh_dir;
   int views_per_scene = 2, scenes = 0, top = 10;
   uint64_t seed = 7;
-  bool noise = false;
+  bool noise = false, allow_held_out = false;
   HoughSweep sweep;
   CLI::App app{
       "Choose the Hough-voting setting of a model on validation piles (a seed used neither for "
@@ -159,6 +160,9 @@ int main(int argc, char** argv) {
       ->check(FiniteNonNegative);
   app.add_option("--seed", seed, "viewpoint seed")->capture_default_str()->transform(SeedNumber);
   app.add_flag("--noise", noise, "Kinect-like sensor noise in the rendered views");
+  app.add_flag("--allow-held-out", allow_held_out,
+               "tune on piles of a held-out test seed all the same (their figures then measure "
+               "what was tuned on them)");
   addSweepOptions(app, sweep);
   app.add_option("--top", top, "rows of the table")->capture_default_str()->check(FinitePositive);
   readIntegersInDecimal(app);
@@ -168,6 +172,12 @@ int main(int argc, char** argv) {
     std::vector<std::string> inputs = perception.inputFiles();
     inputs.insert(inputs.end(), datasets.begin(), datasets.end());
     requireNotAnInput("--output", output, inputs);
+    if (!allow_held_out)
+      for (const std::string& d : datasets)
+        if (const uint64_t s = DatasetReader(d, mesh_dir).info().seed; isHeldOutSeed(s))
+          throw std::runtime_error(d + " holds held-out piles (seed " + std::to_string(s) +
+                                   ", docs/results.md): tune on validation piles of another "
+                                   "seed, or pass --allow-held-out");
     StagedFile written(output);  // a path that cannot be written fails now, not after the sweep
     const PerceptionConfig pc = perception.config();
     // The model's own setting is the first candidate: a tie keeps it, so the chosen setting is

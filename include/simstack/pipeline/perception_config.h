@@ -96,14 +96,14 @@ RefineOptions refineOptions(const PerceptionConfig& config);
 void validatePerceptionConfig(const PerceptionConfig& config, bool latent = false);
 
 /// Reads a perception config: the pipeline's own fields at the top level (model, symmetries,
-/// ...) and the sections `hough:`, `segments:`, `surface_instances:`, `fitting:`, `table:` and
-/// `workspace:` (absent fields keep their defaults; unknown fields are errors, so that a typo is
-/// not silently ignored). `model_path`, when given, replaces the file's `model`. A relative model
-/// path is taken relative to `base_dir` when given. Then the model's card is read
-/// (applyModelCard), and last the file's own `samples` and `hough:` section, which override the
-/// card's when present (normally they are absent). Throws std::runtime_error naming the file
-/// and the field; values out of range are left to validatePerceptionConfig (`source` names the
-/// file).
+/// ...) and the sections of perceptionConfigSections() (`hough:`, `segments:`,
+/// `surface_instances:`, `crowded:`, `fitting:`, `table:`, `workspace:`); absent fields keep
+/// their defaults, unknown fields are errors, so that a typo is not silently ignored.
+/// `model_path`, when given, replaces the file's `model`. A relative model path is taken
+/// relative to `base_dir` when given. Then the model's card is read (applyModelCard), and last
+/// the file's own `samples` and `hough:` section, which override the card's when present
+/// (normally they are absent). Throws std::runtime_error naming the file and the field; values
+/// out of range are left to validatePerceptionConfig (`source` names the file).
 PerceptionConfig loadPerceptionYaml(const std::string& path, const std::string& base_dir = "",
                                     const std::string& model_path = "");
 

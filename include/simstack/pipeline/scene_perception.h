@@ -149,7 +149,7 @@ class ScenePerception {
     return perceive(std::vector<DepthView>{view});
   }
 
-  /// Perceives a rendered box (12 x 8 x 6 cm) on the table seen from 0.8 m, so that the first
+  /// Perceives a rendered box (12 x 8 x 6 cm) on the table seen from 0.75 m, so that the first
   /// real frame does not pay for the network's first pass, and returns that estimate: a model
   /// that works finds one object there. Takes as long as one frame.
   SceneEstimate warmUp() const;

@@ -46,10 +46,12 @@ struct WorkspaceConfig {
 };
 
 /// Table-frame points of the pile as the grid placement sees them: every `stride`-th pixel's
-/// point between `min_height_m` and `max_height_m` above the table and inside the workspace.
+/// point between `min_height_m` and `max_height_m` above the table and inside the workspace;
+/// `pixels` (when given) gets each point's pixel index (v * width + u).
 std::vector<Vec3> pilePoints(const DepthView& view, const Transform& T_table_camera,
                              const WorkspaceConfig& workspace, double min_height_m,
-                             double max_height_m, int stride = 2);
+                             double max_height_m, int stride = 2,
+                             std::vector<int>* pixels = nullptr);
 
 /// The x/y median of the points (each coordinate's element at size / 2). Requires at least one
 /// point.

@@ -216,8 +216,8 @@ void readSamples(const YAML::Node& n, const std::string& prefix, PerceptionConfi
   }
 }
 
-/// Refuses a top-level key that is neither a field nor a section, naming what it is instead
-/// when it is a section this file no longer holds.
+/// Refuses a top-level key that is neither a field nor a section; a `perception:` or `node:`
+/// section is told where its settings belong.
 void checkTopLevel(const YAML::Node& root, const std::string& path) {
   const std::vector<std::string>& fields = perceptionConfigFields();
   const std::vector<std::string>& sections = perceptionConfigSections();

@@ -525,7 +525,10 @@ int cappedThreads(int threads) {
   return std::min(threads, static_cast<int>(std::max(1u, std::thread::hardware_concurrency())));
 }
 
-/// No latent space: S hypotheses would be S copies of one.
+/// `config` checked against the model it runs with: a tile overlap under half the grid, the
+/// widest tiled grid within the Hough voting's fine cells, the thread count capped; a model
+/// without a latent code draws one sample (S hypotheses would be S copies of one) and refuses
+/// decompose_samples above 1. Throws std::invalid_argument naming the field.
 PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
   // The overlap in whole voxels, as planTiles takes it.
   const double voxel = model.extent_m / model.resolution;

@@ -36,8 +36,9 @@ void WorkspaceConfig::validate() const {
 
 std::vector<Vec3> pilePoints(const DepthView& view, const Transform& T_table_camera,
                              const WorkspaceConfig& workspace, double min_height_m,
-                             double max_height_m, int stride) {
+                             double max_height_m, int stride, std::vector<int>* pixels) {
   std::vector<Vec3> out;
+  if (pixels) pixels->clear();
   for (int v = 0; v < view.depth.height; v += stride)
     for (int u = 0; u < view.depth.width; u += stride) {
       const float d = view.depth.at(u, v);
@@ -45,6 +46,7 @@ std::vector<Vec3> pilePoints(const DepthView& view, const Transform& T_table_cam
       const Vec3 p = T_table_camera * view.camera.backproject(u, v, d);
       if (p.z() < min_height_m || p.z() > max_height_m || !workspace.contains(p)) continue;
       out.push_back(p);
+      if (pixels) pixels->push_back(v * view.depth.width + u);
     }
   return out;
 }

@@ -8,6 +8,7 @@
 #include <mutex>
 #include <sstream>
 #include <stdexcept>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -273,6 +274,11 @@ struct DatasetReader::Impl {
   std::vector<std::shared_ptr<const ObjectShape>> catalogue;
   std::mutex mutex;  // one HDF5 read at a time (the trainer reads from two threads)
 };
+
+bool isHeldOutSeed(uint64_t seed) {
+  static const std::set<uint64_t> held_out{777, 778, 779, 780, 4242, 4246, 5150};
+  return held_out.count(seed) > 0;
+}
 
 DatasetReader::DatasetReader(const std::string& path, const std::string& mesh_dir)
     : impl_(std::make_unique<Impl>()) {

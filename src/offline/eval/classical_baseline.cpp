@@ -1,6 +1,7 @@
 #include "simstack/offline/eval/classical_baseline.h"
 
 #include "simstack/instances/surface_instances.h"
+#include "simstack/pipeline/workspace.h"
 
 namespace simstack {
 
@@ -11,24 +12,16 @@ std::vector<Points3> clusterVisiblePoints(const DepthImage& depth, const Pinhole
   camera.validate();
   if (depth.width != camera.width || depth.height != camera.height)
     throw std::invalid_argument("classical baseline: depth and camera sizes differ");
-  Points3 points;
+  WorkspaceConfig box;
+  if (crop) {  // the x/y box of the grid, any height
+    const Vec3& o = crop->origin_table;
+    box.min_m = {o.x(), o.y(), -WorkspaceConfig::kUnbounded};
+    box.max_m = {o.x() + crop->extent_m(), o.y() + crop->extent_m(), WorkspaceConfig::kUnbounded};
+  }
   std::vector<int> pixel_of_point;
-  const int stride = std::max(1, config.pixel_stride);
-  for (int v = 0; v < depth.height; v += stride)
-    for (int u = 0; u < depth.width; u += stride) {
-      const float d = depth.at(u, v);
-      if (!validDepth(d)) continue;
-      const Vec3 p = T_table_camera * camera.backproject(u, v, d);
-      if (p.z() < config.min_height_m) continue;
-      if (crop) {  // the x/y box of the grid, any height
-        const Vec3 rel = p - crop->origin_table;
-        if (rel.x() < 0 || rel.y() < 0 || rel.x() >= crop->extent_m() ||
-            rel.y() >= crop->extent_m())
-          continue;
-      }
-      points.push_back(p);
-      pixel_of_point.push_back(v * depth.width + u);
-    }
+  const Points3 points =
+      pilePoints(DepthView{depth, camera, T_table_camera}, T_table_camera, box, config.min_height_m,
+                 WorkspaceConfig::kUnbounded, std::max(1, config.pixel_stride), &pixel_of_point);
   std::vector<Points3> clusters;
   if (pixels) pixels->clear();
   for (const std::vector<int>& idx :
