@@ -683,6 +683,9 @@ TEST(GraspRequest, TheSceneMustRestOnTheTableAndThePullStayInBounds) {
   refused(named, "the scene's object 1: semi-axes", false);
   named.ids = {12, 7};
   refused(named, "the scene's object 7: semi-axes", false);
+  GraspRequest twice = request;
+  twice.ids = {7, 7};
+  refused(twice, "the scene's object id 7 appears twice", false);
   GraspRequest many = request;
   many.candidates = 1000;
   many.hypotheses = 3;

@@ -390,6 +390,29 @@ TEST(Conversions, OutputsAreWrittenInTheFrameTheTableIsPlacedIn) {
 
 // A hand-built Object whose surface cloud does not hold what measured_points says, or whose
 // fields do not fit its point_step, is refused rather than read out of bounds.
+TEST(Conversions, CloudsOfNoPointKeepTheirFields) {
+  // An empty table, or an occupancy threshold above every voxel: a valid cloud of 0 points.
+  std_msgs::Header header;
+  header.frame_id = "table";
+  const sensor_msgs::PointCloud2 none = pointCloud(header, {});
+  EXPECT_EQ(none.width, 0u);
+  EXPECT_EQ(none.height, 1u);
+  EXPECT_EQ(none.point_step, 12u);
+  ASSERT_EQ(none.fields.size(), 3u);
+  EXPECT_TRUE(none.data.empty());
+  const Grid3<float> probability(GridSpec::sceneGrid(Vec2(0, 0), 0.32, 8), 0.2f);
+  const sensor_msgs::PointCloud2 free =
+      occupancyCloud(header, probability, 0.5, Transform::Identity());
+  EXPECT_EQ(free.width, 0u);
+  EXPECT_EQ(free.fields.size(), 4u);
+  EXPECT_EQ(free.row_step, 0u);
+  const sensor_msgs::PointCloud2 one = pointCloud(header, {Vec3(1, 2, 3)});
+  ASSERT_EQ(one.data.size(), 12u);
+  float xyz[3];
+  std::memcpy(xyz, one.data.data(), 12);
+  EXPECT_EQ(Vec3(xyz[0], xyz[1], xyz[2]), Vec3(1, 2, 3));
+}
+
 TEST(Conversions, MalformedSurfaceCloudsAreRefused) {
   Object object;
   object.id = 3;

@@ -1,10 +1,10 @@
 #pragma once
 /// @file ros_params.h
-/// Every parameter of the perception node and of the grasp server, read in one place. Each setting is one parameter in
-/// the node's private namespace: the pipeline's (config/perception.yaml: ~model, ~symmetries,
-/// ~hough/bandwidth_m, ...) are parsed by the core's loader, laid over the package's
-/// config/perception.yaml, so a field has one name, one default and one check; the node's own
-/// (config/perception_node.yaml: ~table_frame, ~latch, ...) are read here.
+/// Every parameter of the perception node and of the grasp server, read in one place. Each setting
+/// is one parameter in the node's private namespace: the pipeline's (config/perception.yaml:
+/// ~model, ~symmetries, ~hough/bandwidth_m, ...) are parsed by the core's loader, laid over the
+/// package's config/perception.yaml, so a field has one name, one default and one check; the node's
+/// own (config/perception_node.yaml: ~table_frame, ~latch, ...) are read here.
 
 #include <ros/node_handle.h>
 
@@ -63,8 +63,8 @@ struct GraspServerConfig : GraspSettings {
   void validate() const;
 };
 /// The grasp server's settings from `pnh` (absent ones keep their defaults); throws
-/// std::runtime_error naming an unknown or mistyped parameter, std::invalid_argument for a bad
-/// value.
+/// std::runtime_error naming an unknown parameter (or a mistyped ~objects_topic),
+/// std::invalid_argument for a mistyped or bad grasp setting.
 GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh);
 
 }  // namespace simstack

@@ -253,6 +253,7 @@ sensor_msgs::PointCloud2 pointCloud(const std_msgs::Header& header, const Points
   sensor_msgs::PointCloud2 cloud = emptyCloud(header, points.size(), [](auto& m) {
     m.setPointCloud2Fields(3, "x", 1, kFloat, "y", 1, kFloat, "z", 1, kFloat);
   });
+  if (cloud.data.empty()) return cloud;  // an iterator needs a point to start at
   sensor_msgs::PointCloud2Iterator<float> at(cloud, "x");
   for (const Vec3& p : points)
     putFloats(&at,
@@ -366,6 +367,7 @@ sensor_msgs::PointCloud2 instancesCloud(const std_msgs::Header& header, const Sc
     m.setPointCloud2Fields(5, "x", 1, kFloat, "y", 1, kFloat, "z", 1, kFloat, "label", 1, kFloat,
                            "rgb", 1, kFloat);
   });
+  if (cloud.data.empty()) return cloud;  // an iterator needs a point to start at
   sensor_msgs::PointCloud2Iterator<float> at(cloud, "x");
   for (size_t k = 0; k < est.instances().size(); ++k) {
     const uint32_t id = objectId(ids, k);
@@ -390,6 +392,7 @@ sensor_msgs::PointCloud2 occupancyCloud(const std_msgs::Header& header,
     m.setPointCloud2Fields(4, "x", 1, kFloat, "y", 1, kFloat, "z", 1, kFloat, "probability", 1,
                            kFloat);
   });
+  if (cloud.data.empty()) return cloud;  // an iterator needs a point to start at
   sensor_msgs::PointCloud2Iterator<float> at(cloud, "x");
   for (size_t j = 0; j < kept.size(); ++j) {
     const Vec3i v = g.unravel(kept[j]);

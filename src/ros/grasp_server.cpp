@@ -220,10 +220,16 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
     return false;
   }
   res.status = RankGrasps::Response::BAD_SCENE;  // what an invalid_argument from here is about
-  if (scene->header.frame_id.empty()) {          // the ids and shapes are checked by the core
+  std::vector<uint32_t> ids;
+  for (const Object& o : scene->objects) ids.push_back(o.id);
+  // Before any work: a target chosen by id, or a tf wait, would answer another fault.
+  std::string why = checkIds(ids);
+  if (scene->header.frame_id.empty())
+    why = "it has no header.frame_id: its poses are in no known frame";
+  if (!why.empty()) {
     res.message = (req.scene.objects.empty() ? "the latest scene on " + topic + ": "
                                              : std::string("the request's scene: ")) +
-                  "it has no header.frame_id: its poses are in no known frame";
+                  why;
     return false;
   }
   GraspRequest request;
@@ -238,7 +244,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   // The scenes asked for only (table frame; throws for a bad pose).
   request.scenes = graspScenes(*scene, GraspPolicy::hypothesesFor(req.hypotheses));
   request.target = out->target;
-  for (const Object& o : scene->objects) request.ids.push_back(o.id);
+  request.ids = ids;
   if (req.use_camera_pose) {  // its position only: candidates are what is in sight from it
     const geometry_msgs::Point& p = req.camera_pose.position;
     request.camera_table = out->T_scene_table.inverse() * Vec3(p.x, p.y, p.z);

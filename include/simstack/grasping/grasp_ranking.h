@@ -152,6 +152,9 @@ constexpr size_t kMaxGraspSceneObjects = 255;
 /// Farthest an object of a simulated scene may lie from the table frame's origin (m).
 constexpr double kMaxGraspSceneReachM = 100.0;
 
+/// Empty when no id of `ids` appears twice, else which one does.
+std::string checkIds(const std::vector<uint32_t>& ids);
+
 /// A scene that the grasp simulation accepts: at most kMaxGraspSceneObjects objects, finite
 /// poses with unit rotations within kMaxGraspSceneReachM of the origin, semi-axes in (0, 1] m
 /// and exponents in [1, 200], and `ids` (one per object, when given) unique. Empty string when

@@ -148,18 +148,22 @@ PullOutcome executeGrasp(const PullSimulator& sim, const std::vector<Superquadri
   return sim.pullPerceived(target, *contact, c.approach_table);
 }
 
+std::string checkIds(const std::vector<uint32_t>& ids) {
+  std::set<uint32_t> seen;
+  for (const uint32_t id : ids)
+    if (!seen.insert(id).second)
+      return "object id " + std::to_string(id) + " appears twice: ids must be unique";
+  return {};
+}
+
 std::string checkScene(const std::vector<SuperquadricShape>& scene,
                        const std::vector<uint32_t>& ids) {
   // Each pull simulates every object: a scene of thousands would hold a request for hours.
   if (scene.size() > kMaxGraspSceneObjects)
     return std::to_string(scene.size()) + " objects: at most " +
            std::to_string(kMaxGraspSceneObjects) + " are simulated";
-  if (ids.size() == scene.size()) {
-    std::set<uint32_t> seen;
-    for (const uint32_t id : ids)
-      if (!seen.insert(id).second)
-        return "object id " + std::to_string(id) + " appears twice: ids must be unique";
-  }
+  if (ids.size() == scene.size())
+    if (std::string why = checkIds(ids); !why.empty()) return why;
   for (size_t i = 0; i < scene.size(); ++i) {
     const SuperquadricShape& sq = scene[i];
     const std::string name =

@@ -60,11 +60,11 @@ class DatasetWriter {
   std::unique_ptr<Impl> impl_;
 };
 
-/// Reads a dataset written by DatasetWriter. Reads from several threads take turns.
 /// Whether `seed` generated piles the published figures are measured on (docs/results.md: the
-/// test sets 777-780, the fresh grasp piles 4242, 4246 and 5150).
+/// test sets 777-780 and the fresh draws 4242-4246).
 bool isHeldOutSeed(uint64_t seed);
 
+/// Reads a dataset written by DatasetWriter. Reads from several threads take turns.
 class DatasetReader {
  public:
   /// Opens `path` and checks its layout; mesh scenes need the catalogue the file names
