@@ -158,15 +158,21 @@ namespace {
 
 constexpr int kFloat = sensor_msgs::PointField::FLOAT32;
 
-/// A cloud of `points` points (one row, dense) whose fields `set` declares on the modifier.
-template <class SetFields>
-sensor_msgs::PointCloud2 emptyCloud(const std_msgs::Header& header, size_t points, SetFields set) {
+/// A cloud of `points` points (one row, dense) whose float32 fields `set` declares on the
+/// modifier, x first; `fill` writes them through an iterator at x (putFloats), when there are
+/// any (the iterator needs a point to start at).
+template <class SetFields, class Fill>
+sensor_msgs::PointCloud2 floatCloud(const std_msgs::Header& header, size_t points, SetFields set,
+                                    Fill fill) {
   sensor_msgs::PointCloud2 cloud;
   cloud.header = header;
   cloud.is_dense = true;
   sensor_msgs::PointCloud2Modifier modifier(cloud);
   set(modifier);
   modifier.resize(points);
+  if (points == 0) return cloud;
+  sensor_msgs::PointCloud2Iterator<float> at(cloud, "x");
+  fill(&at);
   return cloud;
 }
 
@@ -250,15 +256,14 @@ simstack::Superquadric superquadricMsg(const SuperquadricShape& sq) {
 }
 
 sensor_msgs::PointCloud2 pointCloud(const std_msgs::Header& header, const Points3& points) {
-  sensor_msgs::PointCloud2 cloud = emptyCloud(header, points.size(), [](auto& m) {
-    m.setPointCloud2Fields(3, "x", 1, kFloat, "y", 1, kFloat, "z", 1, kFloat);
-  });
-  if (cloud.data.empty()) return cloud;  // an iterator needs a point to start at
-  sensor_msgs::PointCloud2Iterator<float> at(cloud, "x");
-  for (const Vec3& p : points)
-    putFloats(&at,
-              {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())});
-  return cloud;
+  return floatCloud(
+      header, points.size(),
+      [](auto& m) { m.setPointCloud2Fields(3, "x", 1, kFloat, "y", 1, kFloat, "z", 1, kFloat); },
+      [&](auto* at) {
+        for (const Vec3& p : points)
+          putFloats(at, {static_cast<float>(p.x()), static_cast<float>(p.y()),
+                         static_cast<float>(p.z())});
+      });
 }
 
 namespace {
@@ -268,7 +273,7 @@ uint32_t objectId(const ObjectIds& ids, size_t k) {
   return ids.empty() ? static_cast<uint32_t>(k) : ids[k];
 }
 
-void checkIds(const ObjectIds& ids, size_t objects) {
+void checkIdCount(const ObjectIds& ids, size_t objects) {
   if (!ids.empty() && ids.size() != objects)
     throw std::invalid_argument(std::to_string(ids.size()) + " object ids for " +
                                 std::to_string(objects) + " objects");
@@ -313,7 +318,7 @@ shape_msgs::Mesh superquadricMesh(const SuperquadricShape& sq) {
 ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& est, int views,
                            int samples, int symmetries, const ObjectIds& ids,
                            const Transform& T_frame_table) {
-  checkIds(ids, est.instances().size());
+  checkIdCount(ids, est.instances().size());
   ObjectArray out;
   out.header = header;
   out.table_pose = tf2::toMsg(est.T_table_camera.inverse());
@@ -360,25 +365,24 @@ ObjectArray objectArrayMsg(const std_msgs::Header& header, const SceneEstimate& 
 
 sensor_msgs::PointCloud2 instancesCloud(const std_msgs::Header& header, const SceneEstimate& est,
                                         const ObjectIds& ids, const Transform& T_frame_table) {
-  checkIds(ids, est.instances().size());
+  checkIdCount(ids, est.instances().size());
   size_t n = 0;
   for (const InstanceEstimate& e : est.instances()) n += e.points.size();
-  sensor_msgs::PointCloud2 cloud = emptyCloud(header, n, [](auto& m) {
+  const auto fields = [](auto& m) {
     m.setPointCloud2Fields(5, "x", 1, kFloat, "y", 1, kFloat, "z", 1, kFloat, "label", 1, kFloat,
                            "rgb", 1, kFloat);
-  });
-  if (cloud.data.empty()) return cloud;  // an iterator needs a point to start at
-  sensor_msgs::PointCloud2Iterator<float> at(cloud, "x");
-  for (size_t k = 0; k < est.instances().size(); ++k) {
-    const uint32_t id = objectId(ids, k);
-    const float rgb = packedColour(colourIndex(id));
-    for (const Vec3& q : est.instances()[k].points) {
-      const Vec3 p = T_frame_table * q;
-      putFloats(&at, {static_cast<float>(p.x()), static_cast<float>(p.y()),
-                      static_cast<float>(p.z()), static_cast<float>(id) + 1.0f, rgb});
+  };
+  return floatCloud(header, n, fields, [&](auto* at) {
+    for (size_t k = 0; k < est.instances().size(); ++k) {
+      const uint32_t id = objectId(ids, k);
+      const float rgb = packedColour(colourIndex(id));
+      for (const Vec3& q : est.instances()[k].points) {
+        const Vec3 p = T_frame_table * q;
+        putFloats(at, {static_cast<float>(p.x()), static_cast<float>(p.y()),
+                       static_cast<float>(p.z()), static_cast<float>(id) + 1.0f, rgb});
+      }
     }
-  }
-  return cloud;
+  });
 }
 
 sensor_msgs::PointCloud2 occupancyCloud(const std_msgs::Header& header,
@@ -388,25 +392,24 @@ sensor_msgs::PointCloud2 occupancyCloud(const std_msgs::Header& header,
   std::vector<int> kept;
   for (int i = 0; i < static_cast<int>(probability.data.size()); ++i)
     if (probability.data[i] >= min_probability) kept.push_back(i);
-  sensor_msgs::PointCloud2 cloud = emptyCloud(header, kept.size(), [](auto& m) {
+  const auto fields = [](auto& m) {
     m.setPointCloud2Fields(4, "x", 1, kFloat, "y", 1, kFloat, "z", 1, kFloat, "probability", 1,
                            kFloat);
+  };
+  return floatCloud(header, kept.size(), fields, [&](auto* at) {
+    for (const int i : kept) {
+      const Vec3i v = g.unravel(i);
+      const Vec3 c = T_frame_table * g.voxelCentre(v.x(), v.y(), v.z());
+      putFloats(at, {static_cast<float>(c.x()), static_cast<float>(c.y()),
+                     static_cast<float>(c.z()), probability.data[i]});
+    }
   });
-  if (cloud.data.empty()) return cloud;  // an iterator needs a point to start at
-  sensor_msgs::PointCloud2Iterator<float> at(cloud, "x");
-  for (size_t j = 0; j < kept.size(); ++j) {
-    const Vec3i v = g.unravel(kept[j]);
-    const Vec3 c = T_frame_table * g.voxelCentre(v.x(), v.y(), v.z());
-    putFloats(&at, {static_cast<float>(c.x()), static_cast<float>(c.y()), static_cast<float>(c.z()),
-                    probability.data[kept[j]]});
-  }
-  return cloud;
 }
 
 visualization_msgs::MarkerArray objectMarkers(const std_msgs::Header& header,
                                               const SceneEstimate& est, const ObjectIds& ids,
                                               const Transform& T_frame_table) {
-  checkIds(ids, est.instances().size());
+  checkIdCount(ids, est.instances().size());
   visualization_msgs::MarkerArray out;
   visualization_msgs::Marker clear;
   clear.header = header;

@@ -252,12 +252,7 @@ int main(int argc, char** argv) {
           CvaeTrainer::validateModel(o.datasets, o.validate_only, training, o.mesh_dir));
       return 0;
     }
-    if (!o.allow_held_out)
-      for (const std::string& d : o.datasets)
-        if (const uint64_t s = DatasetReader(d, o.mesh_dir).info().seed; isHeldOutSeed(s))
-          throw std::runtime_error(d + " holds held-out piles (seed " + std::to_string(s) +
-                                   ", docs/results.md): train on piles of another seed, or pass "
-                                   "--allow-held-out");
+    if (!o.allow_held_out) refuseHeldOutDatasets(o.datasets, "train on");
     // A forgotten --resume must not start over in a run's directory (its checkpoint lost).
     if (!o.resume && (std::filesystem::exists(std::filesystem::path(o.output) / "state.yaml") ||
                       std::filesystem::exists(std::filesystem::path(o.output) / "checkpoint.pt")))

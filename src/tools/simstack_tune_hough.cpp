@@ -172,12 +172,7 @@ int main(int argc, char** argv) {
     std::vector<std::string> inputs = perception.inputFiles();
     inputs.insert(inputs.end(), datasets.begin(), datasets.end());
     requireNotAnInput("--output", output, inputs);
-    if (!allow_held_out)
-      for (const std::string& d : datasets)
-        if (const uint64_t s = DatasetReader(d, mesh_dir).info().seed; isHeldOutSeed(s))
-          throw std::runtime_error(d + " holds held-out piles (seed " + std::to_string(s) +
-                                   ", docs/results.md): tune on validation piles of another "
-                                   "seed, or pass --allow-held-out");
+    if (!allow_held_out) refuseHeldOutDatasets(datasets, "tune on validation");
     StagedFile written(output);  // a path that cannot be written fails now, not after the sweep
     const PerceptionConfig pc = perception.config();
     // The model's own setting is the first candidate: a tie keeps it, so the chosen setting is

@@ -275,9 +275,22 @@ struct DatasetReader::Impl {
   std::mutex mutex;  // one HDF5 read at a time (the trainer reads from two threads)
 };
 
-bool isHeldOutSeed(uint64_t seed) {
+void refuseHeldOutDatasets(const std::vector<std::string>& paths, const std::string& use) {
   static const std::set<uint64_t> held_out{777, 778, 779, 780, 4242, 4243, 4244, 4245, 4246};
-  return held_out.count(seed) > 0;
+  for (const std::string& path : paths) {
+    uint64_t seed = 0;
+    try {
+      H5::Exception::dontPrint();
+      const H5::H5File file(path, H5F_ACC_RDONLY);
+      seed = readAttr<uint64_t>(file.openGroup("/"), "seed");
+    } catch (const H5::Exception&) {
+      continue;
+    }
+    if (held_out.count(seed))
+      throw std::runtime_error(path + " holds held-out piles (seed " + std::to_string(seed) +
+                               ", docs/results.md): " + use +
+                               " piles of another seed, or pass --allow-held-out");
+  }
 }
 
 DatasetReader::DatasetReader(const std::string& path, const std::string& mesh_dir)

@@ -60,9 +60,11 @@ class DatasetWriter {
   std::unique_ptr<Impl> impl_;
 };
 
-/// Whether `seed` generated piles the published figures are measured on (docs/results.md: the
-/// test sets 777-780 and the fresh draws 4242-4246).
-bool isHeldOutSeed(uint64_t seed);
+/// Throws std::runtime_error naming the first of `paths` whose piles the published figures are
+/// measured on (generated with seed 777-780 or 4242-4246, docs/results.md), saying to `use`
+/// ("train on") piles of another seed or to pass --allow-held-out. Reads the seed alone; a
+/// file that is no dataset is left to DatasetReader.
+void refuseHeldOutDatasets(const std::vector<std::string>& paths, const std::string& use);
 
 /// Reads a dataset written by DatasetWriter. Reads from several threads take turns.
 class DatasetReader {
