@@ -675,6 +675,10 @@ TEST(GraspRequest, TheSceneMustRestOnTheTableAndThePullStayInBounds) {
   refused(fast, "pull_speed_mps must lie in (0, 2] m/s, not nan");
   standoff.pregrasp_m = -0.1;
   refused(standoff, "pregrasp_distance_m must lie in [0, 1] m");
+  GraspRequest slow = request;  // each bound kept, together over a minute: mm/s taken for m/s
+  slow.pull_distance_m = 0.5;
+  slow.pull_speed_mps = 0.005;
+  refused(slow, "the pull of 0.5 m at 0.005 m/s takes over 60 s");
   target.target = 2;
   refused(target, "target 2 is not an object of the 2-object scene");
   // A bad shape is named by its object's id where the request gives the ids.

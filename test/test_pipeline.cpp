@@ -880,6 +880,22 @@ TEST(ScenePerception, ShippedModelsProveThemselvesAndADifferentSelfTestIsRefused
   std::filesystem::remove_all(dir);
 }
 
+TEST(ScenePerception, TheWarmUpBoxStandsInsideABoundedWorkspace) {
+  // A workcell whose workspace leaves the table's origin out still warms up on one object.
+  PerceptionConfig config;
+  config.model_path = SIMSTACK_SOURCE_DIR "/models/simstack_r32_fc.pt";
+  config.samples = 1;
+  config.symmetries = 1;
+  config.workspace.min_m = {0.5, -WorkspaceConfig::kUnbounded, -WorkspaceConfig::kUnbounded};
+  config.workspace.max_m = {0.9, -0.3, WorkspaceConfig::kUnbounded};
+  const SceneEstimate estimate = ScenePerception(config).warmUp();
+  ASSERT_EQ(estimate.instances().size(), 1u);
+  // The box stands at (0.7, -0.4): in the middle of the bounded x, 10 cm in from y's bound.
+  const Vec3 c = estimate.instances()[0].superquadric.T_table_object.translation();
+  EXPECT_TRUE(config.workspace.contains(c)) << c.transpose();
+  EXPECT_LT((c.head<2>() - Eigen::Vector2d(0.7, -0.4)).norm(), 0.05) << c.transpose();
+}
+
 TEST(ScenePerception, EveryShippedModelSeesNothingOnAnEmptyTable) {
   // Generated piles always hold objects; a bare table must still give no object in any
   // hypothesis, seen from the side, obliquely or from above. The grid goes on the table the

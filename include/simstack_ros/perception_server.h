@@ -172,8 +172,9 @@ class PerceptionServer {
   std::mutex save_mutex_;
   StageTimings last_timings_;
   std::shared_ptr<const SceneEstimate> last_scene_;
-  ViewHistory views_;    ///< accumulated views (accumulate_views)
-  Image<uint8_t> mask_;  ///< the last ~mask received (empty: none)
+  ros::Time last_scene_stamp_;  ///< its depth image's stamp
+  ViewHistory views_;           ///< accumulated views (accumulate_views)
+  Image<uint8_t> mask_;         ///< the last ~mask received (empty: none)
   bool reset_requested_ = false;
   /// The settings in effect from the next frame on, as judged when requested (under mutex_);
   /// settings_changed_ until the worker has applied them.

@@ -240,9 +240,12 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   request.pregrasp_m = asWritten(req.pregrasp_distance_m);
   checkGraspBounds(request, config_.policy);  // before any work (throws; caught by serve())
   out->T_scene_table = tableInFrame(*scene);  // throws for a bad pose (caught by serve())
-  if (!placeRequest(req, *scene, res, out)) return false;
-  // The scenes asked for only (table frame; throws for a bad pose).
+  // The scenes asked for only (table frame; throws for a bad pose). The scene is checked before
+  // a target is looked for in it: a malformed one is BAD_SCENE, not an unknown target.
   request.scenes = graspScenes(*scene, GraspPolicy::hypothesesFor(req.hypotheses));
+  if (why = checkScene(request.scenes[0], ids); !why.empty())
+    throw std::invalid_argument("the scene's " + why);
+  if (!placeRequest(req, *scene, res, out)) return false;
   request.target = out->target;
   request.ids = ids;
   if (req.use_camera_pose) {  // its position only: candidates are what is in sight from it
@@ -367,7 +370,9 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
       clearMarkers();
       return;
     }
-    RankingProgress progress;
+    // A service call has no feedback, but stops at shutdown too (CANCELLED), instead of holding
+    // the node's exit for the rest of its pulls.
+    RankingProgress progress = [](int, int, const RankedGrasp*) { return ros::ok(); };
     if (feedback)
       progress = [&](int done, int total, const RankedGrasp* best) {
         std::optional<Grasp> msg;

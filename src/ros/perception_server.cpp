@@ -550,6 +550,7 @@ void PerceptionServer::process(const Frame& frame) {
   failing_ = false;
   last_timings_ = estimate.timings;
   last_scene_ = std::make_shared<const SceneEstimate>(std::move(estimate));
+  last_scene_stamp_ = frame.image->header.stamp;
 }
 
 void PerceptionServer::publish(const Frame& frame, const DepthView& view,
@@ -561,6 +562,16 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
   std_msgs::Header camera_header = frame.image->header;  // of the labels image and the table's tf
   camera_header.frame_id = tf2Frame(camera_header.frame_id);
   if (estimate.table_estimated) {
+    // Another broadcaster's table of this name (a URDF's, say) would give the frame two parents,
+    // between which tf's lookups jump.
+    std::string parent;
+    if (tf_buffer_._getParent(node_.table_frame, ros::Time(0), parent) &&
+        tf2Frame(parent) != camera_header.frame_id)
+      ROS_WARN_THROTTLE(10.0,
+                        "simstack perception: tf holds '%s' under '%s' too, while estimate_table "
+                        "broadcasts it under the camera '%s': tf has two parents for it; give "
+                        "~table_frame another name (replay.launch's estimated_frame)",
+                        node_.table_frame.c_str(), parent.c_str(), camera_header.frame_id.c_str());
     geometry_msgs::TransformStamped t = tf2::eigenToTransform(estimate.T_table_camera.inverse());
     t.header.stamp = header.stamp;
     t.header.frame_id = camera_header.frame_id;
@@ -638,10 +649,13 @@ bool PerceptionServer::saveOctomap(SaveOctomap::Request& req, SaveOctomap::Respo
   if (!res.message.empty()) return true;
   std::shared_ptr<const SceneEstimate> scene;
   double occupancy_min;
+  std_msgs::Header header;  // the grid's frame: the table's
   {
     std::lock_guard<std::mutex> lock(mutex_);
     scene = last_scene_;
     occupancy_min = node_.occupancy_min;
+    header.frame_id = node_.table_frame;
+    header.stamp = last_scene_stamp_;
   }
   if (!scene) {
     res.message = "no scene perceived yet";
@@ -658,8 +672,10 @@ bool PerceptionServer::saveOctomap(SaveOctomap::Request& req, SaveOctomap::Respo
     }
     writeOccupancyOctomap(target.string(), scene->occupancy_probability, occupancy_min);
     res.path = fs::absolute(target).string();
+    res.header = header;
     res.success = true;
-    res.message = "wrote " + res.path;
+    res.message =
+        "wrote " + res.path + " (coordinates in the table frame '" + header.frame_id + "')";
   } catch (const std::exception& e) {
     res.message = e.what();
   }

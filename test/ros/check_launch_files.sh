@@ -74,6 +74,26 @@ expect "grasps.launch accumulate_views:=true reaches the node" 'perception/accum
   dump "$launch/grasps.launch" accumulate_views:=true
 expect "grasps.launch output_frame:=base_link reaches the node" 'perception/output_frame: base_link$' \
   dump "$launch/grasps.launch" output_frame:=base_link
+# An argument left empty keeps the node config's field; one given overrides it.
+sed -e 's#^output_frame: .*#output_frame: base_link#' -e 's#^table_frame: .*#table_frame: bench#' \
+  -e 's#^estimate_table: .*#estimate_table: true#' "$source_dir/config/perception_node.yaml" \
+  > "$ROS_HOME/node.yaml"
+expect "perception.launch node_config:=N: N's output_frame" 'perception/output_frame: base_link$' \
+  dump "$launch/perception.launch" node_config:="$ROS_HOME/node.yaml"
+expect "perception.launch node_config:=N: N's table_frame" 'perception/table_frame: bench$' \
+  dump "$launch/perception.launch" node_config:="$ROS_HOME/node.yaml"
+expect "perception.launch node_config:=N: N's estimate_table" 'perception/estimate_table: true$' \
+  dump "$launch/perception.launch" node_config:="$ROS_HOME/node.yaml"
+expect "perception.launch node_config:=N table_frame:=T: T" 'perception/table_frame: T$' \
+  dump "$launch/perception.launch" node_config:="$ROS_HOME/node.yaml" table_frame:=T
+expect "grasps.launch node_config:=N reaches the perception" 'perception/output_frame: base_link$' \
+  dump "$launch/grasps.launch" node_config:="$ROS_HOME/node.yaml"
+expect "replay.launch node_config:=N: N's output_frame" 'perception/output_frame: base_link$' \
+  dump "$launch/replay.launch" node_config:="$ROS_HOME/node.yaml"
+expect "replay.launch: the bag's table frame over N's" 'perception/table_frame: table$' \
+  dump "$launch/replay.launch" node_config:="$ROS_HOME/node.yaml"
+expect "replay.launch accumulate_views:=true reaches the node" 'perception/accumulate_views: true$' \
+  dump "$launch/replay.launch" accumulate_views:=true
 expect "grasps.launch manager:=driver loads into it" 'PerceptionNodelet driver ' \
   roslaunch --args /camera/perception "$launch/grasps.launch" manager:=driver
 # One name per setting: no parameter of the perception node lies in a section named after the

@@ -91,6 +91,8 @@ class GraspService(unittest.TestCase):
         self.expect_rejected(request(pull_distance_m=0.0), "pull_distance_m", bad_request)
         self.expect_rejected(request(pull_distance_m=-0.1), "pull_distance_m", bad_request)
         self.expect_rejected(request(pull_speed_mps=float("nan")), "pull_speed_mps", bad_request)
+        self.expect_rejected(request(pull_distance_m=0.5, pull_speed_mps=0.005), "over 60 s",
+                             bad_request)
 
         def nan_axis(sq):
             sq.semi_axes.x = float("nan")
@@ -118,6 +120,11 @@ class GraspService(unittest.TestCase):
                               (infinite_exponent, "exponents"), (long_quaternion, "quaternion"),
                               (nan_position, "not finite")):
             self.expect_rejected(request(scene=self.scene_with(change)), words, bad_scene)
+        # A malformed scene is the scene's fault also when the target is chosen by a point.
+        pointed = request(scene=self.scene_with(nan_axis))
+        pointed.target_point.header.frame_id = self.scene.header.frame_id
+        pointed.target_point.point.z = 0.05
+        self.expect_rejected(pointed, "semi-axes", bad_scene)
         eye = request(use_camera_pose=True)
         eye.camera_pose.position.x = float("nan")
         self.expect_rejected(eye, "camera_pose.position is not finite", bad_request)

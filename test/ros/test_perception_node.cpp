@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <octomap/OcTree.h>
 #include <ros/ros.h>
+#include <rosgraph_msgs/Log.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/image_encodings.h>
@@ -19,6 +20,7 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -459,6 +461,11 @@ TEST_F(PerceptionNodeTest, ResetAndSaveOctomap) {
     ASSERT_TRUE(ros::service::call("/camera/perception/save_octomap", save));
     ASSERT_TRUE(save.response.success) << save.response.message;
     EXPECT_EQ(save.response.path, (std::filesystem::path(dir) / name).string());
+    // The map's frame is the table's, whatever the outputs' frame.
+    std::string table_frame;
+    ASSERT_TRUE(nh_.getParam("/camera/perception/table_frame", table_frame));
+    EXPECT_EQ(save.response.header.frame_id, table_frame);
+    EXPECT_FALSE(save.response.header.stamp.isZero());
   }
   std::unique_ptr<octomap::AbstractOcTree> read(
       octomap::AbstractOcTree::read((std::filesystem::path(dir) / "scene.ot").string()));
@@ -562,6 +569,24 @@ TEST_F(PerceptionNodeTest, AnEstimatedTableIsUsedBroadcastAndRefusedWhenThereIsN
   ASSERT_TRUE(out);
   EXPECT_TRUE(estimatedFor(out->header.stamp, 60.0))
       << "stopped publishing after a tableless frame";
+  // Another broadcaster's parent for the estimated table: the node says tf has two.
+  std::atomic<bool> warned{false};
+  ros::Subscriber rosout = nh_.subscribe<rosgraph_msgs::Log>(
+      "/rosout", 100, [&](const rosgraph_msgs::Log::ConstPtr& log) {
+        if (log->msg.find("tf holds 'table_estimated' under 'world' too") != std::string::npos)
+          warned = true;
+      });
+  tf2_ros::TransformBroadcaster other;
+  for (int i = 0; i < 40 && !warned; ++i) {
+    geometry_msgs::TransformStamped t;
+    t.header.stamp = ros::Time::now();
+    t.header.frame_id = "world";
+    t.child_frame_id = "table_estimated";
+    t.transform.rotation.w = 1.0;
+    other.sendTransform(t);
+    sendDepth(render(knownPile()), 5.0);
+  }
+  EXPECT_TRUE(warned) << "no warning about the estimated table's second parent";
 }
 
 TEST_F(PerceptionNodeTest, PosedViewsAccumulateUntilReset) {

@@ -30,6 +30,8 @@ struct PullConfig {
   /// settles first, for at most this long, and every run starts from the settled state.
   double presettle_s = 1.0;
   PhysicsConfig physics = pullPhysics();
+  /// Longest pull (distance / speed, simulated s): beyond it a request mixes up its units.
+  static constexpr double kMaxPullS = 60.0;
 
   /// The generator's physics (friction 1, rolling friction 0.01) with sleeping and cached
   /// friction directions on (and Bullet's split impulse, as everywhere): objects at rest stay put

@@ -62,6 +62,10 @@ void checkGraspBounds(const GraspRequest& request, const GraspPolicy& policy) {
   if (!positiveFinite(request.pull_speed_mps) || request.pull_speed_mps > policy.max_pull_speed_mps)
     throw BadGraspRequest("pull_speed_mps must lie in (0, " + number(policy.max_pull_speed_mps) +
                           "] m/s, not " + number(request.pull_speed_mps) + " (e.g. 0.2)");
+  if (request.pull_distance_m / request.pull_speed_mps > PullConfig::kMaxPullS)
+    throw BadGraspRequest("the pull of " + number(request.pull_distance_m) + " m at " +
+                          number(request.pull_speed_mps) + " m/s takes over " +
+                          number(PullConfig::kMaxPullS) + " s: are the units m and m/s?");
   if (!std::isfinite(request.pregrasp_m) || request.pregrasp_m < 0.0 ||
       request.pregrasp_m > policy.max_pregrasp_m)
     throw BadGraspRequest("pregrasp_distance_m must lie in [0, " + number(policy.max_pregrasp_m) +

@@ -45,9 +45,9 @@ void check(const PullConfig& c) {
   if (!std::isfinite(c.presettle_s) || c.presettle_s < 0.0 || c.presettle_s > 60.0)
     throw std::invalid_argument("presettle_s must lie in [0, 60] s");
   if (c.break_steps < 1) throw std::invalid_argument("break_steps must be >= 1");
-  // A pull of more than a minute of simulated time is a unit mistake, not a grasp.
-  if (c.pull_distance_m / c.pull_speed_mps > 60.0)
-    throw std::invalid_argument("pull_distance_m / pull_speed_mps is over 60 s");
+  if (c.pull_distance_m / c.pull_speed_mps > PullConfig::kMaxPullS)
+    throw std::invalid_argument("pull_distance_m / pull_speed_mps is over " +
+                                std::to_string(static_cast<int>(PullConfig::kMaxPullS)) + " s");
 }
 
 /// The order the objects enter the physics in: from the bottom up (as a pile is built, which

@@ -871,13 +871,26 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
 }
 
 SceneEstimate ScenePerception::warmUp() const {
+  // The box stands at the table's origin, or inside the workspace box where that leaves the
+  // origin out (the middle of a bounded side, 10 cm in from a one-sided bound).
+  const WorkspaceConfig w = config().workspace;
+  Vec3 at(0.0, 0.0, 0.03);
+  for (int i = 0; i < 2; ++i) {
+    const bool lo = std::isfinite(w.min_m[i]), hi = std::isfinite(w.max_m[i]);
+    if (lo && hi && !(w.min_m[i] <= 0.0 && 0.0 <= w.max_m[i]))
+      at[i] = 0.5 * (w.min_m[i] + w.max_m[i]);
+    else if (lo && !hi && w.min_m[i] > 0.0)
+      at[i] = w.min_m[i] + 0.1;
+    else if (hi && !lo && w.max_m[i] < 0.0)
+      at[i] = w.max_m[i] - 0.1;
+  }
   SuperquadricShape box;
   box.scale_m = Vec3(0.06, 0.04, 0.03);
   box.exponents = Vec3(10.0, 10.0, 10.0);
-  box.T_table_object.translation() = Vec3(0.0, 0.0, 0.03);
+  box.T_table_object.translation() = at;
   const DepthRenderer renderer(Scene::fromSuperquadrics({box}));
   DepthView view;
-  view.T_table_camera = lookAt(Vec3(0.45, -0.3, 0.55), Vec3(0.0, 0.0, 0.03));
+  view.T_table_camera = lookAt(at + Vec3(0.45, -0.3, 0.52), at);
   view.depth = renderer.render(view.camera, *view.T_table_camera).depth;
   return perceive(view);
 }
