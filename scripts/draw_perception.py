@@ -61,8 +61,15 @@ def main():
     if not complete:
         sys.exit(f"draw_perception: {args.bag} holds no frame with depth, camera_info, objects, markers and labels")
     frame = frames[complete[-1]]
+    when = f"{args.bag}, the frame stamped {complete[-1] / 1e9:.3f} s"
     depth = image_array(frame["depth"]) * (0.001 if frame["depth"].encoding != "32FC1" else 1.0)
+    depth[~np.isfinite(depth)] = 0.0
     labels = image_array(frame["labels"]).astype(int)
+    if not (depth > 0).any():
+        sys.exit(f"draw_perception: {when}: its depth image holds no valid depth")
+    if labels.shape != depth.shape:
+        sys.exit(f"draw_perception: {when}: its labels image is {labels.shape[1]}x{labels.shape[0]}, "
+                 f"its depth image {depth.shape[1]}x{depth.shape[0]}")
     colours = {m.id + 1: (m.color.r, m.color.g, m.color.b) for m in frame["markers"].markers
                if m.ns == "superquadrics"}
     grey = np.where(depth > 0, 1.0 - np.clip((depth - depth[depth > 0].min()) / (np.ptp(depth[depth > 0]) + 1e-6), 0, 1) * 0.7, 0)

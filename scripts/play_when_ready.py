@@ -15,6 +15,8 @@ import sys
 import threading
 import time
 
+import rosbag
+import rosgraph
 import rospy
 from std_msgs.msg import Bool
 
@@ -34,10 +36,21 @@ def main():
         parser.error("give the rosbag play arguments after --")
     if not (math.isfinite(args.timeout) and args.timeout > 0):
         parser.error("--timeout %s: give a number of seconds above 0" % args.timeout)
-    # rosbag play reports a missing bag and exits 0: refuse it here, before any wait.
+    # rosbag play reports a missing or broken bag and exits 0: refuse it here, before any wait.
     for bag in (a for a in play_args if a.endswith(".bag") and not a.startswith("-")):
         if not os.path.isfile(bag) or not os.access(bag, os.R_OK):
             sys.exit("play_when_ready: no readable bag file %s" % bag)
+        try:
+            rosbag.Bag(bag, "r", skip_index=True).close()  # its version line and header only
+        except (rosbag.ROSBagException, OSError, ValueError) as e:
+            sys.exit("play_when_ready: %s is not a bag rosbag can read: %s" % (bag, e))
+    deadline = time.time() + args.timeout
+    # rospy.init_node retries a missing master for ever: the deadline holds for it too.
+    while not rosgraph.is_master_online():
+        if time.time() > deadline:
+            sys.exit("play_when_ready: no ROS master at %s within %g s (start roscore, or run "
+                     "this from a launch file)" % (rosgraph.get_master_uri(), args.timeout))
+        time.sleep(0.2)
     rospy.init_node("play_when_ready", anonymous=True, disable_signals=True)
     rospy.loginfo("play_when_ready: waiting for %s", args.ready)
     # One subscription and one deadline: a latched false (a perception that refused its model)
@@ -50,7 +63,6 @@ def main():
             ready.set()
 
     sub = rospy.Subscriber(args.ready, Bool, on_ready)
-    deadline = time.time() + args.timeout
     while not ready.wait(0.1):
         if time.time() > deadline or rospy.is_shutdown():
             sys.exit("play_when_ready: %s %s within %g s (did the perception start? its log says "

@@ -69,9 +69,8 @@ def colours_of(names):
     return out
 
 
-def plot_set(paths, sets, out_dir):
+def plot_set(paths, sets, out_dir, name):
     results = sets[0]
-    name = os.path.splitext(os.path.basename(paths[0]))[0]
     methods = methods_of(paths, sets)
     colours = colours_of(list(methods))
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
@@ -130,7 +129,7 @@ def main():
                 print(f"plot_evaluation: {path}: a --real report (no rendered views to bin), skipped")
                 continue
             methods = results.get("methods")
-            if not isinstance(methods, dict) or not all(
+            if not isinstance(methods, dict) or not methods or not all(
                     isinstance(m, dict) and "by_visible_ratio" in m for m in methods.values()):
                 print(f"plot_evaluation: {path}: not a simstack_evaluate result on rendered views, skipped")
                 continue
@@ -145,11 +144,24 @@ def main():
         paths, sets = groups.setdefault(key, ([], []))
         paths.append(path)
         sets.append(results)
+    names = set()
     for paths, sets in groups.values():
+        # Named after the first file; two test sets whose files share a name (runs/a/synthetic.json,
+        # runs/b/synthetic.json) are told apart by a number, not drawn over each other.
+        stem = os.path.splitext(os.path.basename(paths[0]))[0]
+        name, k = stem, 2
+        while name in names:
+            name, k = f"{stem}_{k}", k + 1
+        if name != stem:
+            print(f"plot_evaluation: {paths[0]}: another test set's figure is {stem}.png; "
+                  f"this one is {name}.png")
+        names.add(name)
         try:
-            print(plot_set(paths, sets, args.output))
+            print(plot_set(paths, sets, args.output, name))
         except KeyError as e:
             sys.exit(f"plot_evaluation: {', '.join(paths)}: missing {e}")
+        except (TypeError, ValueError, AttributeError) as e:
+            sys.exit(f"plot_evaluation: {', '.join(paths)}: a value of the wrong kind ({e})")
 
 
 if __name__ == "__main__":

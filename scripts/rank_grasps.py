@@ -127,12 +127,21 @@ def main():
     for name in ("candidates", "hypotheses", "rows"):
         if not 0 <= getattr(args, name) <= 2**32 - 1:
             parser.error("--%s must lie in [0, 4294967295], not %d" % (name, getattr(args, name)))
-    if not args.timeout > 0:
-        parser.error("--timeout must be > 0 s")
-    if args.result_timeout is not None and not args.result_timeout > 0:
-        parser.error("--result-timeout must be > 0 s")
-    if args.max_age is not None and not args.max_age >= 0:
-        parser.error("--max-age must be >= 0 s")
+    # Checked here, before the master is waited for: a wrong number is said at once. The bounds
+    # are the server's (its answer names them); finite and positive is what any request needs.
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        parser.error("--timeout must be a finite number of seconds > 0")
+    if args.result_timeout is not None and not (math.isfinite(args.result_timeout)
+                                                and args.result_timeout > 0):
+        parser.error("--result-timeout must be a finite number of seconds > 0")
+    if args.max_age is not None and not (math.isfinite(args.max_age) and args.max_age >= 0):
+        parser.error("--max-age must be a finite number of seconds >= 0")
+    for name in ("pull_distance", "pull_speed"):
+        if not (math.isfinite(getattr(args, name)) and getattr(args, name) > 0):
+            parser.error("--%s must be a finite number > 0, not %s"
+                         % (name.replace("_", "-"), getattr(args, name)))
+    if not (math.isfinite(args.pregrasp) and args.pregrasp >= 0):
+        parser.error("--pregrasp must be a finite number of metres >= 0, not %s" % args.pregrasp)
     if args.json:  # fail before the ranking, not after it
         if os.path.isdir(args.json):
             parser.error("--json %s is a directory: name a file" % args.json)

@@ -403,6 +403,16 @@ expect "make_bag --depth with --seed" "excludes" "$bin/simstack_make_bag" --dept
   --seed 3 --output "$dir/x.bag"
 expect "make_bag --depth without a camera" "--intrinsics is needed" "$bin/simstack_make_bag" \
   --depth "$good" --output "$dir/x.bag"
+# An --output naming its own depth or pose file: refused, the input left whole.
+cp "$good" "$dir/own.png"
+cp "$view.yaml" "$dir/own.yaml"
+sum_before=$(md5sum "$dir/own.png" "$dir/own.yaml")
+expect "make_bag --output its --depth" "which it would replace" "$bin/simstack_make_bag" \
+  --depth "$dir/own.png" --table-pose "$dir/own.yaml" --output "$dir/own.png"
+expect "make_bag --output its --table-pose" "which it would replace" "$bin/simstack_make_bag" \
+  --depth "$dir/own.png" --table-pose "$dir/own.yaml" --output "$dir/own.yaml"
+[ "$(md5sum "$dir/own.png" "$dir/own.yaml")" = "$sum_before" ] ||
+  { echo "FAIL make_bag changed its input"; fail=1; }
 # An existing device, pipe or socket is not replaced by an output file.
 mkfifo "$dir/pipe"
 expect "generate --output naming a pipe" "not a regular file" "$bin/simstack_generate" \

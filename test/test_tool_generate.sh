@@ -122,6 +122,10 @@ grep -q "noise" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
 if "$tool" --scenes 1 --seed 3 --resolution 16 --output "$dir/x.h5" --views 1 --noise --sensor kinect2 2> "$dir/err.txt"; then
   echo "accepted --sensor kinect2"; exit 1; fi
 grep -q "kinect2" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
+# Objects smaller than a voxel would leave their ground truth empty: refused, naming the voxel.
+if "$tool" --scenes 1 --seed 3 --resolution 4 --sizes 0.05:0.08 --output "$dir/x.h5" 2> "$dir/err.txt"; then
+  echo "accepted objects smaller than a voxel"; exit 1; fi
+grep -q "below one voxel" "$dir/err.txt" || { cat "$dir/err.txt"; exit 1; }
 # The views' options do nothing without views: refused, not ignored.
 for option in --noise --pictures "--views-dir $dir/vd"; do
   # shellcheck disable=SC2086  # the option and its value are two words

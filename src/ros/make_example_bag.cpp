@@ -213,6 +213,7 @@ int main(int argc, char** argv) {
     return 105;  // as CLI11's refusals of an option's value
   }
   try {
+    requireNotAnInput("--output", output, {depth_path, pose_path});
     StagedFile staged(output);  // an earlier bag stays whole until this one is
     rosbag::Bag bag(staged.path(), rosbag::bagmode::Write);
     bag.setCompression(rosbag::compression::BZ2);

@@ -37,7 +37,8 @@ PerceptionOptions::PerceptionOptions(CLI::App& app, Which which) {
       ->expected(1, which.several_models ? 1 << 16 : 1);
   samples_opt_ =
       app.add_option("--samples", samples_, "latent samples S (default: the model card's)")
-          ->check(FinitePositive);
+          ->check(FinitePositive)
+          ->check(CLI::Range(1, kMaxSamples));
   symmetries_opt_ =
       app.add_option("--symmetries", symmetries_,
                      "network passes averaged: the view as seen, turned by a half (2) or "

@@ -355,6 +355,15 @@ class GraspService(unittest.TestCase):
         code, out = self.script("--point", "0,0,0.05")
         self.assertNotEqual(code, 0, out)
         self.assertIn("--point needs --point-frame", out)
+        # A bad number is said at once, before the master is looked for (here none is there).
+        for option, value in (("--pull-distance", "nan"), ("--timeout", "inf"),
+                              ("--pregrasp", "-0.1")):
+            path = os.path.join(rospkg.RosPack().get_path("simstack"), "scripts", "rank_grasps.py")
+            done = subprocess.run([path, "--target", "top", option, value], capture_output=True,
+                                  text=True, timeout=20,
+                                  env=dict(os.environ, ROS_MASTER_URI="http://localhost:1"))
+            self.assertEqual(done.returncode, 2, done.stdout + done.stderr)
+            self.assertIn(option, done.stderr)
 
     def test_9_the_script_refuses_a_stale_latched_scene(self):
         # A latched scene arrives at once however old it is; the bag's clock reads 1 s or more.

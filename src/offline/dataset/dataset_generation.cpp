@@ -85,6 +85,15 @@ std::unique_ptr<PileGenerator> makeGenerator(const GenerationOptions& o, Dataset
                                 std::to_string(o.min_size_m) + " m) <= max (" +
                                 std::to_string(o.max_size_m) + " m) < the grid's side (" +
                                 std::to_string(o.extent_m) + " m)");
+  // A superquadric narrower than a voxel may hold no voxel centre: its labels would be empty.
+  // (YCB meshes keep their own size.)
+  const double voxel_m = o.extent_m / o.resolution;
+  if (o.ycb_dir.empty() && o.min_size_m < voxel_m)
+    throw std::invalid_argument(
+        "object sizes: the smallest (" + std::to_string(o.min_size_m) +
+        " m) is below one voxel (the grid's side / resolution = " + std::to_string(voxel_m) +
+        " m): such an object may cover no voxel, its ground truth empty; raise --sizes' minimum "
+        "or --resolution");
   config.min_size_m = o.min_size_m;
   config.max_size_m = o.max_size_m;
   config.household_share = o.household_share;
@@ -129,7 +138,9 @@ DatasetInfo datasetInfo(const GenerationOptions& o) {
   return info;
 }
 
-/// Scenes made by worker threads in any order, taken in index order by the writer.
+/// Scenes made by worker threads in any order, taken in index order by the writer. A worker
+/// starts scene i only when i lies within kAhead scenes of the next one the writer takes: a slow
+/// scene (a pile drawn again and again) does not let the finished ones after it fill memory.
 class SceneWorkers {
  public:
   SceneWorkers(const GenerationOptions& o, const PileGenerator& generator, const DatasetInfo& info,
@@ -140,6 +151,11 @@ class SceneWorkers {
       pool_.emplace_back([this, &o, &generator, &info, views_dir, threads] {
         omp_set_num_threads(threads > 1 ? 1 : 2);  // parallelism across scenes, not inside
         for (int i = next_++; i < scenes_; i = next_++) {
+          {
+            std::unique_lock<std::mutex> lock(mutex_);
+            room_.wait(lock, [&] { return i < taken_ + kAhead * threads || stop_; });
+            if (stop_) break;
+          }
           try {
             uint64_t seed = sceneSeed(o.seed, i);
             SceneResult r;
@@ -170,6 +186,11 @@ class SceneWorkers {
   }
   ~SceneWorkers() {
     next_ = scenes_;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    room_.notify_all();
     for (auto& t : pool_) t.join();
   }
   int threads() const { return static_cast<int>(pool_.size()); }
@@ -181,6 +202,8 @@ class SceneWorkers {
     if (done_.count(i) == 0) throw std::runtime_error(failure_);
     SceneResult r = std::move(done_.at(i));
     done_.erase(i);
+    taken_ = i + 1;
+    room_.notify_all();
     return r;
   }
 
@@ -188,8 +211,12 @@ class SceneWorkers {
   const int scenes_;
   std::atomic<int> next_{0};
   std::atomic<int> skipped_{0};
+  static constexpr int kAhead = 4;  ///< scenes ahead of the writer, per thread
   std::mutex mutex_;
   std::condition_variable ready_;
+  std::condition_variable room_;
+  int taken_ = 0;  ///< scenes the writer has taken
+  bool stop_ = false;
   std::map<int, SceneResult> done_;
   std::string failure_;
   std::vector<std::thread> pool_;  // last: the threads use the members above
