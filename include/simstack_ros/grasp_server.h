@@ -3,11 +3,12 @@
 /// The ROS face of the grasping module: service ~rank_grasps (simstack/RankGrasps), and the
 /// same as action ~rank_grasps_action (simstack/RankGraspsAction, with feedback and cancel), rank
 /// suction grasps on one object of a scene (the request's, or the latest ObjectArray on
-/// ~objects_topic) and publishes them on ~grasps (MarkerArray, latched). Parameters:
-/// ros_params.h, config/grasps.yaml. Every bad request is answered with success = false and a
-/// message; the server keeps serving.
+/// ~objects_topic) and publishes them on ~grasps (MarkerArray, latched), its state on
+/// /diagnostics. Parameters: ros_params.h, config/grasps.yaml. Every bad request is answered
+/// with success = false and a message; the server keeps serving.
 
 #include <actionlib/server/action_server.h>
+#include <diagnostic_updater/diagnostic_updater.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <ros/spinner.h>
@@ -67,6 +68,10 @@ class GraspServer {
     std::optional<Vec3> measured_from;  ///< the camera that measured them, table frame
   };
   void onObjects(const ObjectArray::ConstPtr& msg);
+  /// Counts an answer (service or action) for /diagnostics.
+  void record(const RankGrasps::Response& res);
+  /// The server's state: the latest scene and its age, the answers by status, the last one.
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
   /// The request checked and turned into scenes; false with res.message set when it is bad.
   bool prepare(const RankGrasps::Request& req, RankGrasps::Response& res, PreparedRequest* out);
   /// The request's target (by id or point), pre-grasp distance and pose frame; false with
@@ -102,8 +107,21 @@ class GraspServer {
   };
   std::vector<GoalThread> goal_threads_;  ///< joined once finished, or when the server goes
   std::mutex latest_mutex_;
-  ObjectArray::ConstPtr latest_;  ///< the newest scene on objects_topic
-  std::mutex rank_mutex_;         ///< one ranking at a time (each uses the configured threads)
+  ObjectArray::ConstPtr latest_;      ///< the newest scene on objects_topic
+  std::mutex rank_mutex_;             ///< one ranking at a time (each uses the configured threads)
+  std::atomic<bool> ranking_{false};  ///< a ranking holds rank_mutex_
+  struct Answers {
+    long scenes = 0;  ///< received on objects_topic
+    std::map<uint8_t, long> by_status;
+    long total = 0;
+    uint8_t last_status = 0;
+    std::string last_message;
+    double last_time_s = 0.0;
+  };
+  std::mutex answers_mutex_;  ///< guards answers_
+  Answers answers_;
+  diagnostic_updater::Updater diagnostics_;
+  ros::SteadyTimer diagnostics_timer_;  ///< on scene_queue_: a ranking does not hold it up
   std::unique_ptr<ros::AsyncSpinner> scene_spinner_, action_spinner_;
 };
 

@@ -19,10 +19,28 @@ namespace {
 /// How long a tf lookup waits for the transform (wall-clock seconds).
 constexpr double kTfWaitS = 0.5;
 
+/// RankGrasps' status constant's name (diagnostics).
+std::string statusName(uint8_t status) {
+  static const char* const kNames[] = {
+      "SUCCEEDED",      "NO_SCENE",    "STALE_SCENE", "EMPTY_SCENE", "UNKNOWN_TARGET",
+      "TF_UNAVAILABLE", "BAD_REQUEST", "BAD_SCENE",   "CANCELLED",   "INTERNAL_ERROR"};
+  return status < std::size(kNames) ? kNames[status] : "status " + std::to_string(status);
+}
+
 }  // namespace
 
 GraspServer::GraspServer(ros::NodeHandle nh, ros::NodeHandle pnh)
-    : nh_(nh), pnh_(pnh), config_(graspServerConfigFromParams(pnh)), tf_listener_(tf_buffer_) {
+    : nh_(nh),
+      pnh_(pnh),
+      config_(graspServerConfigFromParams(pnh)),
+      tf_listener_(tf_buffer_),
+      diagnostics_(nh, pnh, pnh.getNamespace()) {
+  // ~diagnostic_period is diagnostic_updater's (default 1 s), read once above.
+  const double period = diagnostics_.getPeriod();
+  if (!(period >= 0.01 && period <= 3600.0))
+    throw std::runtime_error(pnh_.resolveName("diagnostic_period") + " must lie in [0.01, 3600] s");
+  diagnostics_.setHardwareID("simstack_grasps " + pnh_.getNamespace());
+  diagnostics_.add("grasps", this, &GraspServer::diagnose);
   // Scenes on a queue and thread of their own: a request waiting for the ranking in progress
   // holds one of the service's threads, and with the scenes on that queue, the newest scene
   // would wait behind it and the request rank the one from before the ranking it waited for.
@@ -46,12 +64,20 @@ GraspServer::GraspServer(ros::NodeHandle nh, ros::NodeHandle pnh)
   action_->start();
   action_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &action_queue_);
   action_spinner_->start();
+  // On the wall clock (also while a bag is paused), on the scenes' thread: the service's threads
+  // may all wait for a ranking.
+  ros::NodeHandle diagnostics_nh(nh_);
+  diagnostics_nh.setCallbackQueue(&scene_queue_);
+  diagnostics_timer_ = diagnostics_nh.createSteadyTimer(
+      ros::WallDuration(period),
+      [this](const ros::SteadyTimerEvent&) { diagnostics_.force_update(); });
   ROS_INFO("simstack grasp_server: scenes from %s, ~rank_grasps ready (%d candidates, %d threads)",
            nh_.resolveName(config_.objects_topic).c_str(), config_.policy.max_candidates,
            config_.ranking.threads);
 }
 
 GraspServer::~GraspServer() {
+  diagnostics_timer_.stop();
   action_spinner_->stop();  // no goal starts, and no cancel comes, past this line
   {
     std::lock_guard<std::mutex> lock(goals_mutex_);
@@ -64,8 +90,62 @@ GraspServer::~GraspServer() {
 }
 
 void GraspServer::onObjects(const ObjectArray::ConstPtr& msg) {
-  std::lock_guard<std::mutex> lock(latest_mutex_);
-  latest_ = msg;
+  {
+    std::lock_guard<std::mutex> lock(latest_mutex_);
+    latest_ = msg;
+  }
+  std::lock_guard<std::mutex> lock(answers_mutex_);
+  ++answers_.scenes;
+}
+
+void GraspServer::record(const RankGrasps::Response& res) {
+  std::lock_guard<std::mutex> lock(answers_mutex_);
+  ++answers_.by_status[res.status];
+  ++answers_.total;
+  answers_.last_status = res.status;
+  answers_.last_message = res.message;
+  answers_.last_time_s = res.time_s;
+}
+
+void GraspServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  ObjectArray::ConstPtr latest;
+  {
+    std::lock_guard<std::mutex> lock(latest_mutex_);
+    latest = latest_;
+  }
+  Answers a;
+  {
+    std::lock_guard<std::mutex> lock(answers_mutex_);
+    a = answers_;
+  }
+  const std::string topic = nh_.resolveName(config_.objects_topic);
+  double age = 0.0;
+  std::string stale;
+  if (latest && !latest->header.stamp.isZero()) {
+    age = (ros::Time::now() - latest->header.stamp).toSec();
+    stale = staleScene(age, config_.policy.max_scene_age_s);
+  }
+  using diagnostic_msgs::DiagnosticStatus;
+  if (a.total > 0 && a.last_status == RankGrasps::Response::INTERNAL_ERROR)
+    status.summary(DiagnosticStatus::ERROR, "the last ranking failed: " + a.last_message);
+  else if (!latest)
+    status.summary(DiagnosticStatus::OK,
+                   "no scene on " + topic + " yet: requests that carry their scene are served");
+  else if (!stale.empty())
+    status.summary(DiagnosticStatus::WARN, "the latest scene on " + topic + " is " + stale +
+                                               ": requests without a scene are refused");
+  else
+    status.summary(DiagnosticStatus::OK, ranking_ ? "ranking" : "serving");
+  status.add("objects topic", topic);
+  status.add("scenes received", a.scenes);
+  status.add("latest scene: objects", latest ? static_cast<int>(latest->objects.size()) : 0);
+  status.add("latest scene: age (s)", age);
+  status.add("ranking in progress", std::string(ranking_ ? "true" : "false"));
+  status.add("requests answered", a.total);
+  for (const auto& [code, count] : a.by_status) status.add("answered " + statusName(code), count);
+  status.add("last answer",
+             a.total > 0 ? statusName(a.last_status) + ": " + a.last_message : std::string("none"));
+  status.add("last answer's time (s)", a.last_time_s);
 }
 
 bool GraspServer::lookup(const std::string& target, const std::string& source,
@@ -268,6 +348,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
 
 bool GraspServer::rank(RankGrasps::Request& req, RankGrasps::Response& res) {
   serve(req, res, {});
+  record(res);
   return true;
 }
 
@@ -331,9 +412,11 @@ void GraspServer::runGoal(GoalHandle goal, const std::atomic<bool>& cancelled) {
       },
       &cancelled);
   const bool was_cancelled = cancelled;  // read once: a cancel may still come
+  if (was_cancelled) res.status = RankGrasps::Response::CANCELLED;
+  record(res);
   RankGraspsResult result;
   result.success = res.success && !was_cancelled;  // cancelled after the last pull: none either
-  result.status = was_cancelled ? uint8_t{RankGraspsResult::CANCELLED} : res.status;
+  result.status = res.status;
   result.message = res.message;
   result.header = res.header;
   result.target_id = res.target_id;
@@ -355,6 +438,11 @@ void GraspServer::runGoal(GoalHandle goal, const std::atomic<bool>& cancelled) {
 void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& res,
                         const GraspFeedback& feedback, const std::atomic<bool>* cancelled) {
   std::lock_guard<std::mutex> lock(rank_mutex_);
+  ranking_ = true;
+  struct Done {
+    std::atomic<bool>& flag;
+    ~Done() { flag = false; }
+  } done{ranking_};
   const auto start = std::chrono::steady_clock::now();
   res.success = false;
   res.status = RankGrasps::Response::INTERNAL_ERROR;

@@ -170,13 +170,13 @@ void GraspServerConfig::validate() const {
 
 GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
   // The grasp settings (config/grasps.yaml's fields) go to the core's reader as YAML, as the
-  // file would; objects_topic is the node's own, rank_grasps_action and
-  // actionlib_status_frequency actionlib's (its status list's timeout, its status rate, which
-  // actionlib searches for up from the action's namespace).
+  // file would; objects_topic is the node's own, diagnostic_period diagnostic_updater's,
+  // rank_grasps_action and actionlib_status_frequency actionlib's (its status list's timeout,
+  // its status rate, which actionlib searches for up from the action's namespace).
   XmlRpc::XmlRpcValue all = privateParameters(pnh);
   const std::string yaml = yamlText(all, [](const std::string& name) {
     return name != "objects_topic" && name != "rank_grasps_action" &&
-           name != "actionlib_status_frequency";
+           name != "actionlib_status_frequency" && name != "diagnostic_period";
   });
   GraspServerConfig c;
   static_cast<GraspSettings&>(c) =

@@ -16,6 +16,7 @@ import rospkg
 import rospy
 import rostest
 from actionlib_msgs.msg import GoalStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from simstack.msg import (Grasp, ObjectArray, Object, RankGraspsAction, RankGraspsActionResult,
                           RankGraspsGoal, SceneSample)
 from simstack.srv import RankGrasps, RankGraspsRequest, RankGraspsResponse
@@ -485,6 +486,30 @@ class GraspService(unittest.TestCase):
                 return
             time.sleep(0.05)
         self.fail("no goal ended as cancelled: %s" % [r.status.status for r in results])
+
+    def test_9f_diagnostics_count_the_answers_and_say_when_no_scene_came(self):
+        statuses = {}
+
+        def on_diagnostics(msg):
+            for status in msg.status:
+                statuses[status.name] = status
+
+        sub = rospy.Subscriber("/diagnostics", DiagnosticArray, on_diagnostics)
+        self.addCleanup(sub.unregister)
+        names = ("camera/grasps: grasps", "camera/lonely_grasps: grasps")
+        deadline = time.time() + 30
+        while time.time() < deadline and not all(n in statuses for n in names):
+            time.sleep(0.1)
+        for name in names:
+            self.assertIn(name, statuses, sorted(statuses))
+        served = {kv.key: kv.value for kv in statuses[names[0]].values}
+        self.assertGreater(int(served["requests answered"]), 0, served)
+        self.assertGreater(int(served["answered SUCCEEDED"]), 0, served)
+        self.assertGreater(int(served["answered BAD_REQUEST"]), 0, served)
+        self.assertGreater(int(served["scenes received"]), 0, served)
+        lonely = statuses[names[1]]
+        self.assertEqual(lonely.level, DiagnosticStatus.OK, lonely.message)
+        self.assertIn("no scene on", lonely.message)
 
     def test_9d_an_abandoned_ranking_is_cancelled_on_the_server(self):
         from simstack import grasp_client
