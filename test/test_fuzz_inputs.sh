@@ -247,6 +247,11 @@ sed 's/validation_scenes: [0-9]*/validation_scenes: 1/' "$(dirname "$0")/../conf
   { echo "FAIL setup: simstack_generate"; exit 1; }
 expect "train --resume without a checkpoint" "no checkpoint" "$bin/simstack_train" --dataset "$dir/two.h5" \
   --config "$train_config" --output "$dir/run" --resume
+for option in "--output $dir/run_v" --resume "--steps 3"; do
+  # shellcheck disable=SC2086  # the option and its value are two words
+  expect "train --validate-only with $option" "excludes" "$bin/simstack_train" \
+    --dataset "$dir/two.h5" --config "$train_config" --validate-only "$pkg/models/simstack_r32_fc.pt" $option
+done
 sed 's/learning_rate:/lerning_rate:/' "$train_config" > "$dir/typo.yaml"
 expect "training config with a misspelt field" "unknown field training.lerning_rate" \
   "$bin/simstack_train" --dataset "$dir/two.h5" --config "$dir/typo.yaml" --output "$dir/run_typo"

@@ -96,11 +96,13 @@ void addOptions(CLI::App& app, Options& o) {
                  "YAML with `model:` and `training:` sections (see config/train_r32.yaml)")
       ->required()
       ->check(CLI::ExistingFile);
-  app.add_option("--output", o.output,
-                 "output directory (model.pt, model.yaml, checkpoints, train_log.csv); required "
-                 "unless --validate-only")
-      ->check(WritablePath);
-  app.add_flag("--resume", o.resume, "continue from OUTPUT/checkpoint.pt");
+  CLI::Option* output =
+      app.add_option(
+             "--output", o.output,
+             "output directory (model.pt, model.yaml, checkpoints, train_log.csv); required "
+             "unless --validate-only")
+          ->check(WritablePath);
+  CLI::Option* resume = app.add_flag("--resume", o.resume, "continue from OUTPUT/checkpoint.pt");
   app.add_flag("--allow-held-out", o.allow_held_out,
                "train on piles of a held-out test seed all the same (their figures then measure "
                "what was trained on)");
@@ -109,12 +111,14 @@ void addOptions(CLI::App& app, Options& o) {
   app.add_option("--architecture", o.architecture,
                  "cvae, fc or fc_plain (overrides model.architecture)")
       ->check(CLI::IsMember({"cvae", "fc", "fc_plain"}));
-  app.add_option("--steps", o.steps, "optimiser steps (overrides training.steps)")
-      ->check(FinitePositive);
-  app.add_option("--init-from", o.init_from,
-                 "warm start from this model file: its tensors of the same name and shape "
-                 "(overrides training.init_from; not read with --resume from a checkpoint)")
-      ->check(CLI::ExistingFile);
+  CLI::Option* steps =
+      app.add_option("--steps", o.steps, "optimiser steps (overrides training.steps)")
+          ->check(FinitePositive);
+  CLI::Option* init_from =
+      app.add_option("--init-from", o.init_from,
+                     "warm start from this model file: its tensors of the same name and shape "
+                     "(overrides training.init_from; not read with --resume from a checkpoint)")
+          ->check(CLI::ExistingFile);
   app.add_option("--validation-scenes", o.validation_scenes,
                  "held-out scenes at the end of the dataset (overrides training.validation_scenes)")
       ->check(FinitePositive);
@@ -127,7 +131,11 @@ void addOptions(CLI::App& app, Options& o) {
   app.add_option("--validate-only", o.validate_only,
                  "score this model file on the dataset's validation scenes as a run's validation "
                  "does (training.validation_scenes x validation_views) and exit; no training")
-      ->check(CLI::ExistingFile);
+      ->check(CLI::ExistingFile)
+      ->excludes(output)  // options of a training run: refused rather than ignored
+      ->excludes(resume)
+      ->excludes(steps)
+      ->excludes(init_from);
   app.add_option("--ycb", o.mesh_dir,
                  "the mesh directory of YCB datasets (<dir>/<object>/nontextured.stl), for "
                  "training or --validate-only on mesh piles")
