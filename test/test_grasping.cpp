@@ -82,6 +82,22 @@ TEST(SuctionCandidates, MeasuredPointsSealOnAFaceAndNotOverAnEdgeOrAGap) {
   const MeasuredSeal gap = measuredSeal(holed, {0, 0, 0.1}, Vec3::UnitZ(), config);
   EXPECT_TRUE(gap.seen);  // its middle was measured
   EXPECT_FALSE(gap.seals);
+  // A cloud of layers 3 mm and more off the plane between them (a caller's, not a camera's), so
+  // that no point lies within twice a 1 mm tolerance of the middle's plane: seen, and no seal,
+  // not a plane of no point (a NaN contact) that seals.
+  CandidateConfig strict;
+  strict.seal_tolerance_m = 0.001;
+  Points3 layers;
+  for (int i = -21; i <= 21; ++i)
+    for (int j = -21; j <= 21; ++j) {
+      const bool middle_zone = std::hypot(i, j) <= 7.5;
+      for (int level = -12; level <= 12; level += 3)
+        if (level != 0 && (!middle_zone || std::abs(level) == 3))
+          layers.emplace_back(0.001 * i, 0.001 * j, 0.1 + 0.001 * level);
+    }
+  const MeasuredSeal layered = measuredSeal(layers, {0, 0, 0.1}, Vec3::UnitZ(), strict);
+  EXPECT_TRUE(layered.seen);
+  EXPECT_FALSE(layered.seals) << layered.deviation_m << " at " << layered.centre.transpose();
   // Nothing measured under the cup's middle: not seen, judged on the superquadric alone.
   EXPECT_FALSE(measuredSeal(top, {0.2, 0, 0.1}, Vec3::UnitZ(), config).seen);
   EXPECT_FALSE(measuredSeal({}, {0, 0, 0.1}, Vec3::UnitZ(), config).seen);
@@ -196,6 +212,15 @@ TEST(GraspRanking, CandidatesOnMeasuredSurfaceTakeItsNormal) {
     EXPECT_GT(g.candidate.approach_table.dot(tilt * Vec3::UnitZ()), std::cos(0.5 * M_PI / 180));
   }
   EXPECT_GT(measured_grasps, 0);
+  // A cloud of over kMaxMeasuredPoints (the same face, measured over and over): thinned, said,
+  // and the seals still judged on the measured face.
+  Points3 dense;
+  while (dense.size() <= kMaxMeasuredPoints)
+    dense.insert(dense.end(), measured.begin(), measured.end());
+  const GraspRanking thinned = rankGrasps({stack}, 1, {}, config, {}, dense);
+  EXPECT_NE(thinned.message.find("seals judged on one in 2 of the"), std::string::npos)
+      << thinned.message;
+  EXPECT_GT(thinned.candidates.measured, 0);
   // Without the points, the same candidates keep the superquadric's normal.
   const GraspRanking plain = rankGrasps({stack}, 1, {}, config);
   ASSERT_FALSE(plain.grasps.empty());

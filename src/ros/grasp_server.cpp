@@ -9,6 +9,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <system_error>
 
 #include "simstack_ros/conversions.h"
 #include "simstack_ros/grasp_conversions.h"
@@ -369,13 +370,22 @@ void GraspServer::onGoal(GoalHandle goal) {
   }
   // Its own thread: the spinner's stay free for cancels and the service.
   auto finished = std::make_shared<std::atomic<bool>>(false);
-  std::thread thread([this, goal, id, cancelled, finished]() mutable {
-    runGoal(goal, *cancelled);
-    std::lock_guard<std::mutex> done(goals_mutex_);
+  try {
+    std::thread thread([this, goal, id, cancelled, finished]() mutable {
+      runGoal(goal, *cancelled);
+      std::lock_guard<std::mutex> done(goals_mutex_);
+      cancelled_.erase(id);
+      *finished = true;
+    });
+    goal_threads_.push_back({std::move(thread), finished});
+  } catch (const std::system_error& e) {  // no thread to be had: the goal ends, the server stays
     cancelled_.erase(id);
-    *finished = true;
-  });
-  goal_threads_.push_back({std::move(thread), finished});
+    RankGraspsResult result;
+    result.status = RankGraspsResult::INTERNAL_ERROR;
+    result.message = std::string("no thread for the ranking: ") + e.what();
+    ROS_ERROR("simstack grasp_server: %s", result.message.c_str());
+    goal.setAborted(result, result.message);
+  }
 }
 
 void GraspServer::onCancel(GoalHandle goal) {

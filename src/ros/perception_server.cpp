@@ -120,7 +120,7 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   try {
     perception_ = std::make_unique<ScenePerception>(config);
     checkModel(config.model_path);
-  } catch (const std::runtime_error& e) {
+  } catch (const std::exception& e) {  // a runtime_error, or a library's (libtorch, yaml-cpp)
     perception_.reset();
     model_error_ = e.what();
     ROS_ERROR("simstack perception: model refused, nothing will be perceived: %s", e.what());

@@ -148,6 +148,8 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
 
 /// Objects in a scene the grasp simulation accepts at most (a pile's labels are 8-bit).
 constexpr size_t kMaxGraspSceneObjects = 255;
+/// Measured points of the target the seals are judged on; more are thinned to every k-th.
+constexpr size_t kMaxMeasuredPoints = 50000;
 
 /// Farthest an object of a simulated scene may lie from the table frame's origin (m).
 constexpr double kMaxGraspSceneReachM = 100.0;

@@ -12,6 +12,7 @@
 #include <random>
 #include <set>
 #include <stdexcept>
+#include <system_error>
 #include <thread>
 
 namespace simstack {
@@ -54,10 +55,28 @@ void parallelFor(int count, int threads, const Job& job) {
     }
   };
   std::vector<std::thread> pool;
-  for (int t = 1; t < std::min(threads, count); ++t) pool.emplace_back(work);
+  try {
+    for (int t = 1; t < std::min(threads, count); ++t) pool.emplace_back(work);
+  } catch (const std::system_error&) {
+    // No thread to be had (a process or pids limit): those started and this one do the work.
+  }
   work();
   for (auto& t : pool) t.join();
   if (error) std::rethrow_exception(error);
+}
+
+/// The target's measured points the seal tests read: all, or every k-th of more than
+/// kMaxMeasuredPoints, kept in `thinned` and said in `message`. Each candidate's test reads
+/// every point: a request's cloud of millions would hold the ranking for minutes before its
+/// first pull, and every k-th point keeps the footprint covered (the perception's objects hold
+/// tens of thousands at most).
+const Points3& sealPoints(const Points3& measured, Points3* thinned, std::string* message) {
+  if (measured.size() <= kMaxMeasuredPoints) return measured;
+  const size_t stride = (measured.size() + kMaxMeasuredPoints - 1) / kMaxMeasuredPoints;
+  for (size_t i = 0; i < measured.size(); i += stride) thinned->push_back(measured[i]);
+  addNote(message, "seals judged on one in " + std::to_string(stride) + " of the " +
+                       std::to_string(measured.size()) + " measured points");
+  return *thinned;
 }
 
 int threadCount(int requested) {
@@ -257,10 +276,12 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
                                 " of " + std::to_string(measured_target.size()) + " is not finite");
   const int threads = threadCount(config.threads);
   GraspRanking out;
+  Points3 thinned;
+  const Points3& measured = sealPoints(measured_target, &thinned, &out.message);
   const auto& scene0 = hypotheses[0];
   out.candidates = suctionCandidates(
       scene0, target, camera_positions.empty() ? defaultCameraPositions(scene0) : camera_positions,
-      config.candidates, measured_target, measured_from);
+      config.candidates, measured, measured_from);
   if (out.candidates.seen_through > 0)
     addNote(&out.message, std::to_string(out.candidates.seen_through) +
                               " sealable places left out where the camera saw past the shape "

@@ -259,6 +259,8 @@ MeasuredSeal measuredSeal(const Points3& measured, const Vec3& contact, const Ve
   Points3 near;
   for (const Vec3& p : under)
     if (std::abs((p - centre).dot(n)) <= 2.0 * config.seal_tolerance_m) near.push_back(p);
+  // Too few near that plane (layers, a step under the middle): seen, and no face to seal on.
+  if (near.size() < kMiddlePoints) return out;
   std::tie(centre, n) = fitPlane(near, a);
   out.normal = n;
   out.centre = centre;
@@ -282,7 +284,8 @@ MeasuredSeal measuredSeal(const Points3& measured, const Vec3& contact, const Ve
       out.deviation_m = std::numeric_limits<double>::infinity();
       break;
     }
-    out.deviation_m = std::max(out.deviation_m, std::abs(sum / count));
+    const double deviation = std::abs(sum / count);
+    if (!(deviation <= out.deviation_m)) out.deviation_m = deviation;  // NaN kept: no seal
   }
   out.seals = out.deviation_m <= config.seal_tolerance_m;
   return out;

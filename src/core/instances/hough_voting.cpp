@@ -230,11 +230,21 @@ std::vector<Vec3> meanShift(const std::vector<WeightedPoint>& pts, double radius
     if (m.density > 0) modes.push_back(m);
   std::sort(modes.begin(), modes.end(),
             [](const Mode& a, const Mode& b) { return a.density > b.density; });
+  // A pile holds tens of objects; thousands of centres mean a radius far below the votes'
+  // spread, and assigning every voxel to each would take minutes per frame.
+  constexpr size_t kMaxCentres = 1000;
   std::vector<Vec3> centres;
   for (const Mode& m : modes) {
     bool merged = false;
     for (const Vec3& c : centres) merged = merged || (c - m.x).squaredNorm() < r2;
-    if (!merged) centres.push_back(m.x);
+    if (merged) continue;
+    centres.push_back(m.x);
+    if (centres.size() > kMaxCentres) {
+      std::ostringstream text;
+      text << "Hough voting: more than " << kMaxCentres << " vote centres with hough.bandwidth_m "
+           << radius << " m: the radius is far below the votes' spread (the shipped 0.05)";
+      throw std::invalid_argument(text.str());
+    }
   }
   return centres;
 }
@@ -308,6 +318,18 @@ FineCounts countRays(const GridSpec& g, const std::vector<int>& occupied,
   FineCounts out;
   out.block = static_cast<size_t>(ref) * ref * ref;
   const size_t block = out.block;
+  // The counts take `block` cells per occupied voxel and thread: within a budget, by fewer
+  // threads, or refused (new[] touches no page; an out-of-memory kill would come later).
+  constexpr size_t kBudgetBytes = size_t{2} << 30;
+  const size_t per_thread = occupied.size() * block * sizeof(FineCount);
+  if (per_thread > kBudgetBytes) {
+    std::ostringstream text;
+    text << "Hough voting: hough.refinement " << ref << " needs " << per_thread / (1 << 20)
+         << " MB of ray counts for " << occupied.size()
+         << " occupied voxels, over the 2048 MB budget: lower the refinement";
+    throw std::invalid_argument(text.str());
+  }
+  threads = std::max<int>(1, std::min<size_t>(threads, kBudgetBytes / per_thread));
   // Allocated here (a bad_alloc inside a parallel region would terminate), zeroed by the thread
   // that uses it (first touch); only the arrays of the threads that ran are summed.
   out.per_thread.resize(threads);

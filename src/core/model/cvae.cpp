@@ -477,6 +477,10 @@ Cvae loadCvae(const std::string& path, const CvaeConfig* expect, std::string* me
     throw std::runtime_error("model file " + path +
                              " is not a simstack model (no simstack_config)");
   }
+  if (!format.isInt() || !yaml.isString())
+    throw std::runtime_error("model file " + path +
+                             " is not a simstack model (simstack_format is not an integer or "
+                             "simstack_config not a string)");
   if (format.toInt() != kFormatVersion) {
     throw std::runtime_error("model file " + path + " has format " +
                              std::to_string(format.toInt()) + ", this build reads " +
