@@ -212,19 +212,30 @@ TEST(GraspRanking, CandidatesOnMeasuredSurfaceTakeItsNormal) {
     EXPECT_GT(g.candidate.approach_table.dot(tilt * Vec3::UnitZ()), std::cos(0.5 * M_PI / 180));
   }
   EXPECT_GT(measured_grasps, 0);
-  // A cloud of over kMaxMeasuredPoints (the same face, measured over and over): thinned, said,
-  // and the seals still judged on the measured face.
-  Points3 dense;
-  while (dense.size() <= kMaxMeasuredPoints)
-    dense.insert(dense.end(), measured.begin(), measured.end());
-  const GraspRanking thinned = rankGrasps({stack}, 1, {}, config, {}, dense);
-  EXPECT_NE(thinned.message.find("seals judged on one in 2 of the"), std::string::npos)
-      << thinned.message;
-  EXPECT_GT(thinned.candidates.measured, 0);
   // Without the points, the same candidates keep the superquadric's normal.
   const GraspRanking plain = rankGrasps({stack}, 1, {}, config);
   ASSERT_FALSE(plain.grasps.empty());
   EXPECT_FALSE(plain.grasps.front().candidate.measured);
+}
+
+TEST(GraspRanking, ACloudOfMillionsIsThinnedForTheSealsAndSaid) {
+  // Up to kMaxMeasuredPoints the seals read every point (the perception's clouds); a request's
+  // cloud of more is read every k-th point, spread over all of it, and the message says so.
+  Points3 cloud(kMaxMeasuredPoints);
+  for (size_t i = 0; i < cloud.size(); ++i) cloud[i] = Vec3(1e-6 * i, 0, 0);
+  Points3 thinned;
+  std::string message;
+  EXPECT_EQ(&sealPoints(cloud, &thinned, &message), &cloud);
+  EXPECT_TRUE(message.empty()) << message;
+  cloud.resize(3 * kMaxMeasuredPoints - 1, Vec3(9, 9, 9));
+  const Points3& read = sealPoints(cloud, &thinned, &message);
+  EXPECT_EQ(&read, &thinned);
+  EXPECT_EQ(read.size(), kMaxMeasuredPoints);
+  EXPECT_EQ(read[1], cloud[3]);
+  EXPECT_EQ(read.back(), cloud[3 * (kMaxMeasuredPoints - 1)]);
+  EXPECT_NE(message.find("seals judged on one in 3 of the 1499999 measured points"),
+            std::string::npos)
+      << message;
 }
 
 TEST(GraspRanking, PerturbedCopiesMoveEveryObjectAndStayOnTheTable) {

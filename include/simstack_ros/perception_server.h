@@ -108,6 +108,8 @@ class PerceptionServer {
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   bool saveOctomap(SaveOctomap::Request& req, SaveOctomap::Response& res);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
+  /// With estimate_table: warns while another node broadcasts table_frame on /tf or /tf_static.
+  void watchTableBroadcasts();
   /// Once a second (wall time): a warning when no frame has come for ~input_timeout_s.
   void onSilenceCheck();
   /// Seconds since the last frame came (since the start before any), mutex_ held.
@@ -134,7 +136,8 @@ class PerceptionServer {
   image_transport::Subscriber image_sub_;  ///< depth/image_rect, through ~image_transport
   ros::Subscriber info_sub_;               ///< the camera_info beside it
   ros::Subscriber mask_sub_;               ///< ~mask: the workspace mask, applied to every frame
-  std::mutex pairing_mutex_;               ///< taken before mutex_ where both are
+  ros::Subscriber tf_watch_, tf_static_watch_;  ///< with estimate_table: other table broadcasts
+  std::mutex pairing_mutex_;                    ///< taken before mutex_ where both are
   StampPairing<sensor_msgs::ImageConstPtr, sensor_msgs::CameraInfoConstPtr> pairing_{4};
   ros::Publisher objects_pub_, instances_pub_, markers_pub_, occupancy_pub_, ready_pub_;
   image_transport::Publisher labels_pub_;  ///< ~labels unlatched, through any transport

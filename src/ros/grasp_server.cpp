@@ -36,7 +36,8 @@ GraspServer::GraspServer(ros::NodeHandle nh, ros::NodeHandle pnh)
       config_(graspServerConfigFromParams(pnh)),
       tf_listener_(tf_buffer_),
       diagnostics_(nh, pnh, pnh.getNamespace()) {
-  // ~diagnostic_period is diagnostic_updater's (default 1 s), read once above.
+  // ~diagnostic_period is diagnostic_updater's (default 1 s); the timer below keeps the
+  // period it had at start.
   const double period = diagnostics_.getPeriod();
   if (!(period >= 0.01 && period <= 3600.0))
     throw std::runtime_error(pnh_.resolveName("diagnostic_period") + " must lie in [0.01, 3600] s");
@@ -384,6 +385,10 @@ void GraspServer::onGoal(GoalHandle goal) {
     result.status = RankGraspsResult::INTERNAL_ERROR;
     result.message = std::string("no thread for the ranking: ") + e.what();
     ROS_ERROR("simstack grasp_server: %s", result.message.c_str());
+    RankGrasps::Response counted;  // in the diagnostics as every other answer
+    counted.status = result.status;
+    counted.message = result.message;
+    record(counted);
     goal.setAborted(result, result.message);
   }
 }

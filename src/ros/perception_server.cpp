@@ -1,5 +1,7 @@
 #include "simstack_ros/perception_server.h"
 
+#include <tf2_msgs/TFMessage.h>
+
 #include <geometry_msgs/TransformStamped.h>
 #include <image_transport/camera_common.h>
 #include <sensor_msgs/CameraInfo.h>
@@ -169,6 +171,7 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
     image_sub_ = image_sub;
     info_sub_ = info_sub;
   }
+  if (node_.estimate_table) watchTableBroadcasts();
   // A latched publisher's mask arrives once; a bad one is reported and the previous one kept.
   const std::string mask_topic = pnh_.resolveName("mask");
   mask_sub_ = pnh_.subscribe<sensor_msgs::Image>(
@@ -553,6 +556,30 @@ void PerceptionServer::process(const Frame& frame) {
   last_scene_stamp_ = frame.image->header.stamp;
 }
 
+void PerceptionServer::watchTableBroadcasts() {
+  // Another node's transform to table_frame (a URDF's table, say) would give the frame a second
+  // parent beside the camera this node broadcasts it under, and tf's lookups would jump
+  // between the two: said every 10 s while it lasts.
+  const std::string table = node_.table_frame, me = ros::this_node::getName();
+  using Event = ros::MessageEvent<tf2_msgs::TFMessage const>;
+  const boost::function<void(const Event&)> watch = [table, me](const Event& event) {
+    if (event.getPublisherName() == me) return;
+    for (const geometry_msgs::TransformStamped& t : event.getMessage()->transforms)
+      if (tf2Frame(t.child_frame_id) == table) {
+        ROS_WARN_THROTTLE(10.0,
+                          "simstack perception: %s broadcasts '%s' under '%s' too, while "
+                          "estimate_table broadcasts it under the camera: tf has two parents "
+                          "for it; give ~table_frame another name (replay.launch's "
+                          "estimated_frame)",
+                          event.getPublisherName().c_str(), table.c_str(),
+                          tf2Frame(t.header.frame_id).c_str());
+        return;
+      }
+  };
+  tf_watch_ = nh_.subscribe<const Event&>("/tf", 100, watch);
+  tf_static_watch_ = nh_.subscribe<const Event&>("/tf_static", 100, watch);
+}
+
 void PerceptionServer::publish(const Frame& frame, const DepthView& view,
                                const SceneEstimate& estimate, int views,
                                const Transform& T_output_table) {
@@ -562,16 +589,6 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
   std_msgs::Header camera_header = frame.image->header;  // of the labels image and the table's tf
   camera_header.frame_id = tf2Frame(camera_header.frame_id);
   if (estimate.table_estimated) {
-    // Another broadcaster's table of this name (a URDF's, say) would give the frame two parents,
-    // between which tf's lookups jump.
-    std::string parent;
-    if (tf_buffer_._getParent(node_.table_frame, ros::Time(0), parent) &&
-        tf2Frame(parent) != camera_header.frame_id)
-      ROS_WARN_THROTTLE(10.0,
-                        "simstack perception: tf holds '%s' under '%s' too, while estimate_table "
-                        "broadcasts it under the camera '%s': tf has two parents for it; give "
-                        "~table_frame another name (replay.launch's estimated_frame)",
-                        node_.table_frame.c_str(), parent.c_str(), camera_header.frame_id.c_str());
     geometry_msgs::TransformStamped t = tf2::eigenToTransform(estimate.T_table_camera.inverse());
     t.header.stamp = header.stamp;
     t.header.frame_id = camera_header.frame_id;

@@ -573,7 +573,7 @@ TEST_F(PerceptionNodeTest, AnEstimatedTableIsUsedBroadcastAndRefusedWhenThereIsN
   std::atomic<bool> warned{false};
   ros::Subscriber rosout = nh_.subscribe<rosgraph_msgs::Log>(
       "/rosout", 100, [&](const rosgraph_msgs::Log::ConstPtr& log) {
-        if (log->msg.find("tf holds 'table_estimated' under 'world' too") != std::string::npos)
+        if (log->msg.find("broadcasts 'table_estimated' under 'world' too") != std::string::npos)
           warned = true;
       });
   tf2_ros::TransformBroadcaster other;

@@ -17,7 +17,7 @@ import rostest
 from actionlib_msgs.msg import GoalStatus
 from geometry_msgs.msg import PointStamped
 from simstack.msg import ObjectArray, RankGraspsAction, RankGraspsGoal
-from simstack.srv import RankGrasps, RankGraspsRequest
+from simstack.srv import RankGrasps, RankGraspsRequest, SaveOctomap
 from std_msgs.msg import Bool
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
@@ -168,6 +168,14 @@ class Workcell(unittest.TestCase):
             self.assertGreater(c.z, BASE_FROM_TABLE[2])
         markers = rospy.wait_for_message("/camera/perception/markers", MarkerArray, timeout=10)
         self.assertTrue(all(m.header.frame_id == "base_link" for m in markers.markers))
+        # The saved occupancy's coordinates are the table frame's grid, whatever the outputs'
+        # frame: the answer names the table, not base_link.
+        rospy.wait_for_service("/camera/perception/save_octomap", timeout=10)
+        save = rospy.ServiceProxy("/camera/perception/save_octomap", SaveOctomap)
+        res = save(file_name="workcell.bt")
+        self.assertTrue(res.success, res.message)
+        self.assertEqual(res.header.frame_id, "table")
+        self.assertIn("'table'", res.message)
 
     def test_8_the_action_gives_feedback_and_a_cancel_stops_it(self):
         scene = self.last_scene()

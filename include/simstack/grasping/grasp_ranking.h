@@ -148,8 +148,12 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
 
 /// Objects in a scene the grasp simulation accepts at most (a pile's labels are 8-bit).
 constexpr size_t kMaxGraspSceneObjects = 255;
-/// Measured points of the target the seals are judged on; more are thinned to every k-th.
-constexpr size_t kMaxMeasuredPoints = 50000;
+/// Measured points of the target the seals are judged on; more are thinned to every k-th
+/// (a 1280x720 view at the perception's pixel stride of 2 holds 230,400 points).
+constexpr size_t kMaxMeasuredPoints = 500000;
+/// The target's measured points the seal tests read: `measured` itself, or every k-th of more
+/// than kMaxMeasuredPoints, kept in `thinned` and said in `message` (addNote).
+const Points3& sealPoints(const Points3& measured, Points3* thinned, std::string* message);
 
 /// Farthest an object of a simulated scene may lie from the table frame's origin (m).
 constexpr double kMaxGraspSceneReachM = 100.0;

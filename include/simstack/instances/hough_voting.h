@@ -50,9 +50,17 @@ struct InstanceSegmentation {
   int size() const { return static_cast<int>(centres_table.size()); }
 };
 
+/// More vote centres than kMaxHoughCentres: a mean-shift radius far below the votes' spread
+/// (assigning every voxel to thousands of centres would take minutes per frame).
+constexpr size_t kMaxHoughCentres = 1000;
+struct TooManyHoughCentres : std::invalid_argument {
+  using std::invalid_argument::invalid_argument;
+};
+
 /// Instances of one scene hypothesis. `tsdf_m` and `votes` must share a grid
 /// (std::invalid_argument otherwise); occupied = tsdf <= 0. Votes need not be unit length
 /// (the network's are normalised here); short votes are assigned by distance alone.
+/// TooManyHoughCentres where the radius makes more than kMaxHoughCentres centres.
 InstanceSegmentation houghInstances(const Grid3<float>& tsdf_m, const Grid3<Vec3f>& votes,
                                     const HoughConfig& config = HoughConfig());
 

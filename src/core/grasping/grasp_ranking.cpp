@@ -65,20 +65,6 @@ void parallelFor(int count, int threads, const Job& job) {
   if (error) std::rethrow_exception(error);
 }
 
-/// The target's measured points the seal tests read: all, or every k-th of more than
-/// kMaxMeasuredPoints, kept in `thinned` and said in `message`. Each candidate's test reads
-/// every point: a request's cloud of millions would hold the ranking for minutes before its
-/// first pull, and every k-th point keeps the footprint covered (the perception's objects hold
-/// tens of thousands at most).
-const Points3& sealPoints(const Points3& measured, Points3* thinned, std::string* message) {
-  if (measured.size() <= kMaxMeasuredPoints) return measured;
-  const size_t stride = (measured.size() + kMaxMeasuredPoints - 1) / kMaxMeasuredPoints;
-  for (size_t i = 0; i < measured.size(); i += stride) thinned->push_back(measured[i]);
-  addNote(message, "seals judged on one in " + std::to_string(stride) + " of the " +
-                       std::to_string(measured.size()) + " measured points");
-  return *thinned;
-}
-
 int threadCount(int requested) {
   const int cores = std::max(1u, std::thread::hardware_concurrency());
   if (requested < 0) throw std::invalid_argument("threads must be >= 0 (0: all cores)");
@@ -110,6 +96,17 @@ void summarise(RankedGrasp* g, int copies, const SuperquadricShape& target) {
 }
 
 }  // namespace
+
+// Each candidate's seal tests read every point: a request's cloud of millions would hold the
+// ranking for minutes before its first pull; every k-th point keeps the footprint covered.
+const Points3& sealPoints(const Points3& measured, Points3* thinned, std::string* message) {
+  if (measured.size() <= kMaxMeasuredPoints) return measured;
+  const size_t stride = (measured.size() + kMaxMeasuredPoints - 1) / kMaxMeasuredPoints;
+  for (size_t i = 0; i < measured.size(); i += stride) thinned->push_back(measured[i]);
+  addNote(message, "seals judged on one in " + std::to_string(stride) + " of the " +
+                       std::to_string(measured.size()) + " measured points");
+  return *thinned;
+}
 
 void PerturbationConfig::validate() const {
   if (copies < 0 || copies > 64)

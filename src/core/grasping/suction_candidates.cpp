@@ -285,7 +285,11 @@ MeasuredSeal measuredSeal(const Points3& measured, const Vec3& contact, const Ve
       break;
     }
     const double deviation = std::abs(sum / count);
-    if (!(deviation <= out.deviation_m)) out.deviation_m = deviation;  // NaN kept: no seal
+    if (std::isnan(deviation)) {  // no plane to measure against: no seal
+      out.deviation_m = deviation;
+      break;
+    }
+    out.deviation_m = std::max(out.deviation_m, deviation);
   }
   out.seals = out.deviation_m <= config.seal_tolerance_m;
   return out;

@@ -230,20 +230,18 @@ std::vector<Vec3> meanShift(const std::vector<WeightedPoint>& pts, double radius
     if (m.density > 0) modes.push_back(m);
   std::sort(modes.begin(), modes.end(),
             [](const Mode& a, const Mode& b) { return a.density > b.density; });
-  // A pile holds tens of objects; thousands of centres mean a radius far below the votes'
-  // spread, and assigning every voxel to each would take minutes per frame.
-  constexpr size_t kMaxCentres = 1000;
   std::vector<Vec3> centres;
   for (const Mode& m : modes) {
     bool merged = false;
     for (const Vec3& c : centres) merged = merged || (c - m.x).squaredNorm() < r2;
     if (merged) continue;
     centres.push_back(m.x);
-    if (centres.size() > kMaxCentres) {
-      std::ostringstream text;
-      text << "Hough voting: more than " << kMaxCentres << " vote centres with hough.bandwidth_m "
-           << radius << " m: the radius is far below the votes' spread (the shipped 0.05)";
-      throw std::invalid_argument(text.str());
+    if (centres.size() > kMaxHoughCentres) {
+      std::ostringstream text;  // the radius is hough.bandwidth_m, or crowded.bandwidth_m
+      text << "Hough voting: more than " << kMaxHoughCentres << " vote centres with a mean-shift "
+           << "radius of " << radius << " m (hough.bandwidth_m, or crowded.bandwidth_m in a "
+           << "crowded pile's second split): the radius is far below the votes' spread";
+      throw TooManyHoughCentres(text.str());
     }
   }
   return centres;

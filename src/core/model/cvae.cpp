@@ -526,7 +526,11 @@ Cvae loadCvae(const std::string& path, const CvaeConfig* expect, std::string* me
       throw std::runtime_error("model file " + path + ": tensor " + name +
                                " holds values that are not finite (NaN or infinite): the file is "
                                "damaged");
-  if (metadata && archive.try_read("simstack_metadata", meta)) *metadata = meta.toStringRef();
+  if (metadata && archive.try_read("simstack_metadata", meta)) {
+    if (!meta.isString())
+      throw std::runtime_error("model file " + path + ": simstack_metadata is not a string");
+    *metadata = meta.toStringRef();
+  }
   return model;
 }
 

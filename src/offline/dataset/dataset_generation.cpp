@@ -93,7 +93,7 @@ std::unique_ptr<PileGenerator> makeGenerator(const GenerationOptions& o, Dataset
         "object sizes: the smallest (" + std::to_string(o.min_size_m) +
         " m) is below one voxel (the grid's side / resolution = " + std::to_string(voxel_m) +
         " m): such an object may cover no voxel, its ground truth empty; raise --sizes' minimum "
-        "or --resolution");
+        "(the default is 0.05:0.3) or --resolution");
   config.min_size_m = o.min_size_m;
   config.max_size_m = o.max_size_m;
   config.household_share = o.household_share;
@@ -139,7 +139,8 @@ DatasetInfo datasetInfo(const GenerationOptions& o) {
 }
 
 /// Scenes made by worker threads in any order, taken in index order by the writer. A worker
-/// starts scene i only when i lies within kAhead scenes of the next one the writer takes: a slow
+/// starts scene i only when i lies within kAhead scenes per thread of the next one the writer
+/// takes: a slow
 /// scene (a pile drawn again and again) does not let the finished ones after it fill memory.
 class SceneWorkers {
  public:

@@ -98,8 +98,14 @@ HoughScore scoreHoughSetting(const std::vector<TuningView>& views, const HoughCo
   HoughScore s;
   s.hough = hough;
   for (const TuningView& v : views) {
-    const InstanceSegmentation seg =
-        finder.find(v.tsdf_m, v.votes, v.segments ? &*v.segments : nullptr);
+    InstanceSegmentation seg;
+    try {
+      seg = finder.find(v.tsdf_m, v.votes, v.segments ? &*v.segments : nullptr);
+    } catch (const TooManyHoughCentres&) {  // a radius too small: counted as the over-count it is
+      s.over += 1;
+      s.abs_error += static_cast<double>(kMaxHoughCentres);
+      continue;
+    }
     const int error = seg.size() - v.objects;
     s.exact += error == 0;
     s.under += error < 0;
