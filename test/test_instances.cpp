@@ -224,6 +224,30 @@ TEST(HoughVoting, WorksAtR64AndIsSparse) {
   EXPECT_LT(static_cast<double>(seg.count_bytes), 0.05 * dense_bytes);
 }
 
+TEST(HoughVoting, ARadiusFarBelowTheVotesSpreadIsRefusedNotMinutesLong) {
+  // A ball whose votes point anywhere, every traversed fine cell a candidate, and a 1 mm
+  // radius: each cell its own centre. Refused, the radius named, before the assignment.
+  const GridSpec g = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 32);
+  Grid3<float> tsdf;
+  Grid3<Vec3f> votes;
+  ballFields(g, {{g.origin_table + Vec3(0.32, 0.32, 0.2), 0.16}}, &tsdf, &votes);
+  std::mt19937_64 rng(9);
+  std::normal_distribution<float> n(0.0f, 1.0f);
+  for (Vec3f& v : votes.data)
+    if (!v.isZero()) v = Vec3f(n(rng), n(rng), n(rng)).normalized();
+  HoughConfig config;
+  config.refinement = 8;
+  config.min_traversals = 0;
+  config.bandwidth_m = 0.001;
+  try {
+    houghInstances(tsdf, votes, config);
+    ADD_FAILURE() << "a 1 mm radius over scattered votes was accepted";
+  } catch (const TooManyHoughCentres& e) {
+    EXPECT_NE(std::string(e.what()).find("radius of 0.001 m (hough.bandwidth_m"), std::string::npos)
+        << e.what();
+  }
+}
+
 TEST(HoughVoting, EmptySceneAndBadInput) {
   const GridSpec g = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 16);
   const InstanceSegmentation empty =

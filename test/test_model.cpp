@@ -793,6 +793,17 @@ TEST(Cvae, BadModelFilesGiveClearErrors) {
   EXPECT_NE(ms.find("shape"), std::string::npos) << ms;
   EXPECT_NE(ms.find("tensor "), std::string::npos) << ms;  // it names the tensor
   fs::remove(shapes);
+  // The archive's values of another type (the format as text): refused by name, not a
+  // libtorch error.
+  torch::serialize::OutputArchive typed;
+  model->save(typed);
+  typed.write("simstack_format", torch::IValue(std::string("1")));
+  typed.write("simstack_config", yaml);
+  const std::string texts = tempPath("simstack_types.pt");
+  typed.save_to(texts);
+  const std::string mt = message(texts, nullptr);
+  EXPECT_NE(mt.find("simstack_format is not an integer"), std::string::npos) << mt;
+  fs::remove(texts);
   fs::remove(path);
 }
 
