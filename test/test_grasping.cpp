@@ -98,6 +98,10 @@ TEST(SuctionCandidates, MeasuredPointsSealOnAFaceAndNotOverAnEdgeOrAGap) {
   const MeasuredSeal layered = measuredSeal(layers, {0, 0, 0.1}, Vec3::UnitZ(), strict);
   EXPECT_TRUE(layered.seen);
   EXPECT_FALSE(layered.seals) << layered.deviation_m << " at " << layered.centre.transpose();
+  // A NaN point in a caller's cloud is no point: the face still seals.
+  Points3 with_nan = top;
+  with_nan.emplace_back(std::numeric_limits<double>::quiet_NaN(), 0.0, 0.1);
+  EXPECT_TRUE(measuredSeal(with_nan, {0, 0, 0.1}, Vec3::UnitZ(), config).seals);
   // Nothing measured under the cup's middle: not seen, judged on the superquadric alone.
   EXPECT_FALSE(measuredSeal(top, {0.2, 0, 0.1}, Vec3::UnitZ(), config).seen);
   EXPECT_FALSE(measuredSeal({}, {0, 0, 0.1}, Vec3::UnitZ(), config).seen);
@@ -212,6 +216,17 @@ TEST(GraspRanking, CandidatesOnMeasuredSurfaceTakeItsNormal) {
     EXPECT_GT(g.candidate.approach_table.dot(tilt * Vec3::UnitZ()), std::cos(0.5 * M_PI / 180));
   }
   EXPECT_GT(measured_grasps, 0);
+  // The ranking reads a cloud of over kMaxMeasuredPoints thinned, and says so (few surface
+  // samples: every seal test reads every point kept).
+  Points3 dense;
+  while (dense.size() <= kMaxMeasuredPoints)
+    dense.insert(dense.end(), measured.begin(), measured.end());
+  GraspRankingConfig quick = config;
+  quick.candidates.surface_samples = 100;
+  const GraspRanking thinned = rankGrasps({stack}, 1, {}, quick, {}, dense);
+  EXPECT_NE(thinned.message.find("seals judged on one in 2 of the"), std::string::npos)
+      << thinned.message;
+  EXPECT_GT(thinned.candidates.measured, 0);
   // Without the points, the same candidates keep the superquadric's normal.
   const GraspRanking plain = rankGrasps({stack}, 1, {}, config);
   ASSERT_FALSE(plain.grasps.empty());
@@ -219,15 +234,16 @@ TEST(GraspRanking, CandidatesOnMeasuredSurfaceTakeItsNormal) {
 }
 
 TEST(GraspRanking, ACloudOfMillionsIsThinnedForTheSealsAndSaid) {
-  // Up to kMaxMeasuredPoints the seals read every point (the perception's clouds); a request's
-  // cloud of more is read every k-th point, spread over all of it, and the message says so.
+  // Up to kMaxMeasuredPoints the seals read every point; a cloud of more (a request's, or fused
+  // HD views) is read every k-th point, spread over all of it, and the message says so.
   Points3 cloud(kMaxMeasuredPoints);
   for (size_t i = 0; i < cloud.size(); ++i) cloud[i] = Vec3(1e-6 * i, 0, 0);
   Points3 thinned;
   std::string message;
   EXPECT_EQ(&sealPoints(cloud, &thinned, &message), &cloud);
   EXPECT_TRUE(message.empty()) << message;
-  cloud.resize(3 * kMaxMeasuredPoints - 1, Vec3(9, 9, 9));
+  cloud.resize(3 * kMaxMeasuredPoints - 1);
+  for (size_t i = kMaxMeasuredPoints; i < cloud.size(); ++i) cloud[i] = Vec3(1e-6 * i, 0, 0);
   const Points3& read = sealPoints(cloud, &thinned, &message);
   EXPECT_EQ(&read, &thinned);
   EXPECT_EQ(read.size(), kMaxMeasuredPoints);

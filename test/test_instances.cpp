@@ -225,8 +225,9 @@ TEST(HoughVoting, WorksAtR64AndIsSparse) {
 }
 
 TEST(HoughVoting, ARadiusFarBelowTheVotesSpreadIsRefusedNotMinutesLong) {
-  // A ball whose votes point anywhere, every traversed fine cell a candidate, and a 1 mm
-  // radius: each cell its own centre. Refused, the radius named, before the assignment.
+  // A ball whose votes point anywhere, every traversed cell a centre vote, and a 1 mm radius:
+  // each voxel's votes their own centre (some 2000). Refused, the radius named, before the
+  // assignment.
   const GridSpec g = GridSpec::sceneGrid(Vec2(0, 0), 0.64, 32);
   Grid3<float> tsdf;
   Grid3<Vec3f> votes;

@@ -108,8 +108,10 @@ class PerceptionServer {
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   bool saveOctomap(SaveOctomap::Request& req, SaveOctomap::Response& res);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
-  /// With estimate_table: warns while another node broadcasts table_frame on /tf or /tf_static.
+  /// With estimate_table: notes another node's broadcast of table_frame on /tf or /tf_static,
+  /// which warnAboutOtherTable() says (each 10 s, while it lasts) when the table is broadcast.
   void watchTableBroadcasts();
+  void warnAboutOtherTable();
   /// Once a second (wall time): a warning when no frame has come for ~input_timeout_s.
   void onSilenceCheck();
   /// Seconds since the last frame came (since the start before any), mutex_ held.
@@ -137,7 +139,12 @@ class PerceptionServer {
   ros::Subscriber info_sub_;               ///< the camera_info beside it
   ros::Subscriber mask_sub_;               ///< ~mask: the workspace mask, applied to every frame
   ros::Subscriber tf_watch_, tf_static_watch_;  ///< with estimate_table: other table broadcasts
-  std::mutex pairing_mutex_;                    ///< taken before mutex_ where both are
+  std::mutex other_table_mutex_;                ///< guards the five below
+  std::string other_table_;  ///< who else broadcasts table_frame, under what ("": none)
+  bool other_table_static_ = false;
+  ros::SteadyTime other_table_seen_, other_table_said_at_;
+  std::string other_table_said_;
+  std::mutex pairing_mutex_;  ///< taken before mutex_ where both are
   StampPairing<sensor_msgs::ImageConstPtr, sensor_msgs::CameraInfoConstPtr> pairing_{4};
   ros::Publisher objects_pub_, instances_pub_, markers_pub_, occupancy_pub_, ready_pub_;
   image_transport::Publisher labels_pub_;  ///< ~labels unlatched, through any transport

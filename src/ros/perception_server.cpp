@@ -559,25 +559,42 @@ void PerceptionServer::process(const Frame& frame) {
 void PerceptionServer::watchTableBroadcasts() {
   // Another node's transform to table_frame (a URDF's table, say) would give the frame a second
   // parent beside the camera this node broadcasts it under, and tf's lookups would jump
-  // between the two: said every 10 s while it lasts.
-  const std::string table = node_.table_frame, me = ros::this_node::getName();
+  // between the two. Kept here (a static one for good, a dynamic one while it keeps coming)
+  // and said by publish(), which broadcasts the table. Another nodelet of the same manager is
+  // this process and shares its publisher name: it is not seen.
+  const std::string me = ros::this_node::getName(), table = node_.table_frame;
   using Event = ros::MessageEvent<tf2_msgs::TFMessage const>;
-  const boost::function<void(const Event&)> watch = [table, me](const Event& event) {
-    if (event.getPublisherName() == me) return;
-    for (const geometry_msgs::TransformStamped& t : event.getMessage()->transforms)
-      if (tf2Frame(t.child_frame_id) == table) {
-        ROS_WARN_THROTTLE(10.0,
-                          "simstack perception: %s broadcasts '%s' under '%s' too, while "
-                          "estimate_table broadcasts it under the camera: tf has two parents "
-                          "for it; give ~table_frame another name (replay.launch's "
-                          "estimated_frame)",
-                          event.getPublisherName().c_str(), table.c_str(),
-                          tf2Frame(t.header.frame_id).c_str());
-        return;
-      }
+  const auto watcher = [this, me, table](bool is_static) {
+    return boost::function<void(const Event&)>([this, me, table, is_static](const Event& event) {
+      if (event.getPublisherName() == me) return;
+      for (const geometry_msgs::TransformStamped& t : event.getMessage()->transforms)
+        if (tf2Frame(t.child_frame_id) == table) {
+          std::lock_guard<std::mutex> lock(other_table_mutex_);
+          other_table_ = event.getPublisherName() + " broadcasts '" + table + "' under '" +
+                         tf2Frame(t.header.frame_id) + "'" + (is_static ? " on /tf_static" : "");
+          other_table_static_ = is_static;
+          other_table_seen_ = ros::SteadyTime::now();
+          return;
+        }
+    });
   };
-  tf_watch_ = nh_.subscribe<const Event&>("/tf", 100, watch);
-  tf_static_watch_ = nh_.subscribe<const Event&>("/tf_static", 100, watch);
+  tf_watch_ = nh_.subscribe<const Event&>("/tf", 100, watcher(false));
+  tf_static_watch_ = nh_.subscribe<const Event&>("/tf_static", 100, watcher(true));
+}
+
+void PerceptionServer::warnAboutOtherTable() {
+  std::lock_guard<std::mutex> lock(other_table_mutex_);
+  const ros::SteadyTime now = ros::SteadyTime::now();
+  const bool current = other_table_static_ || (now - other_table_seen_).toSec() < 10.0;
+  if (other_table_.empty() || !current) return;
+  // Once every 10 s, and at once for another broadcaster than the last one said.
+  if (other_table_ == other_table_said_ && (now - other_table_said_at_).toSec() < 10.0) return;
+  ROS_WARN(
+      "simstack perception: %s too, while estimate_table broadcasts it under the camera: tf has "
+      "two parents for it; give ~table_frame another name (replay.launch's estimated_frame)",
+      other_table_.c_str());
+  other_table_said_ = other_table_;
+  other_table_said_at_ = now;
 }
 
 void PerceptionServer::publish(const Frame& frame, const DepthView& view,
@@ -589,6 +606,7 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
   std_msgs::Header camera_header = frame.image->header;  // of the labels image and the table's tf
   camera_header.frame_id = tf2Frame(camera_header.frame_id);
   if (estimate.table_estimated) {
+    warnAboutOtherTable();
     geometry_msgs::TransformStamped t = tf2::eigenToTransform(estimate.T_table_camera.inverse());
     t.header.stamp = header.stamp;
     t.header.frame_id = camera_header.frame_id;

@@ -148,8 +148,9 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
 
 /// Objects in a scene the grasp simulation accepts at most (a pile's labels are 8-bit).
 constexpr size_t kMaxGraspSceneObjects = 255;
-/// Measured points of the target the seals are judged on; more are thinned to every k-th
-/// (a 1280x720 view at the perception's pixel stride of 2 holds 230,400 points).
+/// Measured points of the target the seals are judged on; more (a request's cloud, or the
+/// perception's fused views of a large target: a 1280x720 view at its pixel stride of 2 holds
+/// 230,400 points) are thinned to every k-th.
 constexpr size_t kMaxMeasuredPoints = 500000;
 /// The target's measured points the seal tests read: `measured` itself, or every k-th of more
 /// than kMaxMeasuredPoints, kept in `thinned` and said in `message` (addNote).

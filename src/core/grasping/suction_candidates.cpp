@@ -246,7 +246,7 @@ MeasuredSeal measuredSeal(const Points3& measured, const Vec3& contact, const Ve
   for (const Vec3& p : measured) {
     const Vec3 d = p - contact;
     const double along = d.dot(a), radial = (d - along * a).norm();
-    if (std::abs(along) > r || radial > 1.4 * r) continue;
+    if (!(std::abs(along) <= r && radial <= 1.4 * r)) continue;  // a NaN point too
     under.push_back(p);
     if (radial <= 0.5 * r) middle.push_back(p);
   }
@@ -285,7 +285,7 @@ MeasuredSeal measuredSeal(const Points3& measured, const Vec3& contact, const Ve
       break;
     }
     const double deviation = std::abs(sum / count);
-    if (std::isnan(deviation)) {  // no plane to measure against: no seal
+    if (std::isnan(deviation)) {  // a plane or points not finite: no seal
       out.deviation_m = deviation;
       break;
     }

@@ -9,8 +9,9 @@ void CrowdedConfig::validate() const {
   if (min_objects < 0 || min_objects > 255)
     throw std::invalid_argument("crowded.min_objects must lie in [0, 255] (0: off), not " +
                                 std::to_string(min_objects));
-  if (!(bandwidth_m > 0.0 && bandwidth_m <= 1.0))
-    throw std::invalid_argument("crowded.bandwidth_m must lie in (0, 1] m, not " +
+  // A millimetre is far below a voxel, as hough.bandwidth_m's own lower bound.
+  if (!(bandwidth_m >= 0.001 && bandwidth_m <= 1.0))
+    throw std::invalid_argument("crowded.bandwidth_m must lie in [0.001, 1] m, not " +
                                 std::to_string(bandwidth_m));
   if (min_instance_voxels < 1)
     throw std::invalid_argument("crowded.min_instance_voxels must be >= 1, not " +

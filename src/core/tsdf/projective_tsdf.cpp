@@ -48,13 +48,11 @@ void ProjectiveTsdf::integrate(const DepthImage& depth, const PinholeCamera& cam
       for (int ix = 0; ix < r; ++ix, p += step_x) {
         if (p.z() <= 1e-6f) continue;
         const float inv_z = 1.0f / p.z();
-        // Bounds checked on the float: a voxel just in front of the camera plane projects far
-        // beyond any int, which a conversion first would wrap back into the image.
-        const float uf = std::round(fx * p.x() * inv_z + cx);
-        const float vf = std::round(fy * p.y() * inv_z + cy);
-        if (!(uf >= 0.0f && vf >= 0.0f && uf < static_cast<float>(w) && vf < static_cast<float>(h)))
-          continue;
-        const int u = static_cast<int>(uf), v = static_cast<int>(vf);
+        // Compared as the long lround gives: a voxel just in front of the camera plane projects
+        // beyond any int, which a narrowing first would wrap back into the image.
+        const long u = std::lround(fx * p.x() * inv_z + cx);
+        const long v = std::lround(fy * p.y() * inv_z + cy);
+        if (u < 0 || v < 0 || u >= w || v >= h) continue;
         const float d = depth.pixels[static_cast<size_t>(v) * w + u];
         if (!(d > 0.0f) || !std::isfinite(d)) continue;
         // Distance along the viewing ray: depth difference times the ray length per unit z.
