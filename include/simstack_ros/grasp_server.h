@@ -107,9 +107,8 @@ class GraspServer {
   };
   std::vector<GoalThread> goal_threads_;  ///< joined once finished, or when the server goes
   std::mutex latest_mutex_;
-  ObjectArray::ConstPtr latest_;      ///< the newest scene on objects_topic
-  std::mutex rank_mutex_;             ///< one ranking at a time (each uses the configured threads)
-  std::atomic<bool> ranking_{false};  ///< a ranking holds rank_mutex_
+  ObjectArray::ConstPtr latest_;  ///< the newest scene on objects_topic
+  std::mutex rank_mutex_;         ///< one ranking at a time (each uses the configured threads)
   struct Answers {
     long scenes = 0;  ///< received on objects_topic
     std::map<uint8_t, long> by_status;

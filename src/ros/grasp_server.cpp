@@ -127,6 +127,9 @@ void GraspServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) 
     age = (ros::Time::now() - latest->header.stamp).toSec();
     stale = staleScene(age, config_.policy.max_scene_age_s);
   }
+  // A ranking holds rank_mutex_ for as long as it runs.
+  const bool ranking = !rank_mutex_.try_lock();
+  if (!ranking) rank_mutex_.unlock();
   using diagnostic_msgs::DiagnosticStatus;
   if (a.total > 0 && a.last_status == RankGrasps::Response::INTERNAL_ERROR)
     status.summary(DiagnosticStatus::ERROR, "the last ranking failed: " + a.last_message);
@@ -137,12 +140,12 @@ void GraspServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) 
     status.summary(DiagnosticStatus::WARN, "the latest scene on " + topic + " is " + stale +
                                                ": requests without a scene are refused");
   else
-    status.summary(DiagnosticStatus::OK, ranking_ ? "ranking" : "serving");
+    status.summary(DiagnosticStatus::OK, ranking ? "ranking" : "serving");
   status.add("objects topic", topic);
   status.add("scenes received", a.scenes);
   status.add("latest scene: objects", latest ? static_cast<int>(latest->objects.size()) : 0);
   status.add("latest scene: age (s)", age);
-  status.add("ranking in progress", std::string(ranking_ ? "true" : "false"));
+  status.add("ranking in progress", std::string(ranking ? "true" : "false"));
   status.add("requests answered", a.total);
   for (const auto& [code, count] : a.by_status) status.add("answered " + statusName(code), count);
   status.add("last answer",
@@ -453,11 +456,6 @@ void GraspServer::runGoal(GoalHandle goal, const std::atomic<bool>& cancelled) {
 void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& res,
                         const GraspFeedback& feedback, const std::atomic<bool>* cancelled) {
   std::lock_guard<std::mutex> lock(rank_mutex_);
-  ranking_ = true;
-  struct Done {
-    std::atomic<bool>& flag;
-    ~Done() { flag = false; }
-  } done{ranking_};
   const auto start = std::chrono::steady_clock::now();
   res.success = false;
   res.status = RankGrasps::Response::INTERNAL_ERROR;

@@ -78,12 +78,11 @@ expect "grasps.launch output_frame:=base_link reaches the node" 'perception/outp
 sed -e 's#^output_frame: .*#output_frame: base_link#' -e 's#^table_frame: .*#table_frame: bench#' \
   -e 's#^estimate_table: .*#estimate_table: true#' "$source_dir/config/perception_node.yaml" \
   > "$ROS_HOME/node.yaml"
-expect "perception.launch node_config:=N: N's output_frame" 'perception/output_frame: base_link$' \
-  dump "$launch/perception.launch" node_config:="$ROS_HOME/node.yaml"
-expect "perception.launch node_config:=N: N's table_frame" 'perception/table_frame: bench$' \
-  dump "$launch/perception.launch" node_config:="$ROS_HOME/node.yaml"
-expect "perception.launch node_config:=N: N's estimate_table" 'perception/estimate_table: true$' \
-  dump "$launch/perception.launch" node_config:="$ROS_HOME/node.yaml"
+dump "$launch/perception.launch" node_config:="$ROS_HOME/node.yaml" > "$ROS_HOME/node_dump.txt"
+for field in "output_frame: base_link" "table_frame: bench" "estimate_table: true"; do
+  expect "perception.launch node_config:=N: N's ${field%%:*}" "perception/$field\$" \
+    cat "$ROS_HOME/node_dump.txt"
+done
 expect "perception.launch node_config:=N table_frame:=T: T" 'perception/table_frame: T$' \
   dump "$launch/perception.launch" node_config:="$ROS_HOME/node.yaml" table_frame:=T
 expect "grasps.launch node_config:=N reaches the perception" 'perception/output_frame: base_link$' \
