@@ -26,6 +26,14 @@ runtime_tools=("$root/src/tools/simstack_rank_grasps.cpp" "$root/src/tools/simst
 for f in "${runtime_tools[@]}"; do  # a renamed tool must not drop out of the check unseen
   [ -f "$f" ] || report "A runtime tool this check names is missing" "$f"
 done
+# Nor a renamed folder (grep's errors go unseen below).
+for d in src/core src/offline src/ros src/tools include/simstack include/simstack/offline \
+         include/simstack_ros src/core/model src/core/pipeline src/offline/training; do
+  [ -d "$root/$d" ] || report "A folder this check reads is missing" "$root/$d"
+done
+# The include pattern finds what it should: the pipeline includes the model.
+grep -rqE "${inc}simstack/model/" "$root/src/core/pipeline" ||
+  report "The include pattern finds nothing" "no simstack/model/ include in src/core/pipeline"
 report "The ROS-free runtime includes ROS headers" "$(grep -rnE "$inc($ros)" \
   "$root/src/core" "$root/src/offline" "$root/include/simstack" "${runtime_tools[@]}" 2>/dev/null)"
 # simstack_make_bag is an offline tool that writes a bag (it generates piles), not a node.

@@ -12,8 +12,18 @@ for bin in "$@"; do
     fail=1
     continue
   fi
-  # NEEDED entries name direct dependencies; ldd resolves the whole tree.
-  hits=$( (readelf -d "$bin" | grep NEEDED; ldd "$bin") 2>&1 | grep -o 'libsimstack_offline\.so[.0-9]*' | sort -u)
+  # NEEDED entries name direct dependencies; ldd resolves the whole tree. They must show the
+  # core library (the core itself: the C++ library), or the check could see nothing.
+  tree=$( (readelf -d "$bin" | grep NEEDED; ldd "$bin") 2>&1)
+  seen='libsimstack_core\.so'
+  [[ "$(basename "$bin")" == libsimstack_core.so* ]] && seen='libstdc\+\+\.so'
+  if ! echo "$tree" | grep -qE "$seen"; then
+    echo "$bin: readelf and ldd show no libsimstack_core (a static build, or the tools failed):"
+    echo "$tree"
+    fail=1
+    continue
+  fi
+  hits=$(echo "$tree" | grep -o 'libsimstack_offline\.so[.0-9]*' | sort -u)
   if [ -n "$hits" ]; then
     echo "$bin links the offline library: $hits"
     fail=1

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "simstack/model/cvae_config.h"
+#include "test_scenes.h"  // tempPath
 
 namespace simstack::test {
 
@@ -22,12 +23,6 @@ inline CvaeConfig tiny(const std::string& architecture = "cvae") {
   c.condition_size = 8;
   c.hidden_size = 16;
   return c;
-}
-
-// Per process, so that two test runs on one machine do not share files.
-inline std::string tempPath(const std::string& name) {
-  return (std::filesystem::temp_directory_path() / (name + "_" + std::to_string(::getpid())))
-      .string();
 }
 
 // Removes the paths when the test ends, also when an assertion returns early.

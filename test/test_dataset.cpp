@@ -16,6 +16,7 @@
 #include "simstack/offline/dataset/dataset.h"
 #include "simstack/offline/piles/household.h"
 #include "simstack/offline/piles/pile_generator.h"
+#include "test_scenes.h"
 
 using namespace simstack;
 
@@ -32,8 +33,7 @@ DatasetInfo smallInfo(int scenes) {
 }  // namespace
 
 TEST(Dataset, WriteReadRoundTrip) {
-  const std::string path =
-      (std::filesystem::temp_directory_path() / "simstack_test_dataset.h5").string();
+  const std::string path = test::tempPath("simstack_test_dataset.h5").string();
   const PileGenerator gen{PileConfig()};
   DatasetInfo info = smallInfo(3);
   info.seed = 77;
@@ -78,8 +78,7 @@ TEST(Dataset, WriteReadRoundTrip) {
 }
 
 TEST(Dataset, HouseholdPilesRebuildTheirContainersWithoutAMeshDirectory) {
-  const std::string path =
-      (std::filesystem::temp_directory_path() / "simstack_test_household.h5").string();
+  const std::string path = test::tempPath("simstack_test_household.h5").string();
   PileConfig config;
   config.household_share = 1.0;
   config.require_stack = false;
@@ -111,7 +110,7 @@ TEST(Dataset, HouseholdPilesRebuildTheirContainersWithoutAMeshDirectory) {
 // Several files read as one: scenes interleaved in proportion to the files' sizes, so the
 // tail of the mix (a training's validation scenes) holds each file's last scenes.
 TEST(Dataset, AMixInterleavesItsFilesInProportionAndRefusesOtherGrids) {
-  const auto dir = std::filesystem::temp_directory_path();
+  const auto dir = test::tempPath("");
   const std::string a = (dir / "simstack_test_mix_a.h5").string();
   const std::string b = (dir / "simstack_test_mix_b.h5").string();
   const std::string c = (dir / "simstack_test_mix_c.h5").string();
@@ -166,8 +165,7 @@ TEST(Dataset, ClearErrorsNameTheFile) {
     EXPECT_NE(std::string(e.what()).find("/nonexistent/simstack.h5"), std::string::npos)
         << e.what();
   }
-  const std::string path =
-      (std::filesystem::temp_directory_path() / "simstack_not_hdf5.h5").string();
+  const std::string path = test::tempPath("simstack_not_hdf5.h5").string();
   { std::ofstream(path) << "not a dataset"; }
   EXPECT_THROW(DatasetReader{path}, std::runtime_error);
   std::filesystem::remove(path);
@@ -176,8 +174,7 @@ TEST(Dataset, ClearErrorsNameTheFile) {
 // A file whose attributes disagree with its arrays' shapes (hand-edited, or written by another
 // tool) is refused when opened, naming what disagrees, before any read could overrun a buffer.
 TEST(Dataset, ArraysThatDisagreeWithTheAttributesAreRefused) {
-  const std::string path =
-      (std::filesystem::temp_directory_path() / "simstack_test_dataset_shapes.h5").string();
+  const std::string path = test::tempPath("simstack_test_dataset_shapes.h5").string();
   DatasetInfo info = smallInfo(1);
   info.max_objects_per_scene = 4;
   const auto rewrite = [&](const char* name, auto value) {

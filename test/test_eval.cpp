@@ -322,7 +322,7 @@ TEST(RealScenes, AnUnorganizedCloudIsPlacedOnThePixelsOfTheCamera) {
   const PinholeCamera camera;  // mOSD's Kinect
   const RenderResult r =
       DepthRenderer(scene).render(camera, lookAt(Vec3(0.5, -0.4, 0.6), Vec3(0, 0, 0.03)));
-  const auto dir = std::filesystem::temp_directory_path() / "simstack_test_unorganized";
+  const auto dir = test::tempPath("simstack_test_unorganized");
   std::filesystem::create_directories(dir);
   const std::string loose = (dir / "loose.pcd").string(), grid = (dir / "grid.pcd").string();
   writeMosdLikeCloud(loose, r, camera, false);
@@ -415,7 +415,7 @@ class LabelledAnswer : public EvaluatedMethod {
 };
 
 TEST(RealScenes, TheTruthScoresOneAndNothingZeroByCategory) {
-  const auto dir = std::filesystem::temp_directory_path() / "simstack_test_real_scenes";
+  const auto dir = test::tempPath("simstack_test_real_scenes");
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   const Scene scene =
@@ -535,7 +535,7 @@ TEST(GraspSummary, AMethodThatPulledNothingHasNoPullFigures) {
 }
 
 TEST(SceneFiles, SuperquadricsMeshesAndGridsRoundTrip) {
-  const auto dir = std::filesystem::temp_directory_path() / "simstack_test_eval";
+  const auto dir = test::tempPath("simstack_test_eval");
   std::filesystem::create_directories(dir);
   const std::vector<SuperquadricShape> shapes = {
       box(Vec3(0.05, 0.04, 0.03), Vec3(0.1, -0.2, 0.03), 0.7),
@@ -654,7 +654,7 @@ class KnownAnswer : public EvaluatedMethod {
 
 /// A dataset of two generated piles in a temporary file.
 std::filesystem::path twoPileDataset(const std::string& name) {
-  const std::filesystem::path path = std::filesystem::temp_directory_path() / name;
+  const std::filesystem::path path = test::tempPath(name);
   DatasetInfo info;
   info.num_scenes = 2;
   DatasetWriter writer(path.string(), info);

@@ -402,9 +402,14 @@ TEST(JointRefinement, RemovesAnInjectedOverlap) {
   const std::vector<SuperquadricShape> joint = refineJointly(pts, independent);
   const double after = collisionCost(joint[0], joint[1]) + collisionCost(joint[1], joint[0]);
   EXPECT_LT(after, 0.1 * before);
-  // The shapes still describe their points.
-  for (int i = 0; i < 2; ++i)
-    EXPECT_LT((joint[i].centroid() - independent[i].centroid()).norm(), 0.03);
+  // The shapes still describe their points: the overlap is shared out, not ended by collapsing
+  // one shape (one shrunk to half its size would be 2.5 cm off its points; half a voxel at R = 32
+  // is the bound, as below).
+  for (int i = 0; i < 2; ++i) {
+    double mean_abs = 0;
+    for (const Vec3& p : pts[i]) mean_abs += std::abs(surfaceDistance(joint[i], p));
+    EXPECT_LT(mean_abs / pts[i].size(), 0.01) << "shape " << i;
+  }
 }
 
 TEST(JointRefinement, RemovesOverlapsAcrossExponentsAndPoses) {

@@ -27,13 +27,16 @@ expect() {
     echo "FAIL $name: no '$words' in:"; cat "$dir/err.txt"; fail=1; return; fi
   echo "ok   $name: $(grep -m1 -- "$words" "$dir/err.txt" | cut -c1-150)"
 }
-# survive NAME CMD...: exit 0 or 1 (a result, or an error), no signal, within 300 s.
+# survive NAME WORDS CMD...: exit 0 or 1 (a result, or an error naming WORDS), no signal, within
+# 300 s.
 survive() {
-  local name=$1; shift
+  local name=$1 words=$2; shift 2
   timeout 300 "$@" > "$dir/out.txt" 2> "$dir/err.txt"
   local rc=$?
-  if [ $rc -le 1 ]; then echo "ok   $name (exit $rc)"; else
-    echo "FAIL $name: exit $rc"; cat "$dir/err.txt"; fail=1; fi
+  if [ $rc -gt 1 ]; then echo "FAIL $name: exit $rc"; cat "$dir/err.txt"; fail=1; return; fi
+  if [ $rc -eq 1 ] && ! grep -q -- "$words" "$dir/err.txt"; then
+    echo "FAIL $name: exit 1 without '$words' in:"; cat "$dir/err.txt"; fail=1; return; fi
+  echo "ok   $name (exit $rc)"
 }
 # succeed NAME CMD...: exit 0 within 300 s.
 succeed() {
@@ -66,7 +69,7 @@ head -c $((64 * 48 * 4)) /dev/urandom > "$dir/raw.bin"
 convert -size 64x48 -depth 32 -define quantum:format=floating-point -endian LSB gray:"$dir/raw.bin" \
   "$dir/random.tiff" 2> /dev/null
 [ -s "$dir/random.tiff" ] || { echo "FAIL setup: convert (ImageMagick) made no float TIFF"; exit 1; }
-survive "random float TIFF" "$reconstruct" --depth "$dir/random.tiff" \
+survive "random float TIFF" "random.tiff" "$reconstruct" --depth "$dir/random.tiff" \
   --intrinsics 52.5,52.5,31.5,23.5 --output "$dir/o"
 convert -size 64x48 xc:red -depth 16 PNG48:"$dir/rgb16.png" ||
   { echo "FAIL setup: convert"; exit 1; }

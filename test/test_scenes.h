@@ -1,7 +1,12 @@
 #pragma once
 // Small analytic scenes shared by the unit tests.
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <filesystem>
+#include <string>
+#include <system_error>
 
 #include "simstack/geometry/image.h"
 #include "simstack/geometry/pinhole_camera.h"
@@ -9,6 +14,22 @@
 
 namespace simstack {
 namespace test {
+
+/// `name` in a directory of this process's own under the temporary directory, so that two test
+/// runs on one machine do not share files (the directory goes when the process ends, if empty).
+inline std::filesystem::path tempPath(const std::string& name) {
+  struct Directory {
+    std::filesystem::path path =
+        std::filesystem::temp_directory_path() / ("simstack_test_" + std::to_string(::getpid()));
+    Directory() { std::filesystem::create_directories(path); }
+    ~Directory() {
+      std::error_code ec;
+      std::filesystem::remove(path, ec);  // only when empty
+    }
+  };
+  static const Directory directory;
+  return directory.path / name;
+}
 
 /// The pixels where `pile` differs from `table` (the same view without the pile), widened by
 /// `margin` and kept inside the image: [u0, u1] x [v0, v1]; u0 > u1 when none differ.

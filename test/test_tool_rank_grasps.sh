@@ -58,10 +58,11 @@ expect_error "pull-distance" --scene "$dir/stack.yaml" --target 7 --pull-distanc
 # CLI11's ranges let nan through: the option is named, not the scene file.
 expect_error "--pull-distance: 'nan' is not a finite number" --scene "$dir/stack.yaml" --target 7 \
   --pull-distance nan
-# The settings come from config/grasps.yaml, or the file --config names, and the options given
+# The settings come from config/grasps.yaml, or the file --config names (the server's own keys
+# passed over), and the options given
 # override it: a seal that breaks at 0.5 N drops the top box (1.7 N) in every pull, unless
 # --max-force says otherwise; perturbed copies from the file show in the outcome.
-printf 'objects_topic: perception/objects\nmax_force_n: 0.5\nperturbed_copies: 2\n' > "$dir/weak.yaml"
+printf 'objects_topic: perception/objects\ndiagnostic_period: 2\nrank_grasps_action: rank\nactionlib_status_frequency: 5\nmax_force_n: 0.5\nperturbed_copies: 2\n' > "$dir/weak.yaml"
 "$rank" --scene "$dir/stack.yaml" --target 7 --candidates 8 --config "$dir/weak.yaml" --output "$dir/weak" > /dev/null
 "$rank" --scene "$dir/stack.yaml" --target 7 --candidates 8 --config "$dir/weak.yaml" --max-force 30 \
   --output "$dir/strong" > /dev/null

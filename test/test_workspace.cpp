@@ -174,7 +174,7 @@ TEST(PlanTiles, BlendingKeepsAgreeingTilesAndFillsTheRest) {
 }
 
 TEST(Workspace, ConfigReadsBoundsAndRejectsAnEmptyBox) {
-  const std::string path = std::filesystem::temp_directory_path() / "simstack_workspace.yaml";
+  const std::string path = test::tempPath("simstack_workspace.yaml");
   std::ofstream(path) << "workspace:\n  min_m: [-0.3, -0.25, -.inf]\n  max_m: [0.3, 0.25, 0.4]\n"
                          "  max_tiles: 4\n";
   const PerceptionConfig c = loadPerceptionYaml(path);

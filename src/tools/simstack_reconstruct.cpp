@@ -9,6 +9,7 @@
 #include <iostream>
 #include <optional>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -81,7 +82,15 @@ int main(int argc, char** argv) {
     const PerceptionConfig config = perception.config();
     StagedDirectory staged(output, "simstack_reconstruct");  // a bad --output fails here
     const ScenePerception pipeline(config);
-    const SceneEstimate est = pipeline.perceive(views);
+    const SceneEstimate est = [&] {
+      try {
+        return pipeline.perceive(views);
+      } catch (const std::exception& e) {  // what the depth holds: named by its file
+        std::string files;
+        for (const std::string& p : depth_paths) files += (files.empty() ? "" : ", ") + p;
+        throw std::runtime_error(files + ": " + e.what());
+      }
+    }();
     const std::vector<std::string> files =
         writeReconstruction(staged.path(), view, est, labelMinHeight(config), views.size() == 1);
     staged.commit();  // replaces an earlier run's directory whole

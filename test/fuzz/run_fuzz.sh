@@ -2,15 +2,18 @@
 # Builds the libFuzzer target for the depth readers with clang (Debian's clang and
 # libclang-rt-dev carry libFuzzer) against the build's simstack_core, seeds it with a valid PCD,
 # PNG and TIFF, and runs it. Crashing inputs are kept in the corpus directory's crash-* files.
-# Usage: test/fuzz/run_fuzz.sh [SECONDS=180] [BUILD_DIR=build]
+# Usage: test/fuzz/run_fuzz.sh [SECONDS=180] [BUILD_DIR=build]   (BUILD_DIR absolute or from the
+# package directory; ctest `fuzz_depth_readers` runs it for 20 s, skipped without clang)
 set -eu
 seconds=${1:-180}
 build=${2:-build}
 root=$(cd "$(dirname "$0")/../.." && pwd)
-work=$root/$build/fuzz
+[[ "$build" = /* ]] || build=$root/$build
+work=$build/fuzz
 mkdir -p "$work/corpus"
-lib=$root/$build/devel/lib
-command -v clang++ > /dev/null || { echo "needs clang: sudo apt-get install clang libclang-rt-14-dev"; exit 2; }
+lib=$build/devel/lib
+# 77: ctest's skip.
+command -v clang++ > /dev/null || { echo "needs clang: sudo apt-get install clang libclang-rt-dev"; exit 77; }
 clang++ -std=c++17 -O1 -g -fsanitize=fuzzer -I"$root/include" -I/usr/include/eigen3 \
   "$root/test/fuzz/fuzz_depth_readers.cpp" -L"$lib" -lsimstack_core -Wl,-rpath,"$lib" \
   -o "$work/fuzz_depth_readers"

@@ -30,6 +30,18 @@ expect() {
     echo "FAILED: $label: no line matching '$pattern' in the output of: $*"; status=1
   fi
 }
+# absent LABEL PATTERN COMMAND...: COMMAND succeeds with some output and no line matches PATTERN.
+absent() {
+  local label=$1 pattern=$2 out
+  shift 2
+  if ! out=$("$@" 2>&1) || [ -z "$out" ]; then
+    echo "FAILED: $label: $* failed or printed nothing"; echo "$out"; status=1
+  elif echo "$out" | grep -E "$pattern"; then
+    echo "FAILED: $label"; status=1
+  else
+    echo "ok: $label"
+  fi
+}
 launch=$source_dir/launch
 dump() { roslaunch --dump-params "$@"; }
 expect "perception.launch: the config's model" 'perception/model: models/simstack_r32_fc.pt$' \
@@ -58,12 +70,9 @@ expect "grasps.launch hypotheses:=1: the config's model" 'perception/model: mode
 # scene, and 3 hypotheses would stop it at start.
 expect "grasps.launch config:=clutter: its model" 'perception/model: models/simstack_r32_fc.pt$' \
   dump "$launch/grasps.launch" config:="$source_dir/config/perception_clutter.yaml"
-if dump "$launch/grasps.launch" config:="$source_dir/config/perception_clutter.yaml" |
-  grep -q 'perception/decompose_samples'; then
-  echo "FAILED: grasps.launch config:=clutter sets decompose_samples"; status=1
-else
-  echo "ok: grasps.launch config:=clutter leaves decompose_samples to the config"
-fi
+absent "grasps.launch config:=clutter leaves decompose_samples to the config" \
+  'perception/decompose_samples' \
+  dump "$launch/grasps.launch" config:="$source_dir/config/perception_clutter.yaml"
 expect "replay.launch decompose_samples:=3: the C-VAE" 'perception/model: .*/simstack_r32.pt$' \
   dump "$launch/replay.launch" decompose_samples:=3
 expect "grasps.launch image_transport:=compressedDepth reaches the node" \
@@ -98,11 +107,8 @@ expect "grasps.launch manager:=driver loads into it" 'PerceptionNodelet driver '
 # One name per setting: no parameter of the perception node lies in a section named after the
 # node's own settings or the pipeline's (the names of an older layout: ~perception/symmetries,
 # ~node/table_frame).
-if dump "$launch/perception.launch" | grep -E '^/camera/perception/(perception|node)/'; then
-  echo "FAILED: perception.launch sets parameters under ~perception/ or ~node/"; status=1
-else
-  echo "ok: perception.launch: one name per setting"
-fi
+absent "perception.launch: one name per setting (none under ~perception/ or ~node/)" \
+  '^/camera/perception/(perception|node)/' dump "$launch/perception.launch"
 # A node that loads a config clears what an earlier launch left in its namespace.
 if ! /usr/bin/python3 - "$launch"/*.launch <<'PY'
 import sys, xml.etree.ElementTree as ET

@@ -47,7 +47,9 @@ while not rospy.is_shutdown():
         if s.name.startswith(ns + "/perception") and s.level == 2 and name in s.message:
             sys.exit(0)
 PY
-  if rostopic list | grep -q "^/$ns/perception/objects$"; then
+  local topics
+  topics=$(rostopic list) && [ -n "$topics" ] || { echo "$ns: rostopic list failed"; exit 1; }
+  if echo "$topics" | grep -q "^/$ns/perception/objects$"; then
     echo "$ns: a refused model's node offers an objects topic"; exit 1; fi
   kill -0 "$pid" || { echo "$ns: the node exited"; cat "$log"; exit 1; }
   ros_session_kill "$pid"

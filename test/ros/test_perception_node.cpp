@@ -424,9 +424,17 @@ TEST_F(PerceptionNodeTest, AnEmptyTableGivesAnEmptyScene) {
 }
 
 TEST_F(PerceptionNodeTest, ResetAndSaveOctomap) {
-  ASSERT_TRUE(sendDepth(render(knownPile()), 60.0));
+  const std::optional<ObjectArray> before = sendDepth(render(knownPile()), 60.0);
+  ASSERT_TRUE(before);
+  ASSERT_FALSE(before->objects.empty());
   std_srvs::Empty empty;
   EXPECT_TRUE(ros::service::call("/camera/perception/reset", empty));
+  // The tracker forgot its objects: the same pile again gets ids never given before.
+  const std::optional<ObjectArray> after = sendDepth(render(knownPile()), 60.0);
+  ASSERT_TRUE(after);
+  ASSERT_FALSE(after->objects.empty());
+  for (const auto& o : after->objects)
+    for (const auto& p : before->objects) EXPECT_NE(o.id, p.id) << "an id kept over the reset";
   std::string dir;
   ASSERT_TRUE(nh_.getParam("/camera/perception/output_dir", dir));
   SaveOctomap save;
@@ -450,12 +458,13 @@ TEST_F(PerceptionNodeTest, ResetAndSaveOctomap) {
   EXPECT_NE(save.response.message.find("at most 255"), std::string::npos) << save.response.message;
   std::filesystem::create_directories(dir);
   std::filesystem::remove(std::filesystem::path(dir) / "link.ot");
-  std::filesystem::create_symlink("/tmp/simstack_link_target.ot",
-                                  std::filesystem::path(dir) / "link.ot");
+  const std::filesystem::path link_target = test::tempPath("simstack_link_target.ot");
+  std::filesystem::remove(link_target);
+  std::filesystem::create_symlink(link_target, std::filesystem::path(dir) / "link.ot");
   save.request.file_name = "link.ot";
   ASSERT_TRUE(ros::service::call("/camera/perception/save_octomap", save));
   EXPECT_FALSE(save.response.success) << "wrote through a symbolic link";
-  EXPECT_FALSE(std::filesystem::exists("/tmp/simstack_link_target.ot"));
+  EXPECT_FALSE(std::filesystem::exists(link_target));
   for (const char* name : {"scene.ot", "scene.ot", "scene.bt"}) {  // the second replaces the first
     save.request.file_name = name;
     ASSERT_TRUE(ros::service::call("/camera/perception/save_octomap", save));

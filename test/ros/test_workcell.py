@@ -5,6 +5,7 @@ the node is ready before the first frame and perceives every frame, ids stay wit
 late subscribers get the latched outputs, and grasps come as PoseStamped in base_link, their
 target named by an id or by a point."""
 import math
+import multiprocessing
 import threading
 import time
 import unittest
@@ -96,6 +97,7 @@ class Workcell(unittest.TestCase):
     def test_2_ids_stay_with_their_objects(self):
         first = self.scenes[min(self.scenes)]
         self.assertGreater(len(first.objects), 0)
+        compared = 0
         for stamp, scene in sorted(self.scenes.items()):
             for o in scene.objects:
                 p = o.superquadric.pose.position
@@ -104,8 +106,11 @@ class Workcell(unittest.TestCase):
                                       f.superquadric.pose.position.z)))
                 q = near.superquadric.pose.position
                 if math.dist((p.x, p.y, p.z), (q.x, q.y, q.z)) < 0.02:
+                    compared += 1
                     self.assertEqual(o.id, near.id, "frame %.2f: the object at (%.3f, %.3f, %.3f)" % (
                         stamp, p.x, p.y, p.z))
+        # Most objects of most frames lie where one of the first frame's does: compared at all.
+        self.assertGreaterEqual(compared, len(first.objects) * len(self.scenes) // 2)
 
     def test_3_late_subscribers_get_the_latched_outputs(self):
         markers = rospy.wait_for_message("/camera/perception/markers", MarkerArray, timeout=10)
@@ -203,8 +208,9 @@ class Workcell(unittest.TestCase):
         self.assertEqual(done[-1], result.pulls)
         self.assertTrue(feedback[-1].has_best)
         # A long ranking (slow, long pulls: minutes in all) cancelled after its first pulls: it
-        # stops within seconds (within a pull per thread: test_grasping's
-        # ProgressCountsEveryPullAndAStopEndsTheRankingWithinOnePullPerThread).
+        # stops within a pull per thread (the server's threads are at most the cores; one more
+        # pull's feedback may be on its way at the cancel), as test_grasping's
+        # ProgressCountsEveryPullAndAStopEndsTheRankingWithinOnePullPerThread does in the core.
         feedback = []
         goal.candidates = 256
         goal.pull_distance_m, goal.pull_speed_mps = 0.5, 0.01
@@ -213,17 +219,17 @@ class Workcell(unittest.TestCase):
         while len(feedback) < 3 and time.time() < deadline:
             time.sleep(0.005)
         self.assertGreaterEqual(len(feedback), 3)
-        cancelled = time.time()
+        done_at_cancel = feedback[-1].pulls_done
         client.cancel_goal()
-        self.assertTrue(client.wait_for_result(rospy.Duration(30)))
-        waited = time.time() - cancelled
+        self.assertTrue(client.wait_for_result(rospy.Duration(30)))  # a hang guard
         result = client.get_result()
         self.assertEqual(client.get_state(), GoalStatus.PREEMPTED, result.message)
         self.assertFalse(result.success)
         self.assertEqual(result.status, result.CANCELLED)
         self.assertIn("stopped after", result.message)
         self.assertLess(result.pulls, feedback[-1].pulls_total)
-        self.assertLess(waited, 10.0, "cancel answered after %.3f s" % waited)
+        self.assertLessEqual(result.pulls, done_at_cancel + multiprocessing.cpu_count() + 1,
+                             "%d pulls done at the cancel" % done_at_cancel)
         # A cancel while two service requests wait for that ranking (holding the service's
         # threads) still stops it.
         feedback = []
