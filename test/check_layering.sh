@@ -31,9 +31,16 @@ for d in src/core src/offline src/ros src/tools include/simstack include/simstac
          include/simstack_ros src/core/model src/core/pipeline src/offline/training; do
   [ -d "$root/$d" ] || report "A folder this check reads is missing" "$root/$d"
 done
-# The include pattern finds what it should: the pipeline includes the model.
+# Each pattern finds what it should where it is allowed (a pattern that matches nothing, or
+# that grep cannot read, would pass every check below).
 grep -rqE "${inc}simstack/model/" "$root/src/core/pipeline" ||
   report "The include pattern finds nothing" "no simstack/model/ include in src/core/pipeline"
+grep -rqE "$inc($ros)" "$root/src/ros" ||
+  report "The ROS pattern finds nothing" "no ROS include in src/ros"
+grep -rqE "$inc(simstack/offline/|(\\.\\./)+offline/)" "$root/src/offline" ||
+  report "The offline pattern finds nothing" "no offline include in src/offline"
+grep -rqE "$inc(torch/|ATen/|c10/)" "$root/src/core/model" ||
+  report "The libtorch pattern finds nothing" "no libtorch include in src/core/model"
 report "The ROS-free runtime includes ROS headers" "$(grep -rnE "$inc($ros)" \
   "$root/src/core" "$root/src/offline" "$root/include/simstack" "${runtime_tools[@]}" 2>/dev/null)"
 # simstack_make_bag is an offline tool that writes a bag (it generates piles), not a node.

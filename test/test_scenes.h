@@ -16,7 +16,7 @@ namespace simstack {
 namespace test {
 
 /// `name` in a directory of this process's own under the temporary directory, so that two test
-/// runs on one machine do not share files (the directory goes when the process ends, if empty).
+/// runs on one machine do not share files (the directory goes when the process ends).
 inline std::filesystem::path tempPath(const std::string& name) {
   struct Directory {
     std::filesystem::path path =
@@ -24,7 +24,7 @@ inline std::filesystem::path tempPath(const std::string& name) {
     Directory() { std::filesystem::create_directories(path); }
     ~Directory() {
       std::error_code ec;
-      std::filesystem::remove(path, ec);  // only when empty
+      std::filesystem::remove_all(path, ec);  // also what a test that stopped early left
     }
   };
   static const Directory directory;

@@ -88,7 +88,7 @@ int main(int argc, char** argv) {
       } catch (const std::exception& e) {  // what the depth holds: named by its file
         std::string files;
         for (const std::string& p : depth_paths) files += (files.empty() ? "" : ", ") + p;
-        throw std::runtime_error(files + ": " + e.what());
+        throw std::runtime_error("perceiving " + files + ": " + e.what());
       }
     }();
     const std::vector<std::string> files =

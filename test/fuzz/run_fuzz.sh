@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer target for the depth readers with clang (Debian's clang and
 # libclang-rt-dev carry libFuzzer) against the build's simstack_core, seeds it with a valid PCD,
-# PNG and TIFF, and runs it. Crashing inputs are kept in the corpus directory's crash-* files.
+# PNG and TIFF, and runs it. Crashing inputs are kept as BUILD_DIR/fuzz/crash-* files.
 # Usage: test/fuzz/run_fuzz.sh [SECONDS=180] [BUILD_DIR=build]   (BUILD_DIR absolute or from the
 # package directory; ctest `fuzz_depth_readers` runs it for 20 s, skipped without clang)
 set -eu
@@ -28,5 +28,7 @@ convert "$seed/d_views/scene_000000_view_0_depth.png" -resize 64x48 "$seed/small
 convert -size 8x6 xc:gray -depth 32 -define quantum:format=floating-point "$seed/f.tiff" 2> /dev/null || true  # writes the file, complains about a tag
 { printf '\002'; cat "$seed/f.tiff"; } > "$work/corpus/seed_tiff"
 cd "$work"
-./fuzz_depth_readers -max_total_time="$seconds" -rss_limit_mb=2048 -timeout=10 \
+# A crash ends it with 1, not libFuzzer's default 77 (ctest's skip here).
+./fuzz_depth_readers -max_total_time="$seconds" -rss_limit_mb=2048 -timeout=10 -error_exitcode=1 \
+  -timeout_exitcode=1 \
   -max_len=65536 corpus

@@ -10,6 +10,7 @@
 
 #include <functional>
 #include <future>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -40,13 +41,19 @@ TEST(FrozenClock, AMissingTransformIsReportedAndAWaitingNodeletUnloads) {
 
   std::mutex mutex;
   std::string quick_status;
+  bool patient_waiting = false;  // its frame received, neither processed nor skipped
   ros::Subscriber diagnostics = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
       "/diagnostics", 50, [&](const diagnostic_msgs::DiagnosticArray::ConstPtr& msg) {
-        for (const auto& s : msg->status)
-          if (s.name.rfind("quick/perception:", 0) == 0) {  // named without the leading slash
-            std::lock_guard<std::mutex> lock(mutex);
+        for (const auto& s : msg->status) {
+          std::lock_guard<std::mutex> lock(mutex);
+          if (s.name.rfind("quick/perception:", 0) == 0)  // named without the leading slash
             quick_status = s.message;
-          }
+          if (s.name.rfind("patient/perception:", 0) != 0) continue;
+          std::map<std::string, std::string> values;
+          for (const auto& kv : s.values) values[kv.key] = kv.value;
+          patient_waiting = values["frames received"] == "1" && values["frames processed"] == "0" &&
+                            values["frames skipped (bad input)"] == "0";
+        }
       });
 
   // A 1 m flat view from a camera frame that tf has never heard of.
@@ -78,27 +85,19 @@ TEST(FrozenClock, AMissingTransformIsReportedAndAWaitingNodeletUnloads) {
     publishers[i + 1].publish(cameraInfoMsg(header, camera));
   }
 
-  // The simulated clock stands still for tf_timeout_s (0.5 s) of wall time: the skip is
-  // reported (diagnostics come on a wall timer, once a second).
-  std::string last_status;
-  const bool reported = waitWall(
+  // The patient nodelet (tf_timeout_s 10) waits for its transform once its diagnostics count
+  // its frame received and neither processed nor skipped: unloading it must end the wait
+  // instead of waiting for the clock, so the unload is answered before the wait would have
+  // ended by itself (10 s after the frame arrived). A thread of its own, left behind if it
+  // hangs.
+  const double patient_wait_s = 10.0;
+  ASSERT_TRUE(waitWall(
       [&] {
         std::lock_guard<std::mutex> lock(mutex);
-        last_status = quick_status;
-        return last_status.find("no transform") != std::string::npos;
+        return patient_waiting;
       },
-      15.0);
-  EXPECT_TRUE(reported) << "the missing transform was never reported; last status: '" << last_status
-                        << "'";
-
-  // The other nodelet (tf_timeout_s 10) is still waiting for its transform: unloading it must
-  // end the wait instead of waiting for the clock, so the unload is answered before the wait
-  // would have ended by itself. A thread of its own, left behind if it hangs.
-  const double patient_wait_s = 10.0;
-  const double started_s = (ros::WallTime::now() - published).toSec();
-  if (started_s > patient_wait_s - 2.0)
-    GTEST_SKIP() << "the unload would start " << started_s << " s after the frame, too near the "
-                 << "end of the patient nodelet's own wait to tell it apart";
+      patient_wait_s - 3.0))
+      << "the patient nodelet's diagnostics never showed its frame waiting for tf";
   auto answered = std::make_shared<std::promise<bool>>();
   std::future<bool> answer = answered->get_future();
   std::thread([answered] {
@@ -112,6 +111,19 @@ TEST(FrozenClock, AMissingTransformIsReportedAndAWaitingNodeletUnloads) {
       << "unloading a nodelet that waits for tf hangs while /clock stands still (no answer "
       << patient_wait_s - 0.5 << " s after its frame)";
   EXPECT_TRUE(answer.get());
+
+  // The simulated clock stands still for tf_timeout_s (0.5 s) of wall time: the skip is
+  // reported (diagnostics come on a wall timer, once a second).
+  std::string last_status;
+  const bool reported = waitWall(
+      [&] {
+        std::lock_guard<std::mutex> lock(mutex);
+        last_status = quick_status;
+        return last_status.find("no transform") != std::string::npos;
+      },
+      15.0);
+  EXPECT_TRUE(reported) << "the missing transform was never reported; last status: '" << last_status
+                        << "'";
 }
 
 }  // namespace
