@@ -565,6 +565,17 @@ TEST(GraspRanking, ATargetTooHeavyForTheCupSaysThatNoGraspHeld) {
   ASSERT_FALSE(ok.grasps.empty());
   EXPECT_GT(ok.grasps.front().freed_share, 0.0);
   EXPECT_EQ(ok.message, "");
+  // Six hypotheses (three scenes and three copies, say): a grasp that fails, or frees the target,
+  // in all six does so with a share of exactly 1 (six sixths added up make 0.9999999999999999).
+  const GraspRanking heavy6 =
+      rankGrasps(std::vector<std::vector<SuperquadricShape>>(6, crate), 0, {}, config);
+  for (const RankedGrasp& g : heavy6.grasps) EXPECT_EQ(g.failed_share, 1.0);
+  EXPECT_NE(heavy6.message.find("none of the 4 grasps held"), std::string::npos) << heavy6.message;
+  const GraspRanking light6 =
+      rankGrasps(std::vector<std::vector<SuperquadricShape>>(6, light), 0, {}, config);
+  ASSERT_FALSE(light6.grasps.empty());
+  EXPECT_EQ(light6.grasps.front().freed_share, 1.0);
+  EXPECT_TRUE(light6.grasps.front().freed());
 }
 
 TEST(GraspRanking, TheSceneBottomIsItsLowestSurface) {

@@ -90,13 +90,16 @@ def _namespace(camera):
 
 
 def latest_scene(camera="camera", timeout=10.0, max_age=None):
-    """The latest ObjectArray on /<camera>/perception/objects. It is latched, so it comes at once
+    """The latest ObjectArray on the topic the grasp server reads (its ~objects_topic under
+    /<camera>, /<camera>/perception/objects by default). It is latched, so it comes at once
     however old it is: refused when its stamp is more than `max_age` seconds behind the clock
     (None: the grasp server's ~max_scene_age_s, 10 s when unset; 0: any age), or when it holds
     no object."""
     _require_node()
+    _check_seconds("timeout", timeout)
     camera = _namespace(camera)
-    topic = "/%s/perception/objects" % camera
+    topic = rospy.get_param("/%s/grasps/objects_topic" % camera, "perception/objects")
+    topic = topic if topic.startswith("/") else "/%s/%s" % (camera, topic)
     try:
         scene = rospy.wait_for_message(topic, ObjectArray, timeout=timeout)
     except rospy.ROSException as e:
@@ -154,6 +157,14 @@ def _check_count(name, value):
 def _check_number(name, value):
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise GraspServiceError("%s must be a finite number, not %r" % (name, value),
+                                RankGraspsResult.BAD_REQUEST)
+
+
+def _check_seconds(name, value):
+    """A wait: a finite number of seconds above 0 (0 or less would give up at once)."""
+    _check_number(name, value)
+    if value <= 0:
+        raise GraspServiceError("%s must be above 0 s, not %r" % (name, value),
                                 RankGraspsResult.BAD_REQUEST)
 
 
@@ -269,10 +280,11 @@ def rank_grasps(scene, target_id, camera="camera", candidates=0, pull_distance_m
     _check_count("candidates", candidates)
     _check_count("hypotheses", hypotheses)
     for name, value in (("pull_distance_m", pull_distance_m), ("pull_speed_mps", pull_speed_mps),
-                        ("pregrasp_distance_m", pregrasp_distance_m), ("timeout", timeout)):
+                        ("pregrasp_distance_m", pregrasp_distance_m)):
         _check_number(name, value)
+    _check_seconds("timeout", timeout)
     if result_timeout is not None:
-        _check_number("result_timeout", result_timeout)
+        _check_seconds("result_timeout", result_timeout)
     name = "/%s/grasps/rank_grasps_action" % _namespace(camera)
     goal = RankGraspsGoal(target_id=0 if target_id is None else target_id, candidates=candidates,
                           pull_distance_m=pull_distance_m, pull_speed_mps=pull_speed_mps,

@@ -285,6 +285,9 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
                   " yet (is the perception running? its log says why not)";
     return false;
   }
+  // The scene's frame and stamp from here on, a stale one's too (its age is the task's to see).
+  res.header = scene->header;
+  res.header.frame_id = tf2Frame(res.header.frame_id);  // markers in rviz
   if (req.scene.objects.empty() && !scene->header.stamp.isZero()) {
     const double age = (ros::Time::now() - scene->header.stamp).toSec();
     if (const std::string why = staleScene(age, config_.policy.max_scene_age_s); !why.empty()) {
@@ -293,8 +296,6 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
       return false;
     }
   }
-  res.header = scene->header;
-  res.header.frame_id = tf2Frame(res.header.frame_id);  // markers in rviz
   if (scene->objects.empty()) {
     res.status = RankGrasps::Response::EMPTY_SCENE;
     char stamp[32];

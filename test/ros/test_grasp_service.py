@@ -426,9 +426,12 @@ class GraspService(unittest.TestCase):
         for bad in (dict(target_id=-1), dict(target_id=None), dict(target_id=1.5),
                     dict(target_id=target, candidates=-2),
                     dict(target_id=target, pull_distance_m=float("nan")),
-                    dict(target_id=target, result_timeout=float("inf"))):
+                    dict(target_id=target, result_timeout=float("inf")),
+                    dict(target_id=target, timeout=0), dict(target_id=target, result_timeout=-1)):
             with self.assertRaises(grasp_client.GraspServiceError, msg=str(bad)):
                 grasp_client.rank_grasps(scene, **bad)
+        with self.assertRaisesRegex(grasp_client.GraspServiceError, "timeout must be above 0 s"):
+            grasp_client.latest_scene(timeout=0)
         # A frame whose z is not up: the table turned a quarter about x, so that the table's
         # up is the frame's -y. Object 7 is higher in the frame's z, object 8 above the table.
         tilted = ObjectArray()

@@ -83,14 +83,21 @@ void summarise(RankedGrasp* g, int copies, const SuperquadricShape& target) {
   const Vec3 arm = target.centroid() - g->candidate.contact_table;
   g->com_offset_m =
       (arm - arm.dot(g->candidate.approach_table) * g->candidate.approach_table).norm();
+  // The shares from whole counts: n times 1/n added up can miss 1 (six sixths do), and held()
+  // and freed() compare them with 0 and 1 exactly.
+  int failed = 0, freed = 0;
   for (const PullOutcome& o : g->outcomes) {
     g->mean_displacement_m += o.mean_displacement_m / n;
     g->worst_displacement_m = std::max(g->worst_displacement_m, o.mean_displacement_m);
     g->max_displacement_m = std::max(g->max_displacement_m, o.max_displacement_m);
     g->mean_toppled += o.toppled / n;
-    g->failed_share += (o.failed() ? 1.0 : 0.0) / n;
-    g->freed_share += (o.target_freed ? 1.0 : 0.0) / n;
+    failed += o.failed() ? 1 : 0;
+    freed += o.target_freed ? 1 : 0;
     g->peak_load = std::max(g->peak_load, o.peak_load);
+  }
+  if (n > 0) {
+    g->failed_share = failed / n;
+    g->freed_share = freed / n;
   }
   g->score_m = 0.5 * (g->mean_displacement_m + g->worst_displacement_m);
 }
