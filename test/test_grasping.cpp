@@ -569,6 +569,7 @@ TEST(GraspRanking, ATargetTooHeavyForTheCupSaysThatNoGraspHeld) {
   // in all six does so with a share of exactly 1 (six sixths added up make 0.9999999999999999).
   const GraspRanking heavy6 =
       rankGrasps(std::vector<std::vector<SuperquadricShape>>(6, crate), 0, {}, config);
+  ASSERT_EQ(heavy6.grasps.size(), 4u);
   for (const RankedGrasp& g : heavy6.grasps) EXPECT_EQ(g.failed_share, 1.0);
   EXPECT_NE(heavy6.message.find("none of the 4 grasps held"), std::string::npos) << heavy6.message;
   const GraspRanking light6 =

@@ -89,23 +89,35 @@ def _namespace(camera):
     return "/".join(parts)
 
 
-def latest_scene(camera="camera", timeout=10.0, max_age=None):
-    """The latest ObjectArray on the topic the grasp server reads (its ~objects_topic under
-    /<camera>, /<camera>/perception/objects by default). It is latched, so it comes at once
-    however old it is: refused when its stamp is more than `max_age` seconds behind the clock
-    (None: the grasp server's ~max_scene_age_s, 10 s when unset; 0: any age), or when it holds
-    no object."""
+def _server_param(camera, name, default):
+    """The grasp server's ~name (its default when unset); GraspServiceError without a master."""
+    try:
+        return rospy.get_param("/%s/grasps/%s" % (camera, name), default)
+    except (OSError, rospy.ROSException) as e:
+        raise GraspServiceError("cannot read /%s/grasps/%s from the ROS master: %s" % (
+            camera, name, e))
+
+
+def latest_scene(camera="camera", timeout=10.0, max_age=None, topic=None):
+    """The latest ObjectArray on the topic the grasp server reads: its ~objects_topic under
+    /<camera> (/<camera>/perception/objects by default; a remapping of the server's is not seen:
+    give `topic` then). It is latched, so it comes at once however old it is: refused when its
+    stamp is more than `max_age` seconds behind the clock (None: the grasp server's
+    ~max_scene_age_s, 10 s when unset; 0: any age), or when it holds no object. `timeout`: None
+    waits for ever."""
     _require_node()
-    _check_seconds("timeout", timeout)
+    if timeout is not None:
+        _check_seconds("timeout", timeout)
     camera = _namespace(camera)
-    topic = rospy.get_param("/%s/grasps/objects_topic" % camera, "perception/objects")
-    topic = topic if topic.startswith("/") else "/%s/%s" % (camera, topic)
+    if topic is None:
+        topic = _server_param(camera, "objects_topic", "perception/objects")
+        topic = topic if topic.startswith("/") else "/%s/%s" % (camera, topic)
     try:
         scene = rospy.wait_for_message(topic, ObjectArray, timeout=timeout)
     except rospy.ROSException as e:
         raise GraspServiceError("no scene on %s: %s" % (topic, e), RankGraspsResult.NO_SCENE)
     if max_age is None:
-        max_age = float(rospy.get_param("/%s/grasps/max_scene_age_s" % camera, 10.0))
+        max_age = float(_server_param(camera, "max_scene_age_s", 10.0))
     age = scene_age(scene)
     if max_age > 0 and age is not None and age > max_age:
         raise GraspServiceError("the latest scene on %s is %.1f s old (max age %g s): %s" % (

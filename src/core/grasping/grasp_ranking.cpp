@@ -83,14 +83,15 @@ void summarise(RankedGrasp* g, int copies, const SuperquadricShape& target) {
   const Vec3 arm = target.centroid() - g->candidate.contact_table;
   g->com_offset_m =
       (arm - arm.dot(g->candidate.approach_table) * g->candidate.approach_table).norm();
-  // The shares from whole counts: n times 1/n added up can miss 1 (six sixths do), and held()
-  // and freed() compare them with 0 and 1 exactly.
-  int failed = 0, freed = 0;
+  // The shares and the mean topples from whole counts: n times 1/n added up can miss 1 (six
+  // sixths do) and depends on the order, while held(), freed() and the ranking compare them
+  // exactly.
+  int failed = 0, freed = 0, toppled = 0;
   for (const PullOutcome& o : g->outcomes) {
     g->mean_displacement_m += o.mean_displacement_m / n;
     g->worst_displacement_m = std::max(g->worst_displacement_m, o.mean_displacement_m);
     g->max_displacement_m = std::max(g->max_displacement_m, o.max_displacement_m);
-    g->mean_toppled += o.toppled / n;
+    toppled += o.toppled;
     failed += o.failed() ? 1 : 0;
     freed += o.target_freed ? 1 : 0;
     g->peak_load = std::max(g->peak_load, o.peak_load);
@@ -98,6 +99,7 @@ void summarise(RankedGrasp* g, int copies, const SuperquadricShape& target) {
   if (n > 0) {
     g->failed_share = failed / n;
     g->freed_share = freed / n;
+    g->mean_toppled = toppled / n;
   }
   g->score_m = 0.5 * (g->mean_displacement_m + g->worst_displacement_m);
 }
