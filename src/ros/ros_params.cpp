@@ -174,10 +174,8 @@ GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
   // rank_grasps_action and actionlib_status_frequency actionlib's (its status list's timeout,
   // its status rate, which actionlib searches for up from the action's namespace).
   XmlRpc::XmlRpcValue all = privateParameters(pnh);
-  const std::string yaml = yamlText(all, [](const std::string& name) {
-    return name != "objects_topic" && name != "rank_grasps_action" &&
-           name != "actionlib_status_frequency" && name != "diagnostic_period";
-  });
+  const std::string yaml =
+      yamlText(all, [](const std::string& name) { return kGraspServerKeys.count(name) == 0; });
   GraspServerConfig c;
   static_cast<GraspSettings&>(c) =
       parseGraspSettingsYaml(yaml, "the parameters under " + pnh.getNamespace());

@@ -136,10 +136,7 @@ struct RankOptions {
   /// defaults, and the bounds on a request (max_candidates_limit, max_pull_distance_m) this
   /// tool's option ranges.
   GraspSettings settings() const {
-    // The grasp server's own keys (its topic, diagnostics and action) are not the ranking's.
-    GraspSettings s = loadGraspSettingsYaml(
-        config_path,
-        {"objects_topic", "rank_grasps_action", "actionlib_status_frequency", "diagnostic_period"});
+    GraspSettings s = loadGraspSettingsYaml(config_path, kGraspServerKeys);
     GraspRankingConfig& c = s.ranking;
     c.candidates.max_candidates = candidates_opt->count() ? candidates : s.policy.max_candidates;
     c.pull.pull_distance_m = pull_distance_m;

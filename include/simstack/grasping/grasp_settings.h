@@ -20,6 +20,11 @@ struct GraspSettings {
   void validate() const;
 };
 
+/// The grasp server's own parameters, which a grasps file may hold beside the settings: its
+/// scene topic, its diagnostics period, its action's namespace and actionlib's status rate.
+inline const std::set<std::string> kGraspServerKeys = {
+    "objects_topic", "diagnostic_period", "rank_grasps_action", "actionlib_status_frequency"};
+
 /// The settings in YAML `text` (a map of config/grasps.yaml's fields; absent ones keep their
 /// defaults), checked. Keys in `ignored` are skipped (a caller's own, such as the server's
 /// objects_topic). Throws, naming the key and `source`: std::runtime_error for text that does
