@@ -1,10 +1,14 @@
 # Sourced by scripts/demo and the rviz test: a ROS master of our own on a free port, an Xvfb
 # display, and everything started here stopped again on exit, Ctrl-C or failure.
 # Usage: source scripts/ros_session.bash BUILD_DIR; ros_session_start; ros_session_xvfb; ...
+# BUILD_DIR: a build directory holding devel/, or a devel space itself (a catkin workspace's
+# <ws>/devel); ROS_SESSION_DEVEL names the devel space found.
 # With ROS_SESSION_REMOVE_HOME=1 the ROS_HOME (logs) is removed at the end too.
 
+ROS_SESSION_DEVEL=$1
+[ -f "$ROS_SESSION_DEVEL/setup.bash" ] || ROS_SESSION_DEVEL=$1/devel
 # shellcheck disable=SC1091
-source "$1/devel/setup.bash"  # (Debian's ROS profile reads unset variables: no set -u before)
+source "$ROS_SESSION_DEVEL/setup.bash"  # (Debian's ROS profile reads unset variables: no set -u before)
 export PATH=/usr/bin:$PATH    # ROS Python tools need the system interpreter, not a pyenv one
 export ROS_HOSTNAME=localhost
 export ROS_HOME=${ROS_HOME:-$(mktemp -d)}

@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -245,8 +246,11 @@ TEST(StagedOutput, ACommittedFileReplacesTheTargetAndAnAbandonedOneLeavesNoTrace
   }
   EXPECT_TRUE(fs::exists(out + "/new.yaml"));
   EXPECT_FALSE(fs::exists(out + "/stale.ply"));
-  // A result directory is readable by others, as any directory the user makes.
-  EXPECT_NE(fs::status(out).permissions() & fs::perms::others_read, fs::perms::none);
+  // A result directory has the permissions of any directory the user makes (0777 less the
+  // umask), not the private ones of a temporary directory.
+  const mode_t mask = ::umask(0);
+  ::umask(mask);
+  EXPECT_EQ(fs::status(out).permissions() & fs::perms::all, static_cast<fs::perms>(0777 & ~mask));
   {
     StagedDirectory staged(out, "tool_a");  // abandoned: the committed one stays
     std::ofstream(staged.path() + "/other.yaml") << "x";

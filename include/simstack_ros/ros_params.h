@@ -67,4 +67,10 @@ struct GraspServerConfig : GraspSettings {
 /// std::invalid_argument for a mistyped or bad grasp setting.
 GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh);
 
+/// `period`, the diagnostics period diagnostic_updater read from `pnh`'s ~diagnostic_period,
+/// checked: the parameter, when set, must be a number (diagnostic_updater itself would take its
+/// 1 s default in silence) and the period lie in [0.01, 3600] s. Throws std::runtime_error
+/// naming the parameter.
+double checkedDiagnosticPeriod(const ros::NodeHandle& pnh, double period);
+
 }  // namespace simstack

@@ -38,9 +38,7 @@ GraspServer::GraspServer(ros::NodeHandle nh, ros::NodeHandle pnh)
       diagnostics_(nh, pnh, pnh.getNamespace()) {
   // ~diagnostic_period is diagnostic_updater's (default 1 s); the timer below keeps the
   // period it had at start.
-  const double period = diagnostics_.getPeriod();
-  if (!(period >= 0.01 && period <= 3600.0))
-    throw std::runtime_error(pnh_.resolveName("diagnostic_period") + " must lie in [0.01, 3600] s");
+  const double period = checkedDiagnosticPeriod(pnh_, diagnostics_.getPeriod());
   diagnostics_.setHardwareID("simstack_grasps " + pnh_.getNamespace());
   diagnostics_.add("grasps", this, &GraspServer::diagnose);
   // Scenes on a queue and thread of their own: a request waiting for the ranking in progress

@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <iomanip>
 #include <sstream>
+#include <stdexcept>
 
 #include "simstack/io/octomap_io.h"
 #include "simstack/io/staged_output.h"
@@ -23,6 +24,11 @@
 
 namespace simstack {
 namespace {
+
+/// Settings the loaded model cannot take: a configuration error that stops the node.
+struct SettingsRefused : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
 
 std::string expandHome(const std::string& path) {
   if (path.rfind("~/", 0) != 0 && path != "~") return path;
@@ -104,10 +110,11 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
       tracker_(node_.tracking) {
   // Read by diagnostic_updater (default 1 s, once, at start); checked before anything is
   // advertised, so that a refused node offers no service that could call into it.
-  const double period = diagnostics_.getPeriod();
-  if (!(period >= 0.01 && period <= 3600.0))
-    throw std::runtime_error(pnh_.resolveName("diagnostic_period") + " must lie in [0.01, 3600] s");
+  const double period = checkedDiagnosticPeriod(pnh_, diagnostics_.getPeriod());
   const PerceptionConfig config = perceptionConfigFromParams(pnh, package_dir);
+  // A setting out of range stops the node, as any refused parameter does; only the model's own
+  // faults leave it up and refusing (below).
+  validatePerceptionConfig(config);
   views_.setMaxViews(node_.accumulate_views ? node_.max_views : 1);
   ready_pub_ = pnh_.advertise<std_msgs::Bool>("ready", 1, true);
   diagnostics_.setHardwareID("simstack_perception " + pnh_.getNamespace());
@@ -120,8 +127,16 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   // weights, the self-test): the node stays up, says so in diagnostics (ERROR) and on ~ready
   // (false), and perceives nothing, rather than publish scenes a broken network made.
   try {
-    perception_ = std::make_unique<ScenePerception>(config);
+    try {
+      perception_ = std::make_unique<ScenePerception>(config);
+    } catch (const std::invalid_argument& e) {
+      // A setting the model cannot take (hypotheses to decompose from a model without a
+      // latent code): the settings are wrong, not the model, and the node stops.
+      throw SettingsRefused(config.model_path + ": " + e.what());
+    }
     checkModel(config.model_path);
+  } catch (const SettingsRefused&) {
+    throw;
   } catch (const std::exception& e) {  // a runtime_error, or a library's (libtorch, yaml-cpp)
     perception_.reset();
     model_error_ = e.what();

@@ -184,4 +184,16 @@ GraspServerConfig graspServerConfigFromParams(const ros::NodeHandle& pnh) {
   return c;
 }
 
+double checkedDiagnosticPeriod(const ros::NodeHandle& pnh, double period) {
+  const std::string name = pnh.resolveName("diagnostic_period");
+  XmlRpc::XmlRpcValue value;
+  if (pnh.getParam("diagnostic_period", value) &&
+      value.getType() != XmlRpc::XmlRpcValue::TypeDouble &&
+      value.getType() != XmlRpc::XmlRpcValue::TypeInt)
+    throw std::runtime_error(name + " must be a number of seconds");
+  if (!(period >= 0.01 && period <= 3600.0))
+    throw std::runtime_error(name + " must lie in [0.01, 3600] s");
+  return period;
+}
+
 }  // namespace simstack

@@ -173,10 +173,9 @@ int main(int argc, char** argv) {
   app.add_option("--truncation-vox", o.truncation_vox, "TSDF truncation in voxels (0.5-64)")
       ->check(FinitePositive & CLI::Range(0.5, 64.0))
       ->capture_default_str();
-  app.add_option(
-         "--max-tilt", o.max_tilt_deg,
-         "drop orientation: a face down, random yaw, tilt up to this many degrees; 180 = "
-         "uniformly random (the paper); 0 is about 2x faster but gives neater, taller piles")
+  app.add_option("--max-tilt", o.max_tilt_deg,
+                 "drop orientation: a face down, random yaw, tilt up to this many degrees; 180 = "
+                 "uniformly random (the paper); 0 settles faster but gives neater, taller piles")
       ->check(FiniteNonNegative & CLI::Range(0.0, 180.0))  // Range alone lets "nan" through
       ->capture_default_str();
   app.add_option("--threads", o.threads, "worker threads")

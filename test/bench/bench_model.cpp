@@ -13,9 +13,18 @@
 using namespace simstack;
 
 namespace {
+// The network's sizes (random weights: the time does not depend on them). R = 32: the shipped
+// C-VAE's (models/simstack_r32.yaml: the library's default widths, the code added to the
+// condition's deepest map); R = 64: config/train_r64_gpu.yaml's, the paper's resolution.
 CvaeConfig configFor(int r) {
   CvaeConfig c;
   c.resolution = r;
+  if (r == 32) c.latent_injection = "condition";
+  if (r == 64) {
+    c.base_channels = 16;
+    c.max_channels = 128;
+    c.hidden_size = 256;
+  }
   return c;
 }
 }  // namespace

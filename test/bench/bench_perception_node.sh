@@ -24,10 +24,14 @@ for case in idle busy_passive busy_spinning; do
   OMP_WAIT_POLICY=$policy ros_session_spawn "$ROS_HOME/node_$case.log" \
     "$build/devel/lib/simstack/perception_node" __ns:=camera __name:=perception
   node_pid=${ROS_SESSION_PIDS[-1]}
-  timeout 60 bash -c 'until rosservice list 2>/dev/null | grep -q /camera/perception/save_octomap; do sleep 0.5; done'
+  # Ready (latched true) once warmed up and subscribed: no frame of the window is lost to start-up.
+  ready=$(timeout 120 rostopic echo -n 1 /camera/perception/ready 2>/dev/null || true)
+  [[ $ready == *"data: True"* ]] \
+    || { echo "the perception node did not report ready within 120 s (log: $ROS_HOME/node_$case.log)" >&2; exit 1; }
   busy_pid=
   if [ "$case" != idle ]; then
-    ros_session_spawn /dev/null yes
+    # A busy loop that stops on SIGINT (a background job starts with SIGINT ignored).
+    ros_session_spawn /dev/null perl -e '$SIG{INT} = "DEFAULT"; 1 while 1'
     busy_pid=${ROS_SESSION_PIDS[-1]}
   fi
   line=$("$build/devel/lib/simstack/bench_node_driver" --pid "$node_pid" --label "$case" \

@@ -1,10 +1,9 @@
 // Scene decomposition: Hough voting at R = 32 and 64, the joint fit of a 4-object scene, and a
-// whole ScenePerception::perceive() at R = 32 with 3 samples (the C-VAE), with and without the
-// regrouping along the observed surface, with the shipped config (`fc`), and with one and with
-// four tiles.
+// whole ScenePerception::perceive() with the shipped config: with its model (`fc`), with the
+// C-VAE and 3 samples with and without the regrouping along the observed surface, and with one
+// and with four tiles.
 #include <benchmark/benchmark.h>
 
-#include <filesystem>
 #include <functional>
 
 #include "../test_scenes.h"
@@ -39,9 +38,23 @@ const BenchScene& benchScene(int r) {
 
 }  // namespace
 
+// Hough voting with the shipped models' setting, read from the default model's card
+// (`card:1`), and with the library's built-in defaults as its peer (`card:0`: refinement 5,
+// mu 4, instances from 15 voxels).
 static void BM_HoughVoting(benchmark::State& state) {
   const BenchScene& b = benchScene(static_cast<int>(state.range(0)));
   HoughConfig hc;
+  if (state.range(1) != 0) {
+    PerceptionConfig pc;
+    pc.model_path = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32_fc.pt";
+    try {
+      if (applyModelCard(&pc).empty()) throw std::runtime_error("no perception: section");
+    } catch (const std::exception& e) {
+      state.SkipWithError((std::string("models/simstack_r32_fc.yaml: ") + e.what()).c_str());
+      return;
+    }
+    hc = pc.hough;
+  }
   hc.threads = 2;
   InstanceSegmentation seg;
   double rays = 0, shift = 0, assign = 0;
@@ -60,7 +73,14 @@ static void BM_HoughVoting(benchmark::State& state) {
   state.counters["candidates"] = seg.candidate_cells;
   state.counters["traversals"] = static_cast<double>(seg.traversals);
 }
-BENCHMARK(BM_HoughVoting)->Arg(32)->Arg(64)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_HoughVoting)
+    ->ArgNames({"", "card"})
+    ->Args({32, 1})
+    ->Args({64, 1})
+    ->Args({32, 0})
+    ->Args({64, 0})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 static void BM_JointFitFourObjects(benchmark::State& state) {
   const BenchScene& b = benchScene(32);
@@ -78,7 +98,7 @@ static void BM_JointFitFourObjects(benchmark::State& state) {
   // Its peer: final solves on the 600-point cover alone (these surfaces surround their shapes,
   // so by default the fits end with a few steps on all 1000 points).
   if (state.range(0) == 0) fc.surrounded_share = 2.0;
-  // Its other peer: the joint refinement's 3 rounds, the former default.
+  // Its other peer: 3 rounds of the joint refinement.
   if (state.range(1) == 1) fc.joint_rounds = 3;
   for (auto _ : state) benchmark::DoNotOptimize(fitInstances(pts, fc, true));
 }
@@ -116,27 +136,6 @@ void perceiveBenchPile(benchmark::State& state, PerceptionConfig pc) {
   state.counters["fitting_ms"] = sum.fitting_ms / n;
 }
 
-static void BM_Perceive(benchmark::State& state) {
-  const std::string model = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
-  if (!std::filesystem::exists(model)) {
-    state.SkipWithError("models/simstack_r32.pt missing");
-    return;
-  }
-  PerceptionConfig pc;
-  pc.model_path = model;
-  pc.samples = static_cast<int>(state.range(0));
-  pc.segments.enabled = state.range(1) != 0;  // its peer: the same frame without the regrouping
-  pc.symmetries = static_cast<int>(state.range(2));
-  perceiveBenchPile(state, pc);
-}
-BENCHMARK(BM_Perceive)
-    ->ArgNames({"samples", "segments", "symmetries"})
-    ->Args({3, 1, 1})
-    ->Args({3, 0, 1})
-    ->Args({3, 1, 4})
-    ->Unit(benchmark::kMillisecond)
-    ->UseRealTime();
-
 // perceive() with config/perception.yaml as shipped and `model` (empty: the config's) with its
 // card, after `change`.
 void perceiveShippedConfig(benchmark::State& state, const std::string& model,
@@ -151,6 +150,23 @@ void perceiveShippedConfig(benchmark::State& state, const std::string& model,
     state.SkipWithError(e.what());
   }
 }
+
+// The shipped config with the C-VAE (its card's setting, `samples` codes), with and without
+// the regrouping along the observed surface (its peer: the same frame, `segments:0`).
+static void BM_Perceive(benchmark::State& state) {
+  perceiveShippedConfig(state, "models/simstack_r32.pt", [&](PerceptionConfig* pc) {
+    pc->samples = static_cast<int>(state.range(0));
+    pc->segments.enabled = state.range(1) != 0;
+    pc->symmetries = static_cast<int>(state.range(2));
+  });
+}
+BENCHMARK(BM_Perceive)
+    ->ArgNames({"samples", "segments", "symmetries"})
+    ->Args({3, 1, 1})
+    ->Args({3, 0, 1})
+    ->Args({3, 1, 4})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 // The labels image (pixelInstances) of the bench pile's frame, which the node makes for every
 // frame while its outputs are latched; its peer is the frame itself (BM_PerceiveDefaultConfig).
@@ -239,13 +255,9 @@ BENCHMARK(BM_PerceiveGraspHypotheses)
     ->UseRealTime();
 
 // A 1280x720 frame seen from 1 m above the table, holding one 4-object pile (one tile) or four
-// copies of it 0.8 m apart (four tiles): the cost of a scene wider than one grid.
+// copies of it 0.8 m apart (four tiles), with the shipped config: the cost of a scene wider
+// than one grid.
 static void BM_PerceiveTiles(benchmark::State& state) {
-  const std::string model = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32.pt";
-  if (!std::filesystem::exists(model)) {
-    state.SkipWithError("models/simstack_r32.pt missing");
-    return;
-  }
   const Scene pile = test::fourObjectPile();
   const Vec3 c = pile.surfaceCentroid();
   Scene scene;
@@ -261,19 +273,23 @@ static void BM_PerceiveTiles(benchmark::State& state) {
   RenderConfig rc;
   rc.table_half_size_m = 1.5;
   const RenderResult r = DepthRenderer(scene, rc).render(camera, T, SensorNoiseConfig::kinect(1));
-  PerceptionConfig pc;
-  pc.model_path = model;
-  pc.threads = 2;
-  const ScenePerception perception(pc);
-  int tiles = 0;
-  size_t objects = 0;
-  for (auto _ : state) {
-    const SceneEstimate e = perception.perceive(DepthView{r.depth, camera, T});
-    tiles = e.tiles;
-    objects = e.instances().size();
+  try {
+    PerceptionConfig pc = loadPerceptionYaml(
+        std::string(SIMSTACK_SOURCE_DIR) + "/config/perception.yaml", SIMSTACK_SOURCE_DIR);
+    pc.threads = 2;
+    const ScenePerception perception(pc);
+    int tiles = 0;
+    size_t objects = 0;
+    for (auto _ : state) {
+      const SceneEstimate e = perception.perceive(DepthView{r.depth, camera, T});
+      tiles = e.tiles;
+      objects = e.instances().size();
+    }
+    state.counters["tiles"] = tiles;
+    state.counters["objects"] = static_cast<double>(objects);
+  } catch (const std::exception& e) {
+    state.SkipWithError(e.what());
   }
-  state.counters["tiles"] = tiles;
-  state.counters["objects"] = static_cast<double>(objects);
 }
 BENCHMARK(BM_PerceiveTiles)
     ->ArgNames({"piles"})

@@ -1,7 +1,10 @@
-// Partial TSDF of one 640x480 depth frame into 32^3 and 64^3 grids, beside OctoMap's
-// insertPointCloud of the same frame at the same voxel size (scripts/bench prints the ratio).
+// Partial TSDF of one 640x480 depth frame into 32^3 and 64^3 grids (on 2 threads and on 1),
+// beside OctoMap's insertPointCloud of the same frame at the same voxel size, of every valid
+// pixel (crop:0) and of the points inside the TSDF's grid alone (crop:1; OctoMap still clears
+// each ray from the camera); scripts/bench prints the ratios.
 #include <benchmark/benchmark.h>
 #include <octomap/octomap.h>
+#include <omp.h>
 
 #include "simstack/offline/piles/pile_generator.h"
 #include "simstack/render/depth_renderer.h"
@@ -35,6 +38,7 @@ static void BM_PartialTsdf(benchmark::State& state) {
   const Frame& f = frame();
   const GridSpec grid =
       GridSpec::sceneGrid(f.centre.head<2>(), 0.64, static_cast<int>(state.range(0)));
+  omp_set_num_threads(static_cast<int>(state.range(1)));
   ProjectiveTsdfConfig config;
   config.truncation_m = 3 * grid.voxel_size_m;
   ProjectiveTsdf tsdf(grid, config);
@@ -44,18 +48,31 @@ static void BM_PartialTsdf(benchmark::State& state) {
     benchmark::DoNotOptimize(tsdf.tsdf().data.data());
   }
   state.counters["pixels"] = f.depth.width * f.depth.height;
+  omp_set_num_threads(omp_get_num_procs());
 }
-BENCHMARK(BM_PartialTsdf)->Arg(32)->Arg(64)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PartialTsdf)
+    ->ArgNames({"", "threads"})
+    ->Args({32, 2})
+    ->Args({64, 2})
+    ->Args({32, 1})
+    ->Args({64, 1})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 static void BM_OctomapInsertPointCloud(benchmark::State& state) {
   const Frame& f = frame();
   const double voxel = 0.64 / static_cast<double>(state.range(0));
+  const GridSpec grid =
+      GridSpec::sceneGrid(f.centre.head<2>(), 0.64, static_cast<int>(state.range(0)));
+  const bool crop = state.range(1) != 0;
   octomap::Pointcloud cloud;
   for (int v = 0; v < f.depth.height; ++v) {
     for (int u = 0; u < f.depth.width; ++u) {
       const float d = f.depth.at(u, v);
       if (!validDepth(d)) continue;
       const Vec3 p = f.T_table_camera * f.camera.backproject(u, v, d);
+      const Vec3 g = (p - grid.origin_table) / grid.extent_m();
+      if (crop && (g.minCoeff() < 0.0 || g.maxCoeff() >= 1.0)) continue;
       cloud.push_back(static_cast<float>(p.x()), static_cast<float>(p.y()),
                       static_cast<float>(p.z()));
     }
@@ -69,8 +86,11 @@ static void BM_OctomapInsertPointCloud(benchmark::State& state) {
   state.counters["points"] = static_cast<double>(cloud.size());
 }
 BENCHMARK(BM_OctomapInsertPointCloud)
-    ->Arg(32)
-    ->Arg(64)
+    ->ArgNames({"", "crop"})
+    ->Args({32, 0})
+    ->Args({64, 0})
+    ->Args({32, 1})
+    ->Args({64, 1})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

@@ -2,9 +2,8 @@
 // shapes"): three shape sets (equal exponents, simstack's three-exponent family, classical
 // two-exponent superquadrics), each seen whole and from one side, 2000 points with 1 mm noise,
 // scored by the Chamfer distance of the fit to the TRUE full surface. The truth's own score
-// (the metric's floor) is printed beside the fits. EMS (Liu et al., CVPR 2022), measured on
-// this protocol with its public code: equal exponents, full view 0.41 / 0.39 mm (mean /
-// median), partial 1.72 / 0.57 mm, 153 ms median per fit; its floor was 0.39 / 0.38 mm.
+// (the metric's floor) is printed beside the fits. EMS (Liu et al., CVPR 2022) was measured on
+// this protocol with its public code: its figures are in docs/results.md.
 //
 // Usage: fit_harness [--shapes 30] [--config perception.yaml] [--json FILE]
 

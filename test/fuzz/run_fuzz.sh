@@ -2,16 +2,19 @@
 # Builds the libFuzzer target for the depth readers with clang (Debian's clang and
 # libclang-rt-dev carry libFuzzer) against the build's simstack_core, seeds it with a valid PCD,
 # PNG and TIFF, and runs it. Crashing inputs are kept as BUILD_DIR/fuzz/crash-* files.
-# Usage: test/fuzz/run_fuzz.sh [SECONDS=180] [BUILD_DIR=build]   (BUILD_DIR absolute or from the
-# package directory; ctest `fuzz_depth_readers` runs it for 20 s, skipped without clang)
+# Usage: test/fuzz/run_fuzz.sh [SECONDS=180] [BUILD_DIR=build] [DEVEL_DIR=BUILD_DIR/devel]
+# (directories absolute or from the package directory; ctest `fuzz_depth_readers` runs it for
+# 20 s, skipped without clang)
 set -eu
 seconds=${1:-180}
 build=${2:-build}
 root=$(cd "$(dirname "$0")/../.." && pwd)
 [[ "$build" = /* ]] || build=$root/$build
+devel=${3:-$build/devel}
+[[ "$devel" = /* ]] || devel=$root/$devel
 work=$build/fuzz
 mkdir -p "$work/corpus"
-lib=$build/devel/lib
+lib=$devel/lib
 # 77: ctest's skip.
 command -v clang++ > /dev/null || { echo "needs clang: sudo apt-get install clang libclang-rt-dev"; exit 77; }
 clang++ -std=c++17 -O1 -g -fsanitize=fuzzer -I"$root/include" -I/usr/include/eigen3 \

@@ -4,9 +4,11 @@
 # with catkin_make in a throwaway workspace on top of this build's devel space, and its task
 # code run on the shipped config. Fails when a public header needs an include directory or a
 # library that catkin does not pass on.
+# Usage: check_downstream.sh BUILD_DIR SOURCE_DIR [DEVEL_DIR=BUILD_DIR/devel]
 set -e
 build=$(cd "$1" && pwd)
 source_dir=$(cd "$2" && pwd)
+devel=$(cd "${3:-$build/devel}" && pwd)
 ws=$(mktemp -d)
 trap 'rm -rf "$ws"' EXIT
 mkdir -p "$ws/src/simstack_downstream_check"
@@ -15,7 +17,7 @@ cp "$source_dir"/test/downstream/{package.xml,CMakeLists.txt,task_code.cpp,servi
 (cd "$source_dir/include" && find simstack simstack_ros -name '*.h' | sort |
   sed 's|.*|#include <&>|') >"$ws/src/simstack_downstream_check/all_headers.cpp"
 # shellcheck disable=SC1091
-source "$build/devel/setup.bash"
+source "$devel/setup.bash"
 cd "$ws"
 # The system interpreter: Debian's ROS Python modules are not in a pyenv one on PATH.
 # libtorch where this build found it (a system path here; elsewhere on other machines).

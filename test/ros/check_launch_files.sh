@@ -3,11 +3,14 @@
 # substitutions, packages and node types resolve. Then what the launch files hand the nodes:
 # the model each hypotheses setting picks, the arguments grasps.launch passes on, and
 # clear_params on every node that loads a config.
+# Usage: check_launch_files.sh DEVEL_DIR SOURCE_DIR   (DEVEL_DIR: the devel space, or a build
+# holding devel/)
 set -e
-build=$1
+devel=$1
+[ -f "$devel/setup.bash" ] || devel=$1/devel
 source_dir=$2
 # shellcheck disable=SC1091
-source "$build/devel/setup.bash"
+source "$devel/setup.bash"
 ROS_HOME=$(mktemp -d)
 export ROS_HOME
 trap 'rm -rf "$ROS_HOME"' EXIT
@@ -73,6 +76,11 @@ expect "grasps.launch config:=clutter: its model" 'perception/model: models/sims
 absent "grasps.launch config:=clutter leaves decompose_samples to the config" \
   'perception/decompose_samples' \
   dump "$launch/grasps.launch" config:="$source_dir/config/perception_clutter.yaml"
+# A model of the user's own keeps the config's decompose_samples: 3 would stop a model without
+# a latent code at start.
+expect "grasps.launch model:=M leaves decompose_samples to the config (1)" \
+  'perception/decompose_samples: 1$' \
+  dump "$launch/grasps.launch" model:="$source_dir/models/simstack_r32_fc.pt"
 expect "replay.launch decompose_samples:=3: the C-VAE" 'perception/model: .*/simstack_r32.pt$' \
   dump "$launch/replay.launch" decompose_samples:=3
 expect "grasps.launch image_transport:=compressedDepth reaches the node" \

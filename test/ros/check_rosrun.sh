@@ -4,7 +4,7 @@
 # them from <package>/.rosrun), `rosrun simstack perception_node` starts and says ready, and when
 # it stops it takes the live settings it wrote back off the parameter server again (they would
 # override the config at the next start) while keeping what was set before it.
-# Usage: check_rosrun.sh BUILD_DIR
+# Usage: check_rosrun.sh DEVEL_DIR   (the devel space, or a build holding devel/)
 set -e
 root=$(cd "$(dirname "$0")/../.." && pwd)
 export ROS_HOME
@@ -21,9 +21,11 @@ done
 rosrun simstack simstack_generate --help > /dev/null
 echo "rosrun simstack simstack_generate --help: exit 0"
 # A Python script is found once (else rosrun asks which, on stdin).
+# In <package>/build the build hides its own copy (.rosrun) and rosrun finds the source's; in a
+# catkin workspace or another build directory it takes the devel space's relay.
 found=$(rosrun --prefix echo simstack rank_grasps.py < /dev/null 2>&1)
-[ "$found" = "$root/scripts/rank_grasps.py" ] ||
-  { echo "rosrun simstack rank_grasps.py found not just scripts/rank_grasps.py: $found"; exit 1; }
+[ "$found" = "$root/scripts/rank_grasps.py" ] || [ "$found" = "$ROS_SESSION_DEVEL/lib/simstack/rank_grasps.py" ] ||
+  { echo "rosrun simstack rank_grasps.py found not just one rank_grasps.py: $found"; exit 1; }
 echo "rosrun simstack rank_grasps.py -> $found"
 ros_session_start
 rosparam set /camera/perception/tf_timeout_s 0.5  # set before the start: kept

@@ -2,12 +2,13 @@
 # Runs one rostest (its own master on a free port) against the devel space of a build, and
 # fails unless every test case in its results passed (rostest can exit 0 also when a test
 # node died before writing any result).
-# Usage: run_rostest.sh BUILD_DIR FILE.test
+# Usage: run_rostest.sh DEVEL_DIR FILE.test   (DEVEL_DIR: the devel space, or a build holding devel/)
 set -e
-build=$1
+devel=$1
+[ -f "$devel/setup.bash" ] || devel=$1/devel
 test_file=$2
 # shellcheck disable=SC1091
-source "$build/devel/setup.bash"  # (not under set -u: Debian's ROS profile reads unset variables)
+source "$devel/setup.bash"  # (not under set -u: Debian's ROS profile reads unset variables)
 set -u
 export ROS_HOSTNAME=localhost
 # ROS Python nodes start with "env python3": the system interpreter, not a pyenv one on PATH.

@@ -3,9 +3,10 @@
 # with one byte flipped, which its card's SHA-256 catches): perception_node stays up, says
 # "model refused" naming the file and the check, reports ERROR on /diagnostics, latches ~ready
 # false and publishes no ObjectArray; the nodelet does the same inside a manager that keeps
-# running. A ~image_transport no plugin provides is a configuration error: the node exits 1 with
-# a ROS_FATAL naming it; the nodelet latches ~ready false and reports ERROR on /diagnostics.
-# Usage: test_bad_model.sh BUILD_DIR SOURCE_DIR
+# running. A ~image_transport no plugin provides, a pipeline setting out of range and one the
+# model cannot take are configuration errors: the node exits 1 with a ROS_FATAL naming it; the
+# nodelet latches ~ready false and reports ERROR on /diagnostics.
+# Usage: test_bad_model.sh DEVEL_DIR SOURCE_DIR   (the devel space, or a build holding devel/)
 set -e
 build=$1
 export ROS_HOME=$(mktemp -d)  # before the session script, which would make one of its own
@@ -14,7 +15,7 @@ source "$2/scripts/ros_session.bash" "$build"
 set -u
 ROS_SESSION_REMOVE_HOME=1
 ros_session_start
-node="$build/devel/lib/simstack/perception_node"
+node="$ROS_SESSION_DEVEL/lib/simstack/perception_node"
 echo "not a model" > "$ROS_HOME/corrupt.pt"
 cp "$2/models/simstack_r32_fc.pt" "$ROS_HOME/flipped.pt"
 cp "$2/models/simstack_r32_fc.yaml" "$ROS_HOME/flipped.yaml"
@@ -58,13 +59,32 @@ refused missing "$ROS_HOME/missing.pt" "not found"
 refused corrupt "$ROS_HOME/corrupt.pt" "not a libtorch archive"
 refused flipped "$ROS_HOME/flipped.pt" "SHA-256"
 
+# exits_fatal WHAT PATTERN PROGRAM ARGS...: PROGRAM, started in a namespace of its own (a
+# `_name:=value` stays on the parameter server), exits 1 with a FATAL matching PATTERN.
+cases=0
+exits_fatal() {
+  local what=$1 pattern=$2 status
+  shift 2
+  cases=$((cases + 1))
+  set +e
+  timeout 120 "$@" __ns:=case$cases > "$ROS_HOME/case$cases.log" 2>&1
+  status=$?
+  set -e
+  [ "$status" -eq 1 ] && grep -q "FATAL.*$pattern" "$ROS_HOME/case$cases.log" ||
+    { echo "$(basename "$1") with $what exited with $status:"; cat "$ROS_HOME/case$cases.log"; exit 1; }
+}
 # image_transport's own parameter, ~image_transport, names a transport that no plugin provides.
-set +e
-timeout 60 "$node" __ns:=bad _image_transport:=nosuch > "$ROS_HOME/node.log" 2>&1
-status=$?
-set -e
-[ "$status" -eq 1 ] && grep -q "FATAL.*~image_transport 'nosuch' cannot be loaded" "$ROS_HOME/node.log" ||
-  { echo "perception_node with ~image_transport nosuch exited with $status:"; cat "$ROS_HOME/node.log"; exit 1; }
+exits_fatal "~image_transport nosuch" "~image_transport 'nosuch' cannot be loaded" \
+  "$node" _image_transport:=nosuch
+# A pipeline setting out of range, one the model cannot take (hypotheses from `fc`, which has no
+# latent code) and a diagnostics period that is not a number are configuration errors too.
+exits_fatal "~symmetries 3" "symmetries must be 1, 2, 4 or 8" "$node" _symmetries:=3
+exits_fatal "~decompose_samples 3 and fc" "simstack_r32_fc.pt: .*decompose_samples" \
+  "$node" _model:="$2/models/simstack_r32_fc.pt" _decompose_samples:=3
+exits_fatal "~diagnostic_period abc" "diagnostic_period must be a number" \
+  "$node" _diagnostic_period:=abc
+exits_fatal "~diagnostic_period abc" "diagnostic_period must be a number" \
+  "$ROS_SESSION_DEVEL/lib/simstack/grasp_server" _diagnostic_period:=abc
 ros_session_spawn "$ROS_HOME/manager.log" rosrun nodelet nodelet manager __name:=manager
 timeout 60 bash -c 'until rosnode list 2>/dev/null | grep -q /manager; do sleep 0.3; done' ||
   { echo "the nodelet manager did not come up within 60 s:"; cat "$ROS_HOME/manager.log"; exit 1; }
@@ -94,4 +114,4 @@ while not rospy.is_shutdown():
             sys.exit(0)
 PY
 rosnode ping -c 1 /manager > /dev/null || { echo "the manager died"; cat "$ROS_HOME/manager.log"; exit 1; }
-echo "bad models refused (ERROR, ~ready false, no objects), the node and the manager alive; a bad transport exits 1 (a nodelet: ~ready false, ERROR)"
+echo "bad models refused (ERROR, ~ready false, no objects), the node and the manager alive; a bad transport or setting exits 1 (a nodelet: ~ready false, ERROR)"

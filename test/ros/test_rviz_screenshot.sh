@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # rviz with config/simstack.rviz under Xvfb, on the example bag replayed into the perception
 # nodelet: the screenshot must show the superquadric markers (pixels in the objects' colours).
-# Usage: test_rviz_screenshot.sh BUILD_DIR SOURCE_DIR
+# Usage: test_rviz_screenshot.sh DEVEL_DIR SOURCE_DIR   (the devel space, or a build holding devel/)
 set -e
 source_dir=$2
 export ROS_HOME=$(mktemp -d)  # before the session script, which would make one of its own

@@ -102,9 +102,8 @@ std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points_
 constexpr double kCollapseSpanM = 0.02;
 /// A joint refinement that leaves a shape below this share of its per-instance fit's volume
 /// has pushed it out of its neighbours by shrinking it away: the per-instance fit stands, made
-/// smaller until clear of them (fitInstances).
-/// (Measured on the synthetic test set: such shapes end below 0.2 % of it, all others above
-/// 1.5 %; docs/experiments.md, "Fitting".)
+/// smaller until clear of them (fitInstances). The threshold lies in the gap between such
+/// shapes and all others (docs/experiments.md, "Fitting").
 constexpr double kLeastJointVolumeShare = 0.01;
 
 /// True when `shape` is collapsed for `points_table`: the points span more than

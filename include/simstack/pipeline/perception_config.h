@@ -69,7 +69,7 @@ struct PerceptionConfig {
   CrowdedConfig crowded;                    ///< the second split of crowded piles
   /// The fitter's settings, but without its one-sided solve: on the pipeline's instances
   /// (network surfaces cut where objects touch, the classical baseline's visible points) it
-  /// measured neutral to slightly worse (docs/results.md).
+  /// does not pay (docs/experiments.md, "Fitting").
   FitConfig fit = [] {
     FitConfig f;
     f.one_sided_volume_exponent = 0.5;

@@ -706,10 +706,8 @@ std::vector<SuperquadricShape> refineJointly(const std::vector<Points3>& points,
   std::vector<Params> u(n), x(n);
   std::vector<Points3> subset(n);
   for (size_t i = 0; i < n; ++i) {
-    // Every n-th point, as the joint refinement always took them. A surface cover here (the
-    // per-instance fit's choice) left 5 % fewer of the C-VAE's fitted test piles stable, a
-    // random subset 2 % fewer; the classical baseline's image-ordered points fared better
-    // with the cover (docs/experiments.md, "Fitting").
+    // Every n-th point: the joint solve keeps the points' own spread (why not a surface cover:
+    // docs/experiments.md, "Fitting").
     const size_t stride =
         std::max<size_t>(1, (points[i].size() + c.joint_points - 1) / c.joint_points);
     for (size_t k = 0; k < points[i].size(); k += stride) subset[i].push_back(points[i][k]);

@@ -27,8 +27,8 @@ Transform fromBt(const btTransform& t) {
 
 // Bullet's default pools hold 4096 manifolds and 4096 collision algorithms (about 5 MB that
 // the pool constructors touch page by page). Our worlds hold a handful of objects and the pile
-// generator builds one per drop; pools sized for them made generation about 4 % faster on one
-// thread. Pools overflow to the heap when full.
+// generator builds one per drop, so the pools are sized for a handful; they overflow to the
+// heap when full.
 btDefaultCollisionConstructionInfo smallPools() {
   btDefaultCollisionConstructionInfo info;
   info.m_defaultMaxPersistentManifoldPoolSize = 64;

@@ -24,10 +24,9 @@ struct PileConfig {
   double max_size_m = 0.30;
   double drop_radius_m = 0.05;  ///< horizontal scatter of each drop about the pile centre
   /// Each object falls with one of its six faces down, a random yaw and a random tilt up to
-  /// this angle; 180 (the default) drops it in a uniformly random orientation. Measured on 150
-  /// piles: face-down drops (0) need 1.9x fewer physics steps per pile, but 97 % of the objects
-  /// then rest with an axis within 10 degrees of vertical (80 % with 180) and piles are taller
-  /// (0.45 against 0.35 m): neater piles than the paper's random drops.
+  /// this angle; 180 (the default) drops it in a uniformly random orientation, as the paper.
+  /// Face-down drops (0) settle in fewer physics steps but give neater, taller piles than the
+  /// paper's (docs/experiments.md, "Pile generation").
   double max_tilt_deg = 180.0;
   double drop_gap_m = 0.01;        ///< height of each drop above the top of the pile
   double grid_extent_m = 0.64;     ///< the scene grid that the pile must fit
