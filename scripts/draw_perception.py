@@ -83,7 +83,13 @@ def main():
     plt.imsave(out1, painted)
 
     K = np.array(frame["info"].K).reshape(3, 3)
+    # The markers lie in the output frame: T_camera_frame = T_camera_table inv(T_frame_table),
+    # table_in_frame the identity (or unset) when that is the table frame.
     T_camera_table = pose_matrix(frame["objects"].table_pose)
+    q = frame["objects"].table_in_frame.orientation
+    T_frame_table = np.eye(4) if (q.w, q.x, q.y, q.z) == (0, 0, 0, 0) else \
+        pose_matrix(frame["objects"].table_in_frame)
+    T_camera_frame = T_camera_table @ np.linalg.inv(T_frame_table)
     fig = plt.figure(figsize=(depth.shape[1] / 100, depth.shape[0] / 100), dpi=100)
     ax = fig.add_axes([0, 0, 1, 1])
     ax.imshow(base)
@@ -94,7 +100,7 @@ def main():
         if m.ns != "superquadrics":
             continue
         pts = np.array([[p.x, p.y, p.z, 1.0] for p in m.points]).T
-        cam = (T_camera_table @ pose_matrix(m.pose) @ pts)[:3]
+        cam = (T_camera_frame @ pose_matrix(m.pose) @ pts)[:3]
         uv = (K @ cam)[:2] / np.maximum(cam[2], 1e-6)
         tris.append(uv.T.reshape(-1, 3, 2))
         depths.append(cam[2].reshape(-1, 3).mean(axis=1))

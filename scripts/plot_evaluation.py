@@ -139,7 +139,7 @@ def main():
                    results.get("noise"), results.get("sensor"), results.get("image"),
                    json.dumps(results.get("intrinsics")), results.get("seed"),
                    results.get("chamfer_points"), results.get("seen_pixels"))
-        except (OSError, KeyError, json.JSONDecodeError) as e:
+        except (OSError, KeyError, ValueError) as e:  # ValueError: not JSON, not even text
             sys.exit(f"plot_evaluation: {path}: {e}")
         paths, sets = groups.setdefault(key, ([], []))
         paths.append(path)

@@ -24,7 +24,12 @@ import genpy
 import rosgraph
 import rospy
 from geometry_msgs.msg import PointStamped, PoseStamped, Vector3
-from simstack import grasp_client
+
+try:
+    from simstack import grasp_client
+except ImportError as e:
+    sys.exit("rank_grasps: %s: source the devel (or install) space first, e.g. "
+             "source build/devel/setup.bash" % e)
 
 
 def table(res, rows):
@@ -38,8 +43,9 @@ def table(res, rows):
             1e3 * g.max_displacement_m, g.toppled, g.freed_share, g.failed_share))
     if len(res.grasps) > rows:
         lines.append("  ... %d more" % (len(res.grasps) - rows))
+    # One per scene pulled in: the hypotheses, then the server's perturbed copies.
     for h, d in enumerate(res.baseline_displacement_m):
-        lines.append("baseline (hypothesis %d left alone): objects moved %.1f mm at most" % (h, 1e3 * d))
+        lines.append("baseline (scene %d left alone): objects moved %.1f mm at most" % (h, 1e3 * d))
     return "\n".join(lines)
 
 
@@ -103,13 +109,13 @@ def main():
                         help="seconds to wait for the master, the scene and the grasp server "
                              "(not for the ranking)")
     parser.add_argument("--result-timeout", type=float, default=None,
-                        help="seconds the ranking may take before it is cancelled (default: no bound)")
+                        help="seconds the ranking may take before it is cancelled (none: no bound)")
     parser.add_argument("--max-age", type=float, default=None,
                         help="with --target top: refuse a scene older than this (s; 0: any age; "
                              "default: the server's ~max_scene_age_s, which it applies to "
                              "requests that carry no scene)")
     parser.add_argument("--frame", default="",
-                        help="tf frame of the printed and written poses (default: the scene's)")
+                        help="tf frame of the printed and written poses (empty: the scene's)")
     parser.add_argument("--pregrasp", type=float, default=0.0,
                         help="pre-grasp stand-off in metres (0: the server's ~pregrasp_distance_m)")
     parser.add_argument("--progress", action="store_true",
@@ -192,7 +198,8 @@ def main():
         sys.exit("rank_grasps: %s%s" % ("" if e.status is None else e.status_name + ": ", e))
     print("object %d: %s (%d pulls in %d %s, %.2f s)" % (
         res.target_id, res.message, res.pulls, res.hypotheses_used,
-        "hypothesis" if res.hypotheses_used == 1 else "hypotheses", res.time_s))
+        "scene" if res.hypotheses_used == 1 else "scenes (hypotheses and perturbed copies)",
+        res.time_s))
     print(table(res, args.rows))
     if args.json:
         with open(args.json, "w") as f:  # checked above; a disk that fills still raises
@@ -201,4 +208,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except KeyboardInterrupt:  # before the action exists: nothing to cancel
+        sys.exit(130)

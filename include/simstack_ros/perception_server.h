@@ -99,12 +99,17 @@ class PerceptionServer {
                         const ros::Time& stamp, std::string* why);
   /// Whether the destructor has asked the worker to end (takes mutex_).
   bool stopRequested();
-  /// The estimate (in the table frame) published in the output frame, `T_output_table`.
-  void publish(const Frame& frame, const DepthView& view, const SceneEstimate& estimate, int views,
-               const Transform& T_output_table);
+  /// The estimate (in the table frame) published in the output frame, `T_output_table`; false,
+  /// and nothing published, when ~reset was called since the frame began (`resets`: the count
+  /// of resets it began after).
+  bool publish(const Frame& frame, const DepthView& view, const SceneEstimate& estimate, int views,
+               const Transform& T_output_table, uint64_t resets);
   void skip(const Frame& frame, const std::string& why);
   /// One frame of a rendered box before the first subscription (ScenePerception::warmUp).
   void warmUp();
+  /// Loads and checks the model; false (said on the log and ~ready) when it is refused.
+  /// Throws std::runtime_error for settings the model cannot take (the node stops).
+  bool loadModel(const PerceptionConfig& config);
   bool reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   bool saveOctomap(SaveOctomap::Request& req, SaveOctomap::Response& res);
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
@@ -186,6 +191,7 @@ class PerceptionServer {
   ViewHistory views_;           ///< accumulated views (accumulate_views)
   Image<uint8_t> mask_;         ///< the last ~mask received (empty: none)
   bool reset_requested_ = false;
+  uint64_t resets_ = 0;  ///< ~reset calls so far: a frame begun before the last is not published
   /// The settings in effect from the next frame on, as judged when requested (under mutex_);
   /// settings_changed_ until the worker has applied them.
   PerceptionConfig requested_;

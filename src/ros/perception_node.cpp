@@ -91,8 +91,9 @@ int main(int argc, char** argv) {
   ros::AsyncSpinner spinner(2);  // frames and service calls in parallel with the worker
   spinner.start();
   while (!stop_requested && ros::ok()) ros::WallDuration(0.1).sleep();
-  if (ros::ok()) removeWrittenBack(pnh.getNamespace(), before);
+  // The spinner first: a settings change served after the removal would write them back.
   spinner.stop();
+  if (ros::ok()) removeWrittenBack(pnh.getNamespace(), before);
   server.reset();
   ros::shutdown();
   return 0;

@@ -120,30 +120,16 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   diagnostics_.setHardwareID("simstack_perception " + pnh_.getNamespace());
   diagnostics_.add("perception", this, &PerceptionServer::diagnose);
   started_ = ros::SteadyTime::now();
-  diagnostics_timer_ =
-      nh_.createSteadyTimer(ros::WallDuration(period),
-                            [this](const ros::SteadyTimerEvent&) { diagnostics_.force_update(); });
-  // A model that cannot be loaded, or that fails its card's checks (SHA-256, format, finite
-  // weights, the self-test): the node stays up, says so in diagnostics (ERROR) and on ~ready
-  // (false), and perceives nothing, rather than publish scenes a broken network made.
-  try {
-    try {
-      perception_ = std::make_unique<ScenePerception>(config);
-    } catch (const std::invalid_argument& e) {
-      // A setting the model cannot take (hypotheses to decompose from a model without a
-      // latent code): the settings are wrong, not the model, and the node stops.
-      throw SettingsRefused(config.model_path + ": " + e.what());
-    }
-    checkModel(config.model_path);
-  } catch (const SettingsRefused&) {
-    throw;
-  } catch (const std::exception& e) {  // a runtime_error, or a library's (libtorch, yaml-cpp)
-    perception_.reset();
-    model_error_ = e.what();
-    ROS_ERROR("simstack perception: model refused, nothing will be perceived: %s", e.what());
-    std_msgs::Bool ready;
-    ready.data = false;
-    ready_pub_.publish(ready);
+  // Timers, services and the settings server are made after everything that may throw, so
+  // that no callback reaches an object whose construction failed (a nodelet's callbacks run
+  // while it is being constructed).
+  const auto startDiagnostics = [this, period] {
+    diagnostics_timer_ = nh_.createSteadyTimer(
+        ros::WallDuration(period),
+        [this](const ros::SteadyTimerEvent&) { diagnostics_.force_update(); });
+  };
+  if (!loadModel(config)) {
+    startDiagnostics();
     return;
   }
   // Latched (~latch): a grasp client, task node or rviz that starts later still gets the
@@ -159,10 +145,7 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
     labels_latched_pub_ = pnh_.advertise<sensor_msgs::Image>("labels", 1, true);
   else
     labels_pub_ = image_transport::ImageTransport(pnh_).advertise("labels", 1);
-  reset_srv_ = pnh_.advertiseService("reset", &PerceptionServer::reset, this);
-  save_srv_ = pnh_.advertiseService("save_octomap", &PerceptionServer::saveOctomap, this);
   decompose_samples_ = perception_->config().decompose_samples;
-  startLiveSettings();
   warmUp();
   // The hints read ~image_transport (image_transport's convention, `_image_transport:=...`)
   // from the node's own namespace: a nodelet's "~" would be its manager's.
@@ -186,6 +169,9 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
     image_sub_ = image_sub;
     info_sub_ = info_sub;
   }
+  reset_srv_ = pnh_.advertiseService("reset", &PerceptionServer::reset, this);
+  save_srv_ = pnh_.advertiseService("save_octomap", &PerceptionServer::saveOctomap, this);
+  startLiveSettings();
   if (node_.estimate_table) watchTableBroadcasts();
   // A latched publisher's mask arrives once; a bad one is reported and the previous one kept.
   const std::string mask_topic = pnh_.resolveName("mask");
@@ -213,13 +199,40 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   ready.data = true;
   ready_pub_.publish(ready);
   // Both on the monotonic wall clock, so also while a bag is paused: the silence check once a
-  // second, /diagnostics once a period. Made after everything that may throw, so that no tick
-  // reaches an object whose construction failed.
+  // second, /diagnostics once a period.
   silence_timer_ = nh_.createSteadyTimer(
       ros::WallDuration(1.0), [this](const ros::SteadyTimerEvent&) { onSilenceCheck(); });
+  startDiagnostics();
   // Last: from here the worker owns the pipeline (settings change between its frames), and
   // onFrame only fills the mailbox.
   worker_ = std::thread(&PerceptionServer::work, this);
+}
+
+bool PerceptionServer::loadModel(const PerceptionConfig& config) {
+  // A model that cannot be loaded, or that fails its card's checks (SHA-256, format, finite
+  // weights, the self-test): the node stays up, says so in diagnostics (ERROR) and on ~ready
+  // (false), and perceives nothing, rather than publish scenes a broken network made.
+  try {
+    try {
+      perception_ = std::make_unique<ScenePerception>(config);
+    } catch (const std::invalid_argument& e) {
+      // A setting the model cannot take (hypotheses to decompose from a model without a
+      // latent code): the settings are wrong, not the model, and the node stops.
+      throw SettingsRefused(config.model_path + ": " + e.what());
+    }
+    checkModel(config.model_path);
+    return true;
+  } catch (const SettingsRefused&) {
+    throw;
+  } catch (const std::exception& e) {  // a runtime_error, or a library's (libtorch, yaml-cpp)
+    perception_.reset();
+    model_error_ = e.what();
+    ROS_ERROR("simstack perception: model refused, nothing will be perceived: %s", e.what());
+    std_msgs::Bool ready;
+    ready.data = false;
+    ready_pub_.publish(ready);
+    return false;
+  }
 }
 
 PerceptionServer::~PerceptionServer() {
@@ -534,6 +547,7 @@ void PerceptionServer::process(const Frame& frame) {
       return skip(frame, "~output_frame: " + why);
   }
   std::vector<DepthView> views;
+  uint64_t resets = 0;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     const ViewHistory::Arrival arrival = views_.arrive(frame.image->header.stamp.toNSec());
@@ -549,6 +563,7 @@ void PerceptionServer::process(const Frame& frame) {
       tracker_.reset();
     }
     reset_requested_ = false;
+    resets = resets_;
     view.mask = mask_;  // a mask of another size makes perceive() refuse the frame
     views = views_.viewsWith(view);
   }
@@ -561,7 +576,13 @@ void PerceptionServer::process(const Frame& frame) {
   const Transform T_output_table =
       T_output_camera ? Transform(*T_output_camera * estimate.T_table_camera.inverse())
                       : Transform::Identity();
-  publish(frame, view, estimate, static_cast<int>(views.size()), T_output_table);
+  // A frame ~reset overtook holds the views and ids the caller asked to forget: the next frame
+  // is the first after the reset.
+  if (!publish(frame, view, estimate, static_cast<int>(views.size()), T_output_table, resets)) {
+    ROS_INFO("simstack perception: the frame stamped %.3f s began before ~reset: not published",
+             frame.image->header.stamp.toSec());
+    return;
+  }
   std::lock_guard<std::mutex> lock(mutex_);
   views_.keep(std::move(view));
   ++processed_;
@@ -612,14 +633,22 @@ void PerceptionServer::warnAboutOtherTable() {
   other_table_said_at_ = now;
 }
 
-void PerceptionServer::publish(const Frame& frame, const DepthView& view,
+bool PerceptionServer::publish(const Frame& frame, const DepthView& view,
                                const SceneEstimate& estimate, int views,
-                               const Transform& T_output_table) {
+                               const Transform& T_output_table, uint64_t resets) {
   std_msgs::Header header;
   header.stamp = frame.image->header.stamp;
   header.frame_id = node_.outputFrame();
   std_msgs::Header camera_header = frame.image->header;  // of the labels image and the table's tf
   camera_header.frame_id = tf2Frame(camera_header.frame_id);
+  std::vector<SuperquadricShape> shapes;
+  for (const InstanceEstimate& e : estimate.instances()) shapes.push_back(e.superquadric);
+  ObjectIds ids;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (resets != resets_) return false;
+    ids = tracker_.assign(shapes);
+  }
   if (estimate.table_estimated) {
     warnAboutOtherTable();
     geometry_msgs::TransformStamped t = tf2::eigenToTransform(estimate.T_table_camera.inverse());
@@ -627,13 +656,6 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
     t.header.frame_id = camera_header.frame_id;
     t.child_frame_id = node_.table_frame;
     tf_broadcaster_.sendTransform(t);
-  }
-  std::vector<SuperquadricShape> shapes;
-  for (const InstanceEstimate& e : estimate.instances()) shapes.push_back(e.superquadric);
-  ObjectIds ids;
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    ids = tracker_.assign(shapes);
   }
   if (node_.publish_object_tf) {
     std::vector<geometry_msgs::TransformStamped> frames;
@@ -669,6 +691,7 @@ void PerceptionServer::publish(const Frame& frame, const DepthView& view,
     else
       labels_pub_.publish(labels);
   }
+  return true;
 }
 
 void PerceptionServer::warmUp() {
@@ -688,6 +711,7 @@ void PerceptionServer::warmUp() {
 bool PerceptionServer::reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
   std::lock_guard<std::mutex> lock(mutex_);
   reset_requested_ = true;
+  ++resets_;
   ROS_INFO("simstack perception: accumulated views cleared");
   return true;
 }
