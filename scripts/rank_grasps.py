@@ -195,6 +195,9 @@ def main():
                                        feedback=progress if args.progress else None,
                                        result_timeout=args.result_timeout)
     except grasp_client.GraspServiceError as e:
+        if rospy.is_shutdown():  # Ctrl-C: the client has cancelled any ranking on the server
+            print("rank_grasps: stopped (%s)" % e, file=sys.stderr)
+            sys.exit(130)
         sys.exit("rank_grasps: %s%s" % ("" if e.status is None else e.status_name + ": ", e))
     print("object %d: %s (%d pulls in %d %s, %.2f s)" % (
         res.target_id, res.message, res.pulls, res.hypotheses_used,

@@ -167,6 +167,7 @@ class PerceptionServer {
   std::optional<Frame> mailbox_;
   bool stop_ = false;
   long received_ = 0, dropped_ = 0, processed_ = 0, skipped_ = 0;
+  long overtaken_ = 0;  ///< frames perceived when ~reset came: not published
   std::string last_error_, last_kind_;
   bool failing_ = false;  ///< the last frame was skipped
   ros::SteadyTime last_warning_;

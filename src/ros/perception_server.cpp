@@ -251,6 +251,8 @@ PerceptionServer::~PerceptionServer() {
   image_sub_.shutdown();
   info_sub_.shutdown();
   mask_sub_.shutdown();
+  tf_watch_.shutdown();
+  tf_static_watch_.shutdown();
   reset_srv_.shutdown();
   save_srv_.shutdown();
   hough_reconfigure_.reset();
@@ -581,6 +583,8 @@ void PerceptionServer::process(const Frame& frame) {
   if (!publish(frame, view, estimate, static_cast<int>(views.size()), T_output_table, resets)) {
     ROS_INFO("simstack perception: the frame stamped %.3f s began before ~reset: not published",
              frame.image->header.stamp.toSec());
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++overtaken_;
     return;
   }
   std::lock_guard<std::mutex> lock(mutex_);
@@ -879,6 +883,7 @@ void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   status.add("frames processed", processed_);
   status.add("frames dropped (newer frame came first)", dropped_);
   status.add("frames skipped (bad input)", skipped_);
+  status.add("frames overtaken by ~reset (not published)", overtaken_);
   status.add("images or camera_info without a partner of their stamp (forgotten)", unpaired);
   status.add("frames processed per second (since the last report)", rate);
   status.add("last error", last_error_);
