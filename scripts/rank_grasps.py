@@ -106,8 +106,8 @@ def main():
     parser.add_argument("--camera", default="camera", help="namespace of the perception and grasp nodes")
     parser.add_argument("--rows", type=int, default=10, help="grasps printed")
     parser.add_argument("--timeout", type=float, default=30.0,
-                        help="seconds to wait for the master, the scene and the grasp server "
-                             "(not for the ranking)")
+                        help="seconds to wait for each of the master, the scene and the grasp "
+                             "server (not for the ranking)")
     parser.add_argument("--result-timeout", type=float, default=None,
                         help="seconds the ranking may take before it is cancelled (none: no bound)")
     parser.add_argument("--max-age", type=float, default=None,
@@ -205,8 +205,17 @@ def main():
         res.time_s))
     print(table(res, args.rows))
     if args.json:
-        with open(args.json, "w") as f:  # checked above; a disk that fills still raises
-            json.dump(response_json(res), f, indent=1, allow_nan=False)
+        # Whole or not at all: written beside it, then renamed over it (a full disk leaves the
+        # previous file, not half of this one).
+        part = "%s.partial-%d" % (args.json, os.getpid())
+        try:
+            with open(part, "w") as f:
+                json.dump(response_json(res), f, indent=1, allow_nan=False)
+            os.replace(part, args.json)
+        except OSError as e:
+            if os.path.exists(part):
+                os.remove(part)
+            sys.exit("rank_grasps: --json %s not written: %s" % (args.json, e))
         print("wrote %s" % args.json)
 
 

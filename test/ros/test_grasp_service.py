@@ -347,6 +347,7 @@ class GraspService(unittest.TestCase):
         for field in Grasp.__slots__:
             self.assertIn(field, written["grasps"][0])
         self.assertEqual(len(written["grasps"][0]["tool_pose"]), 7)
+        self.assertEqual(os.listdir(folder.name), ["grasps.json"])  # no partial file left
         # The target by a point in a tf frame; a namespace written with slashes works alike.
         code, out = self.script("--point", "-0.001,0,0.05", "--point-frame", "table",
                                 "--candidates", "8", "--camera", "/camera/")
