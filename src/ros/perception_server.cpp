@@ -25,11 +25,6 @@
 namespace simstack {
 namespace {
 
-/// Settings the loaded model cannot take: a configuration error that stops the node.
-struct SettingsRefused : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
-
 std::string expandHome(const std::string& path) {
   if (path.rfind("~/", 0) != 0 && path != "~") return path;
   const char* home = std::getenv("HOME");
@@ -212,27 +207,30 @@ bool PerceptionServer::loadModel(const PerceptionConfig& config) {
   // A model that cannot be loaded, or that fails its card's checks (SHA-256, format, finite
   // weights, the self-test): the node stays up, says so in diagnostics (ERROR) and on ~ready
   // (false), and perceives nothing, rather than publish scenes a broken network made.
-  try {
-    try {
-      perception_ = std::make_unique<ScenePerception>(config);
-    } catch (const std::invalid_argument& e) {
-      // A setting the model cannot take (hypotheses to decompose from a model without a
-      // latent code): the settings are wrong, not the model, and the node stops.
-      throw SettingsRefused(config.model_path + ": " + e.what());
-    }
-    checkModel(config.model_path);
-    return true;
-  } catch (const SettingsRefused&) {
-    throw;
-  } catch (const std::exception& e) {  // a runtime_error, or a library's (libtorch, yaml-cpp)
+  const auto refuse = [this](const char* why) {
     perception_.reset();
-    model_error_ = e.what();
-    ROS_ERROR("simstack perception: model refused, nothing will be perceived: %s", e.what());
+    model_error_ = why;
+    ROS_ERROR("simstack perception: model refused, nothing will be perceived: %s", why);
     std_msgs::Bool ready;
     ready.data = false;
     ready_pub_.publish(ready);
     return false;
+  };
+  try {
+    perception_ = std::make_unique<ScenePerception>(config);
+  } catch (const std::invalid_argument& e) {
+    // A setting the model cannot take (hypotheses to decompose from a model without a latent
+    // code): the settings are wrong, not the model, and the node stops.
+    throw std::runtime_error(config.model_path + ": " + e.what());
+  } catch (const std::exception& e) {  // a runtime_error, or a library's (libtorch, yaml-cpp)
+    return refuse(e.what());
   }
+  try {
+    checkModel(config.model_path);
+  } catch (const std::exception& e) {
+    return refuse(e.what());
+  }
+  return true;
 }
 
 PerceptionServer::~PerceptionServer() {

@@ -36,24 +36,29 @@ const BenchScene& benchScene(int r) {
   return cache.emplace(r, std::move(b)).first->second;
 }
 
+/// config/perception.yaml as shipped, with `model` (relative to the package; empty: the
+/// config's) and its card.
+PerceptionConfig shippedConfig(const std::string& model = "") {
+  const std::string dir = SIMSTACK_SOURCE_DIR;
+  return loadPerceptionYaml(dir + "/config/perception.yaml", dir,
+                            model.empty() ? "" : dir + "/" + model);
+}
+
 }  // namespace
 
-// Hough voting with the shipped models' setting, read from the default model's card
-// (`card:1`), and with the library's built-in defaults as its peer (`card:0`: refinement 5,
-// mu 4, instances from 15 voxels).
+// Hough voting with the shipped config's setting (its model's card; `card:1`), and with the
+// library's built-in defaults as its peer (`card:0`: refinement 5, mu 4, instances from 15
+// voxels).
 static void BM_HoughVoting(benchmark::State& state) {
   const BenchScene& b = benchScene(static_cast<int>(state.range(0)));
   HoughConfig hc;
   if (state.range(1) != 0) {
-    PerceptionConfig pc;
-    pc.model_path = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32_fc.pt";
     try {
-      if (applyModelCard(&pc).empty()) throw std::runtime_error("no perception: section");
+      hc = shippedConfig().hough;
     } catch (const std::exception& e) {
-      state.SkipWithError((std::string("models/simstack_r32_fc.yaml: ") + e.what()).c_str());
+      state.SkipWithError(e.what());
       return;
     }
-    hc = pc.hough;
   }
   hc.threads = 2;
   InstanceSegmentation seg;
@@ -140,10 +145,8 @@ void perceiveBenchPile(benchmark::State& state, PerceptionConfig pc) {
 // card, after `change`.
 void perceiveShippedConfig(benchmark::State& state, const std::string& model,
                            const std::function<void(PerceptionConfig*)>& change) {
-  const std::string dir = SIMSTACK_SOURCE_DIR;
   try {
-    PerceptionConfig pc = loadPerceptionYaml(dir + "/config/perception.yaml", dir,
-                                             model.empty() ? "" : dir + "/" + model);
+    PerceptionConfig pc = shippedConfig(model);
     change(&pc);
     perceiveBenchPile(state, pc);
   } catch (const std::exception& e) {
@@ -171,9 +174,8 @@ BENCHMARK(BM_Perceive)
 // The labels image (pixelInstances) of the bench pile's frame, which the node makes for every
 // frame while its outputs are latched; its peer is the frame itself (BM_PerceiveDefaultConfig).
 static void BM_PixelLabels(benchmark::State& state) {
-  const std::string dir = SIMSTACK_SOURCE_DIR;
   try {
-    PerceptionConfig pc = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
+    PerceptionConfig pc = shippedConfig();
     pc.threads = 2;
     const BenchScene& b = benchScene(32);
     PinholeCamera camera;
@@ -274,8 +276,7 @@ static void BM_PerceiveTiles(benchmark::State& state) {
   rc.table_half_size_m = 1.5;
   const RenderResult r = DepthRenderer(scene, rc).render(camera, T, SensorNoiseConfig::kinect(1));
   try {
-    PerceptionConfig pc = loadPerceptionYaml(
-        std::string(SIMSTACK_SOURCE_DIR) + "/config/perception.yaml", SIMSTACK_SOURCE_DIR);
+    PerceptionConfig pc = shippedConfig();
     pc.threads = 2;
     const ScenePerception perception(pc);
     int tiles = 0;
