@@ -47,20 +47,30 @@ def main():
     parser.add_argument("--output", default=".")
     parser.add_argument("--camera", default="camera")
     args = parser.parse_args()
-    frames = {}  # stamp -> topic -> message
     topics = {f"/{args.camera}/depth/image_rect": "depth", f"/{args.camera}/depth/camera_info": "info",
               f"/{args.camera}/perception/objects": "objects", f"/{args.camera}/perception/markers": "markers",
               f"/{args.camera}/perception/labels": "labels"}
+
+    def stamp_of(kind, msg):  # nanoseconds, or None
+        stamp = msg.markers[0].header.stamp if kind == "markers" and msg.markers else \
+            getattr(msg, "header", None) and msg.header.stamp
+        return None if stamp is None else stamp.to_nsec()
+
+    # Two passes, so that a long bag's images are not all held at once: which kinds each stamp
+    # has, then the messages of the last stamp that has all five.
+    kinds = {}  # stamp -> kinds of message
     with rosbag.Bag(args.bag) as bag:
         for topic, msg, _ in bag.read_messages(topics=list(topics)):
-            stamp = msg.markers[0].header.stamp if topics[topic] == "markers" and msg.markers else \
-                getattr(msg, "header", None) and msg.header.stamp
+            stamp = stamp_of(topics[topic], msg)
             if stamp is not None:
-                frames.setdefault(stamp.to_nsec(), {})[topics[topic]] = msg
-    complete = [s for s, f in sorted(frames.items()) if len(f) == 5]
-    if not complete:
-        sys.exit(f"draw_perception: {args.bag} holds no frame with depth, camera_info, objects, markers and labels")
-    frame = frames[complete[-1]]
+                kinds.setdefault(stamp, set()).add(topics[topic])
+        complete = [s for s, k in sorted(kinds.items()) if len(k) == 5]
+        if not complete:
+            sys.exit(f"draw_perception: {args.bag} holds no frame with depth, camera_info, objects, markers and labels")
+        frame = {}
+        for topic, msg, _ in bag.read_messages(topics=list(topics)):
+            if stamp_of(topics[topic], msg) == complete[-1]:
+                frame[topics[topic]] = msg
     when = f"{args.bag}, the frame stamped {complete[-1] / 1e9:.3f} s"
     depth = image_array(frame["depth"]) * (0.001 if frame["depth"].encoding != "32FC1" else 1.0)
     depth[~np.isfinite(depth)] = 0.0

@@ -71,10 +71,27 @@ def main():
     sub.unregister()
     rospy.loginfo("play_when_ready: %s is true, playing the bag", args.ready)
     player = subprocess.Popen(["rosbag", "play"] + play_args)
-    # roslaunch stops its nodes with SIGINT; rosbag play is stopped cleanly with SIGTERM.
-    signal.signal(signal.SIGINT, lambda *_: player.terminate())
-    signal.signal(signal.SIGTERM, lambda *_: player.terminate())
-    sys.exit(player.wait())
+    # rosbag play leaves the master on SIGINT; on SIGTERM it dies registered, and the master
+    # would go on naming a dead publisher of the bag's topics to every later subscriber. So
+    # either signal here (roslaunch's SIGINT, a service manager's SIGTERM) is passed on as
+    # SIGINT, and a player still running 10 s later is killed (roslaunch escalates after 15).
+    asked = []
+
+    def stop(*_):
+        if not asked:
+            asked.append(time.time())
+        player.send_signal(signal.SIGINT)
+
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
+    while True:
+        try:
+            code = player.wait(timeout=0.5)
+            break
+        except subprocess.TimeoutExpired:
+            if asked and time.time() - asked[0] > 10.0:
+                player.kill()
+    sys.exit(130 if code == -signal.SIGINT else code)
 
 
 if __name__ == "__main__":

@@ -144,6 +144,9 @@ def main():
         paths, sets = groups.setdefault(key, ([], []))
         paths.append(path)
         sets.append(results)
+    if not groups:
+        sys.exit("plot_evaluation: no simstack_evaluate result on rendered views among the files given: "
+                 "nothing drawn")
     names = set()
     for paths, sets in groups.values():
         # Named after the first file; two test sets whose files share a name (runs/a/synthetic.json,

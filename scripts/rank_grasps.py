@@ -201,7 +201,7 @@ def main():
         sys.exit("rank_grasps: %s%s" % ("" if e.status is None else e.status_name + ": ", e))
     print("object %d: %s (%d pulls in %d %s, %.2f s)" % (
         res.target_id, res.message, res.pulls, res.hypotheses_used,
-        "scene" if res.hypotheses_used == 1 else "scenes (hypotheses and perturbed copies)",
+        "scene" if res.hypotheses_used == 1 else "scenes",
         res.time_s))
     print(table(res, args.rows))
     if args.json:

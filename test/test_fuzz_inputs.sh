@@ -268,6 +268,16 @@ grep -q "its last 1 are the validation" "$dir/out.txt" ||
   { echo "FAIL train on a small dataset: no note in:"; cat "$dir/out.txt"; fail=1; }
 expect "train again into a run without --resume" "holds a training run" "$bin/simstack_train" \
   --dataset "$dir/two.h5" --config "$train_config" --output "$dir/run_done" --steps 2
+# A log that cannot be written (/dev/full: a full disk) stops the run, naming it; the leftover
+# of a run killed while writing its first checkpoint is that run's, started afresh.
+mkdir -p "$dir/run_full" && ln -s /dev/full "$dir/run_full/train_log.csv"
+expect "train with a log on a full disk" "cannot write $dir/run_full/train_log.csv" \
+  "$bin/simstack_train" --dataset "$dir/two.h5" --config "$train_config" --output "$dir/run_full" \
+  --steps 2 --threads 1
+mkdir -p "$dir/run_cut" && echo "step" > "$dir/run_cut/train_log.csv"
+head -c 1000 "$dir/run_done/checkpoint.pt" > "$dir/run_cut/checkpoint.pt.tmp"
+succeed "train afresh beside a first checkpoint cut short" "$bin/simstack_train" \
+  --dataset "$dir/two.h5" --config "$train_config" --output "$dir/run_cut" --steps 2 --threads 1
 mkdir -p "$dir/theirs" && touch "$dir/theirs/precious.txt"
 expect "train into a directory of other files" "holds no training run" "$bin/simstack_train" \
   --dataset "$dir/two.h5" --config "$train_config" --output "$dir/theirs" --steps 2
@@ -426,6 +436,10 @@ mkfifo "$dir/pipe"
 expect "generate --output naming a pipe" "not a regular file" "$bin/simstack_generate" \
   --scenes 1 --seed 1 --output "$dir/pipe"
 [ -p "$dir/pipe" ] || { echo "FAIL generate replaced a pipe"; fail=1; }
+# The figures' script with no evaluation among its files draws nothing and says so.
+echo '{"real_dir": "mosd_learn", "methods": {}}' > "$dir/real.json"
+expect "plot_evaluation with only a --real report" "nothing drawn" /usr/bin/python3 \
+  "$bin/plot_evaluation.py" "$dir/real.json" --output "$dir/figures"
 
 [ $fail -eq 0 ] && echo "fuzz corpus: every case handled"
 exit $fail

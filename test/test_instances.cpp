@@ -275,6 +275,10 @@ TEST(HoughVoting, EmptySceneAndBadInput) {
   HoughConfig no_bandwidth;
   no_bandwidth.bandwidth_m = std::nan("");
   EXPECT_THROW(no_bandwidth.validate(), std::invalid_argument);
+  // A centre no voxel chose is no instance: the least size is one voxel.
+  HoughConfig empty_instances;
+  empty_instances.min_instance_voxels = 0;
+  EXPECT_THROW(empty_instances.validate(), std::invalid_argument);
   // Votes are unit directions: a least norm of 1 or more would leave every scene empty.
   for (double norm : {1.0, 2.0, std::nan(""), -0.1}) {
     HoughConfig config;

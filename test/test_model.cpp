@@ -240,6 +240,19 @@ TEST(Cvae, GroupNormKeepsEachSampleIndependentOfItsBatch) {
   EXPECT_THROW(bad.validate(), std::invalid_argument);
 }
 
+TEST(Cvae, ResolutionIsAPowerOfTwoTheGridsCanIndex) {
+  // The grids' 32-bit voxel indices overflow above 1290 per side; 512 is the largest accepted.
+  CvaeConfig c = tiny();
+  for (int r : {8, 24, 1024, 2048}) {
+    c.resolution = r;
+    EXPECT_THROW(c.validate(), std::invalid_argument) << r;
+  }
+  for (int r : {16, 512}) {
+    c.resolution = r;
+    EXPECT_NO_THROW(c.validate()) << r;
+  }
+}
+
 TEST(Cvae, ConditionDropoutDropsWholeSamplesInTrainingOnly) {
   // With condition_dropout, a training step decodes some samples without the condition's two
   // finest maps (they differ from the same step without dropout) and the rest unchanged

@@ -68,6 +68,16 @@ TEST(DepthRenderer, SphereMatchesAnalyticDepth) {
   EXPECT_GT(sphere_pixels, 5000);
 }
 
+TEST(DepthRenderer, RefusesMoreObjectsThanItsInstanceImageTellsApart) {
+  // Instances are k + 1 in 8 bits beside the table (0) and no surface (255): a 255th object
+  // would be drawn as no surface, a 256th as the table.
+  Scene many = sphereScene(0.01, Vec3::Zero());
+  many.objects.resize(255, many.objects.front());
+  EXPECT_THROW(DepthRenderer{many}, std::invalid_argument);
+  many.objects.resize(254);
+  EXPECT_NO_THROW(DepthRenderer{many});
+}
+
 TEST(DepthRenderer, NoiseIsSeededAndDropsPixels) {
   const DepthRenderer renderer(sphereScene(0.08, Vec3(0, 0, 0.08)));
   PinholeCamera camera;

@@ -280,6 +280,13 @@ TEST(GraspConversions, TheMeasuringCameraIsTheOneViewsCamera) {
   ObjectArray by_hand;
   by_hand.views = 1;
   EXPECT_FALSE(measuringCamera(by_hand).has_value());
+  // A pose that is set but malformed is refused (the service's BAD_SCENE), not passed over:
+  // without the camera the test for grasps into an opening the camera saw would be skipped.
+  msg.views = 1;
+  msg.table_pose.orientation.x = std::nan("");
+  EXPECT_THROW(measuringCamera(msg), std::invalid_argument);
+  msg.table_pose.orientation = geometry_msgs::Quaternion();
+  EXPECT_THROW(measuringCamera(msg), std::invalid_argument);  // a zero quaternion, a position
 }
 
 TEST(GraspConversions, ToolPoseLooksIntoTheSurfaceInTheAskedFrameAndArrowsShowTheOutcome) {
@@ -429,9 +436,23 @@ TEST(Conversions, MalformedSurfaceCloudsAreRefused) {
     cloud.fields.push_back(f);
   }
   const Transform I = Transform::Identity();
-  EXPECT_THROW(measuredSurface(object, I), std::invalid_argument);  // point_step 0, no data
+  // Each fault named: the point step, the data's size, the count measured_points claims.
+  const auto refusal = [&]() -> std::string {
+    try {
+      measuredSurface(object, I);
+    } catch (const std::invalid_argument& e) {
+      return e.what();
+    }
+    return "accepted";
+  };
+  EXPECT_NE(refusal().find("point_step 0"), std::string::npos) << refusal();
   cloud.point_step = 12;
-  EXPECT_THROW(measuredSurface(object, I), std::invalid_argument);  // no data
+  EXPECT_NE(refusal().find("its data holds 0"), std::string::npos) << refusal();
+  cloud.data.assign(24, 0);
+  object.measured_points = 3;
+  EXPECT_NE(refusal().find("fewer than the 3 measured_points"), std::string::npos) << refusal();
+  object.measured_points = 2;
+  cloud.data.clear();
   cloud.data.assign(24, 0);
   EXPECT_EQ(measuredSurface(object, I).size(), 2u);  // two points at the origin
   cloud.point_step = 8;                              // z beyond the point

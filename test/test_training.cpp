@@ -598,7 +598,7 @@ TEST(CvaeTrainer, AResumeKeepsTheHoughSettingOfTheRunsCard) {
 // --init-from) still gives the card its parent's Hough setting.
 TEST(CvaeTrainer, AResumedWarmStartKeepsItsParentsHoughSetting) {
   const TrainingScratch scratch("simstack_resume_parent");
-  const auto& [parent, child, unused] = scratch.dirs;
+  const auto& [parent, child, other] = scratch.dirs;
   CvaeTrainer(scratch.data, tiny(), scratch.tc, parent, "test").run(false);
   std::ofstream(parent + "/model.yaml", std::ios::app) << "  hough:\n    refinement: 5\n";
   TrainConfig tc = scratch.tc;
@@ -616,6 +616,18 @@ TEST(CvaeTrainer, AResumedWarmStartKeepsItsParentsHoughSetting) {
   // The card's training section names the parent, as an uninterrupted run's does.
   EXPECT_EQ(loadYamlFile(child + "/model.yaml", "card")["training"]["init_from"].as<std::string>(),
             parent + "/model.pt");
+  // Another model named with --init-from on a resume is not read: not its weights, nor its
+  // card's setting, nor its name on the card.
+  CvaeTrainer(scratch.data, tiny(), scratch.tc, other, "test").run(false);
+  std::ofstream(other + "/model.yaml", std::ios::app) << "  hough:\n    refinement: 7\n";
+  fs::remove(child + "/model.yaml");
+  fs::remove(child + "/model.pt");
+  tc.steps = 6;
+  tc.init_from = other + "/model.pt";
+  CvaeTrainer(scratch.data, tiny(), tc, child, "test").run(true);
+  const YAML::Node card = loadYamlFile(child + "/model.yaml", "card");
+  EXPECT_EQ(card["perception"]["hough"]["refinement"].as<int>(), 5);
+  EXPECT_EQ(card["training"]["init_from"].as<std::string>(), parent + "/model.pt");
 }
 
 // A dataset that goes bad between two runs: the resumed run stops on its first training batch

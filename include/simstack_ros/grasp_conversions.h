@@ -40,8 +40,9 @@ std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, 
 Points3 measuredSurface(const Object& object, const Transform& T_table_frame);
 
 /// The position of the camera that measured every object's depth points, in the table frame:
-/// from `msg.table_pose` when the frame fused one view (`views` 1) and the pose is a rigid
-/// transform; std::nullopt otherwise (points of several views, a message made by hand).
+/// from `msg.table_pose` when the frame fused one view (`views` 1); std::nullopt for points of
+/// several views or a pose left all zero (a message made by hand). std::invalid_argument for
+/// any other pose that is not a rigid transform (not finite, a quaternion not of norm 1).
 std::optional<Vec3> measuringCamera(const ObjectArray& msg);
 
 /// One ranked grasp (ranked in the table frame) as a message: its tool and pre-grasp poses

@@ -26,6 +26,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -97,6 +98,9 @@ class PerceptionServer {
   /// reason, when the transform did not come.
   bool waitForTransform(const std::string& target, const std::string& source,
                         const ros::Time& stamp, std::string* why);
+  /// Stops the timers, subscribers, services and reconfigure servers (roscpp waits for a
+  /// callback of theirs still running).
+  void stopCallbacks();
   /// Whether the destructor has asked the worker to end (takes mutex_).
   bool stopRequested();
   /// The estimate (in the table frame) published in the output frame, `T_output_table`; false,
@@ -185,7 +189,12 @@ class PerceptionServer {
   /// Why the model was refused ("" when it was loaded): nothing is perceived then.
   std::string model_error_;
   int tf_ahead_frames_ = 0;  ///< frames in a row whose tf was only far ahead (worker thread)
+  /// The pairs of camera_info and image frames warned about as differing (worker thread).
+  std::set<std::string> other_info_frames_;
   std::mutex save_mutex_;
+  /// Held by the worker from a frame's id check to its last message and by ~reset, taken before
+  /// mutex_: once ~reset returns, no frame begun before it is published.
+  std::mutex publish_mutex_;
   StageTimings last_timings_;
   std::shared_ptr<const SceneEstimate> last_scene_;
   ros::Time last_scene_stamp_;  ///< its depth image's stamp

@@ -74,11 +74,11 @@ std::vector<std::vector<SuperquadricShape>> graspScenes(const ObjectArray& msg, 
 
 std::optional<Vec3> measuringCamera(const ObjectArray& msg) {
   if (msg.views != 1) return std::nullopt;
-  try {  // T_camera_table: the camera in the table
-    return rigidFromPose(msg.table_pose, "table_pose").inverse().translation();
-  } catch (const std::invalid_argument&) {
-    return std::nullopt;
-  }
+  const geometry_msgs::Pose& p = msg.table_pose;
+  const geometry_msgs::Pose by_hand;  // a message filled by hand leaves it all zero
+  if (p == by_hand) return std::nullopt;
+  // T_camera_table: the camera in the table; a malformed pose is refused, not passed over.
+  return rigidFromPose(p, "table_pose").inverse().translation();
 }
 
 Points3 measuredSurface(const Object& object, const Transform& T_table_frame) {
@@ -87,10 +87,15 @@ Points3 measuredSurface(const Object& object, const Transform& T_table_frame) {
   if (object.measured_points == 0) return {};
   const std::string what = "object " + std::to_string(object.id) + ": surface cloud";
   // Divided, not multiplied: width x height x point_step can pass 2^64 and wrap to a small size.
-  const size_t held = cloud.point_step == 0 ? 0 : cloud.data.size() / cloud.point_step;
-  if (object.measured_points > n || n > held)
-    throw std::invalid_argument(what + " holds " + std::to_string(n) + " points (" +
-                                std::to_string(cloud.data.size()) + " bytes), not the " +
+  if (cloud.point_step == 0) throw std::invalid_argument(what + " has point_step 0");
+  const size_t held = cloud.data.size() / cloud.point_step;
+  if (n > held)
+    throw std::invalid_argument(what + ": width x height is " + std::to_string(n) +
+                                " points, its data holds " + std::to_string(held) + " (" +
+                                std::to_string(cloud.data.size()) + " bytes of point_step " +
+                                std::to_string(cloud.point_step) + ")");
+  if (object.measured_points > n)
+    throw std::invalid_argument(what + " holds " + std::to_string(n) + " points, fewer than the " +
                                 std::to_string(object.measured_points) + " measured_points says");
   // The iterators read raw bytes at each field's offset: the layout is checked first, so that
   // a malformed cloud is refused rather than read out of bounds.

@@ -233,6 +233,16 @@ bool GraspServer::placeRequest(const RankGrasps::Request& req, const ObjectArray
     if (scene.objects[k].id == req.target_id) *target = static_cast<int>(k);
     ids += (k ? ", " : "") + std::to_string(scene.objects[k].id);
   }
+  // A frame given as "/" alone (tf1's root prefix) names no frame: a malformed field, not a
+  // transform tf lacks.
+  for (const std::string* frame : {&req.target_frame, &req.target_point.header.frame_id})
+    if (!frame->empty() && tf2Frame(*frame).empty()) {
+      res.status = RankGrasps::Response::BAD_REQUEST;
+      res.message =
+          std::string(frame == &req.target_frame ? "target_frame" : "target_point's frame_id") +
+          " '" + *frame + "' names no frame";
+      return false;
+    }
   const geometry_msgs::Point& q = req.target_point.point;
   if (req.target_point.header.frame_id.empty() && (q.x != 0.0 || q.y != 0.0 || q.z != 0.0)) {
     // Without a frame the point means nothing; ranking target_id instead would pick an object
@@ -329,6 +339,7 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   request.scenes = graspScenes(*scene, GraspPolicy::hypothesesFor(req.hypotheses));
   if (why = checkScene(request.scenes[0], ids); !why.empty())
     throw std::invalid_argument("the scene's " + why);
+  out->measured_from = measuringCamera(*scene);  // throws for a malformed table_pose
   if (!placeRequest(req, *scene, res, out)) return false;
   request.target = out->target;
   request.ids = ids;
@@ -339,7 +350,6 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   // Throws std::invalid_argument saying what is out of bounds (caught by serve()).
   out->grasps = prepareGrasps(request, config_.ranking, config_.policy);
   out->measured_target = measuredSurface(scene->objects[out->target], out->T_scene_table.inverse());
-  out->measured_from = measuringCamera(*scene);
   std::string notes = out->grasps.notes;
   if (req.hypotheses == 0 && scene->hypotheses.empty())
     addNote(&notes,

@@ -17,6 +17,7 @@
 #include <iomanip>
 #include <sstream>
 #include <stdexcept>
+#include <system_error>
 
 #include "simstack/io/octomap_io.h"
 #include "simstack/io/staged_output.h"
@@ -200,7 +201,14 @@ PerceptionServer::PerceptionServer(ros::NodeHandle nh, ros::NodeHandle pnh,
   startDiagnostics();
   // Last: from here the worker owns the pipeline (settings change between its frames), and
   // onFrame only fills the mailbox.
-  worker_ = std::thread(&PerceptionServer::work, this);
+  try {
+    worker_ = std::thread(&PerceptionServer::work, this);
+  } catch (const std::system_error& e) {
+    // No destructor runs for an object whose constructor throws: the callbacks made above
+    // are stopped here, before the members they use go away.
+    stopCallbacks();
+    throw std::runtime_error(std::string("the worker thread cannot be started: ") + e.what());
+  }
 }
 
 bool PerceptionServer::loadModel(const PerceptionConfig& config) {
@@ -242,8 +250,12 @@ PerceptionServer::~PerceptionServer() {
   }
   wake_.notify_all();
   if (worker_.joinable()) worker_.join();
-  // Then nothing may call back into this object once its state starts going away (the timer
-  // reads the subscriber's topic).
+  stopCallbacks();
+}
+
+void PerceptionServer::stopCallbacks() {
+  // Nothing may call back into this object once its state starts going away (the timer reads
+  // the subscriber's topic).
   silence_timer_.stop();
   diagnostics_timer_.stop();
   image_sub_.shutdown();
@@ -371,6 +383,16 @@ bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* 
   if (camera_frame.empty()) {
     *why = "the depth image's header has no frame_id (the camera's optical frame)";
     return false;
+  }
+  // Another camera's intrinsics of the same size (a colour camera_info remapped in its place)
+  // would place every point wrongly: said once for each pair of frames, the image's kept.
+  const std::string info_frame = tf2Frame(info.header.frame_id);
+  if (!info_frame.empty() && info_frame != camera_frame &&
+      other_info_frames_.insert(info_frame + " " + camera_frame).second) {
+    ROS_WARN(
+        "simstack perception: the depth image is in frame '%s' but its camera_info in '%s': "
+        "are they one camera's? The image's frame and the camera_info's intrinsics are used",
+        camera_frame.c_str(), info_frame.c_str());
   }
   if (node_.estimate_table) return true;  // the pipeline fits the plane
   view->T_table_camera = Transform::Identity();
@@ -578,6 +600,7 @@ void PerceptionServer::process(const Frame& frame) {
                       : Transform::Identity();
   // A frame ~reset overtook holds the views and ids the caller asked to forget: the next frame
   // is the first after the reset.
+  std::lock_guard<std::mutex> publishing(publish_mutex_);
   if (!publish(frame, view, estimate, static_cast<int>(views.size()), T_output_table, resets)) {
     ROS_INFO("simstack perception: the frame stamped %.3f s began before ~reset: not published",
              frame.image->header.stamp.toSec());
@@ -711,6 +734,7 @@ void PerceptionServer::warmUp() {
 }
 
 bool PerceptionServer::reset(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
+  std::lock_guard<std::mutex> publishing(publish_mutex_);  // a frame being published goes out first
   std::lock_guard<std::mutex> lock(mutex_);
   reset_requested_ = true;
   ++resets_;

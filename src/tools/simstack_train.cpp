@@ -274,11 +274,13 @@ int main(int argc, char** argv) {
       throw std::runtime_error(o.output +
                                " is the working directory or holds it: name a directory inside "
                                "it, e.g. ./run");
-    // A run stopped or failed before its first checkpoint leaves its log alone: the directory
-    // is that run's, and a new run starts afresh in it.
+    // A run stopped or failed before its first checkpoint leaves its log alone, or with the
+    // checkpoint it was writing (checkpoint.pt.tmp, killed before the rename): the directory is
+    // that run's, and a new run starts afresh in it.
     const auto only_a_log = [&] {
       for (const auto& e : std::filesystem::directory_iterator(o.output, ec))
-        if (e.path().filename() != "train_log.csv") return false;
+        if (e.path().filename() != "train_log.csv" && e.path().filename() != "checkpoint.pt.tmp")
+          return false;
       return true;
     };
     if (!o.resume && std::filesystem::is_directory(o.output) && !only_a_log())

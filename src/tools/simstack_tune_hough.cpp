@@ -118,8 +118,8 @@ void addSweepOptions(CLI::App& app, HoughSweep& sweep) {
   values("--min-traversals", sweep.traversals, "mu values to try", FiniteNonNegative);
   values("--bandwidth", sweep.bandwidths, "mean-shift radii to try (m)",
          FinitePositive & CLI::Range(0.001, 10.0));
-  values("--min-instance-voxels", sweep.min_voxels, "minimum instance sizes to try",
-         FiniteNonNegative);
+  values("--min-instance-voxels", sweep.min_voxels, "minimum instance sizes to try (>= 1)",
+         FinitePositive);
   values("--min-vote-norm", sweep.min_norms,
          "vote lengths to try below which a voxel casts no ray (blunt, unsure votes)",
          finiteNumber([](double v) { return v >= 0.0 && v < 1.0; }, "in [0, 1)", "[0,1)"));

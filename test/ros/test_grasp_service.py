@@ -144,13 +144,21 @@ class GraspService(unittest.TestCase):
         frameless = request()
         frameless.target_point.point.x = 0.1
         self.expect_rejected(frameless, "target_point has no header.frame_id", bad_request)
+        self.expect_rejected(request(target_frame="/"), "target_frame '/' names no frame",
+                             bad_request)
+        # One view's table pose, set but malformed: refused, not passed over (the test for
+        # grasps into an opening the camera saw needs the camera).
+        self.assertEqual(self.scene.views, 1)
+        tilted = copy.deepcopy(self.scene)
+        tilted.table_pose.orientation.x = float("nan")
+        self.expect_rejected(request(scene=tilted), "table_pose", bad_scene)
         # A hand-built object whose surface cloud lacks the points measured_points announces.
         hollow = copy.deepcopy(self.scene)
         seen = max(hollow.objects, key=lambda o: o.measured_points)
         self.assertGreater(seen.measured_points, 0)
         seen.surface.point_step = 0
         seen.surface.data = b""
-        self.expect_rejected(request(scene=hollow, target_id=seen.id), "surface cloud", bad_scene)
+        self.expect_rejected(request(scene=hollow, target_id=seen.id), "point_step 0", bad_scene)
         res = self.rank(request())
         self.assertTrue(res.success, res.message)
         self.assertEqual(res.status, RankGraspsResponse.SUCCEEDED)

@@ -443,10 +443,12 @@ TEST_F(PerceptionNodeTest, ResetAndSaveOctomap) {
   wire->image_pub.publish(imageMsg(render(knownPile()), during));
   ros::WallDuration(0.05).sleep();
   EXPECT_TRUE(ros::service::call("/camera/perception/reset", empty));
-  if (const std::optional<ObjectArray> overtaken = answerTo(wire->received, during, 10.0))
+  if (const std::optional<ObjectArray> overtaken = answerTo(wire->received, during, 10.0)) {
     for (const auto& o : overtaken->objects)
-      for (const auto& p : after->objects)
+      for (const auto& p : after->objects) {
         EXPECT_NE(o.id, p.id) << "a frame begun before the reset kept an id the reset forgot";
+      }
+  }
   const std::optional<ObjectArray> next = sendDepth(render(knownPile()), 60.0);
   ASSERT_TRUE(next) << "no frame answered after a reset during a frame";
   for (const auto& o : next->objects)

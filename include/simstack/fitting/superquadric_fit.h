@@ -111,10 +111,22 @@ constexpr double kLeastJointVolumeShare = 0.01;
 /// box's (the degenerate basin of eq. 5, whose global minimum is a point).
 bool collapsedFit(const SuperquadricShape& shape, const Points3& points_table);
 
+/// Points whose smallest principal standard deviation is under this (m) lie on one plane (or
+/// line) as exactly as noise-free depth makes them: eq. 5 is zero for every slab through them.
+constexpr double kExactlyFlatM = 1e-4;
+
+/// True when the points lie on one plane or line (their smallest principal standard deviation
+/// under kExactlyFlatM). Measured points never do; rendered noise-free depth of a face does.
+bool exactlyFlat(const Points3& points_table);
+
+/// True when `shape` grew along exactlyFlat points: its box's half-extent along a principal
+/// direction in which they spread passes 1.5 x their half-extent there plus 5 mm.
+bool grownFit(const SuperquadricShape& shape, const Points3& points_table);
+
 /// Stage one for a scene: fitSuperquadric for each point set of at least `min_points` points (in
 /// parallel over `threads`; smaller sets and sets that cannot be fitted get std::nullopt), the
-/// points' oriented box (initialGuess) where the fit collapses or flattens (collapsedFit,
-/// flattenedFit).
+/// points' oriented box (initialGuess) where the fit collapses, flattens or grows (collapsedFit,
+/// flattenedFit, grownFit).
 std::vector<std::optional<SuperquadricShape>> fitEachInstance(const std::vector<Points3>& points,
                                                               const FitConfig& config,
                                                               int min_points = 30);
@@ -140,8 +152,9 @@ bool fitAtBound(const SuperquadricShape& shape, const Points3& visible_table,
 /// Both stages for a scene: per-instance fits (in parallel over `threads`), then, when
 /// `joint`, the joint refinement of all fitted shapes. Sets with fewer than `min_points`
 /// points are skipped (std::nullopt). No fit collapses: a per-instance fit that does
-/// (collapsedFit, or flattenedFit along one axis) is replaced by the points' oriented box
-/// (initialGuess), and a jointly refined shape that does, or that keeps less than
+/// (collapsedFit, or flattenedFit along one axis), or grows past exactly flat points
+/// (grownFit), is replaced by the points' oriented box (initialGuess), and a jointly refined
+/// shape that does, whose points are exactlyFlat, or that keeps less than
 /// kLeastJointVolumeShare of its per-instance fit's volume, by its per-instance fit scaled down
 /// about its centre until clear of the others, but not below 0.3 of its points' extent, nor to the
 /// bound along an axis they extend along.

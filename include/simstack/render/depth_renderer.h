@@ -67,6 +67,8 @@ struct RenderResult {
 /// Builds the acceleration structure once; render() is const and thread-safe.
 class DepthRenderer {
  public:
+  /// std::invalid_argument for a scene of more objects than the instance image tells apart
+  /// (254).
   DepthRenderer(const Scene& scene, const RenderConfig& config = RenderConfig());
   /// One mesh as instance 1, no table (for visibility tests of arbitrary surfaces).
   explicit DepthRenderer(const TriangleMesh& mesh, double max_range_m = 10.0);

@@ -488,8 +488,10 @@ void FitConfig::validate() const {
     if (!ok) throw std::invalid_argument("fitting config: " + what);
   };
   require(min_scale_m > 0.0 && max_scale_m > min_scale_m, "need 0 < min_scale_m < max_scale_m");
-  require(min_exponent >= 1.0 && max_exponent > min_exponent,
-          "need 1 <= min_exponent < max_exponent (exponents below 1 are not convex)");
+  require(min_exponent >= 1.0 && max_exponent > min_exponent && max_exponent <= 200.0,
+          "need 1 <= min_exponent < max_exponent <= 200 (exponents below 1 are not convex; "
+          "above 200 |x / a|^e over- or underflows, and the grasp ranking refuses them)");
+  require(max_scale_m <= 10.0, "max_scale_m must be at most 10 m");
   require(initial_exponent >= min_exponent && initial_exponent <= max_exponent,
           "initial_exponent must lie in [min_exponent, max_exponent]");
   require(lambda_dist >= 0.0 && lambda_coll >= 0.0 && lambda_floor >= 0.0,
@@ -856,7 +858,8 @@ std::vector<std::optional<SuperquadricShape>> fitEachInstance(const std::vector<
     try {
       fits[i] = fitSuperquadric(points[i], single);
       // The points' oriented box rather than a shape that lost them.
-      if (collapsedFit(*fits[i], points[i]) || flattenedFit(*fits[i], points[i], c.min_scale_m))
+      if (collapsedFit(*fits[i], points[i]) || flattenedFit(*fits[i], points[i], c.min_scale_m) ||
+          grownFit(*fits[i], points[i]))
         fits[i] = initialGuess(points[i], c.initial_exponent);
     } catch (const std::invalid_argument&) {
       // Points that cannot be fitted (all at a few places, or not finite): no superquadric, as
@@ -890,8 +893,10 @@ void refineInstances(const std::vector<Points3>& points, const FitConfig& c,
   if (shapes.empty()) return;
   std::vector<SuperquadricShape> refined = refineJointly(pts, shapes, c);
   for (size_t k = 0; k < index.size(); ++k) {
+    // Points on exactly one plane or line leave eq. 5 no say in the shape's size: the joint
+    // solve's volume pull shrinks it below them, so it keeps its per-instance fit.
     if (!collapsedFit(refined[k], pts[k]) && !flattenedFit(refined[k], pts[k], c.min_scale_m) &&
-        refined[k].volume() >= kLeastJointVolumeShare * shapes[k].volume())
+        !exactlyFlat(pts[k]) && refined[k].volume() >= kLeastJointVolumeShare * shapes[k].volume())
       continue;
     // The per-instance fit, made smaller until it is clear of the others, as far as its points
     // allow: the joint solve's own way out of a collision, without losing the object.
@@ -923,6 +928,45 @@ bool flattenedFit(const SuperquadricShape& shape, const Points3& points_table, d
     if (shape.scale_m[k] <= 1.5 * min_scale_m &&
         middleSpan(points_table, shape.T_table_object.linear().col(k)) > kCollapseSpanM)
       return true;
+  return false;
+}
+
+namespace {
+
+/// The points' principal directions and standard deviations along them (ascending).
+Eigen::SelfAdjointEigenSolver<Mat3> principalSpread(const Points3& points) {
+  Vec3 mean = Vec3::Zero();
+  for (const Vec3& p : points) mean += p;
+  mean /= points.size();
+  Mat3 cov = Mat3::Zero();
+  for (const Vec3& p : points) cov += (p - mean) * (p - mean).transpose();
+  return Eigen::SelfAdjointEigenSolver<Mat3>(cov / points.size());
+}
+
+}  // namespace
+
+bool exactlyFlat(const Points3& points_table) {
+  if (points_table.size() < 4) return false;
+  return std::sqrt(std::max(0.0, principalSpread(points_table).eigenvalues()[0])) < kExactlyFlatM;
+}
+
+bool grownFit(const SuperquadricShape& shape, const Points3& points_table) {
+  if (!exactlyFlat(points_table)) return false;
+  const Eigen::SelfAdjointEigenSolver<Mat3> eigen = principalSpread(points_table);
+  const Vec3 spread = eigen.eigenvalues().cwiseMax(0.0).cwiseSqrt();  // ascending
+  const Mat3 axes = shape.T_table_object.linear();
+  for (int j = 0; j < 3; ++j) {
+    if (spread[j] < kExactlyFlatM) continue;  // across the plane: the hidden depth is free
+    const Vec3 u = eigen.eigenvectors().col(j);
+    double lo = 1e9, hi = -1e9;
+    for (const Vec3& p : points_table) {
+      lo = std::min(lo, u.dot(p));
+      hi = std::max(hi, u.dot(p));
+    }
+    // The shape's box bounds its extent along u from above.
+    const double reach = (axes.transpose() * u).cwiseAbs().dot(shape.scale_m);
+    if (reach > 1.5 * 0.5 * (hi - lo) + 0.005) return true;
+  }
   return false;
 }
 

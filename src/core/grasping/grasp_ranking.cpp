@@ -55,6 +55,7 @@ void parallelFor(int count, int threads, const Job& job) {
     }
   };
   std::vector<std::thread> pool;
+  pool.reserve(std::max(0, std::min(threads, count) - 1));  // no reallocation under running threads
   try {
     for (int t = 1; t < std::min(threads, count); ++t) pool.emplace_back(work);
   } catch (const std::system_error&) {

@@ -496,7 +496,7 @@ void HoughConfig::validate() const {
   // A millimetre is far below a voxel; the live setting (LiveSettings.cfg) has the same range.
   require(std::isfinite(bandwidth_m) && bandwidth_m >= 0.001 && bandwidth_m <= 10, "bandwidth_m",
           bandwidth_m, "in [0.001, 10] m");
-  require(min_instance_voxels >= 0, "min_instance_voxels", min_instance_voxels, ">= 0");
+  require(min_instance_voxels >= 1, "min_instance_voxels", min_instance_voxels, ">= 1");
   // The votes' targets are unit directions, and the network shortens the votes it is unsure
   // of: from 1 on, next to none would cast a ray and every scene would be empty.
   require(min_vote_norm >= 0 && min_vote_norm < 1, "min_vote_norm", min_vote_norm, "in [0, 1)");

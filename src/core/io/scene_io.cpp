@@ -129,7 +129,7 @@ std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path, st
                                  " has an id that is not an integer");
       }
       if (ids->back() < 0)
-        throw std::runtime_error(path + ": object " + std::to_string(out.size() - 1) + " has id " +
+        throw std::runtime_error(path + ": object " + std::to_string(out.size()) + " has id " +
                                  std::to_string(ids->back()) + ": ids are 0 or more");
       if (!seen_ids.insert(ids->back()).second)
         throw std::runtime_error(path + ": id " + std::to_string(ids->back()) + " is given twice");

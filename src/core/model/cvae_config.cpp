@@ -64,8 +64,11 @@ void cvaeAllFields(C& c, F&& f) {
 void CvaeConfig::validate() const {
   requireConfig(architecture == "cvae" || architecture == "fc" || architecture == "fc_plain",
                 "architecture must be 'cvae', 'fc' or 'fc_plain', got '" + architecture + "'");
-  requireConfig(resolution >= 16 && (resolution & (resolution - 1)) == 0,
-                "resolution must be a power of two >= 16, got " + std::to_string(resolution));
+  // Up to 512: the grids index their voxels with 32-bit ints (R^3 passes 2^31 above 1290), and
+  // one float grid at 512 already takes 0.5 GB.
+  requireConfig(
+      resolution >= 16 && resolution <= 512 && (resolution & (resolution - 1)) == 0,
+      "resolution must be a power of two in [16, 512], got " + std::to_string(resolution));
   requireConfig(extent_m > 0.0, "extent_m must be > 0");
   requireConfig(truncation_vox > 0.0, "truncation_vox must be > 0");
   requireConfig(base_channels >= 1 && max_channels >= base_channels,

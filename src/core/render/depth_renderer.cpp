@@ -114,6 +114,11 @@ struct DepthRenderer::Impl {
 
 DepthRenderer::DepthRenderer(const Scene& scene, const RenderConfig& config)
     : impl_(std::make_unique<Impl>()) {
+  // Instance k + 1 of an 8-bit image: 0 is the table and kNoSurface no hit.
+  if (scene.objects.size() >= kNoSurface)
+    throw std::invalid_argument("DepthRenderer: " + std::to_string(scene.objects.size()) +
+                                " objects; the instance image holds at most " +
+                                std::to_string(kNoSurface - 1));
   impl_->config = config;
   impl_->device = rtcNewDevice("threads=1");
   if (!impl_->device)

@@ -312,10 +312,6 @@ nlohmann::json graspSummary(const std::vector<PickResult>& picks) {
   std::map<std::pair<int, int>, const PickResult*> oracle;
   for (const PickResult& p : picks)
     if (p.method == "truth") oracle[{p.scene, p.target}] = &p;
-  double oracle_broke = 0, oracle_pulled = 0;
-  for (const auto& [key, p] : oracle)
-    if (p->grasped) ++oracle_pulled, oracle_broke += p->outcome.failed();
-  const double oracle_broke_share = oracle_pulled > 0 ? oracle_broke / oracle_pulled : 0.0;
   std::vector<std::pair<std::string, std::string>> keys;
   for (const PickResult& p : picks)
     if (std::find(keys.begin(), keys.end(), std::make_pair(p.method, p.chooser)) == keys.end())
@@ -328,10 +324,14 @@ nlohmann::json graspSummary(const std::vector<PickResult>& picks) {
     std::vector<double> d, d_freed;
     std::vector<std::pair<double, double>> paired;  // (freed, the oracle freed) per target
     double toppled = 0, freed = 0, broke = 0, found = 0, pulled = 0, n = 0;
+    // Seals broken on the targets both this method and the oracle pulled: the oracle's share
+    // over all its pulls would set this method's breaks against targets it never tried.
+    double both_broke = 0, both_oracle_broke = 0;
     for (const PickResult& p : picks) {
       if (p.method != method || p.chooser != chooser) continue;
       ++n;
-      if (const auto o = oracle.find({p.scene, p.target}); o != oracle.end())
+      const auto o = oracle.find({p.scene, p.target});
+      if (o != oracle.end())
         paired.emplace_back(p.outcome.target_freed, o->second->outcome.target_freed);
       found += p.found;
       freed += p.outcome.target_freed;
@@ -340,6 +340,8 @@ nlohmann::json graspSummary(const std::vector<PickResult>& picks) {
       d.push_back(1e3 * p.outcome.mean_displacement_m);
       if (p.outcome.target_freed) d_freed.push_back(d.back());
       toppled += p.outcome.toppled > 0, broke += p.outcome.failed();
+      if (o != oracle.end() && o->second->grasped)
+        both_broke += p.outcome.failed(), both_oracle_broke += o->second->outcome.failed();
     }
     // A figure over nothing (no pull, an oracle that freed or broke nothing) is null, not 0.
     const nlohmann::json undefined;
@@ -369,9 +371,7 @@ nlohmann::json graspSummary(const std::vector<PickResult>& picks) {
          {"freed_of_oracle", against_oracle ? nlohmann::json(of_oracle.ratio) : undefined},
          {"freed_of_oracle_ci95",
           against_oracle ? nlohmann::json({of_oracle.low, of_oracle.high}) : undefined},
-         {"seal_broke_of_oracle", pulled > 0 && oracle_broke_share > 0
-                                      ? nlohmann::json(broke / pulled / oracle_broke_share)
-                                      : undefined}});
+         {"seal_broke_of_oracle", share(both_broke, both_oracle_broke)}});
   }
   return out;
 }

@@ -6,10 +6,12 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <cstring>
 #include <deque>
 #include <filesystem>
 #include <fstream>
@@ -204,8 +206,21 @@ class TrainingLog {
            << report.validation_disagreement_unseen << "," << report.validation_unseen_share;
     }
     log_ << std::endl;  // each row on disk at once: a long run is followed with tail -f
+    check();
   }
-  void flush() { log_.flush(); }
+  void flush() {
+    log_.flush();
+    check();
+  }
+  /// A row that cannot be written (a full disk) stops the run: a log with rows missing would
+  /// pass for a whole one. Thrown before the checkpoint is written, so that --resume finds the
+  /// log and the last checkpoint in step.
+  void check() const {
+    if (!log_)
+      throw std::runtime_error("cannot write " + path_.string() + " (" + std::strerror(errno) +
+                               "): the run stops; its last checkpoint, if it has one, is kept "
+                               "for --resume once the file can be written");
+  }
   /// The losses and pace of the last logged step (a resumed run that had nothing left to do).
   bool lastRow(LossRow* losses, double* samples_per_second) const {
     std::ifstream previous(path_.string());
@@ -798,10 +813,16 @@ std::string CvaeTrainer::Impl::resumeFrom(const std::string& metadata, const fs:
                 << " steps and now trains to " << config.steps
                 << " (the learning rate's cosine follows the new length)\n";
   }
-  const std::string parent =
-      config.init_from.empty() ? metadataField(metadata, "init_from") : config.init_from;
-  if (config.init_from.empty() && !parent.empty())
-    card_perception = cardPerceptionSection(parent, model_config.hasLatentCode());
+  // The run's parent is the one it started from: an --init-from given to the resume is not
+  // read (its weights, its card's Hough setting, its name on the card).
+  const std::string parent = metadataField(metadata, "init_from");
+  if (!config.init_from.empty() && config.init_from != parent)
+    std::cerr << "note: --init-from " << config.init_from
+              << " is not read on a resume: the run continues from its checkpoint"
+              << (parent.empty() ? std::string(", started afresh")
+                                 : ", warm-started from " + parent)
+              << "\n";
+  card_perception = cardPerceptionSection(parent, model_config.hasLatentCode());
   if (const std::string kept = runCardPerceptionSection(out / "model.yaml"); !kept.empty())
     card_perception = kept;
   config.init_from = parent;  // the card's training section names the run's parent

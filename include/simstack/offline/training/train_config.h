@@ -23,8 +23,8 @@ struct TrainConfig {
   int validate_every = 500;    ///< steps between validations
   /// The last scenes of the dataset, never trained on, each seen from `validation_views`
   /// random viewpoints. Piles differ more than the protocol does: per view the IoU spreads by
-  /// about 0.08, so 32 views leave the mean uncertain by 0.014 (docs/results.md, "Validation
-  /// and test").
+  /// about 0.08, so 32 views leave the mean's standard error at 0.014-0.016 (docs/results.md,
+  /// "Validation and test").
   int validation_scenes = 128;
   int validation_views = 2;
   int validation_samples = 8;  ///< latent codes per validation view (hypotheses S)
