@@ -289,6 +289,21 @@ head -c 3000 "$dir/d.h5" > "$dir/cut.h5"
 expect "train on a truncated dataset" "cut.h5" "$bin/simstack_train" --dataset "$dir/cut.h5" \
   --config "$train_config" --output "$dir/run2"
 
+# A dataset missing one array, or one attribute: each named.
+cp "$dir/two.h5" "$dir/novotes.h5"
+cp "$dir/two.h5" "$dir/noseed.h5"
+/usr/bin/python3 - "$dir/novotes.h5" "$dir/noseed.h5" <<'PY'
+import sys
+import h5py
+with h5py.File(sys.argv[1], "a") as f:
+    del f["votes"]
+with h5py.File(sys.argv[2], "a") as f:
+    del f.attrs["seed"]
+PY
+expect "train on a dataset without votes" "no array 'votes'" "$bin/simstack_train" \
+  --dataset "$dir/novotes.h5" --config "$train_config" --output "$dir/run_nv"
+expect "train on a dataset without a seed" "no attribute 'seed'" "$bin/simstack_train" \
+  --dataset "$dir/noseed.h5" --config "$train_config" --output "$dir/run_ns"
 cp "$dir/two.h5" "$dir/scrambled.h5"
 dd if=/dev/urandom of="$dir/scrambled.h5" bs=1 seek=20000 count=20000 conv=notrunc 2> /dev/null
 expect "train on a scrambled dataset" "scrambled.h5" "$bin/simstack_train" --dataset "$dir/scrambled.h5" \

@@ -41,25 +41,30 @@ void writeAttr(H5::H5Object& obj, const std::string& name, const std::string& v)
   H5::StrType type(H5::PredType::C_S1, H5T_VARIABLE);
   obj.createAttribute(name, type, H5::DataSpace()).write(type, v);
 }
+/// The attribute, or std::runtime_error naming it when the file has none of that name.
+H5::Attribute attribute(const H5::H5Object& obj, const std::string& name) {
+  if (!obj.attrExists(name)) throw std::runtime_error("it has no attribute '" + name + "'");
+  return obj.openAttribute(name);
+}
 template <typename T>
 T readAttr(const H5::H5Object& obj, const std::string& name);
 template <>
 double readAttr<double>(const H5::H5Object& obj, const std::string& name) {
   double v = 0;
-  obj.openAttribute(name).read(H5::PredType::NATIVE_DOUBLE, &v);
+  attribute(obj, name).read(H5::PredType::NATIVE_DOUBLE, &v);
   return v;
 }
 template <>
 int64_t readAttr<int64_t>(const H5::H5Object& obj, const std::string& name) {
   int64_t v = 0;
-  obj.openAttribute(name).read(H5::PredType::NATIVE_INT64, &v);
+  attribute(obj, name).read(H5::PredType::NATIVE_INT64, &v);
   return v;
 }
 /// An unsigned attribute; one stored signed (a file written before seeds were stored unsigned)
 /// keeps its bits.
 template <>
 uint64_t readAttr<uint64_t>(const H5::H5Object& obj, const std::string& name) {
-  const H5::Attribute attr = obj.openAttribute(name);
+  const H5::Attribute attr = attribute(obj, name);
   if (attr.getIntType().getSign() == H5T_SGN_NONE) {
     uint64_t v = 0;
     attr.read(H5::PredType::NATIVE_UINT64, &v);
@@ -72,7 +77,7 @@ uint64_t readAttr<uint64_t>(const H5::H5Object& obj, const std::string& name) {
 template <>
 std::string readAttr<std::string>(const H5::H5Object& obj, const std::string& name) {
   std::string v;
-  H5::Attribute a = obj.openAttribute(name);
+  H5::Attribute a = attribute(obj, name);
   a.read(a.getStrType(), v);
   return v;
 }
@@ -284,6 +289,8 @@ void refuseHeldOutDatasets(const std::vector<std::string>& paths, const std::str
       const H5::H5File file(path, H5F_ACC_RDONLY);
       seed = readAttr<uint64_t>(file.openGroup("/"), "seed");
     } catch (const H5::Exception&) {
+      continue;  // not a dataset: the reader says so
+    } catch (const std::runtime_error&) {
       continue;
     }
     if (held_out.count(seed))
@@ -310,12 +317,17 @@ DatasetReader::DatasetReader(const std::string& path, const std::string& mesh_di
     info.max_objects_per_scene = static_cast<int>(readAttr<int64_t>(root, "max_objects_per_scene"));
     info.generator_version = readAttr<std::string>(root, "generator_version");
     info.mesh_names = split(readAttr<std::string>(root, "mesh_names"));
-    impl_->tsdf = impl_->file->openDataSet("tsdf");
-    impl_->votes = impl_->file->openDataSet("votes");
-    impl_->labels = impl_->file->openDataSet("labels");
-    impl_->origin = impl_->file->openDataSet("grid_origin");
-    impl_->count = impl_->file->openDataSet("num_objects");
-    impl_->objects = impl_->file->openDataSet("objects");
+    const auto array = [&](const std::string& name) {
+      if (H5Lexists(impl_->file->getId(), name.c_str(), H5P_DEFAULT) <= 0)
+        throw std::runtime_error("it has no array '" + name + "'");
+      return impl_->file->openDataSet(name);
+    };
+    impl_->tsdf = array("tsdf");
+    impl_->votes = array("votes");
+    impl_->labels = array("labels");
+    impl_->origin = array("grid_origin");
+    impl_->count = array("num_objects");
+    impl_->objects = array("objects");
     checkAttributes(info);
     const hsize_t n = sceneCount(impl_->tsdf);
     const hsize_t r = info.resolution, k = info.max_objects_per_scene;
