@@ -670,6 +670,35 @@ std::filesystem::path twoPileDataset(const std::string& name) {
   return path;
 }
 
+// A method that places its grid itself, 10 cm off the first method's: the same voxel count,
+// so its voxels would be scored against a ground truth lying elsewhere. Refused, naming it.
+class Elsewhere : public KnownAnswer {
+ public:
+  using KnownAnswer::KnownAnswer;
+  MethodEstimate estimate(const DepthView& view, const GridSpec*, const Vec2& pile_xy) override {
+    return KnownAnswer::estimate(view, nullptr, pile_xy + Vec2(0.1, 0.0));
+  }
+};
+
+TEST(Evaluator, AMethodOnAnotherGridThanTheGroundTruthsIsRefused) {
+  const std::filesystem::path path = twoPileDataset("simstack_evaluator_grid.h5");
+  const DatasetReader reader(path.string());
+  KnownAnswer truth("truth", reader, true);
+  Elsewhere shifted("shifted", reader, true);
+  EvaluationOptions options;
+  options.views = 2;
+  options.stability = false;
+  try {
+    evaluateDataset(reader, {&truth, &shifted}, options);
+    ADD_FAILURE() << "a method on another grid was scored";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("method shifted estimated scene 0 on another grid"),
+              std::string::npos)
+        << e.what();
+  }
+  std::filesystem::remove(path);
+}
+
 TEST(Evaluator, TheTruthScoresPerfectlyAndNothingScoresNothing) {
   const std::filesystem::path path = twoPileDataset("simstack_evaluator_test.h5");
   const DatasetReader reader(path.string());

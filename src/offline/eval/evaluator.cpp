@@ -182,6 +182,17 @@ void evaluateView(const SceneRecord& rec, int k, int v, const SceneTruth& scene,
       grid = est.grid;
       gt = computeGroundTruth(rec.scene, grid, truncation_m);
       have_gt = true;
+    } else if (est.grid.resolution != grid.resolution ||
+               std::abs(est.grid.voxel_size_m - grid.voxel_size_m) > 1e-12 ||
+               (est.grid.origin_table - grid.origin_table).norm() > 1e-9) {
+      // A network of another extent or placement would be scored voxel by voxel against a
+      // ground truth that lies elsewhere.
+      throw std::runtime_error(
+          "method " + methods[i]->name() + " estimated scene " + std::to_string(k) +
+          " on another grid (" + std::to_string(est.grid.resolution) + " voxels of " +
+          std::to_string(est.grid.voxel_size_m) + " m) than " + methods[0]->name() + " (" +
+          std::to_string(grid.resolution) + " of " + std::to_string(grid.voxel_size_m) +
+          " m): evaluate them in separate runs");
     }
     scoreEstimate(est, rec, scene, vt, gt, options, method_rng, &row);
     (*results)[i].rows.push_back(std::move(row));
