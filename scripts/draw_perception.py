@@ -56,22 +56,22 @@ def main():
             getattr(msg, "header", None) and msg.header.stamp
         return None if stamp is None else stamp.to_nsec()
 
-    # Two passes, so that a long bag's images are not all held at once: which kinds each stamp
-    # has, then the messages of the last stamp that has all five.
-    kinds = {}  # stamp -> kinds of message
+    # One pass that holds only the last complete frame and the stamps after it: a long bag's
+    # images are not all kept.
+    frames, last = {}, None  # stamp -> kind -> message; the last stamp with all five kinds
     with rosbag.Bag(args.bag) as bag:
         for topic, msg, _ in bag.read_messages(topics=list(topics)):
             stamp = stamp_of(topics[topic], msg)
-            if stamp is not None:
-                kinds.setdefault(stamp, set()).add(topics[topic])
-        complete = [s for s, k in sorted(kinds.items()) if len(k) == 5]
-        if not complete:
-            sys.exit(f"draw_perception: {args.bag} holds no frame with depth, camera_info, objects, markers and labels")
-        frame = {}
-        for topic, msg, _ in bag.read_messages(topics=list(topics)):
-            if stamp_of(topics[topic], msg) == complete[-1]:
-                frame[topics[topic]] = msg
-    when = f"{args.bag}, the frame stamped {complete[-1] / 1e9:.3f} s"
+            if stamp is None or (last is not None and stamp < last):
+                continue
+            frames.setdefault(stamp, {})[topics[topic]] = msg
+            if len(frames[stamp]) == 5 and stamp != last:
+                last = stamp
+                frames = {s: f for s, f in frames.items() if s >= last}
+    if last is None:
+        sys.exit(f"draw_perception: {args.bag} holds no frame with depth, camera_info, objects, markers and labels")
+    frame = frames[last]
+    when = f"{args.bag}, the frame stamped {last / 1e9:.3f} s"
     depth = image_array(frame["depth"]) * (0.001 if frame["depth"].encoding != "32FC1" else 1.0)
     depth[~np.isfinite(depth)] = 0.0
     labels = image_array(frame["labels"]).astype(int)

@@ -525,14 +525,38 @@ double meanDistortion(const SuperquadricShape& sq, const Points3& points_table) 
   return std::sqrt(sq.scale_m.prod()) * sum / points_table.size();
 }
 
+namespace {
+
+/// The points' mean and the eigen-decomposition of their scatter matrix (eigenvalues
+/// ascending: n times the variances along the principal directions).
+struct PrincipalAxes {
+  Vec3 mean;
+  Eigen::SelfAdjointEigenSolver<Mat3> eigen;
+};
+
+PrincipalAxes principalAxes(const Points3& points) {
+  PrincipalAxes out;
+  out.mean = Vec3::Zero();
+  for (const Vec3& p : points) out.mean += p;
+  out.mean /= points.size();
+  Mat3 scatter = Mat3::Zero();
+  for (const Vec3& p : points) scatter += (p - out.mean) * (p - out.mean).transpose();
+  out.eigen.compute(scatter);
+  return out;
+}
+
+/// Standard deviations of `points` along its principal directions (ascending).
+Vec3 principalSpread(const PrincipalAxes& axes, const Points3& points) {
+  return (axes.eigen.eigenvalues() / points.size()).cwiseMax(0.0).cwiseSqrt();
+}
+
+}  // namespace
+
 SuperquadricShape initialGuess(const Points3& points, double initial_exponent) {
   checkPoints(points);
-  Vec3 mean = Vec3::Zero();
-  for (const Vec3& p : points) mean += p;
-  mean /= points.size();
-  Mat3 cov = Mat3::Zero();
-  for (const Vec3& p : points) cov += (p - mean) * (p - mean).transpose();
-  Mat3 axes = Eigen::SelfAdjointEigenSolver<Mat3>(cov).eigenvectors();
+  const PrincipalAxes principal = principalAxes(points);
+  const Vec3& mean = principal.mean;
+  Mat3 axes = principal.eigen.eigenvectors();
   if (axes.determinant() < 0) axes.col(0) = -axes.col(0);
   Vec3 lo = Vec3::Constant(1e9), hi = Vec3::Constant(-1e9);
   for (const Vec3& p : points) {
@@ -931,29 +955,17 @@ bool flattenedFit(const SuperquadricShape& shape, const Points3& points_table, d
   return false;
 }
 
-namespace {
-
-/// The points' principal directions and standard deviations along them (ascending).
-Eigen::SelfAdjointEigenSolver<Mat3> principalSpread(const Points3& points) {
-  Vec3 mean = Vec3::Zero();
-  for (const Vec3& p : points) mean += p;
-  mean /= points.size();
-  Mat3 cov = Mat3::Zero();
-  for (const Vec3& p : points) cov += (p - mean) * (p - mean).transpose();
-  return Eigen::SelfAdjointEigenSolver<Mat3>(cov / points.size());
-}
-
-}  // namespace
-
 bool exactlyFlat(const Points3& points_table) {
   if (points_table.size() < 4) return false;
-  return std::sqrt(std::max(0.0, principalSpread(points_table).eigenvalues()[0])) < kExactlyFlatM;
+  return principalSpread(principalAxes(points_table), points_table)[0] < kExactlyFlatM;
 }
 
 bool grownFit(const SuperquadricShape& shape, const Points3& points_table) {
-  if (!exactlyFlat(points_table)) return false;
-  const Eigen::SelfAdjointEigenSolver<Mat3> eigen = principalSpread(points_table);
-  const Vec3 spread = eigen.eigenvalues().cwiseMax(0.0).cwiseSqrt();  // ascending
+  if (points_table.size() < 4) return false;
+  const PrincipalAxes principal = principalAxes(points_table);
+  const Vec3 spread = principalSpread(principal, points_table);
+  if (spread[0] >= kExactlyFlatM) return false;  // not exactlyFlat
+  const Eigen::SelfAdjointEigenSolver<Mat3>& eigen = principal.eigen;
   const Mat3 axes = shape.T_table_object.linear();
   for (int j = 0; j < 3; ++j) {
     if (spread[j] < kExactlyFlatM) continue;  // across the plane: the hidden depth is free
