@@ -43,9 +43,10 @@ def image_array(msg):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("bag")
-    parser.add_argument("--output", default=".")
-    parser.add_argument("--camera", default="camera")
+    parser.add_argument("bag", help="the bag recorded from the perception's topics")
+    parser.add_argument("--output", default=".", help="directory of the two PNGs (default: .)")
+    parser.add_argument("--camera", default="camera",
+                        help="the camera's namespace in the bag (default: camera)")
     args = parser.parse_args()
     topics = {f"/{args.camera}/depth/image_rect": "depth", f"/{args.camera}/depth/camera_info": "info",
               f"/{args.camera}/perception/objects": "objects", f"/{args.camera}/perception/markers": "markers",
@@ -59,15 +60,18 @@ def main():
     # One pass that holds only the last complete frame and the stamps after it: a long bag's
     # images are not all kept.
     frames, last = {}, None  # stamp -> kind -> message; the last stamp with all five kinds
-    with rosbag.Bag(args.bag) as bag:
-        for topic, msg, _ in bag.read_messages(topics=list(topics)):
-            stamp = stamp_of(topics[topic], msg)
-            if stamp is None or (last is not None and stamp < last):
-                continue
-            frames.setdefault(stamp, {})[topics[topic]] = msg
-            if len(frames[stamp]) == 5 and stamp != last:
-                last = stamp
-                frames = {s: f for s, f in frames.items() if s >= last}
+    try:
+        with rosbag.Bag(args.bag) as bag:
+            for topic, msg, _ in bag.read_messages(topics=list(topics)):
+                stamp = stamp_of(topics[topic], msg)
+                if stamp is None or (last is not None and stamp < last):
+                    continue
+                frames.setdefault(stamp, {})[topics[topic]] = msg
+                if len(frames[stamp]) == 5 and stamp != last:
+                    last = stamp
+                    frames = {s: f for s, f in frames.items() if s >= last}
+    except rosbag.ROSBagException as e:  # its message does not name the file
+        sys.exit(f"draw_perception: {args.bag}: {e}")
     if last is None:
         sys.exit(f"draw_perception: {args.bag} holds no frame with depth, camera_info, objects, markers and labels")
     frame = frames[last]

@@ -30,7 +30,7 @@ def main():
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--ready", required=True, help="the perception's latched ready topic")
     parser.add_argument("--timeout", type=float, default=300.0,
-                        help="seconds (wall clock) to wait for it before giving up")
+                        help="seconds (wall clock) to wait for it before giving up (default: 300)")
     args = parser.parse_args(rospy.myargv(argv[:split]))
     if not play_args:
         parser.error("give the rosbag play arguments after --")

@@ -6,8 +6,8 @@
 For every test set: Chamfer distance on the visible (VS) and full (FS) surface against the
 visible share of the pile's surface (the paper's Figure 5), IoU and the share of stable piles
 against the same bins, one line per method. Files of one test set under one protocol (dataset
-seed, scenes, views, posed views per estimate, camera, noise, sensor, image and view seed), such
-as a later run of one more method, are drawn into one figure, named after the first of them; a
+seed, scenes, views, posed views per estimate, overhead camera, noise, sensor, image and its
+intrinsics, view seed, Chamfer samples and seen pixels), such as a later run of one more method, are drawn into one figure, named after the first of them; a
 method name met twice in a figure is told apart by its file's name. Files that are not
 simstack_evaluate results on rendered views (a --real report, a simstack_evaluate_grasps file)
 are skipped with a note. The summaries of simstack_evaluate --summary are enough (the per-view

@@ -45,7 +45,10 @@ def table(res, rows):
         lines.append("  ... %d more" % (len(res.grasps) - rows))
     # One per scene pulled in: the hypotheses, then the server's perturbed copies.
     for h, d in enumerate(res.baseline_displacement_m):
-        lines.append("baseline (scene %d left alone): objects moved %.1f mm at most" % (h, 1e3 * d))
+        line = "baseline (scene %d left alone): objects moved %.1f mm at most" % (h, 1e3 * d)
+        if h < len(res.settle_displacement_m) and res.settle_displacement_m[h] > 0.005:
+            line += "; while settling, up to %.0f mm" % (1e3 * res.settle_displacement_m[h])
+        lines.append(line)
     return "\n".join(lines)
 
 

@@ -287,10 +287,25 @@ TEST(StagedOutput, ACommittedFileReplacesTheTargetAndAnAbandonedOneLeavesNoTrace
   EXPECT_NO_THROW(StagedDirectory(out, "tool_a"));
   fs::create_directories(dir / "empty");
   EXPECT_NO_THROW(StagedDirectory((dir / "empty").string(), "tool_a"));
-  // Nor the working directory, or one holding it: the caller would be left in a deleted one.
-  EXPECT_THROW(StagedDirectory(".", "tool_a"), std::runtime_error);
-  EXPECT_THROW(StagedDirectory(fs::current_path().parent_path().string(), "tool_a"),
-               std::runtime_error);
+  // Nor the working directory, or one holding it, even an earlier result of the same tool:
+  // the caller would be left in a deleted one.
+  const fs::path was = fs::current_path();
+  fs::create_directories(out + "/sub");  // a directory, no file: not a user's file added
+  for (const fs::path& cwd : {fs::path(out), fs::path(out) / "sub"}) {
+    fs::current_path(cwd);
+    for (const std::string& target : {std::string("."), out}) {
+      try {
+        StagedDirectory staged(target, "tool_a");
+        ADD_FAILURE() << "replaces " << target << " from " << cwd;
+      } catch (const std::runtime_error& e) {
+        EXPECT_NE(std::string(e.what()).find("is the working directory or holds it"),
+                  std::string::npos)
+            << e.what();
+      }
+    }
+    fs::current_path(was);
+  }
+  EXPECT_NO_THROW(StagedDirectory(out, "tool_a"));
   fs::remove_all(dir);
 }
 

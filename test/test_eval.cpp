@@ -600,6 +600,8 @@ TEST(SceneFiles, SuperquadricsMeshesAndGridsRoundTrip) {
       {"objects:\n  - {id: 0, " + object + "}\n  - {id: 0, " + object + "}\n",
        "id 0 is given twice"},
       {"just text\n", "no 'objects' list"},
+      {"objects:\n  - {" + object + ", truncated: maybe}\n",
+       "object 0's truncated is not true or false"},
       {"objects: [1, 2]\n", "object 0 is not a map"}};
   for (const auto& [text, message] : spoiled) {
     std::ofstream(dir / "spoiled.yaml") << text;
@@ -611,6 +613,15 @@ TEST(SceneFiles, SuperquadricsMeshesAndGridsRoundTrip) {
       EXPECT_NE(std::string(e.what()).find("spoiled.yaml"), std::string::npos) << e.what();
       EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << e.what();
     }
+  }
+  // A camera at or below the table measured no pile.
+  std::ofstream(dir / "below.yaml") << "camera: [0, 0, -1]\nobjects:\n  - {" << object << "}\n";
+  try {
+    readSuperquadricsYaml((dir / "below.yaml").string(), nullptr, &camera);
+    ADD_FAILURE() << "accepted a camera below the table";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("below.yaml: camera is at z = -1"), std::string::npos)
+        << e.what();
   }
   EXPECT_THROW(readDepthPcd((dir / "c.pcd").string()), std::runtime_error);  // not organized
   std::filesystem::remove_all(dir);

@@ -304,6 +304,30 @@ expect "train on a dataset without votes" "no array 'votes'" "$bin/simstack_trai
   --dataset "$dir/novotes.h5" --config "$train_config" --output "$dir/run_nv"
 expect "train on a dataset without a seed" "no attribute 'seed'" "$bin/simstack_train" \
   --dataset "$dir/noseed.h5" --config "$train_config" --output "$dir/run_ns"
+# Objects no pile holds: each named with the file, the scene and the object.
+for spoil in quat0 hugeaxes farpos; do cp "$dir/two.h5" "$dir/$spoil.h5"; done
+/usr/bin/python3 - "$dir" <<'PY'
+import sys
+import h5py
+for name, columns, value in (("quat0", slice(11, 15), 0.0), ("hugeaxes", slice(2, 5), 1e6),
+                             ("farpos", slice(8, 11), 1e6)):
+    with h5py.File("%s/%s.h5" % (sys.argv[1], name), "a") as f:
+        objects = f["objects"][...]
+        objects[0, 0, columns] = value
+        f["objects"][...] = objects
+PY
+expect "evaluate a dataset whose object has a zero quaternion" \
+  "quat0.h5: scene 0, object 0: its orientation quaternion has norm 0" \
+  "$bin/simstack_evaluate" --dataset "$dir/quat0.h5" --scenes 1 --views 1 --no-classical \
+  --no-stability --output "$dir/q.json"
+expect "evaluate a dataset whose object is a kilometre long" \
+  "hugeaxes.h5: scene 0, object 0: a semi-axis is longer than the grid" \
+  "$bin/simstack_evaluate" --dataset "$dir/hugeaxes.h5" --scenes 1 --views 1 --no-classical \
+  --no-stability --output "$dir/q.json"
+expect "evaluate a dataset whose object is far from its grid" \
+  "farpos.h5: scene 0, object 0: its centre lies" "$bin/simstack_evaluate" \
+  --dataset "$dir/farpos.h5" --scenes 1 --views 1 --no-classical --no-stability \
+  --output "$dir/q.json"
 cp "$dir/two.h5" "$dir/scrambled.h5"
 dd if=/dev/urandom of="$dir/scrambled.h5" bs=1 seek=20000 count=20000 conv=notrunc 2> /dev/null
 expect "train on a scrambled dataset" "scrambled.h5" "$bin/simstack_train" --dataset "$dir/scrambled.h5" \
@@ -352,6 +376,14 @@ cp "$pkg/models/simstack_r32_fc.pt" "$dir/houghcard/m.pt"
 sed 's/^\(    refinement:\).*/\1 100/' "$pkg/models/simstack_r32_fc.yaml" > "$dir/houghcard/m.yaml"
 expect "check_model on a card whose Hough setting loading refuses" "hough.refinement must be in" \
   "$bin/simstack_check_model" "$dir/houghcard/m.pt"
+mkdir -p "$dir/samplescard"
+cp "$pkg/models/simstack_r32_fc.pt" "$dir/samplescard/m.pt"
+sed 's/^\(  samples:\).*/\1 0/' "$pkg/models/simstack_r32_fc.yaml" > "$dir/samplescard/m.yaml"
+expect "check_model on a card whose samples loading refuses" "perception.samples must lie in" \
+  "$bin/simstack_check_model" "$dir/samplescard/m.pt"
+expect "evaluate_grasps --perturb-position without --perturbed" "requires --perturbed" \
+  "$bin/simstack_evaluate_grasps" --dataset "$dir/keep.h5" --perturb-position 0.05 \
+  --output "$dir/pp.json"
 mkdir -p "$dir/dircard/m.yaml"
 cp "$pkg/models/simstack_r32_fc.pt" "$dir/dircard/m.pt"
 expect "check_model with a directory as card" "it is a directory" "$bin/simstack_check_model" \

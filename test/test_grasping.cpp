@@ -365,6 +365,80 @@ TEST(SuctionCandidates, ThePullsThroughTheCentreOfMassAreAmongThem) {
   EXPECT_EQ(top_ring, 8) << "two cup radii around the top's middle, all round";
 }
 
+TEST(SuctionCandidates, FewCandidatesAreTheUpperFacesMiddlesWhateverTheAxesOrder) {
+  // The top box of the stack, turned so that each of its axes in turn points up: one or two
+  // candidates are the top's middle, then the most upward side's, not the sides of the axes
+  // listed first.
+  for (int up = 0; up < 3; ++up)
+    for (double sign : {1.0, -1.0}) {
+      std::vector<SuperquadricShape> stack = twoBoxStack();
+      SuperquadricShape& top = stack[1];
+      // A cube, so that the turn changes no contact: only which axis is up.
+      top.scale_m = Vec3::Constant(0.03);
+      top.T_table_object.translation().z() = 0.15;
+      top.T_table_object.linear() =
+          Eigen::Quaterniond::FromTwoVectors(sign * Vec3::Unit(up), Vec3::UnitZ())
+              .toRotationMatrix();
+      CandidateConfig config;
+      config.max_candidates = 1;
+      const CandidateSet one = suctionCandidates(stack, 1, defaultCameraPositions(stack), config);
+      ASSERT_EQ(one.candidates.size(), 1u);
+      EXPECT_GT(one.candidates[0].approach_table.z(), 0.99) << "axis " << up << " sign " << sign;
+      EXPECT_NEAR(one.candidates[0].contact_table.z(), 0.18, 1e-4);
+    }
+}
+
+TEST(SuctionCandidates, APlateThinnerThanTheSealSearchSeals) {
+  // The rim search reaches 4 mm below the cup's plane: a plate thinner than that lies between
+  // its start and its end.
+  for (double half_mm : {0.5, 1.0, 1.5, 2.5}) {
+    const std::vector<SuperquadricShape> plate{
+        box({0.05, 0.05, half_mm * 1e-3}, {0, 0, half_mm * 1e-3})};
+    const CandidateSet set =
+        suctionCandidates(plate, 0, defaultCameraPositions(plate), CandidateConfig());
+    int top = 0;
+    for (const SuctionCandidate& c : set.candidates) top += c.approach_table.z() > 0.99;
+    EXPECT_GT(top, 0) << half_mm << " mm: " << set.sealable << " of " << set.visible << " seal";
+  }
+}
+
+TEST(GraspRanking, ACandidateCarriedOntoATallerEstimateLandsOnItsTop) {
+  // The same footprint 10 and 30 cm tall: the top's middle of the low one, carried along its
+  // approach, lands on the tall one's top, not inside it.
+  const SuperquadricShape low = box({0.2, 0.2, 0.05}, {0, 0, 0.05});
+  const SuperquadricShape tall = box({0.2, 0.2, 0.15}, {0, 0, 0.15});
+  SuctionCandidate c;
+  c.contact_table = Vec3(0.02, 0.01, 0.1);
+  c.approach_table = Vec3::UnitZ();
+  for (const auto& [shape, top] : {std::pair{low, 0.1}, std::pair{tall, 0.3}}) {
+    const std::optional<Vec3> at = carryCandidate(c, shape, 0.05);
+    ASSERT_TRUE(at);
+    EXPECT_NEAR(at->z(), top, 1e-4);
+    EXPECT_NEAR(at->x(), 0.02, 1e-9);
+  }
+  c.contact_table.x() = 0.5;  // beside both
+  EXPECT_FALSE(carryCandidate(c, tall, 0.05));
+}
+
+TEST(SuctionPull, OverlappingEstimatesArePushedApartNotShotApart) {
+  // Two boxes side by side, overlapping by 2 cm (an estimate's): settling separates them by
+  // about the overlap, each moving half of it (a correction that added velocity would throw
+  // each 2.5 cm), and the ranking says how far they moved.
+  const std::vector<SuperquadricShape> overlap{box({0.04, 0.04, 0.03}, {-0.03, 0, 0.03}),
+                                               box({0.04, 0.04, 0.03}, {0.03, 0, 0.03})};
+  PullSimulator sim(overlap, PullConfig());
+  EXPECT_GT(sim.drift().presettle_displacement_m, 0.008);
+  EXPECT_LT(sim.drift().presettle_displacement_m, 0.015);
+  GraspRankingConfig config;
+  config.candidates.max_candidates = 2;
+  const GraspRanking r = rankGrasps({overlap}, 0, {}, config);
+  EXPECT_NE(r.message.find("moved up to"), std::string::npos) << r.message;
+  EXPECT_NE(r.message.find("while settling before the pulls"), std::string::npos) << r.message;
+  // A scene at rest as given: no such note.
+  const GraspRanking apart = rankGrasps({twoBoxStack()}, 1, {}, config);
+  EXPECT_EQ(apart.message.find("while settling"), std::string::npos) << apart.message;
+}
+
 TEST(GraspRanking, TiesGoToThePullNearerTheCentreOfMass) {
   GraspRankingConfig config;
   config.candidates.max_candidates = 16;

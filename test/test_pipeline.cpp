@@ -845,6 +845,21 @@ TEST(ScenePerception, AModelWithoutACodeGivesOneHypothesis) {
   }
   config.workspace.max_tiles = 9;
   EXPECT_NO_THROW(ScenePerception{config});
+  // Samples whose hypotheses over the widest scene grid would take more memory than a machine
+  // has (64 over 192^3 voxels: 9 GB): refused, naming both settings.
+  config.hough.refinement = 4;
+  config.workspace.max_tiles = 36;
+  config.samples = 64;
+  try {
+    ScenePerception{config};
+    ADD_FAILURE() << "64 samples at max_tiles 36 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("samples 64 and workspace.max_tiles 36"),
+              std::string::npos)
+        << e.what();
+  }
+  config.samples = 16;
+  EXPECT_NO_THROW(ScenePerception{config});
 }
 
 TEST(ScenePerception, ShippedModelsProveThemselvesAndADifferentSelfTestIsRefused) {
@@ -1116,8 +1131,10 @@ TEST(ScenePerception, NoFitCollapsesOnSyntheticPiles) {
 }
 
 TEST(RealScenes, NoFitCollapsesOnTheCylindricalScenes) {
-  if (!std::filesystem::exists(learnScene(33)))
-    GTEST_SKIP() << learnScene(33) << " not found (see ../shared/data/README.md)";
+  std::vector<std::string> scenes;
+  for (int n = 33; n <= 44; ++n) scenes.push_back(learnScene(n));
+  if (const std::string missing = test::firstMissing(scenes); !missing.empty())
+    GTEST_SKIP() << missing << " not found (see ../shared/data/README.md)";
   const PerceptionConfig c = shippedConfig();
   const ScenePerception perception(c);
   int objects = 0;
@@ -1129,9 +1146,9 @@ TEST(RealScenes, NoFitCollapsesOnTheCylindricalScenes) {
 
 TEST(YcbObjects, NoFitCollapsesOnYcbObjectsSideBySide) {
   const std::string ycb = std::string(SIMSTACK_SHARED_DATA) + "/ycb";
-  if (!std::filesystem::exists(ycb + "/003_cracker_box/nontextured.stl"))
-    GTEST_SKIP() << ycb
-                 << "/003_cracker_box/nontextured.stl not found (see ../shared/data/README.md)";
+  if (const std::string missing = test::firstMissing(test::ycbMeshFiles(ycb, ycbObjectNames()));
+      !missing.empty())
+    GTEST_SKIP() << missing << " not found (see ../shared/data/README.md)";
   const PerceptionConfig c = shippedConfig();
   const ScenePerception perception(c);
   // Five YCB objects side by side on the table, as their meshes rest (no physics).

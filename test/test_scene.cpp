@@ -6,6 +6,7 @@
 #include "simstack/offline/piles/mesh_catalogue.h"
 #include "simstack/offline/piles/pile_generator.h"
 #include "simstack/physics/physics_world.h"
+#include "test_scenes.h"
 
 using namespace simstack;
 
@@ -203,9 +204,9 @@ TEST(PileGenerator, RespectsObjectRangeAndBadConfig) {
 
 TEST(YcbPiles, LoadCatalogueAndGenerate) {
   const std::string dir = std::string(SIMSTACK_SHARED_DATA) + "/ycb";
-  if (!std::filesystem::exists(dir + "/003_cracker_box/nontextured.stl")) {
-    GTEST_SKIP() << "YCB meshes not found in " << dir << " (see ../shared/data/README.md)";
-  }
+  if (const std::string missing = test::firstMissing(test::ycbMeshFiles(dir, ycbObjectNames()));
+      !missing.empty())
+    GTEST_SKIP() << missing << " not found (see ../shared/data/README.md)";
   const auto catalogue = loadMeshCatalogue(dir);
   ASSERT_EQ(catalogue.size(), 10u);
   // The cracker box is about 6 x 16 x 21 cm.

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <string>
 #include <system_error>
+#include <vector>
 
 #include "simstack/geometry/image.h"
 #include "simstack/geometry/pinhole_camera.h"
@@ -14,6 +15,22 @@
 
 namespace simstack {
 namespace test {
+
+/// The first of these files of ../shared/data (the third-party data) that is missing, or "": a
+/// test that reads several of them skips, naming it, unless all are there.
+inline std::string firstMissing(const std::vector<std::string>& paths) {
+  for (const std::string& p : paths)
+    if (!std::filesystem::exists(p)) return p;
+  return {};
+}
+
+/// The mesh files of the YCB objects `names` under `dir`, as loadMeshCatalogue reads them.
+inline std::vector<std::string> ycbMeshFiles(const std::string& dir,
+                                             const std::vector<std::string>& names) {
+  std::vector<std::string> out;
+  for (const std::string& name : names) out.push_back(dir + "/" + name + "/nontextured.stl");
+  return out;
+}
 
 /// `name` in a directory of this process's own under the temporary directory, so that two test
 /// runs on one machine do not share files (the directory goes when the process ends).

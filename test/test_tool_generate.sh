@@ -9,7 +9,7 @@ trap 'rm -rf "$dir"' EXIT
 # meshes: the file names only those; a name twice or an object the directory lacks is refused.
 ycb=${2:-}
 if [ -n "$ycb" ]; then
-  [ -s "$ycb/003_cracker_box/nontextured.stl" ] ||
+  [ -s "$ycb/003_cracker_box/nontextured.stl" ] && [ -s "$ycb/005_tomato_soup_can/nontextured.stl" ] ||
     { echo "YCB meshes not found in '$ycb': skipped (docs/results.md, Reproducing: ../shared/data)"; exit 77; }
   "$tool" --scenes 2 --seed 6 --resolution 16 --ycb "$ycb" --ycb-objects 003_cracker_box,005_tomato_soup_can \
     --output "$dir/sub.h5" > "$dir/sub.txt"

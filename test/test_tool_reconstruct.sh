@@ -139,6 +139,25 @@ if "$reconstruct" --depth "$dir/loose.pcd" --intrinsics 600,600,319.5,239.5 --ou
   2> "$dir/e_pcd"; then echo "accepted a cloud that does not fall on the pixels"; exit 1; fi
 grep -q "loose.pcd: point 0 .* does not fall on a pixel of the 640x480 camera" "$dir/e_pcd" ||
   { cat "$dir/e_pcd"; exit 1; }
+# A camera whose principal point is off the image's centre: the image its intrinsics centre
+# (646 x 475) misses its last rows; given its size, the cloud is placed on it.
+sed -n '1,10p' "$dir/loose.pcd" > "$dir/shifted.pcd"
+/usr/bin/python3 - "$dir/loose.pcd" >> "$dir/shifted.pcd" <<'PY'
+import sys
+lines = open(sys.argv[1]).read().split("\n")[10:]
+for line in filter(None, lines):
+    x, y, z = map(float, line.split())
+    u, v = x * 525 / z + 319.5, y * 525 / z + 239.5
+    print("%.9g %.9g %.9g" % ((u - 322.3) * z / 525, (v - 236.8) * z / 525, z))
+PY
+"$reconstruct" --depth "$dir/shifted.pcd" --intrinsics 525,525,322.3,236.8,640,480 \
+  --output "$dir/out_shifted" > "$dir/log_shifted.txt" || { cat "$dir/log_shifted.txt"; exit 1; }
+if "$reconstruct" --depth "$dir/shifted.pcd" --intrinsics 525,525,322.3,236.8 --output "$dir/x" \
+  2> "$dir/e_shifted"; then echo "placed a cloud on pixels the camera does not have"; exit 1; fi
+grep -q "or an image of another size?" "$dir/e_shifted" || { cat "$dir/e_shifted"; exit 1; }
+if "$reconstruct" --depth "${view}_depth.png" --intrinsics 525,525,319.5,239.5,320,240 \
+  --output "$dir/x" 2> "$dir/e_size"; then echo "accepted intrinsics of another size"; exit 1; fi
+grep -q "gives a 320x240 image, but it is 640x480" "$dir/e_size" || { cat "$dir/e_size"; exit 1; }
 # Without a pose the table comes from RANSAC.
 "$reconstruct" --depth "${view}_depth.png" --intrinsics 525,525,319.5,239.5 --output "$dir/out2" \
   > "$dir/log2.txt"

@@ -12,7 +12,7 @@ trap 'rm -rf "$dir"' EXIT
 # YCB piles are read given their meshes, and without them the message names the option.
 ycb=${3:-}
 if [ -n "$ycb" ]; then
-  [ -s "$ycb/003_cracker_box/nontextured.stl" ] ||
+  [ -s "$ycb/003_cracker_box/nontextured.stl" ] && [ -s "$ycb/005_tomato_soup_can/nontextured.stl" ] ||
     { echo "YCB meshes not found in '$ycb': skipped (docs/results.md, Reproducing: ../shared/data)"; exit 77; }
   "$generate" --scenes 2 --seed 11 --ycb "$ycb" --ycb-objects 003_cracker_box,005_tomato_soup_can \
     --output "$dir/ycb.h5" > /dev/null

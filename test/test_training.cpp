@@ -198,8 +198,10 @@ TEST(CvaeTrainer, ValidatesAModelFileAsARunDoes) {
 
 TEST(CvaeTrainerYcb, TrainsAndValidatesOnYcbPilesGivenTheirMeshes) {
   const std::string dir = std::string(SIMSTACK_SHARED_DATA) + "/ycb";
-  if (!fs::exists(dir + "/003_cracker_box/nontextured.stl"))
-    GTEST_SKIP() << "YCB meshes not found in " << dir << " (see ../shared/data/README.md)";
+  if (const std::string missing = test::firstMissing(
+          test::ycbMeshFiles(dir, {"003_cracker_box", "005_tomato_soup_can", "061_foam_brick"}));
+      !missing.empty())
+    GTEST_SKIP() << missing << " not found (see ../shared/data/README.md)";
   const std::string data = tinyDataset(3);
   const std::string ycb = tempPath("simstack_test_validate_ycb.h5");
   const std::string a = tempPath("simstack_train_validate_ycb");

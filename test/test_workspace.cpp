@@ -437,5 +437,51 @@ TEST(Tiles, DecompositionDoesNotDependOnTheGridAroundThePile) {
   }
 }
 
+TEST(Tiles, AnObjectTheTilesCutIsTruncated) {
+  ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
+  // A box 1.1 m long, wholly in view: with one tile allowed the pile is cut at the tile's side,
+  // and the object's far end is a guess; with the tiles it needs it is whole.
+  Scene scene;
+  scene.objects.push_back(box(Vec3(0.0, 0.0, 0.04), Vec3(0.55, 0.05, 0.04)));
+  const DepthView view =
+      render(scene, test::wideCamera(), lookAt(Vec3(0.0, -0.7, 1.0), Vec3(0.0, 0.0, 0.0)));
+  PerceptionConfig config;
+  config.model_path = kModel;
+  for (const int max_tiles : {9, 1}) {
+    config.workspace.max_tiles = max_tiles;
+    const SceneEstimate est = ScenePerception(config).perceive(view);
+    EXPECT_EQ(est.tiles_cropped, max_tiles == 1);
+    ASSERT_FALSE(est.instances().empty()) << max_tiles << " tiles";
+    bool truncated = false;
+    for (const InstanceEstimate& e : est.instances()) truncated = truncated || e.truncated;
+    EXPECT_EQ(truncated, max_tiles == 1) << "max_tiles " << max_tiles;
+  }
+}
+
+TEST(Workspace, DepthInStepWithTheSamplingStridePlacesThePileAsTheWholeImage) {
+  ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
+  // A depth image on every other row and column of its frame (registered into a frame twice
+  // its size): the pile is found, on either lattice, where the whole image places it.
+  Scene scene;
+  scene.objects.push_back(box(Vec3(0.05, 0.02, 0.05), Vec3(0.07, 0.05, 0.05)));
+  const DepthView full = render(scene, test::centredCamera(640, 480, 525.0),
+                                lookAt(Vec3(0.3, -0.4, 0.7), Vec3(0.0, 0.0, 0.0)));
+  PerceptionConfig config;
+  config.model_path = kModel;
+  const ScenePerception perception(config);
+  const SceneEstimate whole = perception.perceive(full);
+  ASSERT_EQ(whole.instances().size(), 1u);
+  for (const int phase : {0, 1}) {
+    DepthView sparse = full;
+    for (int v = 0; v < full.depth.height; ++v)
+      for (int u = 0; u < full.depth.width; ++u)
+        if (u % 2 != phase || v % 2 != phase) sparse.depth.at(u, v) = 0.0f;
+    EXPECT_FALSE(pilePoints(sparse, *full.T_table_camera, WorkspaceConfig(), 0.01, 1.0).empty());
+    const SceneEstimate est = perception.perceive(sparse);
+    EXPECT_LT((est.grid.origin_table - whole.grid.origin_table).norm(), 0.03) << "phase " << phase;
+    EXPECT_EQ(est.instances().size(), 1u) << "phase " << phase;
+  }
+}
+
 }  // namespace
 }  // namespace simstack

@@ -318,8 +318,9 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   for (const Object& o : scene->objects) ids.push_back(o.id);
   // Before any work: a target chosen by id, or a tf wait, would answer another fault.
   std::string why = checkIds(ids);
-  if (scene->header.frame_id.empty())
-    why = "it has no header.frame_id: its poses are in no known frame";
+  if (tf2Frame(scene->header.frame_id).empty())
+    why =
+        "its header.frame_id is '" + scene->header.frame_id + "': its poses are in no known frame";
   if (!why.empty()) {
     res.message = (req.scene.objects.empty() ? "the latest scene on " + topic + ": "
                                              : std::string("the request's scene: ")) +
@@ -452,6 +453,7 @@ void GraspServer::runGoal(GoalHandle goal, const std::atomic<bool>& cancelled) {
   result.candidates_sealable = res.candidates_sealable;
   result.hypotheses_used = res.hypotheses_used;
   result.baseline_displacement_m = res.baseline_displacement_m;
+  result.settle_displacement_m = res.settle_displacement_m;
   result.pulls = res.pulls;
   result.time_s = res.time_s;
   if (was_cancelled)
@@ -494,8 +496,10 @@ void GraspServer::serve(const RankGrasps::Request& req, RankGrasps::Response& re
                    p.measured_target, p.measured_from);
     for (const RankedGrasp& g : ranking.grasps)
       res.grasps.push_back(graspMsg(g, p.pose_header, p.T_pose_table, p.grasps.pregrasp_m));
-    for (const SceneDrift& d : ranking.baseline)
+    for (const SceneDrift& d : ranking.baseline) {
       res.baseline_displacement_m.push_back(static_cast<float>(d.max_displacement_m));
+      res.settle_displacement_m.push_back(static_cast<float>(d.presettle_displacement_m));
+    }
     res.candidates_seen = static_cast<uint32_t>(ranking.candidates.visible);
     res.candidates_sealable = static_cast<uint32_t>(ranking.candidates.sealable);
     res.hypotheses_used = static_cast<uint32_t>(ranking.hypotheses.size());

@@ -16,6 +16,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <iostream>
 #include <optional>
 #include <regex>
@@ -25,6 +26,7 @@
 #include "depth_files.h"
 #include "simstack/io/staged_output.h"
 #include "simstack/offline/piles/pile_generator.h"
+#include "simstack/pipeline/scene_perception.h"
 #include "simstack/pipeline/table_plane.h"
 #include "simstack/render/depth_renderer.h"
 #include "simstack_ros/conversions.h"
@@ -90,9 +92,20 @@ int writeDepthFileFrames(rosbag::Bag* bag, const BagNames& names, const std::str
                          std::optional<double> depth_scale, const std::string& intrinsics,
                          const std::string& pose_path, int frames, double interval_s) {
   const DepthView view = readDepthFileView(depth_path, depth_scale, intrinsics, pose_path, "");
+  // What the node would refuse, refused here: a bag of frames it cannot use is no example.
+  try {
+    checkPerceivableView(view, PerceptionConfig());
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(depth_path + ": " + e.what());
+  }
   Transform T_table_camera = view.T_table_camera.value_or(Transform::Identity());
   if (!view.T_table_camera) {
-    const TablePlane plane = estimateTablePlane(view.depth, view.camera);
+    TablePlane plane;
+    try {
+      plane = estimateTablePlane(view.depth, view.camera);
+    } catch (const std::exception& e) {
+      throw std::runtime_error(depth_path + ": " + e.what() + " (--table-pose gives the table)");
+    }
     T_table_camera = plane.T_table_camera;
     std::cout << "table plane estimated from " << depth_path << " (" << plane.inliers << " of "
               << plane.points << " sampled points on it); the camera "
@@ -102,6 +115,25 @@ int writeDepthFileFrames(rosbag::Bag* bag, const BagNames& names, const std::str
     writeFrame(bag, names, f, ros::Time(1.0 + f * interval_s), view.camera, T_table_camera,
                view.depth);
   return frames;
+}
+
+/// A BZ2 bag at `path` (staged for `output`) of the frames `frames` writes; returns their count.
+/// rosbag::Bag's destructor closes the bag and throws when that fails too (a full disk), which
+/// during an exception's unwinding ends the process: a bag whose writing failed is abandoned,
+/// never destroyed, and the caller's staged file goes with its file.
+int writeBag(const std::string& path, const std::string& output,
+             const std::function<int(rosbag::Bag*)>& frames) {
+  auto* bag = new rosbag::Bag(path, rosbag::bagmode::Write);
+  int written = 0;
+  try {
+    bag->setCompression(rosbag::compression::BZ2);
+    written = frames(bag);
+    bag->close();
+  } catch (const rosbag::BagException& e) {
+    throw std::runtime_error("cannot write " + output + ": " + e.what());
+  }
+  delete bag;
+  return written;
 }
 
 }  // namespace
@@ -158,7 +190,8 @@ int main(int argc, char** argv) {
                      "32-bit float TIFF in metres, or PCD (as simstack_reconstruct)")
           ->check(CLI::ExistingFile);
   app.add_option("--intrinsics", intrinsics,
-                 "with --depth: fx,fy,cx,cy in pixels (or --table-pose)")
+                 "with --depth: fx,fy,cx,cy in pixels, optionally followed by width,height (or "
+                 "--table-pose)")
       ->needs(depth);
   const CLI::Option* scale_option =
       app.add_option("--depth-scale", depth_scale,
@@ -215,17 +248,15 @@ int main(int argc, char** argv) {
   try {
     requireNotAnInput("--output", output, {depth_path, pose_path});
     StagedFile staged(output);  // an earlier bag stays whole until this one is
-    rosbag::Bag bag(staged.path(), rosbag::bagmode::Write);
-    bag.setCompression(rosbag::compression::BZ2);
     size_t objects = 0;
-    const int written =
-        depth_path.empty()
-            ? writeRingFrames(&bag, names, ring, interval_s, &objects)
-            : writeDepthFileFrames(
-                  &bag, names, depth_path,
-                  scale_option->count() ? std::optional<double>(depth_scale) : std::nullopt,
-                  intrinsics, pose_path, frames, interval_s);
-    bag.close();
+    const int written = writeBag(staged.path(), output, [&](rosbag::Bag* bag) {
+      return depth_path.empty()
+                 ? writeRingFrames(bag, names, ring, interval_s, &objects)
+                 : writeDepthFileFrames(
+                       bag, names, depth_path,
+                       scale_option->count() ? std::optional<double>(depth_scale) : std::nullopt,
+                       intrinsics, pose_path, frames, interval_s);
+    });
     staged.commit();
     if (depth_path.empty())
       std::cout << "wrote " << written << " frames (" << ring.views << " viewpoints, " << objects

@@ -92,7 +92,7 @@ std::vector<PerceptionConfig> PerceptionOptions::configs() const {
 
 namespace {
 
-/// fx, fy, cx, cy of --intrinsics.
+/// fx, fy, cx, cy of --intrinsics, and the image's width and height when it gives them.
 std::vector<double> intrinsicValues(const std::string& text) {
   if (!text.empty() && text.back() == ',')  // getline would drop the empty last item
     throw std::invalid_argument("--intrinsics: '" + text + "' ends in a comma");
@@ -108,7 +108,15 @@ std::vector<double> intrinsicValues(const std::string& text) {
       throw std::invalid_argument("--intrinsics: '" + item + "' is not a number");
     }
   }
-  if (v.size() != 4) throw std::invalid_argument("--intrinsics needs fx,fy,cx,cy (4 numbers)");
+  if (v.size() != 4 && v.size() != 6)
+    throw std::invalid_argument(
+        "--intrinsics needs fx,fy,cx,cy or fx,fy,cx,cy,width,height (4 or 6 numbers)");
+  for (size_t i = 4; i < v.size(); ++i)
+    if (!(v[i] >= 1 && v[i] <= kMaxDepthImageSide && v[i] == std::floor(v[i])))
+      throw std::invalid_argument("--intrinsics: the image's " +
+                                  std::string(i == 4 ? "width " : "height ") +
+                                  std::to_string(v[i]) + " is not a whole number in [1, " +
+                                  std::to_string(kMaxDepthImageSide) + "]");
   return v;
 }
 
@@ -116,6 +124,10 @@ std::vector<double> intrinsicValues(const std::string& text) {
 
 PinholeCamera parseIntrinsics(const std::string& text, int width, int height) {
   const std::vector<double> v = intrinsicValues(text);
+  if (v.size() == 6 && (v[4] != width || v[5] != height))
+    throw std::invalid_argument("--intrinsics gives a " + std::to_string(std::lround(v[4])) + "x" +
+                                std::to_string(std::lround(v[5])) + " image, but it is " +
+                                std::to_string(width) + "x" + std::to_string(height));
   PinholeCamera c;
   c.width = width;
   c.height = height;
@@ -129,6 +141,7 @@ PinholeCamera parseIntrinsics(const std::string& text, int width, int height) {
 
 PinholeCamera parseCentredIntrinsics(const std::string& text) {
   const std::vector<double> v = intrinsicValues(text);
+  if (v.size() == 6) return parseIntrinsics(text, static_cast<int>(v[4]), static_cast<int>(v[5]));
   const auto side = [&](double centre, const char* what) {
     if (!(centre >= 0 && 2 * centre + 1 <= kMaxDepthImageSide))
       throw std::invalid_argument(std::string("--intrinsics: ") + what + " " +

@@ -24,12 +24,13 @@ std::string packageDir();
 /// where `make install` put it.
 std::string packageFile(const std::string& relative);
 
-/// --intrinsics "fx,fy,cx,cy" (pixels) for an image of width x height; std::invalid_argument
-/// naming the option for anything else, or for intrinsics PinholeCamera::validate refuses.
+/// --intrinsics "fx,fy,cx,cy" (pixels) for an image of width x height, or
+/// "fx,fy,cx,cy,width,height" naming that size; std::invalid_argument naming the option for
+/// anything else, another size, or intrinsics PinholeCamera::validate refuses.
 PinholeCamera parseIntrinsics(const std::string& text, int width, int height);
-/// As parseIntrinsics, for the image whose centre is the principal point (width 2 cx + 1,
-/// height 2 cy + 1): the camera of a depth file that does not give its size (an unorganized
-/// cloud).
+/// As parseIntrinsics, for the size the text gives, else for the image whose centre is the
+/// principal point (width 2 cx + 1, height 2 cy + 1): the camera of a depth file that does not
+/// give its size (an unorganized cloud).
 PinholeCamera parseCentredIntrinsics(const std::string& text);
 
 class PerceptionOptions {

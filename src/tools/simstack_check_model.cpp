@@ -51,6 +51,9 @@ int main(int argc, char** argv) {
       if (!applyModelCard(&card).empty()) {
         try {
           card.hough.validate();
+          if (card.samples < 1 || card.samples > kMaxSamples)
+            throw std::invalid_argument("samples must lie in [1, " + std::to_string(kMaxSamples) +
+                                        "], not " + std::to_string(card.samples));
         } catch (const std::invalid_argument& e) {
           throw std::runtime_error(modelCardPath(model) + ": perception." + e.what());
         }

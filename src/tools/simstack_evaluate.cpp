@@ -20,13 +20,12 @@ using namespace simstack;
 
 namespace {
 
-/// Writes `j` into its staged file and puts that in place.
+/// Writes `j` into its staged file (ResultFiles::commit puts it in place).
 void writeJson(StagedFile& file, const std::string& path, const nlohmann::json& j) {
   std::ofstream f(file.path());
   f << j.dump(1) << "\n";
   f.close();  // a failed flush shows only here
   if (!f) throw std::runtime_error("cannot write " + path);
-  file.commit();
 }
 
 /// The result files, made (with their directories) before the work, so that a path that
@@ -40,6 +39,11 @@ struct ResultFiles {
     requireNotAnInput("--summary", summary, {output}, "the --output file");
     results.emplace(output);
     if (!summary.empty()) this->summary.emplace(summary);
+  }
+  /// Both files in place once both are written: a run that fails keeps the earlier ones.
+  void commit() {
+    results->commit();
+    if (summary) summary->commit();
   }
   std::optional<StagedFile> results;
   std::optional<StagedFile> summary;
@@ -67,6 +71,7 @@ void runDataset(const DatasetReader& reader, const std::string& dataset,
     else if (files.summary)
       writeJson(*files.summary, summary, j);
   }
+  files.commit();
   std::cout << "\n"
             << resultsTable(results) << "\n"
             << results.scenes << " scenes x " << o.views << " views"
@@ -110,6 +115,7 @@ void runRealScenes(const std::vector<PerceptionConfig>& configs, bool classical,
     for (auto& [name, m] : j["methods"].items()) m.erase("scenes");
     writeJson(*files.summary, summary, j);
   }
+  files.commit();
   std::cout << "\n"
             << realScenesTable(results) << "\n"
             << scenes << " scenes; results: " << output << "\n";
@@ -132,6 +138,7 @@ void addViewOptions(CLI::App& app, EvaluationOptions* o, std::string* intrinsics
       ->capture_default_str()
       ->check(FinitePositive);
   app.add_option("--scenes", o->scenes, "evaluate only the first N scenes (0 = all)")
+      ->capture_default_str()
       ->check(FiniteNonNegative);
   app.add_option("--seed", o->seed, "viewpoint and Chamfer-sample seed")
       ->capture_default_str()

@@ -37,11 +37,12 @@ std::unique_ptr<NetworkMethod> networkMethod(PerceptionConfig c, int hypotheses)
 
 /// How seals are judged, and the perturbed copies.
 void addSealOptions(CLI::App& app, GraspEvaluationOptions* o, bool* superquadric_seal) {
-  app.add_option("--perturbed", o->ranking.perturbation.copies,
-                 "perturbed copies of the estimate each candidate is also pulled in (the "
-                 "oracle's ranking on the true pile takes none)")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 64));
+  CLI::Option* copies =
+      app.add_option("--perturbed", o->ranking.perturbation.copies,
+                     "perturbed copies of the estimate each candidate is also pulled in (the "
+                     "oracle's ranking on the true pile takes none)")
+          ->capture_default_str()
+          ->check(CLI::Range(0, 64));
   app.add_flag("--best-in-truth", o->best_in_truth,
                "also pick each estimate's candidate whose pull does best in the true pile (what "
                "a perfect ranking of those candidates would do)");
@@ -49,15 +50,18 @@ void addSealOptions(CLI::App& app, GraspEvaluationOptions* o, bool* superquadric
   app.add_option("--perturb-position", p.position_m,
                  "standard deviation of a copy's shift across the table (m)")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 0.1));
+      ->check(CLI::Range(0.0, 0.1))
+      ->needs(copies);
   app.add_option("--perturb-rotation", p.rotation_deg,
                  "standard deviation of a copy's turn about a random axis (degrees)")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 45.0));
+      ->check(CLI::Range(0.0, 45.0))
+      ->needs(copies);
   app.add_option("--perturb-scale", p.scale_share,
                  "standard deviation of a copy's semi-axes, as a share of each")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 0.5));
+      ->check(CLI::Range(0.0, 0.5))
+      ->needs(copies);
   app.add_flag("--true-seal", o->true_seal,
                "a grasp executed in the true pile must also seal on the true surface where it "
                "lands (else it holds nothing), not only withstand the pull");

@@ -68,6 +68,7 @@ struct ViewCamera {
 /// --views and what they are: where, pictures, noise, sensor and camera.
 void addViewOptions(CLI::App& app, GenerationOptions* o, ViewCamera* camera) {
   app.add_option("--views", o->views, "rendered views per scene written beside the dataset")
+      ->capture_default_str()
       ->check(FiniteNonNegative);
   // The options of the views do nothing without them: refused in main, not ignored.
   app.add_option("--views-dir", o->views_dir, "where views go (default: <output stem>_views/)")

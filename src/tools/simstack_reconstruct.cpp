@@ -33,17 +33,17 @@ int main(int argc, char** argv) {
       "Reconstruct a pile from one depth image (or several posed ones): superquadrics (YAML), "
       "instance meshes (PLY), a labelled instance cloud (PCD), the predicted grids (HDF5) and PNG "
       "pictures."};
-  app.add_option(
-         "--depth", depth_paths,
-         "16-bit PNG (units of --depth-scale), 32-bit float TIFF in metres, or a PCD: "
-         "organized, or unorganized and placed on the pixels of --intrinsics (the image "
-         "they centre) or of the view file; repeat it for more views of the scene, each with its "
-         "--table-pose (the outputs are drawn over the first)")
+  app.add_option("--depth", depth_paths,
+                 "16-bit PNG (units of --depth-scale), 32-bit float TIFF in metres, or a PCD: "
+                 "organized, or unorganized and placed on the pixels of --intrinsics (the image of "
+                 "the size they give, else the one they centre) or of the view file; repeat it for "
+                 "more views of the scene, each with its "
+                 "--table-pose (the outputs are drawn over the first)")
       ->required()
       ->check(CLI::ExistingFile);
   app.add_option("--intrinsics", intrinsics,
-                 "fx,fy,cx,cy in pixels; may be left out when every --depth has its --table-pose "
-                 "view file, which holds them");
+                 "fx,fy,cx,cy in pixels, optionally followed by the image's width,height; may be "
+                 "left out when every --depth has its --table-pose view file, which holds them");
   const CLI::Option* scale_option =
       app.add_option("--depth-scale", depth_scale,
                      "metres per unit of a 16-bit PNG (default: the --table-pose view file's "

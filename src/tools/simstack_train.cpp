@@ -148,13 +148,17 @@ std::atomic<int> g_stop_signal{0};
 static_assert(std::atomic<int>::is_always_lock_free);
 
 extern "C" void onStopSignal(int signal) {
-  g_stop_signal.store(signal);
+  // The first stop signal is the one the run ends by (a second one ends it at once).
+  int none = 0;
+  g_stop_signal.compare_exchange_strong(none, signal);
   static const char kSaid[] =
       "\nsimstack_train: stopping after this step, its checkpoint written (Ctrl-C again: at "
       "once)\n";
   const ssize_t written = write(STDERR_FILENO, kSaid, sizeof(kSaid) - 1);
   (void)written;
-  std::signal(signal, SIG_DFL);  // a second Ctrl-C ends the process as usual
+  // A second Ctrl-C or SIGTERM, whichever came first, ends the process as usual.
+  std::signal(SIGINT, SIG_DFL);
+  std::signal(SIGTERM, SIG_DFL);
 }
 
 /// While it lives, Ctrl-C and SIGTERM ask training to stop after its step (the step's

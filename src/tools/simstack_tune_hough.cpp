@@ -157,6 +157,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(FinitePositive);
   app.add_option("--scenes", scenes, "only the first N scenes of each dataset (0 = all)")
+      ->capture_default_str()
       ->check(FiniteNonNegative);
   app.add_option("--seed", seed, "viewpoint seed")->capture_default_str()->transform(SeedNumber);
   app.add_flag("--noise", noise, "Kinect-like sensor noise in the rendered views");

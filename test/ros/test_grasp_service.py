@@ -57,6 +57,7 @@ class GraspService(unittest.TestCase):
         self.assertEqual(res.hypotheses_used, 1)
         self.assertIn("carries no hypotheses", res.message)  # replay.launch: `fc`, one scene
         self.assertEqual(len(res.baseline_displacement_m), 1)
+        self.assertEqual(len(res.settle_displacement_m), 1)
         self.assertEqual(res.pulls, len(res.grasps))
         for better, worse in zip(res.grasps, res.grasps[1:]):
             self.assertLessEqual(better.failed_share, worse.failed_share)
@@ -141,6 +142,8 @@ class GraspService(unittest.TestCase):
         nowhere = copy.deepcopy(self.scene)
         nowhere.header.frame_id = ""
         self.expect_rejected(request(scene=nowhere), "frame_id", bad_scene)
+        nowhere.header.frame_id = "/"  # tf2's name for no frame: poses in no frame either
+        self.expect_rejected(request(scene=nowhere), "frame_id is '/'", bad_scene)
         frameless = request()
         frameless.target_point.point.x = 0.1
         self.expect_rejected(frameless, "target_point has no header.frame_id", bad_request)
@@ -185,6 +188,9 @@ class GraspService(unittest.TestCase):
         self.assertTrue(raised.success, raised.message)
         self.assertIn("lowest surface is at z = 0.", raised.message)
         self.assertIn("fall before any pull", raised.message)
+        # It fell 0.7 m before the pulls: the answer says so, in the message and per scene.
+        self.assertGreater(raised.settle_displacement_m[0], 0.6)
+        self.assertIn("while settling before the pulls", raised.message)
         self.expect_rejected(request(scene=moved(-0.3)), "would stand in the table",
                              RankGraspsResponse.BAD_SCENE)
         self.assertNotIn("lowest surface", self.rank(request(scene=self.scene)).message)
@@ -543,11 +549,22 @@ class GraspService(unittest.TestCase):
                                  "256", "--pull-distance", "0.3", "--pull-speed", "0.01",
                                  "--progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 text=True)
+        self.addCleanup(proc.kill)  # whatever fails below, no script left waiting
         # The first progress line (a tenth of the pulls done), with no error of actionlib's
         # before it (SimpleActionClient's "not tracking" race, which the client steps around).
-        lines = [proc.stderr.readline()]
-        while lines[-1] and "pulls" not in lines[-1] and len(lines) < 20:
-            lines.append(proc.stderr.readline())
+        # Read by a thread of its own: a script that prints nothing fails the test in 120 s.
+        lines = []
+
+        def read_until_progress():
+            while len(lines) < 20:
+                lines.append(proc.stderr.readline())
+                if not lines[-1] or "pulls" in lines[-1]:
+                    return
+
+        reader = threading.Thread(target=read_until_progress, daemon=True)
+        reader.start()
+        reader.join(120)
+        self.assertFalse(reader.is_alive(), "no progress line in 120 s: " + "".join(lines))
         self.assertIn("pulls", lines[-1], "".join(lines))
         self.assertNotIn("not tracking", "".join(lines))
         proc.send_signal(signal.SIGINT)

@@ -93,8 +93,9 @@ struct GraspRanking {
   int pulls = 0;                     ///< pulls simulated
   bool stopped = false;  ///< the progress callback asked to stop: grasps holds what finished
   /// What the caller should know, notes joined by "; " (empty when all is well): hypotheses
-  /// left out, no sealable surface, no grasp that held (in any hypothesis, or in every one), no
-  /// grasp that freed the target.
+  /// left out, no sealable surface, objects that moved more than
+  /// SceneDrift::kMovedWhileSettling_m while settling, no grasp that held (in any hypothesis, or
+  /// in every one), no grasp that freed the target.
   std::string message;
 };
 

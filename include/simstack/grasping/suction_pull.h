@@ -34,11 +34,11 @@ struct PullConfig {
   static constexpr double kMaxPullS = 60.0;
 
   /// The generator's physics (friction 1, rolling friction 0.01) with sleeping and cached
-  /// friction directions on (and Bullet's split impulse, as everywhere): objects at rest stay put
-  /// (true piles left alone move under 2 mm over a pull; docs/experiments.md), and overlaps are
-  /// resolved without being shot apart. Density 200 kg/m^3, that of packaged household goods (a
-  /// cereal box is about 100, a full can 1000): what the cup must lift, unlike the stability test,
-  /// depends on it.
+  /// friction directions on: objects at rest stay put (true piles left alone move under 2 mm over
+  /// a pull; docs/experiments.md); every overlap resolved by split impulse, so that an estimate's
+  /// overlapping objects are pushed apart, not shot apart. Density 200 kg/m^3, that of packaged
+  /// household goods (a cereal box is about 100, a full can 1000): what the cup must lift, unlike
+  /// the stability test, depends on it.
   static PhysicsConfig pullPhysics();
   /// Throws std::invalid_argument naming the first bad value.
   void validate() const;
@@ -58,7 +58,8 @@ struct PullOutcome {
   bool target_freed = false;  ///< held, and touching no other object at the end
   double peak_force_n = 0.0;  ///< largest force the seal carried
   /// Largest share of the seal's limit used while it held: max of force / max_force_n and
-  /// moment / (max_force_n x cup_radius_m). Near 1, a slightly heavier object breaks it.
+  /// moment / (max_force_n x cup_radius_m). Near 1, a slightly heavier object breaks it; above
+  /// 1 only in spikes shorter than break_steps.
   double peak_load = 0.0;
   double target_lift_m = 0.0;  ///< the target's rise (its centre's z) at the end
   /// A failed pull: the seal broke and the target was not freed. Ranked last.
@@ -71,6 +72,9 @@ struct SceneDrift {
   double max_displacement_m = 0.0;
   double presettle_displacement_m = 0.0;  ///< largest centre motion while settling first
   bool settled = true;                    ///< came to rest within presettle_s
+  /// Settling moved an object further than this: the scene the pulls start from is not the one
+  /// given (objects that overlap, float or stand in the table).
+  static constexpr double kMovedWhileSettling_m = 0.005;
 };
 
 /// A scene's bodies, built once and simulated many times (each run in a fresh world, so runs

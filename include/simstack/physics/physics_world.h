@@ -30,9 +30,13 @@ struct PhysicsConfig {
   int rest_steps = 20;  ///< consecutive steps at rest that end settle()
   bool allow_sleeping = true;
   int solver_iterations = 10;  ///< Bullet's default; more reduce creep on slopes
-  /// Bullet's split impulse (its default): overlapping objects (estimated scenes have them)
-  /// are pushed apart by a position correction that adds no velocity, not shot apart.
+  /// Bullet's split impulse (its default): overlaps deeper than `split_impulse_depth_m` are
+  /// pushed apart by a position correction that adds no velocity; shallower ones by a velocity
+  /// (Baumgarte) correction, which gives an object overlapping another by centimetres a speed
+  /// of metres per second.
   bool split_impulse = true;
+  /// Bullet's 4 cm by default; 0 resolves every overlap without adding velocity.
+  double split_impulse_depth_m = 0.04;
   /// Bullet's two friction directions per contact, kept from step to step: objects resting
   /// on slopes hold instead of creeping a few mm/s down them.
   bool friction_direction_caching = false;

@@ -42,8 +42,9 @@ struct InstanceEstimate {
   /// Share of `mesh`'s area that the first view's camera sees (0..1): the rest was completed.
   double visible_fraction = 0.0;
   /// Its visible part in the first view reaches the image border (kTruncationBorderPx) or
-  /// depth that was measured but left out (mask, workspace box, sensor range): the camera did
-  /// not see where it ends, and its shape there is the network's guess.
+  /// depth that was measured but left out (mask, workspace box, sensor range, the tiles of a
+  /// pile cut at workspace.max_tiles or taller than a grid): the camera did not see where it
+  /// ends, or the grid did not hold it, and its shape there is the network's guess.
   bool truncated = false;
 };
 
@@ -138,12 +139,12 @@ class ScenePerception {
   ScenePerception(const ScenePerception&) = delete;
   ScenePerception& operator=(const ScenePerception&) = delete;
 
-  /// Views after the first must carry a pose (they are fused into the first view's table
-  /// frame). Throws std::invalid_argument for unusable input (no view, image and camera sizes
-  /// differ, a later view without pose) and std::runtime_error when no table pose is given and none
-  /// can be estimated. A scene with nothing on the table gives hypotheses without instances.
-  /// Calls from several threads run one at a time (one model state): for frames perceived in
-  /// parallel, one ScenePerception per thread.
+  /// Several views must each carry a pose (they are fused in the table frame the poses share);
+  /// a single view may leave the table to RANSAC. Throws std::invalid_argument for unusable
+  /// input (no view, image and camera sizes differ, one of several views without pose) and
+  /// std::runtime_error when no table pose is given and none can be estimated. A scene with nothing
+  /// on the table gives hypotheses without instances. Calls from several threads run one at a time
+  /// (one model state): for frames perceived in parallel, one ScenePerception per thread.
   SceneEstimate perceive(const std::vector<DepthView>& views) const;
   SceneEstimate perceive(const DepthView& view) const {
     return perceive(std::vector<DepthView>{view});
@@ -180,6 +181,7 @@ struct ModelSelfTest {
   int occupied_voxels = 0;  ///< occupancy probability >= 0.5
 };
 ModelSelfTest runModelSelfTest(const std::string& model_path);
+
 /// Checks the model at `model_path` as every loader does (its card's SHA-256 and format, finite
 /// weights), then runs the self-test and compares it with the card's `integrity.self_test`: the
 /// same object count, and occupied voxels within 5 % (a few voxels for a small count). Returns
@@ -191,5 +193,9 @@ ModelSelfTest checkModel(const std::string& model_path);
 /// be finite. std::runtime_error naming the file when it cannot be read, fails to load or the
 /// card cannot be written; the card is then left as it was.
 ModelIntegrity stampModel(const std::string& model_path);
+
+/// Throws std::invalid_argument as perceive() would for this single view: its size, camera,
+/// pose or mask, or no depth within `config`'s sensor range (for tools that pass a view on).
+void checkPerceivableView(const DepthView& view, const PerceptionConfig& config);
 
 }  // namespace simstack

@@ -46,8 +46,8 @@ struct WorkspaceConfig {
 };
 
 /// Table-frame points of the pile as the grid placement sees them: every `stride`-th pixel's
-/// point between `min_height_m` and `max_height_m` above the table and inside the workspace;
-/// `pixels` (when given) gets each point's pixel index (v * width + u).
+/// (from latticeStart) point between `min_height_m` and `max_height_m` above the table and inside
+/// the workspace; `pixels` (when given) gets each point's pixel index (v * width + u).
 std::vector<Vec3> pilePoints(const DepthView& view, const Transform& T_table_camera,
                              const WorkspaceConfig& workspace, double min_height_m,
                              double max_height_m, int stride = 2,
@@ -87,10 +87,10 @@ struct TilePlan {
 /// each side) is at most the side: that tile is centred on `single_centre` (placed as in
 /// training), moved just enough to hold the spread. `placement` maps the
 /// median of a group of points to where training would centre a grid on that group.
-/// Otherwise the points are split into groups (gaps of two voxels; groups whose joint spread fits
-/// one tile kept together), each perceived as a scene of its own: one tile placed as in
-/// training when it fits, else the fewest tiles overlapping by at least `tile_overlap_m`; the
-/// largest groups first, at most `max_tiles` tiles in all and
+/// Otherwise the points are split into groups (points in cells of two voxels, a whole empty cell
+/// between two groups; groups whose joint spread fits one tile kept together), each perceived as a
+/// scene of its own: one tile placed as in training when it fits, else the fewest tiles overlapping
+/// by at least `tile_overlap_m`; the largest groups first, at most `max_tiles` tiles in all and
 /// within a square of ceil(sqrt(max_tiles)) tiles' side (`cropped` says when groups were left
 /// out). Flying pixels alone (groups of fewer than 10 points) take the single tile. Every tile's
 /// origin is then moved (by less than a voxel) onto the table frame's voxel lattice.

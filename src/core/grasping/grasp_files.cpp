@@ -65,7 +65,7 @@ std::string graspTable(const GraspRanking& r, int rows) {
                   1e3 * r.baseline[h].mean_displacement_m);
     out << line;
     // A scene given above its table falls while it settles, before the baseline and any pull.
-    if (r.baseline[h].presettle_displacement_m > 0.005) {
+    if (r.baseline[h].presettle_displacement_m > SceneDrift::kMovedWhileSettling_m) {
       std::snprintf(line, sizeof line, "; while settling, up to %.0f mm",
                     1e3 * r.baseline[h].presettle_displacement_m);
       out << line;

@@ -105,6 +105,25 @@ void summarise(RankedGrasp* g, int copies, const SuperquadricShape& target) {
   g->score_m = 0.5 * (g->mean_displacement_m + g->worst_displacement_m);
 }
 
+std::string settlingNote(const std::vector<SceneDrift>& baseline,
+                         const std::vector<int>& hypotheses) {
+  // A large motion is what a robot must hear of: the neighbours' reactions are judged where
+  // the objects came to rest, not where the camera saw them. (How much a scene still moves
+  // after settling is its baseline.)
+  double moved = 0.0;
+  int worst = 0;
+  for (size_t h = 0; h < baseline.size(); ++h)
+    if (baseline[h].presettle_displacement_m > moved) {
+      moved = baseline[h].presettle_displacement_m;
+      worst = hypotheses[h];
+    }
+  if (!(moved > SceneDrift::kMovedWhileSettling_m)) return {};
+  return "the scene's objects moved up to " + std::to_string(std::lround(moved * 1e3)) +
+         " mm while settling before the pulls (hypothesis " + std::to_string(worst) +
+         "; objects that overlap, float or stand in the table): the pulls start from where "
+         "they came to rest";
+}
+
 }  // namespace
 
 // Each candidate's seal tests read every point: a request's cloud of millions would hold the
@@ -158,9 +177,13 @@ std::vector<std::vector<SuperquadricShape>> perturbedCopies(
 
 std::optional<Vec3> carryCandidate(const SuctionCandidate& c, const SuperquadricShape& target,
                                    double tool_length_m) {
-  const double reach = tool_length_m + 2.0 * target.scale_m.maxCoeff() + 0.1;
-  const Vec3 start = c.contact_table + (tool_length_m + 0.05) * c.approach_table;
-  return enterSuperquadric(target, start, -c.approach_table, reach);
+  // From outside the target's bounding sphere (a taller estimate of it must not start the
+  // search inside), and at least the tool and 5 cm out.
+  const Vec3 a = c.approach_table.normalized();
+  const double radius = target.scale_m.norm();
+  const double out =
+      std::max(tool_length_m + 0.05, (target.centroid() - c.contact_table).dot(a) + radius + 1e-3);
+  return enterSuperquadric(target, c.contact_table + out * a, -a, out + 2.0 * radius + 0.1);
 }
 
 PullOutcome executeGrasp(const PullSimulator& sim, const std::vector<SuperquadricShape>& scene,
@@ -328,6 +351,8 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
   parallelFor(H, threads,
               [&](int k) { sims[k] = std::make_unique<PullSimulator>(scenes[k], config.pull); });
   for (const auto& s : sims) out.baseline.push_back(s->drift());
+  if (const std::string note = settlingNote(out.baseline, out.hypotheses); !note.empty())
+    addNote(&out.message, note);
   const auto& cands = out.candidates.candidates;
   const int C = static_cast<int>(cands.size());
   std::vector<PullOutcome> outcomes(static_cast<size_t>(C) * H);

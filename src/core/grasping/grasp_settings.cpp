@@ -56,7 +56,8 @@ void GraspSettings::validate() const {
   within(ranking.pull.max_force_n, 0.1, 1000.0, "max_force_n");
   within(ranking.candidates.cup_radius_m, 0.002, 0.1, "cup_radius_m");
   within(ranking.threads, 0, 1024, "threads");
-  positive(ranking.pull.topple_rad, "topple_deg");  // said as the file gives it, in degrees
+  // Said as the file gives it, in degrees: no turn passes 180.
+  within(ranking.pull.topple_rad * 180.0 / M_PI, 0.1, 180.0, "topple_deg");
   positive(ranking.candidates.seal_tolerance_m, "seal_tolerance_m");
   positive(ranking.candidates.tool_length_m, "tool_length_m");
   positive(ranking.match_distance_m, "match_distance_m");

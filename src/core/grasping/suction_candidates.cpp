@@ -100,27 +100,36 @@ std::vector<SuctionCandidate> spread(const std::vector<SuctionCandidate>& all, i
 /// mass or near it, where the load's moment on the seal is least: on each of the six ends of the
 /// object's axes, the point on the axis, four a cup's radius around it and eight two radii
 /// around it (a face wider than the cup then offers a patch of holding grasps, not one point).
+/// The six ends first, then the rings, each in the order of the ends from the most upward
+/// (table frame): a spread of few candidates keeps the upper faces' middles, which the ranking
+/// puts first, not those of the axes listed first.
 std::vector<SurfacePoint> centredSamples(const SuperquadricShape& sq, double cup_radius_m) {
-  std::vector<Vec3> towards;  // the six axis ends first: a spread of few candidates keeps them
+  std::vector<std::pair<int, double>> ends;  // axis, sign
   for (int axis = 0; axis < 3; ++axis)
-    for (double sign : {1.0, -1.0}) towards.push_back(sign * Vec3::Unit(axis));
-  for (int axis = 0; axis < 3; ++axis)
-    for (double sign : {1.0, -1.0}) {
-      const Vec3 end = sq.surfacePointAlong(sign * Vec3::Unit(axis));
-      for (int other = 0; other < 3; ++other)
-        if (other != axis)
-          for (double side : {1.0, -1.0})
-            towards.push_back(end + side * cup_radius_m * Vec3::Unit(other));
+    for (double sign : {1.0, -1.0}) ends.emplace_back(axis, sign);
+  const Mat3 R = sq.T_table_object.linear();
+  const auto upward = [&](const std::pair<int, double>& e) {
+    return e.second * R(2, e.first);  // the end's direction, its z in the table frame
+  };
+  std::stable_sort(ends.begin(), ends.end(),
+                   [&](const auto& a, const auto& b) { return upward(a) > upward(b); });
+  std::vector<Vec3> towards;
+  for (const auto& [axis, sign] : ends) towards.push_back(sign * Vec3::Unit(axis));
+  for (const auto& [axis, sign] : ends) {
+    const Vec3 end = sq.surfacePointAlong(sign * Vec3::Unit(axis));
+    for (int other = 0; other < 3; ++other)
+      if (other != axis)
+        for (double side : {1.0, -1.0})
+          towards.push_back(end + side * cup_radius_m * Vec3::Unit(other));
+  }
+  for (const auto& [axis, sign] : ends) {
+    const Vec3 end = sq.surfacePointAlong(sign * Vec3::Unit(axis));
+    const Vec3 u = Vec3::Unit((axis + 1) % 3), v = Vec3::Unit((axis + 2) % 3);
+    for (int k = 0; k < 8; ++k) {
+      const double phi = M_PI / 4.0 * k;
+      towards.push_back(end + 2.0 * cup_radius_m * (std::cos(phi) * u + std::sin(phi) * v));
     }
-  for (int axis = 0; axis < 3; ++axis)
-    for (double sign : {1.0, -1.0}) {
-      const Vec3 end = sq.surfacePointAlong(sign * Vec3::Unit(axis));
-      const Vec3 u = Vec3::Unit((axis + 1) % 3), v = Vec3::Unit((axis + 2) % 3);
-      for (int k = 0; k < 8; ++k) {
-        const double phi = M_PI / 4.0 * k;
-        towards.push_back(end + 2.0 * cup_radius_m * (std::cos(phi) * u + std::sin(phi) * v));
-      }
-    }
+  }
   std::vector<SurfacePoint> out;
   for (const Vec3& t : towards) {
     SurfacePoint p;
@@ -199,7 +208,9 @@ double rimDeviation(const SuperquadricShape& sq, const Vec3& contact, const Vec3
   const Vec3 a_object = T_object_table.linear() * a;
   // Each rim point is searched for along -a from just above the cup's plane down to the
   // limit. The object is convex and lies below its tangent plane, so the rim point is outside
-  // at the start; inside at the limit means it lands within it, found by bisection.
+  // at the start; inside at the limit, or at a step before it (a plate thinner than the
+  // search), means it lands within it, found by bisection.
+  constexpr int kPlateSteps = 16;
   const double lift = 0.001, reach = lift + std::min(limit_m, 2.0 * cup_radius_m);
   double worst = 0.0;
   for (int k = 0; k < rim_points; ++k) {
@@ -207,9 +218,17 @@ double rimDeviation(const SuperquadricShape& sq, const Vec3& contact, const Vec3
     const Vec3 rim = contact + cup_radius_m * (std::cos(phi) * u + std::sin(phi) * v);
     const Vec3 o = T_object_table * (rim + lift * a);
     const auto h = [&](double t) { return logInsideOutside(sq, o - t * a_object); };
-    if (h(reach) > 0.0) return kInf;
     double lo = 0.0, hi = reach;
-    if (h(0.0) <= 0.0) hi = 0.0;
+    if (h(0.0) <= 0.0) {
+      hi = 0.0;
+    } else if (h(reach) > 0.0) {
+      hi = kInf;
+      for (int step = 1; step < kPlateSteps && hi == kInf; ++step) {
+        const double t = reach * step / kPlateSteps;
+        (h(t) > 0.0 ? lo : hi) = t;
+      }
+      if (hi == kInf) return kInf;  // the rim misses the object
+    }
     for (int i = 0; i < 30 && hi > 0.0; ++i) {
       const double mid = 0.5 * (lo + hi);
       (h(mid) > 0.0 ? lo : hi) = mid;

@@ -93,6 +93,7 @@ PhysicsConfig PullConfig::pullPhysics() {
   p.spinning_friction = 0.01;
   p.allow_sleeping = true;
   p.friction_direction_caching = true;
+  p.split_impulse_depth_m = 0.0;
   p.density_kgpm3 = 200.0;
   return p;
 }

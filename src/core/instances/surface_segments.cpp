@@ -364,8 +364,9 @@ SurfaceSegments segmentVisibleSurface(const DepthImage& depth, const PinholeCame
   out.camera = camera;
   out.T_table_camera = T_table_camera;
   auto cloud = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
-  for (int v = 0; v < depth.height; v += config.pixel_stride)
-    for (int u = 0; u < depth.width; u += config.pixel_stride) {
+  const LatticeStart start = latticeStart(depth, config.pixel_stride);
+  for (int v = start.v; v < depth.height; v += config.pixel_stride)
+    for (int u = start.u; u < depth.width; u += config.pixel_stride) {
       const float d = depth.at(u, v);
       if (!validDepth(d)) continue;
       const Vec3 q = camera.backproject(u, v, d);

@@ -94,6 +94,10 @@ std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path, st
       *camera = Vec3(c[0], c[1], c[2]);
       if (!camera->value().allFinite())
         throw std::runtime_error(path + ": camera has a value that is not finite");
+      // The table is z = 0: a camera at or below it measured no pile.
+      if (!(camera->value().z() > 0.0))
+        throw std::runtime_error(path + ": camera is at z = " + std::to_string(c[2]) +
+                                 ", at or below the table (z = 0), where no camera sees the pile");
     }
   }
   std::vector<SuperquadricShape> out;
@@ -103,6 +107,11 @@ std::vector<SuperquadricShape> readSuperquadricsYaml(const std::string& path, st
     if (!o.IsMap()) throw std::runtime_error(path + ": " + which + " is not a map");
     requireKnownKeys(o, {"id", "scale", "exponents", "position", "orientation", "truncated"}, which,
                      path);
+    if (o["truncated"]) {
+      bool truncated = false;
+      if (!o["truncated"].IsScalar() || !YAML::convert<bool>::decode(o["truncated"], truncated))
+        throw std::runtime_error(path + ": " + which + "'s truncated is not true or false");
+    }
     const auto a = seq(o["scale"], 3, "scale", path), e = seq(o["exponents"], 3, "exponents", path),
                p = seq(o["position"], 3, "position", path),
                q = seq(o["orientation"], 4, "orientation", path);
@@ -199,8 +208,12 @@ void writeLabelledCloudPcd(const std::string& path, const Points3& points,
     if (!f) throw std::runtime_error("cannot write " + path);
     return;
   }
-  if (pcl::io::savePCDFileBinary(path, cloud) != 0)
-    throw std::runtime_error("cannot write " + path);
+  try {
+    if (pcl::io::savePCDFileBinary(path, cloud) != 0)
+      throw std::runtime_error("cannot write " + path);
+  } catch (const pcl::IOException& e) {  // a full disk, say
+    throw std::runtime_error("cannot write " + path + ": " + e.detailedMessage());
+  }
 }
 
 namespace {
@@ -509,7 +522,7 @@ DepthImage depthOf(const std::string& path, const pcl::PointCloud<Point>& cloud,
           where + " does not fall on a pixel of the " + std::to_string(camera->width) + "x" +
           std::to_string(camera->height) + " camera fx " + std::to_string(camera->fx) + ", fy " +
           std::to_string(camera->fy) + ", cx " + std::to_string(camera->cx) + ", cy " +
-          std::to_string(camera->cy) + ": other intrinsics?");
+          std::to_string(camera->cy) + ": other intrinsics, or an image of another size?");
     if ((*point_of_pixel)[pixel] >= 0)
       throw std::runtime_error(where + " falls on the pixel of point " +
                                std::to_string((*point_of_pixel)[pixel]) +

@@ -71,10 +71,17 @@ void CvaeConfig::validate() const {
       "resolution must be a power of two in [16, 512], got " + std::to_string(resolution));
   requireConfig(extent_m > 0.0, "extent_m must be > 0");
   requireConfig(truncation_vox > 0.0, "truncation_vox must be > 0");
-  requireConfig(base_channels >= 1 && max_channels >= base_channels,
-                "need 1 <= base_channels <= max_channels");
-  requireConfig(latent_size >= 1 && condition_size >= 1 && hidden_size >= 1,
-                "latent, condition and hidden sizes must be >= 1");
+  // The upper bounds are far beyond what trains on one machine: past them a size is a typo, and
+  // the network's allocation would fail with a message that names no field.
+  requireConfig(base_channels >= 1 && max_channels >= base_channels && max_channels <= 1024,
+                "need 1 <= base_channels <= max_channels <= 1024, got " +
+                    std::to_string(base_channels) + " and " + std::to_string(max_channels));
+  requireConfig(latent_size >= 1 && latent_size <= 4096 && condition_size >= 1 &&
+                    condition_size <= 4096 && hidden_size >= 1 && hidden_size <= 65536,
+                "latent_size and condition_size must lie in [1, 4096] and hidden_size in [1, "
+                "65536], got " +
+                    std::to_string(latent_size) + ", " + std::to_string(condition_size) + " and " +
+                    std::to_string(hidden_size));
   requireConfig(alpha >= 0 && beta >= 0 && gamma >= 0 && delta >= 0, "loss weights must be >= 0");
   requireConfig(norm == "batch" || norm == "group",
                 "norm must be 'batch' or 'group', got '" + norm + "'");

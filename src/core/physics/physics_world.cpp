@@ -91,6 +91,9 @@ PhysicsWorld::PhysicsWorld(const PhysicsConfig& config) : impl_(std::make_unique
   impl_->world.setGravity(btVector3(0, 0, -config.gravity_mps2));
   impl_->world.getSolverInfo().m_numIterations = config.solver_iterations;
   impl_->world.getSolverInfo().m_splitImpulse = config.split_impulse ? 1 : 0;
+  // Bullet measures penetration as a negative distance.
+  impl_->world.getSolverInfo().m_splitImpulsePenetrationThreshold =
+      static_cast<btScalar>(-config.split_impulse_depth_m);
   if (config.friction_direction_caching)
     impl_->world.getSolverInfo().m_solverMode |=
         SOLVER_USE_2_FRICTION_DIRECTIONS | SOLVER_ENABLE_FRICTION_DIRECTION_CACHING;

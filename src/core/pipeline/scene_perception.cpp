@@ -420,6 +420,29 @@ void markTruncated(SceneHypothesis* h, const DepthView& given, const DepthView& 
   }
 }
 
+/// The view without the pile's pixels that no tile holds, as a cut the truncation test reads:
+/// a pile cut at `max_tiles` (the plan is cropped), or taller than the tiles. Outside every tile
+/// of a plan that is not cropped, and below the tiles' top, lie only the outliers the spread's
+/// percentiles leave out (flying pixels), no cut object.
+DepthView withinTiles(const DepthView& view, const Transform& T_table_camera, const TilePlan& plan,
+                      double min_height_m) {
+  DepthView out = view;
+  if (plan.groups.empty() || plan.groups.front().tiles.empty()) return out;
+  const GridSpec& tile = plan.groups.front().tiles.front();
+  const double top_m = tile.origin_table.z() + tile.extent_m();
+  for (int v = 0; v < view.depth.height; ++v)
+    for (int u = 0; u < view.depth.width; ++u) {
+      float& d = out.depth.at(u, v);
+      if (!validDepth(d)) continue;
+      const Vec3 p = T_table_camera * view.camera.backproject(u, v, d);
+      if (p.z() < min_height_m || (!plan.cropped && p.z() < top_m)) continue;
+      const bool held = std::any_of(plan.groups.begin(), plan.groups.end(),
+                                    [&](const TileGroup& g) { return groupWeight(g, p) > 0.0; });
+      if (!held) d = 0.0f;
+    }
+  return out;
+}
+
 /// Labelled pixels in depth-continuous regions (4-neighbours whose depths differ by at most 2 %):
 /// per pixel its region, -1 for unlabelled ones; `regions` receives their count.
 Image<int> continuousRegions(const DepthImage& depth, const Image<int>& labels, int* regions) {
@@ -525,8 +548,12 @@ int cappedThreads(int threads) {
   return std::min(threads, static_cast<int>(std::max(1u, std::thread::hardware_concurrency())));
 }
 
+/// The most the hypotheses of one frame may take (GB): more is a setting no machine holds.
+constexpr double kMaxHypothesesGB = 4.0;
+
 /// `config` checked against the model it runs with: a tile overlap under half the grid, the
-/// widest tiled grid within the Hough voting's fine cells, the thread count capped; a model
+/// widest tiled grid within the Hough voting's fine cells and its hypotheses within
+/// kMaxHypothesesGB, the thread count capped; a model
 /// without a latent code draws one sample (S hypotheses would be S copies of one) and refuses
 /// decompose_samples above 1. Throws std::invalid_argument naming the field.
 PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
@@ -559,6 +586,16 @@ PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
           "C-VAE, models/simstack_r32.pt)");
     config.samples = 1;
   }
+  // Each hypothesis holds a TSDF, votes and labels over the scene grid, 20 bytes a voxel: those
+  // of the widest grid must fit a machine's memory.
+  const double gigabytes = 20e-9 * std::pow(widest, 3) * config.samples;
+  if (gigabytes > kMaxHypothesesGB)
+    throw std::invalid_argument(
+        "samples " + std::to_string(config.samples) + " and workspace.max_tiles " +
+        std::to_string(config.workspace.max_tiles) +
+        ": the hypotheses over the widest scene grid (" + std::to_string(widest) +
+        "^3 voxels) would take " + std::to_string(gigabytes).substr(0, 4) + " GB, over " +
+        std::to_string(static_cast<int>(kMaxHypothesesGB)) + "; lower one of them");
   return config;
 }
 
@@ -799,6 +836,11 @@ Vec2 bareTableCentre(const DepthView& view, const Transform& T_table_camera,
 
 }  // namespace
 
+void checkPerceivableView(const DepthView& view, const PerceptionConfig& config) {
+  checkView(view, 0);
+  withinSensorRange({view}, config);
+}
+
 SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_given) const {
   std::lock_guard<std::mutex> lock(impl_->mutex);
   const PerceptionConfig& c = impl_->config;
@@ -806,10 +848,11 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
   if (views_given.empty()) throw std::invalid_argument("perceive: no depth view given");
   for (size_t i = 0; i < views_given.size(); ++i) {
     checkView(views_given[i], i);
-    if (i > 0 && !views_given[i].T_table_camera)
-      throw std::invalid_argument(
-          "perceive: view " + std::to_string(i) +
-          " has no pose; only the first view may leave the table to RANSAC");
+    // Several views are fused in the frame their poses share, which RANSAC cannot give.
+    if (views_given.size() > 1 && !views_given[i].T_table_camera)
+      throw std::invalid_argument("perceive: view " + std::to_string(i) + " of " +
+                                  std::to_string(views_given.size()) +
+                                  " has no pose; only a single view may leave the table to RANSAC");
   }
   std::vector<DepthView> views = withinSensorRange(views_given, c);
   const auto start = Clock::now();
@@ -845,6 +888,7 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
         perceiveGroup(*impl_->model, g, views, out.T_table_camera, partial, c, &out.timings));
   out.partial_tsdf_m = std::move(partial.first);
   out.partial_weight = std::move(partial.second);
+  t = Clock::now();  // the groups' grids and instances joined: the instances' stage
   if (groups.size() == 1 && plan.groups.front().grid == plan.scene) {
     out.hypotheses = std::move(groups.front());
   } else {
@@ -859,10 +903,12 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
     for (size_t i = 0; i < h.tsdf_m.data.size(); ++i)
       if (h.tsdf_m.data[i] <= 0.0f)
         out.occupancy_probability.data[i] += 1.0f / out.hypotheses.size();
+  out.timings.instances_ms += msSince(t);
   t = Clock::now();
+  const DepthView covered = withinTiles(views[0], out.T_table_camera, plan, c.min_pile_height_m);
   for (int k = 0; k < c.decompose_samples; ++k) {
     setVisibleFractions(&out.hypotheses[k], views[0].camera, out.T_table_camera);
-    markTruncated(&out.hypotheses[k], views_given[0], views[0], out.T_table_camera,
+    markTruncated(&out.hypotheses[k], views_given[0], covered, out.T_table_camera,
                   c.min_pile_height_m);
   }
   out.timings.mesh_ms += msSince(t);

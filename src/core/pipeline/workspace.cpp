@@ -39,8 +39,9 @@ std::vector<Vec3> pilePoints(const DepthView& view, const Transform& T_table_cam
                              double max_height_m, int stride, std::vector<int>* pixels) {
   std::vector<Vec3> out;
   if (pixels) pixels->clear();
-  for (int v = 0; v < view.depth.height; v += stride)
-    for (int u = 0; u < view.depth.width; u += stride) {
+  const LatticeStart start = latticeStart(view.depth, stride);
+  for (int v = start.v; v < view.depth.height; v += stride)
+    for (int u = start.u; u < view.depth.width; u += stride) {
       const float d = view.depth.at(u, v);
       if (!validDepth(d)) continue;
       const Vec3 p = T_table_camera * view.camera.backproject(u, v, d);

@@ -17,8 +17,9 @@ std::vector<bool> visibleTriangles(const TriangleMesh& mesh, const PinholeCamera
     const auto& t = mesh.triangles[i];
     const Vec3 c = (mesh.vertices[t[0]] + mesh.vertices[t[1]] + mesh.vertices[t[2]]) / 3.0;
     double u, v;
-    if (!camera.project(T_camera_table * c, &u, &v) || u < 0 || v < 0 || u >= camera.width ||
-        v >= camera.height)
+    // Pixel centres are whole numbers: the image spans [-0.5, size - 0.5).
+    if (!camera.project(T_camera_table * c, &u, &v) || u < -0.5 || v < -0.5 ||
+        u >= camera.width - 0.5 || v >= camera.height - 0.5)
       continue;
     int hit = -1;
     const double distance = caster.castRay(eye, c - eye, nullptr, &hit);

@@ -3,7 +3,10 @@
 #include <H5Cpp.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <fstream>
 #include <limits>
 #include <mutex>
 #include <set>
@@ -303,6 +306,9 @@ void refuseHeldOutDatasets(const std::vector<std::string>& paths, const std::str
 DatasetReader::DatasetReader(const std::string& path, const std::string& mesh_dir)
     : impl_(std::make_unique<Impl>()) {
   impl_->path = path;
+  // A file that cannot be opened says why (HDF5's own failure reads as a file that is not one).
+  if (std::ifstream probe(path, std::ios::binary); !probe)
+    throw std::runtime_error("cannot read dataset " + path + ": " + std::strerror(errno));
   try {
     H5::Exception::dontPrint();
     impl_->file = std::make_unique<H5::H5File>(path, H5F_ACC_RDONLY);
@@ -395,6 +401,10 @@ SceneRecord DatasetReader::readScene(int index) const {
     if (row[0] == 0.0) {
       if (!std::all_of(row + 2, row + 8, [](double v) { return v > 0.0; }))  // a1-a3, r s t
         throw std::runtime_error(where + ": a superquadric's semi-axes and exponents must be > 0");
+      // An object of a pile fits its grid.
+      if (!std::all_of(row + 2, row + 5, [&](double v) { return v <= info.extent_m; }))
+        throw std::runtime_error(where + ": a semi-axis is longer than the grid's side " +
+                                 std::to_string(info.extent_m) + " m");
       SuperquadricShape sq;
       sq.scale_m = Vec3(row[2], row[3], row[4]);
       sq.exponents = Vec3(row[5], row[6], row[7]);
@@ -407,10 +417,20 @@ SceneRecord DatasetReader::readScene(int index) const {
       }
       o.shape = impl_->catalogue[c];
     }
+    const Quat q(row[11], row[12], row[13], row[14]);
+    if (std::abs(q.norm() - 1.0) > 1e-3)
+      throw std::runtime_error(where + ": its orientation quaternion has norm " +
+                               std::to_string(q.norm()) + ", not 1");
+    const Vec3 centre(row[8], row[9], row[10]);
+    const Vec3 lo = origin, hi = origin + Vec3::Constant(info.extent_m);
+    const double outside = (lo - centre).cwiseMax(centre - hi).cwiseMax(0.0).norm();
+    if (outside > info.extent_m)
+      throw std::runtime_error(where + ": its centre lies " + std::to_string(outside) +
+                               " m outside the scene's grid (of side " +
+                               std::to_string(info.extent_m) + " m)");
     o.T_table_object = Transform::Identity();
-    o.T_table_object.linear() =
-        Quat(row[11], row[12], row[13], row[14]).normalized().toRotationMatrix();
-    o.T_table_object.translation() = Vec3(row[8], row[9], row[10]);
+    o.T_table_object.linear() = q.normalized().toRotationMatrix();
+    o.T_table_object.translation() = centre;
     rec.scene.objects.push_back(o);
   }
   return rec;

@@ -54,7 +54,9 @@ TrainConfig trainFromNodes(const YAML::Node& n, const YAML::Node& x, const std::
 }  // namespace
 
 void TrainConfig::validate() const {
-  requireConfig(batch_size >= 2, "batch_size must be >= 2 (BatchNorm and MMD need a batch)");
+  requireConfig(batch_size >= 2 && batch_size <= 1024,
+                "batch_size must lie in [2, 1024] (BatchNorm and MMD need a batch), not " +
+                    std::to_string(batch_size));
   requireConfig(learning_rate > 0.0, "learning_rate must be > 0");
   requireConfig(final_learning_rate > 0.0 && final_learning_rate <= learning_rate,
                 "final_learning_rate must be > 0 and <= learning_rate");
@@ -63,10 +65,14 @@ void TrainConfig::validate() const {
   requireConfig(checkpoint_every >= 1 && validate_every >= 1,
                 "checkpoint_every and validate_every must be >= 1");
   requireConfig(validation_scenes >= 1, "validation_scenes must be >= 1");
-  requireConfig(validation_views >= 1, "validation_views must be >= 1");
+  requireConfig(validation_views >= 1 && validation_views <= 64,
+                "validation_views must lie in [1, 64], not " + std::to_string(validation_views));
   requireConfig(validation_samples >= 2 && validation_samples <= 256,
                 "validation_samples must lie in [2, 256]");
-  requireConfig(image_width >= 16 && image_height >= 16, "image size must be at least 16x16");
+  requireConfig(
+      image_width >= 16 && image_height >= 16 && image_width <= 4096 && image_height <= 4096,
+      "image_width and image_height must lie in [16, 4096], not " + std::to_string(image_width) +
+          "x" + std::to_string(image_height));
   requireConfig(overhead_share >= 0.0 && overhead_share <= 1.0,
                 "overhead_share must lie in [0, 1]");
   parseSensorModel(sensor_model);  // throws naming the value and the choices
