@@ -384,6 +384,9 @@ expect "check_model on a card whose samples loading refuses" "perception.samples
 expect "evaluate_grasps --perturb-position without --perturbed" "requires --perturbed" \
   "$bin/simstack_evaluate_grasps" --dataset "$dir/keep.h5" --perturb-position 0.05 \
   --output "$dir/pp.json"
+expect "evaluate_grasps --perturb-scale with --perturbed 0" "need --perturbed N above 0" \
+  "$bin/simstack_evaluate_grasps" --dataset "$dir/keep.h5" --perturbed 0 --perturb-scale 0.2 \
+  --output "$dir/pp.json"
 mkdir -p "$dir/dircard/m.yaml"
 cp "$pkg/models/simstack_r32_fc.pt" "$dir/dircard/m.pt"
 expect "check_model with a directory as card" "it is a directory" "$bin/simstack_check_model" \

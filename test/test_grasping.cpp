@@ -1,6 +1,7 @@
 // The grasping module against scenes whose right answer is known from mechanics.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <optional>
@@ -434,9 +435,17 @@ TEST(SuctionPull, OverlappingEstimatesArePushedApartNotShotApart) {
   const GraspRanking r = rankGrasps({overlap}, 0, {}, config);
   EXPECT_NE(r.message.find("moved up to"), std::string::npos) << r.message;
   EXPECT_NE(r.message.find("while settling before the pulls"), std::string::npos) << r.message;
-  // A scene at rest as given: no such note.
+  // A scene at rest as given: no such note, also when the perturbed copies (shifted, turned and
+  // resized at random: overlapping or floating) move as they settle.
   const GraspRanking apart = rankGrasps({twoBoxStack()}, 1, {}, config);
   EXPECT_EQ(apart.message.find("while settling"), std::string::npos) << apart.message;
+  config.perturbation.copies = 4;
+  const GraspRanking copied = rankGrasps({twoBoxStack()}, 1, {}, config);
+  EXPECT_EQ(copied.message.find("while settling"), std::string::npos) << copied.message;
+  double copies_moved = 0.0;
+  for (size_t k = 1; k < copied.baseline.size(); ++k)
+    copies_moved = std::max(copies_moved, copied.baseline[k].presettle_displacement_m);
+  EXPECT_GT(copies_moved, SceneDrift::kMovedWhileSettling_m);
 }
 
 TEST(GraspRanking, TiesGoToThePullNearerTheCentreOfMass) {

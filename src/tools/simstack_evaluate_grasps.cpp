@@ -211,6 +211,15 @@ int main(int argc, char** argv) {
   addSealOptions(app, &o, &superquadric_seal);
   readIntegersInDecimal(app);
   CLI11_PARSE(app, argc, argv);
+  // The copies' spreads do nothing without copies: refused, not recorded as if used.
+  if (o.ranking.perturbation.copies == 0 && app.count("--perturb-position") +
+                                                    app.count("--perturb-rotation") +
+                                                    app.count("--perturb-scale") >
+                                                0)
+    return app.exit(
+        CLI::RequiresError("--perturb-position, --perturb-rotation and "
+                           "--perturb-scale need --perturbed N above 0",
+                           CLI::ExitCodes::RequiresError));
   keepFreedMemoryForReuse();  // the network runs in this process
   o.noise = !no_noise;
   o.measured_seal = !superquadric_seal;

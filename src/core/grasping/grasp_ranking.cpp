@@ -339,6 +339,7 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
   // The perturbed copies of hypothesis 0, pulled in like further hypotheses.
   std::vector<std::vector<SuperquadricShape>> scenes;
   for (int h : out.hypotheses) scenes.push_back(hypotheses[h]);
+  const size_t given = scenes.size();  // the caller's; the copies follow
   int next = static_cast<int>(hypotheses.size());
   const int copies = config.perturbation.copies;
   for (auto& copy : perturbedCopies(scene0, config.perturbation)) {
@@ -351,7 +352,10 @@ GraspRanking rankGrasps(const std::vector<std::vector<SuperquadricShape>>& hypot
   parallelFor(H, threads,
               [&](int k) { sims[k] = std::make_unique<PullSimulator>(scenes[k], config.pull); });
   for (const auto& s : sims) out.baseline.push_back(s->drift());
-  if (const std::string note = settlingNote(out.baseline, out.hypotheses); !note.empty())
+  // The copies' own shifts make them overlap: only the scenes the caller gave are said.
+  if (const std::string note =
+          settlingNote({out.baseline.begin(), out.baseline.begin() + given}, out.hypotheses);
+      !note.empty())
     addNote(&out.message, note);
   const auto& cands = out.candidates.candidates;
   const int C = static_cast<int>(cands.size());

@@ -421,24 +421,30 @@ void markTruncated(SceneHypothesis* h, const DepthView& given, const DepthView& 
 }
 
 /// The view without the pile's pixels that no tile holds, as a cut the truncation test reads:
-/// a pile cut at `max_tiles` (the plan is cropped), or taller than the tiles. Outside every tile
-/// of a plan that is not cropped, and below the tiles' top, lie only the outliers the spread's
-/// percentiles leave out (flying pixels), no cut object.
+/// those above the tiles (a pile taller than a grid), and, when the plan is cropped (the pile
+/// needed more than `max_tiles`), those beside them. Beside the tiles of a plan that is not
+/// cropped lie only what the spread's percentiles leave out (flying pixels), and points beside
+/// the tiles' footprint above their top are no pile (a wall, a robot), no cut object.
 DepthView withinTiles(const DepthView& view, const Transform& T_table_camera, const TilePlan& plan,
                       double min_height_m) {
   DepthView out = view;
   if (plan.groups.empty() || plan.groups.front().tiles.empty()) return out;
   const GridSpec& tile = plan.groups.front().tiles.front();
   const double top_m = tile.origin_table.z() + tile.extent_m();
+  const double middle_m = tile.origin_table.z() + 0.5 * tile.extent_m();
+  const auto held = [&](const Vec3& p) {
+    return std::any_of(plan.groups.begin(), plan.groups.end(),
+                       [&](const TileGroup& g) { return groupWeight(g, p) > 0.0; });
+  };
   for (int v = 0; v < view.depth.height; ++v)
     for (int u = 0; u < view.depth.width; ++u) {
       float& d = out.depth.at(u, v);
       if (!validDepth(d)) continue;
       const Vec3 p = T_table_camera * view.camera.backproject(u, v, d);
-      if (p.z() < min_height_m || (!plan.cropped && p.z() < top_m)) continue;
-      const bool held = std::any_of(plan.groups.begin(), plan.groups.end(),
-                                    [&](const TileGroup& g) { return groupWeight(g, p) > 0.0; });
-      if (!held) d = 0.0f;
+      if (p.z() < min_height_m) continue;
+      const bool left_out =
+          p.z() < top_m ? plan.cropped && !held(p) : held(Vec3(p.x(), p.y(), middle_m));
+      if (left_out) d = 0.0f;
     }
   return out;
 }
