@@ -62,6 +62,15 @@ void addSealOptions(CLI::App& app, GraspEvaluationOptions* o, bool* superquadric
       ->capture_default_str()
       ->check(CLI::Range(0.0, 0.5))
       ->needs(copies);
+  // The copies' spreads do nothing without copies: refused, not recorded as if used.
+  app.final_callback([&app, o] {
+    const size_t spreads = app.count("--perturb-position") + app.count("--perturb-rotation") +
+                           app.count("--perturb-scale");
+    if (o->ranking.perturbation.copies == 0 && spreads > 0)
+      throw CLI::RequiresError(
+          "--perturb-position, --perturb-rotation and --perturb-scale need --perturbed N above 0",
+          CLI::ExitCodes::RequiresError);
+  });
   app.add_flag("--true-seal", o->true_seal,
                "a grasp executed in the true pile must also seal on the true surface where it "
                "lands (else it holds nothing), not only withstand the pull");
@@ -211,15 +220,6 @@ int main(int argc, char** argv) {
   addSealOptions(app, &o, &superquadric_seal);
   readIntegersInDecimal(app);
   CLI11_PARSE(app, argc, argv);
-  // The copies' spreads do nothing without copies: refused, not recorded as if used.
-  if (o.ranking.perturbation.copies == 0 && app.count("--perturb-position") +
-                                                    app.count("--perturb-rotation") +
-                                                    app.count("--perturb-scale") >
-                                                0)
-    return app.exit(
-        CLI::RequiresError("--perturb-position, --perturb-rotation and "
-                           "--perturb-scale need --perturbed N above 0",
-                           CLI::ExitCodes::RequiresError));
   keepFreedMemoryForReuse();  // the network runs in this process
   o.noise = !no_noise;
   o.measured_seal = !superquadric_seal;
