@@ -420,14 +420,15 @@ void markTruncated(SceneHypothesis* h, const DepthView& given, const DepthView& 
   }
 }
 
-/// The view without the pile's pixels that no tile holds, as a cut the truncation test reads:
+/// The pile's pixels that no tile holds (indices v * width + u), a cut the truncation test reads:
 /// those above the tiles (a pile taller than a grid), and, when the plan is cropped (the pile
 /// needed more than `max_tiles`), those beside them. Beside the tiles of a plan that is not
 /// cropped lie only what the spread's percentiles leave out (flying pixels), and points beside
-/// the tiles' footprint above their top are no pile (a wall, a robot), no cut object.
-DepthView withinTiles(const DepthView& view, const Transform& T_table_camera, const TilePlan& plan,
-                      double min_height_m) {
-  DepthView out = view;
+/// the tiles' footprint above their top are no pile (a wall, a robot), no cut object. Empty for
+/// most frames.
+std::vector<int> outsideTiles(const DepthView& view, const Transform& T_table_camera,
+                              const TilePlan& plan, double min_height_m) {
+  std::vector<int> out;
   if (plan.groups.empty() || plan.groups.front().tiles.empty()) return out;
   const GridSpec& tile = plan.groups.front().tiles.front();
   const double top_m = tile.origin_table.z() + tile.extent_m();
@@ -438,13 +439,12 @@ DepthView withinTiles(const DepthView& view, const Transform& T_table_camera, co
   };
   for (int v = 0; v < view.depth.height; ++v)
     for (int u = 0; u < view.depth.width; ++u) {
-      float& d = out.depth.at(u, v);
+      const float d = view.depth.at(u, v);
       if (!validDepth(d)) continue;
       const Vec3 p = T_table_camera * view.camera.backproject(u, v, d);
       if (p.z() < min_height_m) continue;
-      const bool left_out =
-          p.z() < top_m ? plan.cropped && !held(p) : held(Vec3(p.x(), p.y(), middle_m));
-      if (left_out) d = 0.0f;
+      if (p.z() < top_m ? plan.cropped && !held(p) : held(Vec3(p.x(), p.y(), middle_m)))
+        out.push_back(v * view.depth.width + u);
     }
   return out;
 }
@@ -911,10 +911,18 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
         out.occupancy_probability.data[i] += 1.0f / out.hypotheses.size();
   out.timings.instances_ms += msSince(t);
   t = Clock::now();
-  const DepthView covered = withinTiles(views[0], out.T_table_camera, plan, c.min_pile_height_m);
+  // The view as the truncation test reads it: without what the tiles left out (a copy only then).
+  DepthView covered;
+  const std::vector<int> outside =
+      outsideTiles(views[0], out.T_table_camera, plan, c.min_pile_height_m);
+  if (!outside.empty()) {
+    covered = views[0];
+    for (int i : outside) covered.depth.pixels[i] = 0.0f;
+  }
+  const DepthView& used = outside.empty() ? views[0] : covered;
   for (int k = 0; k < c.decompose_samples; ++k) {
     setVisibleFractions(&out.hypotheses[k], views[0].camera, out.T_table_camera);
-    markTruncated(&out.hypotheses[k], views_given[0], covered, out.T_table_camera,
+    markTruncated(&out.hypotheses[k], views_given[0], used, out.T_table_camera,
                   c.min_pile_height_m);
   }
   out.timings.mesh_ms += msSince(t);
