@@ -154,6 +154,16 @@ TEST(Dataset, AMixInterleavesItsFilesInProportionAndRefusesOtherGrids) {
     EXPECT_NE(std::string(e.what()).find("dataset " + c + " has 8^3 grids"), std::string::npos)
         << e.what();
   }
+  // One file twice (or two of one seed's piles): its validation piles would be trained on.
+  ASSERT_EQ(mix.file(0).info().seed, mix.file(1).info().seed);  // told apart by their piles
+  try {
+    DatasetMix({a, b, b});
+    ADD_FAILURE() << "a mix of one file twice was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("datasets " + b + " and " + b + " hold the same piles"),
+              std::string::npos)
+        << e.what();
+  }
   EXPECT_THROW(DatasetMix({}), std::invalid_argument);
   for (const auto& p : {a, b, c}) std::filesystem::remove(p);
 }
@@ -305,6 +315,19 @@ TEST(StagedOutput, ACommittedFileReplacesTheTargetAndAnAbandonedOneLeavesNoTrace
     }
     fs::current_path(was);
   }
+  // A working directory of the user's files: the same reason, not "is not empty".
+  fs::create_directories(dir / "users");
+  std::ofstream(dir / "users" / "notes.txt") << "mine\n";
+  fs::current_path(dir / "users");
+  try {
+    StagedDirectory staged(".", "tool_a");
+    ADD_FAILURE() << "replaces a working directory of the user's files";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(". is the working directory or holds it"),
+              std::string::npos)
+        << e.what();
+  }
+  fs::current_path(was);
   EXPECT_NO_THROW(StagedDirectory(out, "tool_a"));
   fs::remove_all(dir);
 }

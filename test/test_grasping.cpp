@@ -889,6 +889,33 @@ TEST(GraspRequest, APointNamesTheObjectItIsDeepestInOrTheNearestSurface) {
   EXPECT_NEAR(distance, 0.07, 0.001);
 }
 
+TEST(GraspRequest, MeasuredPointsAreTheTargetsWhenEnoughLieNearItsShape) {
+  // A 1 cm plate whose fitted top lies 4 mm under the measured one: every point is 4 mm off
+  // (along the ray from the centre, those beyond 4.5 cm of the middle are over 2 cm off).
+  const SuperquadricShape plate = box({0.1, 0.1, 0.005}, {0, 0, 0.005});
+  Points3 top;
+  for (int i = -10; i <= 10; ++i)
+    for (int j = -10; j <= 10; ++j) top.emplace_back(0.0095 * i, 0.0095 * j, 0.014);
+  EXPECT_EQ(measuredOffTarget(top, plate), "");
+  EXPECT_EQ(measuredOffTarget({}, plate), "");
+  // Another object's cloud, 25 cm aside: refused, with the count.
+  Points3 aside = top;
+  for (Vec3& p : aside) p.x() += 0.25;
+  EXPECT_EQ(measuredOffTarget(aside, plate),
+            "0 of 441 points lie inside or within 2 cm of its superquadric");
+  // A quarter near is enough; fewer is not.
+  Points3 mixed(aside.begin(), aside.begin() + 300);
+  mixed.insert(mixed.end(), top.begin(), top.begin() + 100);
+  EXPECT_EQ(measuredOffTarget(mixed, plate), "");
+  mixed.insert(mixed.end(), aside.begin(), aside.begin() + 10);
+  EXPECT_NE(measuredOffTarget(mixed, plate).find("100 of 410 points"), std::string::npos);
+  // A large cloud is judged on every n-th point, and says so.
+  Points3 many;
+  for (int k = 0; k < 10; ++k) many.insert(many.end(), aside.begin(), aside.end());
+  EXPECT_NE(measuredOffTarget(many, plate).find("0 of 1470 points judged (1 in 3)"),
+            std::string::npos);
+}
+
 TEST(GraspRequest, AStaleSceneIsRefusedUnlessAnyAgeIsAllowed) {
   EXPECT_TRUE(staleScene(5.0, 10.0).empty());
   EXPECT_TRUE(staleScene(-3.0, 10.0).empty());  // a looping bag's stamp ahead of now

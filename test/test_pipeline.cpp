@@ -121,6 +121,21 @@ TEST(PerceptionConfig, ACardSectionReadsBackAsTheSettingItCameFrom) {
   applyModelCard(&c);
   EXPECT_EQ(c.hough.refinement, 8);
   EXPECT_DOUBLE_EQ(c.hough.min_vote_norm, 0.3);
+  // A misspelt section would leave the card's setting (or its checksum) unread: refused.
+  for (const char* misspelt : {"perceptoin", "integirty"}) {
+    std::ofstream(dir / "m.yaml") << misspelt << ":\n  samples: 1\n";
+    PerceptionConfig d;
+    d.model_path = (dir / "m.pt").string();
+    try {
+      applyModelCard(&d);
+      ADD_FAILURE() << "a card section '" << misspelt << "' was passed over";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("unknown section '" + std::string(misspelt) + "'"),
+                std::string::npos)
+          << e.what();
+    }
+    EXPECT_THROW(readModelIntegrity(d.model_path), std::runtime_error);
+  }
   std::filesystem::remove_all(dir);
 }
 

@@ -263,6 +263,34 @@ TEST(GraspConversions, ScenesComeFromObjectsThenHypotheses) {
   EXPECT_THROW(graspScenes(msg, 1), std::invalid_argument);
 }
 
+// Quaternions typed to a few places (a launch file's static transform, a hand-built request)
+// are rotations to the scene's checks once read.
+TEST(GraspConversions, QuaternionsTypedToFewPlacesAreRotations) {
+  const auto orthonormalError = [](const Transform& T) {
+    return (T.linear() * T.linear().transpose() - Eigen::Matrix3d::Identity()).norm();
+  };
+  const Eigen::Matrix3d quarter = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitZ()).toRotationMatrix();
+  Object o;
+  o.superquadric.semi_axes.x = o.superquadric.semi_axes.y = o.superquadric.semi_axes.z = 0.05;
+  o.superquadric.exponents.x = o.superquadric.exponents.y = o.superquadric.exponents.z = 2.0;
+  o.superquadric.pose.position.z = 0.05;
+  o.superquadric.pose.orientation.z = o.superquadric.pose.orientation.w = 0.7071;  // norm 0.99999
+  const Transform T = rigidFromPose(o.superquadric.pose, "typed");
+  EXPECT_LT(orthonormalError(T), 1e-12);
+  EXPECT_TRUE(T.linear().isApprox(quarter, 1e-4));
+  ObjectArray msg;
+  msg.objects.push_back(o);
+  EXPECT_EQ(checkScene(graspScenes(msg, 1)[0]), "");
+  // A transform tf2 took as typed to three places (norm 0.99985): rigid as looked up.
+  geometry_msgs::TransformStamped t;
+  t.transform.rotation.z = t.transform.rotation.w = 0.707;
+  t.transform.translation.x = 0.2;
+  const Transform U = rigidFromTf(t);
+  EXPECT_LT(orthonormalError(U), 1e-12);
+  EXPECT_TRUE(U.linear().isApprox(quarter, 1e-9));
+  EXPECT_EQ(U.translation(), Vec3(0.2, 0, 0));
+}
+
 // The camera that measured the objects' points: from table_pose (T_camera_table) when one view
 // was fused; none for several views or a pose made by hand (all zero).
 TEST(GraspConversions, TheMeasuringCameraIsTheOneViewsCamera) {

@@ -48,3 +48,16 @@ assert checked >= 4, checked
 assert beaten >= 1, beaten
 print(f"best in truth checked on {checked} targets")
 PY
+# Two models of one architecture make two rows, not one pooled over twice the picks.
+models=$(dirname "$0")/../models
+cp "$models/simstack_r32_fc.pt" "$models/simstack_r32_fc.yaml" "$dir/"
+"$evaluate" --dataset "$dir/piles.h5" --scenes 1 --candidates 4 --no-classical \
+  --model "$models/simstack_r32_fc.pt" --model "$dir/simstack_r32_fc.pt" \
+  --output "$dir/two.json" > "$dir/two.txt"
+/usr/bin/python3 - "$dir/two.json" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+rows = {(r["method"], r["chooser"]): r["picks"] for r in d["summary"]}
+truth = rows[("truth", "ranked")]
+assert rows[("fc", "ranked")] == truth and rows[("fc_1", "ranked")] == truth, rows
+PY

@@ -1,4 +1,7 @@
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <sys/file.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -284,7 +287,7 @@ TEST(CvaeTrainer, DeterministicResumableAndLogged) {
   EXPECT_EQ(log[2].rfind("4,", 0), 0u);
   // Interrupted at step 2 and resumed: it continues from the checkpoint to step 4, appending
   // to the log, and a resumed run is itself reproducible (not equal to the uninterrupted run:
-  // the shorter run's learning-rate schedule differs, and a resumed run reseeds torch).
+  // the shorter run's learning-rate schedule differs; a run stopped and resumed is, below).
   TrainConfig half = tc;
   half.steps = 2;
   for (const auto& d : {b, c}) {
@@ -433,6 +436,12 @@ TEST(CvaeTrainer, AStopCheckpointsItsStepAndAFinishedRunKeepsItsModel) {
   const TrainingReport finished =
       CvaeTrainer(scratch.data, tiny(), scratch.tc, run, "test").run(true);
   EXPECT_EQ(finished.steps_trained, 3);
+  // Stopped after step 1 and resumed, it ends where the run never stopped ends: the C-VAE's
+  // posterior noise and prior codes are drawn step by step, not from one stream since the start.
+  ASSERT_EQ(tiny().architecture, "cvae");
+  const std::string straight = scratch.dirs[1];
+  CvaeTrainer(scratch.data, tiny(), scratch.tc, straight, "test").run(false);
+  EXPECT_TRUE(torch::equal(probe(run + "/model.pt"), probe(straight + "/model.pt")));
   // Resumed once more with nothing to train: the model and its card stay as written, and the
   // report gives the card's figures (the posterior of the steps that trained it included).
   const std::vector<std::string> card = lines(run + "/model.yaml");
@@ -449,6 +458,27 @@ TEST(CvaeTrainer, AStopCheckpointsItsStepAndAFinishedRunKeepsItsModel) {
   EXPECT_NEAR(again.validation_iou, finished.validation_iou, 1e-9);
   ASSERT_TRUE(std::isfinite(finished.posterior_mu_rms));
   EXPECT_NEAR(again.posterior_mu_rms, finished.posterior_mu_rms, 1e-6);
+}
+
+// Two trainings in one run directory would write one checkpoint: the second is refused, and
+// the run's files stay as they were.
+TEST(CvaeTrainer, ASecondTrainingInARunDirectoryIsRefused) {
+  const TrainingScratch scratch("simstack_run_lock");
+  const std::string& run = scratch.dirs[0];
+  fs::create_directories(run);
+  const int held = ::open(run.c_str(), O_RDONLY | O_DIRECTORY);
+  ASSERT_GE(held, 0);
+  ASSERT_EQ(::flock(held, LOCK_EX | LOCK_NB), 0);  // as the other trainer's process holds it
+  try {
+    CvaeTrainer(scratch.data, tiny(), scratch.tc, run, "test").run(false);
+    ADD_FAILURE() << "a second training ran in a held run directory";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("another training runs in " + run), std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(fs::exists(run + "/checkpoint.pt"));
+  ::close(held);  // the other ended: the run goes ahead
+  EXPECT_EQ(CvaeTrainer(scratch.data, tiny(), scratch.tc, run, "test").run(false).steps, 4);
 }
 
 TEST(CvaeTrainer, ACheckpointWithoutAFormatVersionIsRefusedWithTheWayOn) {

@@ -4,6 +4,7 @@
 /// throw std::invalid_argument with a message fit for a throttled ROS warning.
 
 #include <geometry_msgs/Pose.h>
+#include <geometry_msgs/TransformStamped.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
@@ -33,6 +34,11 @@ Image<uint8_t> maskFromImage(const sensor_msgs::Image& msg);
 /// A frame name as tf2 takes it: without the leading '/' of tf1's names (older drivers and bags
 /// still send "/camera_depth_optical_frame"; tf2 refuses it and warns on every lookup).
 std::string tf2Frame(const std::string& frame);
+
+/// tf's transform as a rigid one. tf2 takes quaternions within 1 % of unit length (a transform
+/// typed to three places, 0.707) and hands them on as they are: normalised here, so that its
+/// rotation is one and what is placed with it stays rigid.
+Transform rigidFromTf(const geometry_msgs::TransformStamped& transform);
 
 /// Pinhole intrinsics of the image a CameraInfo describes: the rectified P matrix (K when P is
 /// zero), with its ROI cut out and its binning applied (image_geometry's reduced resolution,

@@ -21,9 +21,11 @@ namespace simstack {
 double asWritten(float value);
 
 /// The core superquadric of a message; rejects a quaternion that is not finite and of unit
-/// norm (within 1e-3), naming `what`. The shape's values are checked by checkScene().
+/// norm (within 1e-3), naming `what`, and normalises it. The shape's values are checked by
+/// checkScene().
 SuperquadricShape superquadricFromMsg(const simstack::Superquadric& msg, const std::string& what);
-/// A unit-quaternion pose as a transform; rejects non-finite values and non-unit quaternions.
+/// A unit-quaternion pose as a transform, the quaternion normalised; rejects non-finite values
+/// and quaternions whose norm is not 1 within 1e-3.
 Transform rigidFromPose(const geometry_msgs::Pose& pose, const std::string& what);
 
 /// T_frame_table of `msg` (its table_in_frame): the identity when all zero (a message made by

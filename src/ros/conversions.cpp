@@ -93,6 +93,15 @@ std::string tf2Frame(const std::string& frame) {
   return !frame.empty() && frame.front() == '/' ? frame.substr(1) : frame;
 }
 
+Transform rigidFromTf(const geometry_msgs::TransformStamped& transform) {
+  const geometry_msgs::Quaternion& r = transform.transform.rotation;
+  const geometry_msgs::Vector3& t = transform.transform.translation;
+  Transform T = Transform::Identity();
+  T.linear() = Quat(r.w, r.x, r.y, r.z).normalized().toRotationMatrix();
+  T.translation() = Vec3(t.x, t.y, t.z);
+  return T;
+}
+
 PinholeCamera cameraFromInfo(const sensor_msgs::CameraInfo& msg) {
   sensor_msgs::CameraInfo info = msg;
   if (info.P[0] == 0.0 || info.P[5] == 0.0)  // a driver that fills K alone

@@ -22,8 +22,11 @@ Transform rigidFromPose(const geometry_msgs::Pose& p, const std::string& what) {
   if (std::abs(q.norm() - 1.0) > 1e-3)
     throw std::invalid_argument(what + ": orientation quaternion has norm " +
                                 std::to_string(q.norm()) + ", not 1");
-  Transform T;
-  tf2::fromMsg(p, T);
+  // Normalised: a quaternion typed to four places (0.7071) is a rotation to 1e-5 only, and the
+  // scene's checks hold rotations to 1e-6.
+  Transform T = Transform::Identity();
+  T.linear() = q.normalized().toRotationMatrix();
+  T.translation() = t;
   return T;
 }
 

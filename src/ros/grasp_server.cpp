@@ -161,7 +161,7 @@ bool GraspServer::lookup(const std::string& target, const std::string& source,
     ros::WallDuration(0.01).sleep();
   }
   try {
-    *T_target_source = tf2::transformToEigen(tf_buffer_.lookupTransform(target, source, stamp));
+    *T_target_source = rigidFromTf(tf_buffer_.lookupTransform(target, source, stamp));
     return true;
   } catch (const tf2::TransformException& e) {
     char seconds[32];
@@ -352,6 +352,14 @@ bool GraspServer::prepare(const RankGrasps::Request& req, RankGrasps::Response& 
   out->grasps = prepareGrasps(request, config_.ranking, config_.policy);
   out->measured_target = measuredSurface(scene->objects[out->target], out->T_scene_table.inverse());
   std::string notes = out->grasps.notes;
+  // A cloud that is not the target's (a scene built by hand) would judge the seals on a surface
+  // the cup never meets: its points are set aside and the ranking says so.
+  const SuperquadricShape& target = request.scenes[0][static_cast<size_t>(out->target)];
+  if (const std::string why = measuredOffTarget(out->measured_target, target); !why.empty()) {
+    addNote(&notes,
+            "seals judged on the superquadric alone: of the target's surface cloud, " + why);
+    out->measured_target.clear();
+  }
   if (req.hypotheses == 0 && scene->hypotheses.empty())
     addNote(&notes,
             "ranked in the objects alone: the scene carries no hypotheses (the perception "

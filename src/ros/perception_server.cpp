@@ -384,6 +384,12 @@ bool PerceptionServer::toView(const Frame& frame, DepthView* view, std::string* 
     *why = "the depth image's header has no frame_id (the camera's optical frame)";
     return false;
   }
+  // Stamp 0 is no time: tf would place the camera where it is now, and the scene published
+  // under it would never be stale to the grasp service.
+  if (frame.image->header.stamp.isZero()) {
+    *why = "the depth image's header stamp is 0 (no capture time): stamp the images";
+    return false;
+  }
   // Another camera's intrinsics of the same size (a colour camera_info remapped in its place)
   // would place every point wrongly: said once for each pair of frames, the image's kept.
   const std::string info_frame = tf2Frame(info.header.frame_id);
@@ -406,7 +412,7 @@ bool PerceptionServer::lookup(const std::string& target, const std::string& sour
   bool found = waitForTransform(target, source, stamp, why);
   if (found) {
     try {
-      *T_target_source = tf2::transformToEigen(tf_buffer_.lookupTransform(target, source, stamp));
+      *T_target_source = rigidFromTf(tf_buffer_.lookupTransform(target, source, stamp));
     } catch (const tf2::TransformException& e) {
       *why = "no transform " + target + " <- '" + source + "': " + e.what();
       found = false;
@@ -668,11 +674,17 @@ bool PerceptionServer::publish(const Frame& frame, const DepthView& view,
   camera_header.frame_id = tf2Frame(camera_header.frame_id);
   std::vector<SuperquadricShape> shapes;
   for (const InstanceEstimate& e : estimate.instances()) shapes.push_back(e.superquadric);
+  // The tracker matches objects in a frame that stays put: the table's, or, where the table is
+  // the plane estimated in each image (its origin and x axis follow the camera), the output
+  // frame when that is another (a fixed frame of the workcell).
+  std::vector<SuperquadricShape> tracked = shapes;
+  if (estimate.table_estimated && node_.outputFrame() != node_.table_frame)
+    for (SuperquadricShape& sq : tracked) sq.T_table_object = T_output_table * sq.T_table_object;
   ObjectIds ids;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     if (resets != resets_) return false;
-    ids = tracker_.assign(shapes);
+    ids = tracker_.assign(tracked);
   }
   if (estimate.table_estimated) {
     warnAboutOtherTable();

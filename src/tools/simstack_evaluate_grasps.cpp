@@ -35,6 +35,27 @@ std::unique_ptr<NetworkMethod> networkMethod(PerceptionConfig c, int hypotheses)
   return method;
 }
 
+/// The methods compared, as the node runs them (hypothesis 0 the mean scene, `hypotheses` of
+/// them decomposed): one per model, two of one architecture named apart, then the classical
+/// baseline when `classical`.
+std::vector<std::unique_ptr<EvaluatedMethod>> graspMethods(const PerceptionOptions& perception,
+                                                           int hypotheses, bool classical,
+                                                           const DatasetInfo& data) {
+  std::vector<std::unique_ptr<EvaluatedMethod>> methods;
+  for (const PerceptionConfig& c : perception.configs()) {
+    auto m = networkMethod(c, hypotheses);
+    m->rename(distinctName(m->name(), methods));
+    methods.push_back(std::move(m));
+  }
+  if (classical) {
+    ClassicalConfig cc;
+    cc.threads = perception.config().threads;
+    cc.fit = perception.config().fit;
+    methods.push_back(std::make_unique<ClassicalMethod>(cc, data.extent_m, data.resolution));
+  }
+  return methods;
+}
+
 /// How seals are judged, and the perturbed copies.
 void addSealOptions(CLI::App& app, GraspEvaluationOptions* o, bool* superquadric_seal) {
   CLI::Option* copies =
@@ -235,17 +256,8 @@ int main(int argc, char** argv) {
       throw std::runtime_error("dataset " + dataset +
                                " holds mesh objects (household or YCB piles): the grasp "
                                "evaluation simulates pulls on superquadric piles only");
-    // As the node runs them: hypothesis 0 is the mean scene, H of them decomposed.
-    std::vector<std::unique_ptr<EvaluatedMethod>> methods;
-    for (const PerceptionConfig& c : perception.configs())
-      methods.push_back(networkMethod(c, o.hypotheses));
-    if (!no_classical) {
-      ClassicalConfig cc;
-      cc.threads = perception.config().threads;
-      cc.fit = perception.config().fit;
-      methods.push_back(
-          std::make_unique<ClassicalMethod>(cc, reader.info().extent_m, reader.info().resolution));
-    }
+    const std::vector<std::unique_ptr<EvaluatedMethod>> methods =
+        graspMethods(perception, o.hypotheses, !no_classical, reader.info());
     std::vector<EvaluatedMethod*> run;
     for (const auto& m : methods) run.push_back(m.get());
     const int n = o.scenes > 0 ? std::min(o.scenes, reader.size()) : reader.size();

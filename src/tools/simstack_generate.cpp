@@ -106,7 +106,8 @@ void printSummary(const GenerationOptions& o, const GenerationSummary& s) {
             << " cm voxels, truncation " << s.truncation_m * 100.0 << " cm\n"
             << "  " << s.attempts << " piles drawn for " << o.scenes << " accepted ("
             << 100.0 * o.scenes / s.attempts << " % accepted), " << o.scenes / s.seconds
-            << " scenes/s on " << s.threads << " threads; " << 100.0 * s.undone_share
+            << " scenes/s on " << s.threads << (s.threads == 1 ? " thread; " : " threads; ")
+            << 100.0 * s.undone_share
             << " % of the physics went to drops and piles that were undone\n";
   std::cout << "  piles by object count:";
   const char* sep = " ";
@@ -138,7 +139,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(4, 256))
       ->capture_default_str();
   app.add_option("--output", o.output, "output HDF5 file")->required()->check(WritablePath);
-  app.add_option("--objects", objects, "objects per pile, MIN:MAX")->capture_default_str();
+  app.add_option("--objects", objects, "objects per pile, MIN:MAX or N")->capture_default_str();
   app.add_option("--sizes", sizes,
                  "superquadrics' full extent along each axis, MIN:MAX metres (drawn uniformly); "
                  "smaller objects make piles of more objects fit the grid")

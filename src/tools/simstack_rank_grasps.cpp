@@ -22,17 +22,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-/// Measured points further than this outside the target's superquadric are not its.
-constexpr double kNearShapeM = 0.02;
-/// At least this share of the cloud's target points must be near the shape.
-constexpr double kNearShare = 0.25;
-
-/// How far `p_table` lies outside `sq`, along the ray from its centre (metres; 0 inside: a
-/// cup's inner wall lies inside the superquadric that closes it).
-double outsideBy(const SuperquadricShape& sq, const Vec3& p_table) {
-  return std::max(0.0, surfaceDistance(sq, p_table));
-}
-
 /// The depth points measured on the target: those labelled target_id + 1 in `cloud_path`, or
 /// in the reconstruction's instances.pcd beside the scene file when none is given (none when
 /// there is no such file: said). A cloud whose target points lie mostly away from the target's
@@ -49,15 +38,11 @@ Points3 measuredTarget(const std::string& scene_path, std::string cloud_path, in
     cloud_path = beside.string();
   }
   Points3 out = readLabelledPoints(cloud_path, static_cast<uint32_t>(target_id + 1));
-  const long near = std::count_if(
-      out.begin(), out.end(), [&](const Vec3& p) { return outsideBy(target, p) <= kNearShapeM; });
-  if (!out.empty() && near < kNearShare * static_cast<double>(out.size()))
-    throw std::invalid_argument(
-        std::to_string(near) + " of the " + std::to_string(out.size()) + " points labelled " +
-        std::to_string(target_id + 1) + " in " + cloud_path + " lie inside or within " +
-        std::to_string(static_cast<int>(kNearShapeM * 100)) + " cm of object " +
-        std::to_string(target_id) + "'s superquadric in " + scene_path +
-        ": is it this scene's cloud, labelled id + 1?");
+  if (const std::string why = measuredOffTarget(out, target); !why.empty())
+    throw std::invalid_argument("of the points labelled " + std::to_string(target_id + 1) + " in " +
+                                cloud_path + ", " + why + " (object " + std::to_string(target_id) +
+                                " in " + scene_path +
+                                "): is it this scene's cloud, labelled id + 1?");
   std::cout << "seals judged on " << out.size() << " points of object " << target_id
             << " measured in " << cloud_path
             << (out.empty() ? " (none: seals judged on the superquadric alone)" : "") << "\n";

@@ -167,6 +167,28 @@ class GraspService(unittest.TestCase):
         self.assertEqual(res.status, RankGraspsResponse.SUCCEEDED)
         self.assertGreater(len(res.grasps), 0)
 
+    def test_2a_a_surface_cloud_not_on_its_target_is_set_aside_and_said(self):
+        res = self.rank(request())
+        self.assertTrue(res.success, res.message)
+        self.assertNotIn("seals judged on the superquadric alone", res.message)
+        # A hand-built scene whose target carries the cloud of the object furthest from it.
+        scene = copy.deepcopy(self.scene)
+        target = next(o for o in scene.objects if o.id == 0)
+        self.assertGreater(target.measured_points, 0)
+
+        def centre(o):
+            p = o.superquadric.pose.position
+            return (p.x, p.y, p.z)
+
+        other = max((o for o in scene.objects if o.measured_points > 0 and o is not target),
+                    key=lambda o: math.dist(centre(o), centre(target)))
+        target.surface, target.measured_points = other.surface, other.measured_points
+        res = self.rank(request(scene=scene))
+        self.assertTrue(res.success, res.message)
+        self.assertIn("seals judged on the superquadric alone: of the target's surface cloud, ",
+                      res.message)
+        self.assertIn("cm of its superquadric", res.message)
+
     def test_2b_a_scene_off_the_table_plane_is_said_or_refused(self):
         # The camera's orientation is not used (candidates are what is in sight of its
         # position), so an all-zero quaternion is no error.

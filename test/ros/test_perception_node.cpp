@@ -369,6 +369,11 @@ TEST_F(PerceptionNodeTest, BadInputIsSkippedAndTheNodeKeepsPublishing) {
              i->header.frame_id = c->header.frame_id = "nowhere";
            }},
       };
+  // A frame stamped 0 (no capture time) is skipped: tf would place it now, and its scene would
+  // never be stale.
+  wire->info_pub.publish(infoMsg(ros::Time(0)));
+  wire->image_pub.publish(imageMsg(depth, ros::Time(0)));
+  EXPECT_FALSE(answerTo(wire->received, ros::Time(0), 2.0)) << "published for a frame stamped 0";
   const ros::Time first_bad = ros::Time::now();
   for (auto& [name, spoil] : cases) {
     sensor_msgs::Image image = imageMsg(depth, ros::Time(0));

@@ -96,6 +96,19 @@ constexpr double kMaxTargetPointM = 0.1;
 int objectAtPoint(const std::vector<SuperquadricShape>& scene, const Vec3& p,
                   double* distance_m = nullptr);
 
+/// Measured points further than this outside the target's superquadric are not its (m).
+constexpr double kMeasuredNearShapeM = 0.02;
+/// At least this share of the points measured on a target must lie near its superquadric.
+constexpr double kMeasuredNearShare = 0.25;
+
+/// Why `points` (table frame), said to be measured on `target`, are not its: "" when there are
+/// none or at least kMeasuredNearShare of them lie inside it or within kMeasuredNearShapeM of its
+/// surface (a cup's inner wall lies inside the superquadric that closes it; a point just above
+/// a flat book's edge is near it); else "K of N points ...". At most 2000 points are judged,
+/// evenly through the list. Another scene's cloud, or one labelled otherwise, would judge the
+/// seals on a surface the cup never meets.
+std::string measuredOffTarget(const Points3& points, const SuperquadricShape& target);
+
 /// A number as a person writes it in a request's message: 0.1, 2, nan (std::to_string gives
 /// 0.100000 and -nan).
 std::string number(double v);

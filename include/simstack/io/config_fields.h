@@ -7,6 +7,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <set>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -34,6 +35,13 @@ inline YAML::Node parseConfigText(const std::string& text, const std::string& se
 /// std::invalid_argument(what) unless `ok`.
 inline void requireConfig(bool ok, const std::string& what) {
   if (!ok) throw std::invalid_argument(what);
+}
+
+/// ", got V": the value a refusal names, as the file writes it (0.0002, not 0.000200).
+inline std::string gotValue(double v) {
+  std::ostringstream out;
+  out << v;
+  return ", got " + out.str();
 }
 
 // A misspelt field in a file the user writes must not fall back to its default unnoticed

@@ -142,4 +142,9 @@ CvaeConfig cvaeConfigFromSection(const YAML::Node& section);
 /// The card of a model file: the same path with the extension .yaml.
 std::string modelCardPath(const std::string& model_path);
 
+/// The model card at `card_path`, read: a map whose sections are those a card holds (model,
+/// training, provenance, perception, evaluation, integrity). A misspelt section would leave
+/// the card's Hough setting or checksum unread: std::runtime_error naming the file and key.
+YAML::Node loadModelCard(const std::string& card_path);
+
 }  // namespace simstack

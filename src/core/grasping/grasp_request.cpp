@@ -5,6 +5,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "simstack/fitting/superquadric_fit.h"
+
 namespace simstack {
 
 std::string number(double v) {
@@ -126,14 +128,15 @@ PreparedGrasps prepareGrasps(const GraspRequest& request, const GraspRankingConf
 
 namespace {
 
-/// Distance (m) from `q`, an object-frame point outside `sq`, to its surface: the nearest vertex
-/// of a fine mesh, then foot-point steps (onto the tangent plane, back onto the surface along
-/// the ray from the centre); the least of these and of the ray's own surface point. Each is a
-/// surface point, so the figure never understates.
-double distanceOutside(const SuperquadricShape& sq, const Vec3& q) {
+/// Distance (m) from `q`, an object-frame point outside `sq`, to its surface: the nearest of
+/// `vertices` (a fine mesh of sq), then foot-point steps (onto the tangent plane, back onto the
+/// surface along the ray from the centre); the least of these and of the ray's own surface
+/// point. Each is a surface point, so the figure never understates.
+double distanceOutside(const SuperquadricShape& sq, const Vec3& q,
+                       const std::vector<Vec3>& vertices) {
   double best = q.norm() - sq.surfacePointAlong(q).norm();
   Vec3 x = Vec3::Zero();
-  for (const Vec3& v : sq.meshObject(24).vertices)
+  for (const Vec3& v : vertices)
     if ((v - q).norm() < best) best = (v - q).norm(), x = v;
   if (x.isZero()) return best;
   for (int i = 0; i < 8; ++i) {
@@ -146,6 +149,12 @@ double distanceOutside(const SuperquadricShape& sq, const Vec3& q) {
   return best;
 }
 
+/// The mesh distanceOutside starts from.
+std::vector<Vec3> distanceMesh(const SuperquadricShape& sq) { return sq.meshObject(24).vertices; }
+
+/// Measured points judged at most: a share needs no more (every n-th, in order).
+constexpr size_t kMeasuredJudged = 2000;
+
 }  // namespace
 
 int objectAtPoint(const std::vector<SuperquadricShape>& scene, const Vec3& p, double* distance_m) {
@@ -154,12 +163,33 @@ int objectAtPoint(const std::vector<SuperquadricShape>& scene, const Vec3& p, do
   for (size_t k = 0; k < scene.size(); ++k) {
     const Vec3 q = scene[k].T_table_object.inverse() * p;
     const double f = scene[k].insideOutsideObject(q);
-    const double d = f < 1.0 ? 0.0 : distanceOutside(scene[k], q);
+    const double d = f < 1.0 ? 0.0 : distanceOutside(scene[k], q, distanceMesh(scene[k]));
     const double rank = f < 1.0 ? f - 1.0 : d;  // inside (below 0) before outside
     if (rank < best_rank) best_rank = rank, best_distance = d, best = static_cast<int>(k);
   }
   if (distance_m) *distance_m = best_distance;
   return best_distance <= kMaxTargetPointM ? best : -1;
+}
+
+std::string measuredOffTarget(const Points3& points, const SuperquadricShape& target) {
+  if (points.empty()) return {};
+  const size_t stride = (points.size() + kMeasuredJudged - 1) / kMeasuredJudged;
+  const Transform T_object_table = target.T_table_object.inverse();
+  const std::vector<Vec3> mesh = distanceMesh(target);
+  size_t judged = 0, near = 0;
+  for (size_t i = 0; i < points.size(); i += stride, ++judged) {
+    // Along the ray from the centre first: never under the true distance, and cheap.
+    if (surfaceDistance(target, points[i]) <= kMeasuredNearShapeM) {
+      ++near;
+      continue;
+    }
+    const Vec3 q = T_object_table * points[i];
+    if (distanceOutside(target, q, mesh) <= kMeasuredNearShapeM) ++near;
+  }
+  if (near >= kMeasuredNearShare * static_cast<double>(judged)) return {};
+  return std::to_string(near) + " of " + std::to_string(judged) +
+         (stride > 1 ? " points judged (1 in " + std::to_string(stride) + ")" : " points") +
+         " lie inside or within " + number(kMeasuredNearShapeM * 100.0) + " cm of its superquadric";
 }
 
 std::string staleScene(double age_s, double max_age_s) {

@@ -146,6 +146,12 @@ StagedDirectory::StagedDirectory(const std::string& target, const std::string& o
   const fs::path t = parentOf(target);
   if (fs::exists(t) && !fs::is_directory(t))
     throw std::runtime_error(target + " exists and is not a directory");
+  // Replacing the working directory (or one holding it) would leave the caller in a deleted one.
+  if (pathHolds(target, "."))
+    throw std::runtime_error(target +
+                             " is the working directory or holds it: name a directory inside "
+                             "it, e.g. " +
+                             (fs::path(target) / "out").string());
   // Only an earlier result of the same tool is replaced: never a directory of the user's files,
   // nor another tool's result (the reconstruction a grasp ranking reads, say).
   if (fs::is_directory(t) && !fs::is_empty(t) && ownerOf(t) != owner) {
@@ -169,12 +175,6 @@ StagedDirectory::StagedDirectory(const std::string& target, const std::string& o
                                "another directory");
     }
   }
-  // Replacing the working directory (or one holding it) would leave the caller in a deleted one.
-  if (pathHolds(target, "."))
-    throw std::runtime_error(target +
-                             " is the working directory or holds it: name a directory inside "
-                             "it, e.g. " +
-                             (fs::path(target) / "out").string());
   target_ = t.string();
   removeStalePartials(t);
   staged_ = uniqueDirectory(stagedStem(t));

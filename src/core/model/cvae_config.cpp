@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <set>
 #include <stdexcept>
+#include <utility>
 
 #include "simstack/io/config_fields.h"
 #include "simstack/io/yaml_file.h"
@@ -69,8 +70,8 @@ void CvaeConfig::validate() const {
   requireConfig(
       resolution >= 16 && resolution <= 512 && (resolution & (resolution - 1)) == 0,
       "resolution must be a power of two in [16, 512], got " + std::to_string(resolution));
-  requireConfig(extent_m > 0.0, "extent_m must be > 0");
-  requireConfig(truncation_vox > 0.0, "truncation_vox must be > 0");
+  requireConfig(extent_m > 0.0, "extent_m must be > 0" + gotValue(extent_m));
+  requireConfig(truncation_vox > 0.0, "truncation_vox must be > 0" + gotValue(truncation_vox));
   // The upper bounds are far beyond what trains on one machine: past them a size is a typo, and
   // the network's allocation would fail with a message that names no field.
   requireConfig(base_channels >= 1 && max_channels >= base_channels && max_channels <= 1024,
@@ -82,7 +83,12 @@ void CvaeConfig::validate() const {
                 "65536], got " +
                     std::to_string(latent_size) + ", " + std::to_string(condition_size) + " and " +
                     std::to_string(hidden_size));
-  requireConfig(alpha >= 0 && beta >= 0 && gamma >= 0 && delta >= 0, "loss weights must be >= 0");
+  for (const auto& [name, weight] : {std::pair<const char*, double>{"alpha", alpha},
+                                     {"beta", beta},
+                                     {"gamma", gamma},
+                                     {"delta", delta}})
+    requireConfig(weight >= 0,
+                  std::string(name) + " (a loss weight) must be >= 0" + gotValue(weight));
   requireConfig(norm == "batch" || norm == "group",
                 "norm must be 'batch' or 'group', got '" + norm + "'");
   requireConfig(latent_injection == "bottleneck" || latent_injection == "every_scale" ||
@@ -91,27 +97,33 @@ void CvaeConfig::validate() const {
                     latent_injection + "'");
   requireConfig(hidden_condition == "full" || hidden_condition == "coarse",
                 "hidden_condition must be 'full' or 'coarse', got '" + hidden_condition + "'");
-  requireConfig(mmd_prior_samples >= 2, "mmd_prior_samples must be >= 2");
+  // The MMD's kernel matrices take N^2 floats per kernel width (4096 draws: 64 MB each).
+  requireConfig(mmd_prior_samples >= 2 && mmd_prior_samples <= 4096,
+                "mmd_prior_samples must lie in [2, 4096]" + gotValue(mmd_prior_samples));
   requireConfig(!mmd_kernel_widths.empty(), "mmd_kernel_widths needs at least one width");
-  for (double w : mmd_kernel_widths) requireConfig(w > 0.0, "mmd_kernel_widths must be > 0");
-  requireConfig(tsdf_epsilon > 0.0, "tsdf_epsilon must be > 0");
-  requireConfig(occupancy_weight >= 0.0, "occupancy_weight must be >= 0");
-  requireConfig(occupancy_sharpness > 0.0, "occupancy_sharpness must be > 0");
-  requireConfig(iou_weight >= 0.0, "iou_weight must be >= 0");
+  for (double w : mmd_kernel_widths)
+    requireConfig(w > 0.0, "mmd_kernel_widths must be > 0" + gotValue(w));
+  requireConfig(tsdf_epsilon > 0.0, "tsdf_epsilon must be > 0" + gotValue(tsdf_epsilon));
+  requireConfig(occupancy_weight >= 0.0,
+                "occupancy_weight must be >= 0" + gotValue(occupancy_weight));
+  requireConfig(occupancy_sharpness > 0.0,
+                "occupancy_sharpness must be > 0" + gotValue(occupancy_sharpness));
+  requireConfig(iou_weight >= 0.0, "iou_weight must be >= 0" + gotValue(iou_weight));
   requireConfig(condition_dropout >= 0.0 && condition_dropout < 1.0,
-                "condition_dropout must lie in [0, 1)");
+                "condition_dropout must lie in [0, 1)" + gotValue(condition_dropout));
   requireConfig(posterior == "gaussian" || posterior == "deterministic",
                 "posterior must be 'gaussian' or 'deterministic', got '" + posterior + "'");
   requireConfig(prior == "standard" || prior == "learned",
                 "prior must be 'standard' or 'learned', got '" + prior + "'");
   requireConfig(prior == "standard" || posterior == "gaussian",
                 "a learned prior needs posterior 'gaussian' (the KL compares two Gaussians)");
-  requireConfig(kl_weight >= 0.0, "kl_weight must be >= 0");
-  requireConfig(kl_free_nats >= 0.0, "kl_free_nats must be >= 0");
-  requireConfig(best_of >= 1 && best_of <= 16, "best_of must lie in 1-16");
+  requireConfig(kl_weight >= 0.0, "kl_weight must be >= 0" + gotValue(kl_weight));
+  requireConfig(kl_free_nats >= 0.0, "kl_free_nats must be >= 0" + gotValue(kl_free_nats));
+  requireConfig(best_of >= 1 && best_of <= 16, "best_of must lie in 1-16" + gotValue(best_of));
   requireConfig(best_of == 1 || (hasLatentCode() && posterior == "gaussian"),
                 "best_of > 1 needs the C-VAE's code drawn from a Gaussian posterior");
-  requireConfig(vote_boundary_weight >= 0.0, "vote_boundary_weight must be >= 0");
+  requireConfig(vote_boundary_weight >= 0.0,
+                "vote_boundary_weight must be >= 0" + gotValue(vote_boundary_weight));
   requireConfig(vote_loss == "occupied" || vote_loss == "all",
                 "vote_loss must be 'occupied' or 'all', got '" + vote_loss + "'");
 }
@@ -168,6 +180,21 @@ CvaeConfig CvaeConfig::fromYaml(const std::string& text) {
 
 std::string modelCardPath(const std::string& model_path) {
   return std::filesystem::path(model_path).replace_extension(".yaml").string();
+}
+
+YAML::Node loadModelCard(const std::string& card_path) {
+  const YAML::Node root = loadYamlFile(card_path, "model card");
+  if (!root.IsMap()) throw std::runtime_error(card_path + ": a model card is a YAML map");
+  static const std::set<std::string> kSections = {"model",      "training",   "provenance",
+                                                  "perception", "evaluation", "integrity"};
+  for (const auto& kv : root) {
+    const std::string key = kv.first.as<std::string>();
+    if (!kSections.count(key))
+      throw std::runtime_error(card_path + ": unknown section '" + key +
+                               "' (a model card holds model, training, provenance, perception, "
+                               "evaluation and integrity)");
+  }
+  return root;
 }
 
 CvaeConfig cvaeConfigFromSection(const YAML::Node& section) {

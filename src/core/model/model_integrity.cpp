@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "simstack/io/yaml_file.h"
+#include "simstack/model/cvae_config.h"
 #include "simstack/model/cvae_config.h"  // modelCardPath
 
 namespace simstack {
@@ -47,8 +48,8 @@ std::string sha256OfFile(const std::string& path) {
 std::optional<ModelIntegrity> readModelIntegrity(const std::string& model_path) {
   const std::string card = modelCardPath(model_path);
   if (model_path.empty() || !std::filesystem::exists(card)) return std::nullopt;
-  const YAML::Node root = loadYamlFile(card, "model card");
-  const YAML::Node n = root.IsMap() ? root["integrity"] : YAML::Node();
+  const YAML::Node root = loadModelCard(card);
+  const YAML::Node n = root["integrity"];
   if (!n) return std::nullopt;
   ModelIntegrity m;
   try {

@@ -360,8 +360,8 @@ const std::vector<std::string>& perceptionConfigFields() {
 std::string applyModelCard(PerceptionConfig* config) {
   const std::string path = modelCardPath(config->model_path);
   if (config->model_path.empty() || !std::filesystem::exists(path)) return "";
-  const YAML::Node root = loadYamlFile(path, "model card");
-  const YAML::Node section = root.IsMap() ? root["perception"] : YAML::Node();
+  const YAML::Node root = loadModelCard(path);
+  const YAML::Node section = root["perception"];
   if (!section) return "";
   if (!section.IsMap()) throw std::runtime_error(path + ": 'perception' must be a map");
   for (const auto& kv : section) {

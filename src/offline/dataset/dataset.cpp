@@ -63,8 +63,7 @@ int64_t readAttr<int64_t>(const H5::H5Object& obj, const std::string& name) {
   attribute(obj, name).read(H5::PredType::NATIVE_INT64, &v);
   return v;
 }
-/// An unsigned attribute; one stored signed (a file written before seeds were stored unsigned)
-/// keeps its bits.
+/// An unsigned attribute; one stored signed (an older file's seed) keeps its bits.
 template <>
 uint64_t readAttr<uint64_t>(const H5::H5Object& obj, const std::string& name) {
   const H5::Attribute attr = attribute(obj, name);
@@ -467,6 +466,21 @@ SceneRecord DatasetReader::read(int index) const {
   return rec;
 }
 
+namespace {
+
+/// Whether two files hold the same piles: one seed, and the same first pile (the generator's
+/// size range and object kinds are not among a file's attributes).
+bool samePiles(const DatasetReader& a, const DatasetReader& b) {
+  if (a.info().seed != b.info().seed || a.size() == 0 || b.size() == 0) return false;
+  const Scene sa = a.readScene(0).scene, sb = b.readScene(0).scene;
+  if (sa.objects.size() != sb.objects.size()) return false;
+  for (size_t i = 0; i < sa.objects.size(); ++i)
+    if (!sa.objects[i].T_table_object.isApprox(sb.objects[i].T_table_object, 1e-9)) return false;
+  return true;
+}
+
+}  // namespace
+
 DatasetMix::DatasetMix(const std::vector<std::string>& paths, const std::string& mesh_dir)
     : paths_(paths) {
   if (paths.empty()) throw std::invalid_argument("a dataset mix needs at least one file");
@@ -484,6 +498,16 @@ DatasetMix::DatasetMix(const std::vector<std::string>& paths, const std::string&
       throw std::runtime_error(msg.str());
     }
   }
+  // Scene i depends on (seed, i) alone: two files of one seed and one generator share their
+  // first piles, and the mix's validation piles (its last) would be trained on in the other.
+  for (size_t a = 0; a < readers_.size(); ++a)
+    for (size_t b = a + 1; b < readers_.size(); ++b)
+      if (samePiles(*readers_[a], *readers_[b]))
+        throw std::runtime_error(
+            "datasets " + paths[a] + " and " + paths[b] + " hold the same piles (seed " +
+            std::to_string(readers_[a]->info().seed) +
+            ", the same first pile): the piles one validates on would be trained on in the "
+            "other; generate one of them with another --seed");
   std::vector<int64_t> taken(readers_.size(), 0);
   int64_t total = 0;
   for (const auto& r : readers_) total += r->size();

@@ -199,14 +199,20 @@ std::vector<std::unique_ptr<EvaluatedMethod>> multiViewMethods(
   return methods;
 }
 
+std::string distinctName(const std::string& name,
+                         const std::vector<std::unique_ptr<EvaluatedMethod>>& methods) {
+  for (const auto& other : methods)
+    if (other->name() == name) return name + "_" + std::to_string(methods.size());
+  return name;
+}
+
 std::vector<std::unique_ptr<EvaluatedMethod>> evaluatedMethods(
     const std::vector<PerceptionConfig>& configs, bool classical, double extent_m, int resolution) {
   std::vector<std::unique_ptr<EvaluatedMethod>> methods;
   for (PerceptionConfig c : configs) {
     c.zero_code_first = false;  // random codes, as the paper evaluates
     auto m = std::make_unique<NetworkMethod>(c);
-    for (const auto& other : methods)
-      if (other->name() == m->name()) m->rename(m->name() + "_" + std::to_string(methods.size()));
+    m->rename(distinctName(m->name(), methods));
     methods.push_back(std::move(m));
   }
   if (classical && !configs.empty()) {

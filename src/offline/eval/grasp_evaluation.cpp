@@ -289,17 +289,24 @@ OracleFraction freedOfOracle(const std::vector<std::pair<double, double>>& freed
   const auto ratio = [](const std::vector<std::pair<double, double>>& v) {
     double a = 0, b = 0;
     for (const auto& [x, y] : v) a += x, b += y;
-    return b > 0 ? a / b : 0.0;
+    return b > 0 ? a / b : NAN;  // undefined where the oracle freed nothing
   };
   if (freed_and_oracle.empty()) return out;
   out.ratio = ratio(freed_and_oracle);
   std::mt19937_64 rng(1);
   std::uniform_int_distribution<size_t> pick(0, freed_and_oracle.size() - 1);
+  constexpr int kResamples = 2000;
   std::vector<double> boot;
   std::vector<std::pair<double, double>> sample(freed_and_oracle.size());
-  for (int b = 0; b < 2000; ++b) {
+  for (int b = 0; b < kResamples; ++b) {
     for (auto& s : sample) s = freed_and_oracle[pick(rng)];
-    boot.push_back(ratio(sample));
+    if (const double r = ratio(sample); std::isfinite(r)) boot.push_back(r);
+  }
+  // Resamples without an oracle success have no ratio: left out, and with more than 2.5 % of
+  // them (too few targets the oracle frees) the interval's low end is not known: none given.
+  if (boot.size() < 0.975 * kResamples) {
+    out.low = out.high = NAN;
+    return out;
   }
   std::sort(boot.begin(), boot.end());
   out.low = boot[static_cast<size_t>(0.025 * boot.size())];
@@ -369,8 +376,9 @@ nlohmann::json graspSummary(const std::vector<PickResult>& picks) {
          {"toppled_share", share(toppled, pulled)},
          {"target_found_share", share(found, n)},
          {"freed_of_oracle", against_oracle ? nlohmann::json(of_oracle.ratio) : undefined},
-         {"freed_of_oracle_ci95",
-          against_oracle ? nlohmann::json({of_oracle.low, of_oracle.high}) : undefined},
+         {"freed_of_oracle_ci95", against_oracle && std::isfinite(of_oracle.low)
+                                      ? nlohmann::json({of_oracle.low, of_oracle.high})
+                                      : undefined},
          {"seal_broke_of_oracle", share(both_broke, both_oracle_broke)}});
   }
   return out;

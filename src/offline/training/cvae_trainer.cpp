@@ -1,7 +1,10 @@
 #include "simstack/offline/training/cvae_trainer.h"
 
 #include <ATen/CPUGeneratorImpl.h>
+#include <fcntl.h>
 #include <omp.h>
+#include <sys/file.h>
+#include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -572,7 +575,8 @@ int64_t CvaeTrainer::Impl::restore(Cvae& model, torch::optim::Adam& optimizer,
   const fs::path checkpoint = out / "checkpoint.pt";
   // The network is the checkpoint's; the losses are this config's (training a model further
   // may change them), and the saved files say so.
-  const bool same = model->config().toYaml() == mc.toYaml();
+  const std::string saved = model->config().toYaml();
+  const bool same = saved == mc.toYaml();
   try {
     model->setConfig(mc);
   } catch (const std::invalid_argument&) {
@@ -586,7 +590,9 @@ int64_t CvaeTrainer::Impl::restore(Cvae& model, torch::optim::Adam& optimizer,
                                          : "") +
         "; --init-from warm-starts another)");
   }
-  if (!same) std::cerr << "the checkpoint's loss settings are replaced by the config's\n";
+  if (!same)
+    std::cerr << "the checkpoint's loss settings are replaced by the config's: "
+              << differingLines(saved, mc.toYaml()) << "\n";
   // The checkpoint holds its step and the optimizer's state (resumeFrom checked its format).
   torch::serialize::InputArchive archive;
   archive.load_from(checkpoint.string());
@@ -597,7 +603,6 @@ int64_t CvaeTrainer::Impl::restore(Cvae& model, torch::optim::Adam& optimizer,
                              " holds no step or optimizer state: it cannot be resumed");
   optimizer.load(adam);
   const int64_t start = step.toInt();
-  torch::manual_seed(mix(config.seed, static_cast<uint64_t>(start)));
   std::cerr << "resuming from step " << start << " (" << checkpoint.string() << ")\n";
   return start;
 }
@@ -914,11 +919,44 @@ void CvaeTrainer::Impl::saveCheckpoint(Cvae& model, torch::optim::Adam& optimize
   fs::rename(state_tmp, out / "state.yaml");
 }
 
+namespace {
+
+/// The run directory held by one trainer for its run: a second (a --resume started twice)
+/// would write the same checkpoint and log. flock on the directory itself: released when the
+/// process ends, however it ends, and nothing is left behind.
+class RunDirectoryLock {
+ public:
+  explicit RunDirectoryLock(const fs::path& dir)
+      : fd_(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC)) {
+    if (fd_ < 0)
+      throw std::runtime_error("cannot open the run directory " + dir.string() + ": " +
+                               std::strerror(errno));
+    if (::flock(fd_, LOCK_EX | LOCK_NB) == 0) return;
+    const int err = errno;
+    ::close(fd_);
+    throw std::runtime_error(err == EWOULDBLOCK
+                                 ? "another training runs in " + dir.string() +
+                                       " (it holds the directory): let it end, or stop it "
+                                       "and --resume"
+                                 : "cannot lock the run directory " + dir.string() + ": " +
+                                       std::strerror(err));
+  }
+  ~RunDirectoryLock() { ::close(fd_); }
+  RunDirectoryLock(const RunDirectoryLock&) = delete;
+  RunDirectoryLock& operator=(const RunDirectoryLock&) = delete;
+
+ private:
+  int fd_;
+};
+
+}  // namespace
+
 TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& progress,
                                 const std::function<bool()>& stop) {
   const TrainConfig& tc = impl_->config;
   const CvaeConfig& mc = impl_->model_config;
   const fs::path out(impl_->output_dir);
+  const RunDirectoryLock lock(out);
   torch::set_num_threads(tc.threads);
   torch::manual_seed(tc.seed);
   const fs::path checkpoint = out / "checkpoint.pt";
@@ -963,6 +1001,9 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
       }
       for (auto& group : optimizer.param_groups())
         static_cast<torch::optim::AdamOptions&>(group.options()).lr(learningRate(tc, step));
+      // The step's draws (posterior noise, the MMD's prior codes, dropout) from a stream of its
+      // own: a run stopped and resumed at any checkpoint trains as the uninterrupted one.
+      torch::manual_seed(mix(tc.seed, static_cast<uint64_t>(step)));
       optimizer.zero_grad();
       const CvaeOutput o = model->forward(batch.partial, batch.tsdf, batch.votes);
       const CvaeLosses l =

@@ -1,5 +1,8 @@
 #include "simstack/offline/training/model_writer.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -28,22 +31,46 @@ void saveCvae(const std::string& path, Cvae& model, const std::string& metadata,
   } catch (const c10::Error& e) {
     throw std::runtime_error("cannot write model " + path + ": " + e.what_without_backtrace());
   }
+  // Written, flushed to the disk and renamed: after a crash or a power loss the path holds the
+  // previous file or this one whole, never an empty or partial one.
   const std::string tmp = path + ".tmp";
-  {
-    std::ofstream file(tmp, std::ios::binary | std::ios::trunc);
-    const std::string data = bytes.str();
-    file.write(data.data(), static_cast<std::streamsize>(data.size()));
-    file.flush();
-    if (!file) {
-      const std::string why = std::strerror(errno);
-      file.close();
-      std::error_code ec;
-      std::filesystem::remove(tmp, ec);
-      throw std::runtime_error("cannot write model " + path + " (" + std::to_string(data.size()) +
-                               " bytes): " + why + "; the file there stays as it was");
+  const std::string data = bytes.str();
+  const auto fail = [&](const std::string& doing) {
+    const std::string why = std::strerror(errno);
+    std::error_code ec;
+    std::filesystem::remove(tmp, ec);
+    return std::runtime_error("cannot write model " + path + " (" + std::to_string(data.size()) +
+                              " bytes, " + doing + "): " + why +
+                              "; the file there stays as it was");
+  };
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw fail("creating " + tmp);
+  for (size_t done = 0; done < data.size();) {
+    const ssize_t n = ::write(fd, data.data() + done, data.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int err = errno;
+      ::close(fd);
+      errno = err;
+      throw fail("writing");
     }
+    done += static_cast<size_t>(n);
   }
-  std::filesystem::rename(tmp, path);  // a crash never leaves half a file behind
+  if (::fsync(fd) != 0) {
+    const int err = errno;
+    ::close(fd);
+    errno = err;
+    throw fail("flushing");
+  }
+  if (::close(fd) != 0) throw fail("closing");
+  std::filesystem::rename(tmp, path);
+  // The rename itself reaches the disk with the directory's entry.
+  const std::string dir = std::filesystem::path(path).parent_path().string();
+  const int dfd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd >= 0) {
+    ::fsync(dfd);
+    ::close(dfd);
+  }
 }
 
 std::vector<std::string> warmStartCvae(Cvae& model, const std::string& path) {

@@ -57,24 +57,27 @@ void TrainConfig::validate() const {
   requireConfig(batch_size >= 2 && batch_size <= 1024,
                 "batch_size must lie in [2, 1024] (BatchNorm and MMD need a batch), not " +
                     std::to_string(batch_size));
-  requireConfig(learning_rate > 0.0, "learning_rate must be > 0");
-  requireConfig(final_learning_rate > 0.0 && final_learning_rate <= learning_rate,
-                "final_learning_rate must be > 0 and <= learning_rate");
-  requireConfig(steps >= 1, "steps must be >= 1");
-  requireConfig(threads >= 1 && threads <= 256, "threads must lie in [1, 256]");
-  requireConfig(checkpoint_every >= 1 && validate_every >= 1,
-                "checkpoint_every and validate_every must be >= 1");
-  requireConfig(validation_scenes >= 1, "validation_scenes must be >= 1");
+  requireConfig(learning_rate > 0.0, "learning_rate must be > 0" + gotValue(learning_rate));
+  requireConfig(
+      final_learning_rate > 0.0 && final_learning_rate <= learning_rate,
+      "final_learning_rate must be > 0 and <= learning_rate" + gotValue(final_learning_rate));
+  requireConfig(steps >= 1, "steps must be >= 1" + gotValue(steps));
+  requireConfig(threads >= 1 && threads <= 256, "threads must lie in [1, 256]" + gotValue(threads));
+  requireConfig(checkpoint_every >= 1,
+                "checkpoint_every must be >= 1" + gotValue(checkpoint_every));
+  requireConfig(validate_every >= 1, "validate_every must be >= 1" + gotValue(validate_every));
+  requireConfig(validation_scenes >= 1,
+                "validation_scenes must be >= 1" + gotValue(validation_scenes));
   requireConfig(validation_views >= 1 && validation_views <= 64,
                 "validation_views must lie in [1, 64], not " + std::to_string(validation_views));
   requireConfig(validation_samples >= 2 && validation_samples <= 256,
-                "validation_samples must lie in [2, 256]");
+                "validation_samples must lie in [2, 256]" + gotValue(validation_samples));
   requireConfig(
       image_width >= 16 && image_height >= 16 && image_width <= 4096 && image_height <= 4096,
       "image_width and image_height must lie in [16, 4096], not " + std::to_string(image_width) +
           "x" + std::to_string(image_height));
   requireConfig(overhead_share >= 0.0 && overhead_share <= 1.0,
-                "overhead_share must lie in [0, 1]");
+                "overhead_share must lie in [0, 1]" + gotValue(overhead_share));
   parseSensorModel(sensor_model);  // throws naming the value and the choices
 }
 

@@ -95,6 +95,11 @@ std::vector<std::unique_ptr<EvaluatedMethod>> multiViewMethods(
     const std::vector<PerceptionConfig>& configs, int refine_iterations, double extent_m,
     int resolution, double truncation_m);
 
+/// `name`, or, when one of `methods` already has it, `name` + "_" + the method's index: two
+/// models of one architecture make two rows.
+std::string distinctName(const std::string& name,
+                         const std::vector<std::unique_ptr<EvaluatedMethod>>& methods);
+
 /// The methods of the dataset protocol: one NetworkMethod per config with random latent codes
 /// (not the zero code first, as the paper evaluates), named by architecture (a repeated
 /// architecture gets the method's index appended), then the classical baseline with the first

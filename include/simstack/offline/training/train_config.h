@@ -19,7 +19,7 @@ struct TrainConfig {
   int64_t steps = 6000;  ///< optimiser steps
   int threads = 2;       ///< torch intra-op threads
   uint64_t seed = 1;
-  int checkpoint_every = 200;  ///< steps between checkpoints (and CSV flushes)
+  int checkpoint_every = 200;  ///< steps between checkpoints
   int validate_every = 500;    ///< steps between validations
   /// The last scenes of the dataset, never trained on, each seen from `validation_views`
   /// random viewpoints. Piles differ more than the protocol does: per view the IoU spreads by
