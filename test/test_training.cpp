@@ -460,6 +460,30 @@ TEST(CvaeTrainer, AStopCheckpointsItsStepAndAFinishedRunKeepsItsModel) {
   EXPECT_NEAR(again.posterior_mu_rms, finished.posterior_mu_rms, 1e-6);
 }
 
+// A warm start from a parent trained on the same seed's piles: the validation piles it trained
+// on are counted, said and written in the card's provenance.
+TEST(CvaeTrainer, AWarmStartSaysWhichValidationPilesItsParentTrainedOn) {
+  const TrainingScratch scratch("simstack_warm_overlap");
+  const auto& [parent, child, apart] = scratch.dirs;
+  TrainConfig tc = scratch.tc;
+  tc.steps = 1;
+  CvaeTrainer(scratch.data, tiny(), tc, parent, "test").run(false);  // trained on scenes 0, 1
+  tc.init_from = parent + "/model.pt";
+  tc.validation_scenes = 2;  // scenes 1 and 2: the parent trained on 1
+  CvaeTrainer overlapping(scratch.data, tiny(), tc, child, "test");
+  EXPECT_NE(overlapping.note().find("1 of the last 2 piles, this run's validation, were trained on "
+                                    "by " +
+                                    tc.init_from),
+            std::string::npos)
+      << overlapping.note();
+  overlapping.run(false);
+  const YAML::Node provenance = loadYamlFile(child + "/model.yaml", "model card")["provenance"];
+  EXPECT_EQ(provenance["validation_trained_by_parent"].as<int>(), 1);
+  tc.validation_scenes = 1;  // the parent's own validation pile: nothing to say
+  const CvaeTrainer separate(scratch.data, tiny(), tc, apart, "test");
+  EXPECT_EQ(separate.note(), "");
+}
+
 // Two trainings in one run directory would write one checkpoint: the second is refused, and
 // the run's files stay as they were.
 TEST(CvaeTrainer, ASecondTrainingInARunDirectoryIsRefused) {

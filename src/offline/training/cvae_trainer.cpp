@@ -455,14 +455,41 @@ double learningRate(const TrainConfig& tc, int64_t step) {
          0.5 * (tc.learning_rate - tc.final_learning_rate) * (1.0 + std::cos(M_PI * progress));
 }
 
+namespace {
+
+/// How many of the last `validation_scenes` piles of `data` the warm start's parent `init_from`
+/// trained on, from its provenance (model.pt's metadata: its dataset's seed, scene count and
+/// validation split; scene i depends on the seed and i alone). 0 for a mix, another seed, or a
+/// parent that records none.
+int validationTrainedByParent(const std::string& init_from, const DatasetMix& data,
+                              int validation_scenes) {
+  if (init_from.empty() || data.files() != 1 || !fs::exists(init_from)) return 0;
+  std::string metadata;
+  try {
+    loadCvae(init_from, nullptr, &metadata);
+    const YAML::Node p = YAML::Load(metadata);
+    if (!p.IsMap() || !p["dataset_seed"] || !p["dataset_scenes"] || !p["validation_scenes"])
+      return 0;
+    if (p["dataset_seed"].as<std::string>() != std::to_string(data.file(0).info().seed)) return 0;
+    const long trained = p["dataset_scenes"].as<long>() - p["validation_scenes"].as<long>();
+    const long first_validation = data.size() - validation_scenes;
+    return static_cast<int>(std::max(0L, std::min<long>(trained, data.size()) - first_validation));
+  } catch (const std::exception&) {  // a checkpoint or an older file: no provenance to compare
+    return 0;
+  }
+}
+
+}  // namespace
+
 struct CvaeTrainer::Impl {
   std::string output_dir, command_line;
   CvaeConfig model_config;
   TrainConfig config;
   std::unique_ptr<DatasetMix> data;
   int train_scenes = 0;
-  std::string card_perception;  // the card's perception: section, read before training
-  std::string note;             // what the trainer chose for the user (CvaeTrainer::note)
+  std::string card_perception;        // the card's perception: section, read before training
+  std::string note;                   // what the trainer chose for the user (CvaeTrainer::note)
+  int validation_seen_by_parent = 0;  // validation piles the warm start's parent trained on
 
   /// `trained_on` receives a resumed checkpoint's metadata (checkpointMetadata).
   Cvae loadOrCreate(bool resuming, const fs::path& checkpoint, std::string* trained_on) const;
@@ -510,6 +537,15 @@ CvaeTrainer::CvaeTrainer(const std::vector<std::string>& dataset_paths, const Cv
         " are the validation (--validation-scenes chooses)";
   }
   impl_->train_scenes = scenes - impl_->config.validation_scenes;
+  impl_->validation_seen_by_parent =
+      validationTrainedByParent(training.init_from, data, impl_->config.validation_scenes);
+  if (impl_->validation_seen_by_parent > 0)
+    impl_->note +=
+        (impl_->note.empty() ? "" : "; ") + std::to_string(impl_->validation_seen_by_parent) +
+        " of the last " + std::to_string(impl_->config.validation_scenes) +
+        " piles, this run's validation, were trained on by " + training.init_from +
+        " (same seed): its validation figures flatter it (the card's provenance says "
+        "so); --validation-scenes at most the parent's, or another seed, keeps them apart";
   std::error_code ec;
   fs::create_directories(output_dir, ec);
   if (ec)
@@ -735,6 +771,8 @@ void CvaeTrainer::Impl::writeModelFiles(const fs::path& out, Cvae& model,
   meta << YAML::Key << "validation_scenes" << YAML::Value << config.validation_scenes;
   meta << YAML::Key << "validation_views" << YAML::Value << config.validation_views;
   meta << YAML::Key << "validation_samples" << YAML::Value << config.validation_samples;
+  if (validation_seen_by_parent > 0)  // the warm start's parent trained on them
+    meta << YAML::Key << "validation_trained_by_parent" << YAML::Value << validation_seen_by_parent;
   meta << YAML::Key << "steps" << YAML::Value << report.steps;
   meta << YAML::Key << "final_losses" << YAML::Value << YAML::Flow << YAML::BeginMap << YAML::Key
        << "total" << YAML::Value << report.total << YAML::Key << "tsdf" << YAML::Value
