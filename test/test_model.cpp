@@ -883,7 +883,7 @@ TEST(ModelIntegrity, StampingADamagedFileLeavesTheCardAlone) {
   fs::remove(modelCardPath(path));
   EXPECT_THROW(stampModel(path), std::runtime_error);
   EXPECT_FALSE(fs::exists(modelCardPath(path)));
-  const std::string card = "samples: 3  # the user's card\n";
+  const std::string card = "perception:\n  samples: 3  # the user's card\n";
   std::ofstream(modelCardPath(path)) << card;
   EXPECT_THROW(stampModel(path), std::runtime_error);
   std::ifstream in(modelCardPath(path));

@@ -526,8 +526,8 @@ TEST(CvaeTrainer, ACheckpointWithoutAFormatVersionIsRefusedWithTheWayOn) {
 }
 
 TEST(CvaeTrainer, HowOftenARunValidatesDoesNotChangeWhatItTrains) {
-  // Validation draws the posterior's noise from torch's global stream; it leaves the stream
-  // as it found it.
+  // Validation draws from streams of its own, and each step from its own: how often a run
+  // validates does not change what it trains.
   const TrainingScratch scratch("simstack_validate_every");
   const auto& [often, rarely, unused] = scratch.dirs;
   TrainConfig tc = scratch.tc;
@@ -536,6 +536,24 @@ TEST(CvaeTrainer, HowOftenARunValidatesDoesNotChangeWhatItTrains) {
   tc.validate_every = 3;
   CvaeTrainer(scratch.data, tiny(), tc, rarely, "test").run(false);  // at 3, 6
   EXPECT_TRUE(torch::equal(probe(often + "/model.pt"), probe(rarely + "/model.pt")));
+}
+
+// Loss settings may change on a resume: the fields changed are named, a list as a whole.
+TEST(CvaeTrainer, AResumeWithOtherLossSettingsNamesThem) {
+  const TrainingScratch scratch("simstack_resume_losses");
+  const std::string& run = scratch.dirs[0];
+  TrainConfig half = scratch.tc;
+  half.steps = 2;
+  CvaeTrainer(scratch.data, tiny(), half, run, "test").run(false);
+  CvaeConfig widths = tiny();
+  widths.mmd_kernel_widths = {0.5, 1.0, 2.0};
+  testing::internal::CaptureStderr();
+  CvaeTrainer(scratch.data, widths, scratch.tc, run, "test").run(true);
+  const std::string said = testing::internal::GetCapturedStderr();
+  EXPECT_NE(said.find("loss settings are replaced by the config's: mmd_kernel_widths: [1] "
+                      "(checkpoint) against mmd_kernel_widths: [0.5, 1, 2] (config)\n"),
+            std::string::npos)
+      << said;
 }
 
 // A resume that would rewind a run, mix two datasets or change its network is refused by name,

@@ -6,10 +6,11 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <charconv>
 #include <set>
-#include <sstream>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 #include "simstack/io/yaml_file.h"
 
@@ -37,11 +38,23 @@ inline void requireConfig(bool ok, const std::string& what) {
   if (!ok) throw std::invalid_argument(what);
 }
 
-/// ", got V": the value a refusal names, as the file writes it (0.0002, not 0.000200).
-inline std::string gotValue(double v) {
-  std::ostringstream out;
-  out << v;
-  return ", got " + out.str();
+/// A config value as the file writes it (0.0002, not 0.000200; a count as a whole number;
+/// 0.0010000004 to the last digit that tells it from 0.001).
+template <typename T>
+std::string configValue(T v) {
+  if constexpr (std::is_integral_v<T>) {
+    return std::to_string(v);
+  } else {
+    char text[64];
+    const std::to_chars_result r = std::to_chars(text, text + sizeof(text), static_cast<double>(v));
+    return std::string(text, r.ptr);
+  }
+}
+
+/// ", got V": the value a refusal names (configValue).
+template <typename T>
+std::string gotValue(T v) {
+  return ", got " + configValue(v);
 }
 
 // A misspelt field in a file the user writes must not fall back to its default unnoticed

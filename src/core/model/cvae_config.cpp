@@ -184,10 +184,15 @@ std::string modelCardPath(const std::string& model_path) {
 
 YAML::Node loadModelCard(const std::string& card_path) {
   const YAML::Node root = loadYamlFile(card_path, "model card");
-  if (!root.IsMap()) throw std::runtime_error(card_path + ": a model card is a YAML map");
+  if (!root.IsMap())
+    throw std::runtime_error(card_path + (root.IsNull() ? ": the model card is empty" : "") +
+                             ": a model card is a YAML map of sections (model, training, "
+                             "provenance, perception, evaluation, integrity)");
   static const std::set<std::string> kSections = {"model",      "training",   "provenance",
                                                   "perception", "evaluation", "integrity"};
   for (const auto& kv : root) {
+    if (!kv.first.IsScalar())
+      throw std::runtime_error(card_path + ": a section name that is not a word");
     const std::string key = kv.first.as<std::string>();
     if (!kSections.count(key))
       throw std::runtime_error(card_path + ": unknown section '" + key +

@@ -11,8 +11,7 @@
 #include <stdexcept>
 
 #include "simstack/io/yaml_file.h"
-#include "simstack/model/cvae_config.h"
-#include "simstack/model/cvae_config.h"  // modelCardPath
+#include "simstack/model/cvae_config.h"  // modelCardPath, loadModelCard
 
 namespace simstack {
 

@@ -345,20 +345,29 @@ std::string runCardPerceptionSection(const fs::path& card) {
          ") when it was resumed\n" + e.c_str() + "\n";
 }
 
-/// The lines of two YAML texts from the same emitter that differ ("  key: a" against
-/// "  key: b"), as "key: a (checkpoint) against key: b (config)" clauses.
+/// The fields of two YAML maps (a config's toYaml) whose values differ, as "key: a (checkpoint)
+/// against key: b (config)" clauses; a list is compared whole (written [1, 2]).
 std::string differingLines(const std::string& checkpoint, const std::string& config) {
-  std::istringstream a(checkpoint), b(config);
-  std::string out, la, lb;
-  while (std::getline(a, la) && std::getline(b, lb)) {
-    if (la == lb) continue;
-    auto trim = [](const std::string& s) {
-      const size_t first = s.find_first_not_of(' ');
-      return first == std::string::npos ? std::string() : s.substr(first);
-    };
-    out += (out.empty() ? "" : "; ") + trim(la) + " (checkpoint) against " + trim(lb) + " (config)";
-  }
-  return out.empty() ? "their YAML differs in length" : out;
+  const YAML::Node a = YAML::Load(checkpoint), b = YAML::Load(config);
+  const auto text = [](const YAML::Node& n) {
+    if (!n) return std::string("(none)");
+    YAML::Node flow = YAML::Clone(n);  // a list on one line
+    flow.SetStyle(YAML::EmitterStyle::Flow);
+    YAML::Emitter e;
+    e << flow;
+    return std::string(e.c_str());
+  };
+  std::string out;
+  const auto differ = [&](const std::string& key) {
+    const std::string was = text(a[key]), is = text(b[key]);
+    if (was != is)
+      out += (out.empty() ? "" : "; ") + key + ": " + was + " (checkpoint) against " + key + ": " +
+             is + " (config)";
+  };
+  for (const auto& kv : a) differ(kv.first.as<std::string>());
+  for (const auto& kv : b)
+    if (!a[kv.first.as<std::string>()]) differ(kv.first.as<std::string>());
+  return out.empty() ? "no field differs" : out;
 }
 
 /// The data a run trains on as a checkpoint records it (one line; the files' tags joined by

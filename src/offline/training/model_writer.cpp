@@ -43,7 +43,8 @@ void saveCvae(const std::string& path, Cvae& model, const std::string& metadata,
                               " bytes, " + doing + "): " + why +
                               "; the file there stays as it was");
   };
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  const int fd =
+      ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);  // the umask applies
   if (fd < 0) throw fail("creating " + tmp);
   for (size_t done = 0; done < data.size();) {
     const ssize_t n = ::write(fd, data.data() + done, data.size() - done);

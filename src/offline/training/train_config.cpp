@@ -58,9 +58,9 @@ void TrainConfig::validate() const {
                 "batch_size must lie in [2, 1024] (BatchNorm and MMD need a batch), not " +
                     std::to_string(batch_size));
   requireConfig(learning_rate > 0.0, "learning_rate must be > 0" + gotValue(learning_rate));
-  requireConfig(
-      final_learning_rate > 0.0 && final_learning_rate <= learning_rate,
-      "final_learning_rate must be > 0 and <= learning_rate" + gotValue(final_learning_rate));
+  requireConfig(final_learning_rate > 0.0 && final_learning_rate <= learning_rate,
+                "final_learning_rate must be > 0 and <= learning_rate (" +
+                    configValue(learning_rate) + ")" + gotValue(final_learning_rate));
   requireConfig(steps >= 1, "steps must be >= 1" + gotValue(steps));
   requireConfig(threads >= 1 && threads <= 256, "threads must lie in [1, 256]" + gotValue(threads));
   requireConfig(checkpoint_every >= 1,

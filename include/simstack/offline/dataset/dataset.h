@@ -95,8 +95,9 @@ class DatasetReader {
 class DatasetMix {
  public:
   /// Opens the files (DatasetReader's `mesh_dir` for each). Throws std::runtime_error naming
-  /// the file that cannot be read or whose grids (resolution, extent, truncation) differ
-  /// from the first file's, and std::invalid_argument for an empty list.
+  /// the file that cannot be read, whose grids (resolution, extent, truncation) differ from
+  /// the first file's, or that holds the same piles as another (one seed and the same first
+  /// pile: one file twice), and std::invalid_argument for an empty list.
   explicit DatasetMix(const std::vector<std::string>& paths, const std::string& mesh_dir = "");
   ~DatasetMix();
   int size() const { return static_cast<int>(order_.size()); }

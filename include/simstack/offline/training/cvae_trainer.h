@@ -98,7 +98,8 @@ class CvaeTrainer {
   /// after every step from the calling thread. `stop`, when given, is asked after every step:
   /// true writes a checkpoint at that step and throws TrainingStopped. A resumed run that had
   /// reached its steps and written its model leaves model.pt and its card as they are and
-  /// reports the card's figures.
+  /// reports the card's figures. The run holds its directory (flock): a second run in it
+  /// meanwhile throws std::runtime_error saying so.
   TrainingReport run(bool resume, const TrainingProgressCallback& progress = {},
                      const std::function<bool()>& stop = {});
 
