@@ -662,6 +662,27 @@ TEST(GraspRanking, ATargetTooHeavyForTheCupSaysThatNoGraspHeld) {
   EXPECT_TRUE(light6.grasps.front().freed());
 }
 
+TEST(GraspRanking, AListWhoseHeldGraspsFreeTheTargetInFewerHypothesesSaysSo) {
+  const auto grasp = [](double failed, double freed) {
+    RankedGrasp g;
+    g.outcomes.resize(3);
+    g.failed_share = failed;
+    g.freed_share = freed;
+    return g;
+  };
+  // Held everywhere but freeing in no hypothesis, before one that frees in two of three and
+  // slips in the third: the first grasp with held true would leave the target in place.
+  const std::string note = outcomeNote({grasp(0.0, 0.0), grasp(1.0 / 3, 2.0 / 3)});
+  EXPECT_NE(note.find("no grasp both held and freed the target in every hypothesis"),
+            std::string::npos)
+      << note;
+  // One that holds and frees everywhere: nothing to say.
+  EXPECT_EQ(outcomeNote({grasp(0.0, 1.0), grasp(0.0, 0.0)}), "");
+  // None freed anywhere, or none held everywhere: the notes of their own, not this one.
+  EXPECT_EQ(outcomeNote({grasp(0.0, 0.0)}).find("both held and freed"), std::string::npos);
+  EXPECT_EQ(outcomeNote({grasp(1.0 / 3, 2.0 / 3)}).find("both held and freed"), std::string::npos);
+}
+
 TEST(GraspRanking, TheSceneBottomIsItsLowestSurface) {
   std::vector<SuperquadricShape> pile = fourObjects();
   EXPECT_NEAR(sceneBottom(pile), 0.0, 1e-3);

@@ -1,11 +1,12 @@
 // Grasp ranking: 64 candidates on a fixed 4-object pile, simulated in H = 1 and H = 3 scene
 // hypotheses on 1 and 2 threads (the 1-thread run is the peer of the 2-thread one), with and
-// without perturbed copies of the scene, and the candidate search alone. Counters: pulls
-// simulated per second.
+// without perturbed copies of the scene, the candidate search alone, and the service's check
+// of the target's surface cloud. Counters: pulls simulated per second.
 #include <benchmark/benchmark.h>
 
 #include "../test_scenes.h"
 #include "simstack/grasping/grasp_ranking.h"
+#include "simstack/grasping/grasp_request.h"
 
 using namespace simstack;
 
@@ -90,5 +91,30 @@ static void BM_SuctionCandidates(benchmark::State& state) {
   state.counters["sealable"] = sealable;
 }
 BENCHMARK(BM_SuctionCandidates)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The grasp service's check that a target's surface cloud lies on its superquadric, on N points
+// of the target's surface (on: every point passes along the ray from the centre) and on the same
+// points 25 cm aside (off: every judged point takes the Euclidean search, the worst case). Peer:
+// BM_RankGrasps/H:1/threads:2, the ranking the check precedes.
+static void BM_MeasuredOffTarget(benchmark::State& state) {
+  const SuperquadricShape target = hypotheses(1).front()[kTarget];
+  const std::vector<Vec3> surface = target.meshObject(48).vertices;
+  Points3 cloud;
+  const Vec3 aside = state.range(1) ? Vec3(0.25, 0.0, 0.0) : Vec3::Zero();
+  while (cloud.size() < static_cast<size_t>(state.range(0)))
+    for (const Vec3& v : surface) cloud.push_back(target.T_table_object * v + aside);
+  cloud.resize(static_cast<size_t>(state.range(0)));
+  bool refused = false;
+  for (auto _ : state) refused = !measuredOffTarget(cloud, target).empty();
+  state.counters["refused"] = refused;
+}
+BENCHMARK(BM_MeasuredOffTarget)
+    ->ArgNames({"points", "off"})
+    ->Args({2000, 0})
+    ->Args({2000, 1})
+    ->Args({100000, 0})
+    ->Args({100000, 1})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 BENCHMARK_MAIN();

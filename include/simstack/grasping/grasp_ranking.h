@@ -129,6 +129,12 @@ PullOutcome executeGrasp(const PullSimulator& simulator,
 /// simulated, so it ends within one pull per thread.
 using RankingProgress = std::function<bool(int done, int total, const RankedGrasp* best)>;
 
+/// What the caller should know of ranked grasps as a whole ("" when nothing): that none held
+/// (in any hypothesis, or in all of them), that none freed the target, or that none both held
+/// and freed it in every hypothesis. Each grasp's shares say it too, but a list ranked best
+/// first reads as if its first grasp were a good one. rankGrasps adds it to its message.
+std::string outcomeNote(const std::vector<RankedGrasp>& grasps);
+
 /// Appends `note` to a ranking's or a request's message; notes are joined by "; ".
 void addNote(std::string* message, const std::string& note);
 

@@ -16,11 +16,7 @@
 #include <thread>
 
 namespace simstack {
-namespace {
 
-/// What the caller should know of the ranked grasps as a whole: that none held (in any
-/// hypothesis, or in all of them), that none freed the target. Each grasp's shares say it too,
-/// but a list ranked best first reads as if its first grasp were a good one.
 std::string outcomeNote(const std::vector<RankedGrasp>& grasps) {
   if (grasps.empty()) return {};
   auto any = [&](auto pred) { return std::any_of(grasps.begin(), grasps.end(), pred); };
@@ -34,8 +30,16 @@ std::string outcomeNote(const std::vector<RankedGrasp>& grasps) {
   if (!any([](const RankedGrasp& g) { return g.freed_share > 0.0; }))
     addNote(&note,
             "no grasp freed the target in any hypothesis (it stayed against another object)");
+  else if (any([](const RankedGrasp& g) { return g.held(); }) &&
+           !any([](const RankedGrasp& g) { return g.held() && g.freed(); }))
+    // Failures rank first: the first grasp that held everywhere may free the target in none.
+    addNote(&note,
+            "no grasp both held and freed the target in every hypothesis: the first that held "
+            "frees it in fewer (each grasp's freed_share says in how many)");
   return note;
 }
+
+namespace {
 
 // Runs job(i) for i in [0, count) on `threads` threads. Each job writes only its own result,
 // so the outcome does not depend on the thread count. The first exception is rethrown.
