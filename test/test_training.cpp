@@ -470,18 +470,65 @@ TEST(CvaeTrainer, AWarmStartSaysWhichValidationPilesItsParentTrainedOn) {
   CvaeTrainer(scratch.data, tiny(), tc, parent, "test").run(false);  // trained on scenes 0, 1
   tc.init_from = parent + "/model.pt";
   tc.validation_scenes = 2;  // scenes 1 and 2: the parent trained on 1
-  CvaeTrainer overlapping(scratch.data, tiny(), tc, child, "test");
-  EXPECT_NE(overlapping.note().find("1 of the last 2 piles, this run's validation, were trained on "
-                                    "by " +
-                                    tc.init_from),
+  tc.steps = 4;
+  // Stopped after its first step and resumed (without --init-from, as a resume is started):
+  // the count is the run's parent's, said again, and in the finished card.
+  try {
+    CvaeTrainer(scratch.data, tiny(), tc, child, "test").run(false, {}, [] { return true; });
+    ADD_FAILURE() << "a run asked to stop trained on";
+  } catch (const TrainingStopped&) {
+  }
+  TrainConfig resumed = tc;
+  resumed.init_from.clear();
+  testing::internal::CaptureStderr();
+  CvaeTrainer(scratch.data, tiny(), resumed, child, "test").run(true);
+  const std::string said = testing::internal::GetCapturedStderr();
+  EXPECT_NE(said.find("note: 1 of the last 2 piles, this run's validation, were trained on by " +
+                      tc.init_from),
             std::string::npos)
-      << overlapping.note();
-  overlapping.run(false);
+      << said;
+  EXPECT_NE(said.find("from pile 2 on, the parent trained on none"), std::string::npos) << said;
   const YAML::Node provenance = loadYamlFile(child + "/model.yaml", "model card")["provenance"];
   EXPECT_EQ(provenance["validation_trained_by_parent"].as<int>(), 1);
   tc.validation_scenes = 1;  // the parent's own validation pile: nothing to say
-  const CvaeTrainer separate(scratch.data, tiny(), tc, apart, "test");
-  EXPECT_EQ(separate.note(), "");
+  tc.steps = 1;
+  testing::internal::CaptureStderr();
+  CvaeTrainer(scratch.data, tiny(), tc, apart, "test").run(false);
+  EXPECT_EQ(testing::internal::GetCapturedStderr().find("were trained on by"), std::string::npos);
+  EXPECT_FALSE(loadYamlFile(apart + "/model.yaml",
+                            "model card")["provenance"]["validation_trained_by_parent"]);
+}
+
+// A refused setting is named with its value as written: a count whole, a rate to the digit
+// that tells it from its neighbour.
+TEST(TrainConfig, ARefusedValueIsNamedAsWritten) {
+  const auto refusal = [](const TrainConfig& t) {
+    try {
+      t.validate();
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("(accepted)");
+  };
+  TrainConfig rate;
+  rate.learning_rate = 0.0002;
+  rate.final_learning_rate = 0.00020000004;
+  EXPECT_NE(refusal(rate).find("<= learning_rate (0.0002), got 0.00020000004"), std::string::npos)
+      << refusal(rate);
+  TrainConfig steps;
+  steps.steps = -1234567;
+  EXPECT_NE(refusal(steps).find("steps must be >= 1, got -1234567"), std::string::npos)
+      << refusal(steps);
+  CvaeConfig weights;
+  weights.gamma = -1.0;
+  try {
+    weights.validate();
+    ADD_FAILURE() << "a negative loss weight was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("gamma (a loss weight) must be >= 0, got -1"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 // Two trainings in one run directory would write one checkpoint: the second is refused, and
@@ -547,11 +594,16 @@ TEST(CvaeTrainer, AResumeWithOtherLossSettingsNamesThem) {
   CvaeTrainer(scratch.data, tiny(), half, run, "test").run(false);
   CvaeConfig widths = tiny();
   widths.mmd_kernel_widths = {0.5, 1.0, 2.0};
+  widths.tsdf_epsilon = 0.05;  // stored as 0.050000000000000003, written as 0.05
   testing::internal::CaptureStderr();
   CvaeTrainer(scratch.data, widths, scratch.tc, run, "test").run(true);
   const std::string said = testing::internal::GetCapturedStderr();
-  EXPECT_NE(said.find("loss settings are replaced by the config's: mmd_kernel_widths: [1] "
-                      "(checkpoint) against mmd_kernel_widths: [0.5, 1, 2] (config)\n"),
+  EXPECT_NE(said.find("loss settings are replaced by the config's: "), std::string::npos) << said;
+  EXPECT_NE(said.find("mmd_kernel_widths: [1] (checkpoint) against mmd_kernel_widths: [0.5, 1, "
+                      "2] (config)"),
+            std::string::npos)
+      << said;
+  EXPECT_NE(said.find("tsdf_epsilon: 0.01 (checkpoint) against tsdf_epsilon: 0.05 (config)"),
             std::string::npos)
       << said;
 }

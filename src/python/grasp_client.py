@@ -10,9 +10,10 @@ pull held.
     target = grasp_client.top_object(scene)          # or any id of scene.objects
     res = grasp_client.rank_grasps(scene, target, target_frame="base_link")
     held = grasp_client.held_grasps(res)             # best first; empty: no pull held
-    if held:
-        tool = held[0].tool_pose                     # PoseStamped in base_link, z into the surface
-        pregrasp = held[0].pregrasp_pose             # 5 cm back along the approach
+    best = next((g for g in held if g.freed), None)  # held and freed in every hypothesis
+    if best:
+        tool = best.tool_pose                        # PoseStamped in base_link, z into the surface
+        pregrasp = best.pregrasp_pose                # 5 cm back along the approach
 
 Object ids stay with their objects from frame to frame, so an id chosen from one scene names
 the same object in the next while it stays where it was.

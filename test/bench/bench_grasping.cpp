@@ -94,8 +94,8 @@ BENCHMARK(BM_SuctionCandidates)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // The grasp service's check that a target's surface cloud lies on its superquadric, on N points
 // of the target's surface (on: every point passes along the ray from the centre) and on the same
-// points 25 cm aside (off: every judged point takes the Euclidean search, the worst case). Peer:
-// BM_RankGrasps/H:1/threads:2, the ranking the check precedes.
+// points 25 cm aside (off: the refused case, every point beyond the bounding sphere and passed
+// over without a surface search). Peer: BM_RankGrasps/H:1/threads:2, the ranking it precedes.
 static void BM_MeasuredOffTarget(benchmark::State& state) {
   const SuperquadricShape target = hypotheses(1).front()[kTarget];
   const std::vector<Vec3> surface = target.meshObject(48).vertices;

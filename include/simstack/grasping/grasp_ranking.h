@@ -95,7 +95,8 @@ struct GraspRanking {
   /// What the caller should know, notes joined by "; " (empty when all is well): hypotheses
   /// left out, no sealable surface, objects that moved more than
   /// SceneDrift::kMovedWhileSettling_m while settling, no grasp that held (in any hypothesis, or
-  /// in every one), no grasp that freed the target.
+  /// in every one), no grasp that freed the target, no grasp that both held and freed it in
+  /// every hypothesis (outcomeNote).
   std::string message;
 };
 

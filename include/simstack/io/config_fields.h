@@ -46,7 +46,8 @@ std::string configValue(T v) {
     return std::to_string(v);
   } else {
     char text[64];
-    const std::to_chars_result r = std::to_chars(text, text + sizeof(text), static_cast<double>(v));
+    const std::to_chars_result r = std::to_chars(text, text + sizeof(text), static_cast<double>(v),
+                                                 std::chars_format::general);
     return std::string(text, r.ptr);
   }
 }

@@ -32,7 +32,8 @@ std::string outcomeNote(const std::vector<RankedGrasp>& grasps) {
             "no grasp freed the target in any hypothesis (it stayed against another object)");
   else if (any([](const RankedGrasp& g) { return g.held(); }) &&
            !any([](const RankedGrasp& g) { return g.held() && g.freed(); }))
-    // Failures rank first: the first grasp that held everywhere may free the target in none.
+    // Whether the seal held is the first sort key: a grasp that held everywhere and freed the
+    // target in none ranks before one that freed it in two of three and slipped in the third.
     addNote(&note,
             "no grasp both held and freed the target in every hypothesis: the first that held "
             "frees it in fewer (each grasp's freed_share says in how many)");

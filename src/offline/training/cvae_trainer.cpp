@@ -26,6 +26,7 @@
 #include <thread>
 #include <tuple>
 
+#include "simstack/io/config_fields.h"
 #include "simstack/io/staged_output.h"
 #include "simstack/io/yaml_file.h"
 #include "simstack/model/cvae.h"
@@ -345,18 +346,30 @@ std::string runCardPerceptionSection(const fs::path& card) {
          ") when it was resumed\n" + e.c_str() + "\n";
 }
 
+/// A config value as a person writes it: numbers in their shortest form (toYaml stores 0.05 as
+/// 0.050000000000000003), a list on one line ([0.5, 1, 2]).
+std::string writtenValue(const YAML::Node& n) {
+  if (!n) return "(none)";
+  if (n.IsSequence() || n.IsMap()) {
+    std::string out = n.IsSequence() ? "[" : "{";
+    for (auto it = n.begin(); it != n.end(); ++it) {
+      if (it != n.begin()) out += ", ";
+      out += n.IsSequence() ? writtenValue(*it)
+                            : it->first.as<std::string>() + ": " + writtenValue(it->second);
+    }
+    return out + (n.IsSequence() ? "]" : "}");
+  }
+  const std::string s = n.Scalar();
+  char* end = nullptr;
+  const double v = std::strtod(s.c_str(), &end);
+  return !s.empty() && end == s.c_str() + s.size() ? configValue(v) : s;
+}
+
 /// The fields of two YAML maps (a config's toYaml) whose values differ, as "key: a (checkpoint)
-/// against key: b (config)" clauses; a list is compared whole (written [1, 2]).
+/// against key: b (config)" clauses; a list is compared whole.
 std::string differingLines(const std::string& checkpoint, const std::string& config) {
   const YAML::Node a = YAML::Load(checkpoint), b = YAML::Load(config);
-  const auto text = [](const YAML::Node& n) {
-    if (!n) return std::string("(none)");
-    YAML::Node flow = YAML::Clone(n);  // a list on one line
-    flow.SetStyle(YAML::EmitterStyle::Flow);
-    YAML::Emitter e;
-    e << flow;
-    return std::string(e.c_str());
-  };
+  const auto text = [](const YAML::Node& n) { return writtenValue(n); };
   std::string out;
   const auto differ = [&](const std::string& key) {
     const std::string was = text(a[key]), is = text(b[key]);
@@ -512,7 +525,23 @@ struct CvaeTrainer::Impl {
                       int64_t step) const;
   void writeModelFiles(const fs::path& out, Cvae& model, const TrainingReport& report,
                        bool posterior_measured) const;
+  /// Counts this run's validation piles that the run's parent `init_from` trained on, and says
+  /// so on stderr when there are some.
+  void noteValidationTrainedByParent(const std::string& init_from);
 };
+
+void CvaeTrainer::Impl::noteValidationTrainedByParent(const std::string& init_from) {
+  validation_seen_by_parent = validationTrainedByParent(init_from, *data, config.validation_scenes);
+  if (validation_seen_by_parent == 0) return;
+  const int first_validation = data->size() - config.validation_scenes;
+  std::cerr << "note: " << validation_seen_by_parent << " of the last " << config.validation_scenes
+            << " piles, this run's validation, were trained on by " << init_from
+            << " (same seed): its validation figures flatter it (the card's provenance says so); "
+               "from pile "
+            << first_validation + validation_seen_by_parent
+            << " on, the parent trained on none: fewer --validation-scenes, a larger dataset of "
+               "the seed, or another seed keeps them apart\n";
+}
 
 CvaeTrainer::CvaeTrainer(const std::vector<std::string>& dataset_paths, const CvaeConfig& model,
                          const TrainConfig& training, const std::string& output_dir,
@@ -546,15 +575,6 @@ CvaeTrainer::CvaeTrainer(const std::vector<std::string>& dataset_paths, const Cv
         " are the validation (--validation-scenes chooses)";
   }
   impl_->train_scenes = scenes - impl_->config.validation_scenes;
-  impl_->validation_seen_by_parent =
-      validationTrainedByParent(training.init_from, data, impl_->config.validation_scenes);
-  if (impl_->validation_seen_by_parent > 0)
-    impl_->note +=
-        (impl_->note.empty() ? "" : "; ") + std::to_string(impl_->validation_seen_by_parent) +
-        " of the last " + std::to_string(impl_->config.validation_scenes) +
-        " piles, this run's validation, were trained on by " + training.init_from +
-        " (same seed): its validation figures flatter it (the card's provenance says "
-        "so); --validation-scenes at most the parent's, or another seed, keeps them apart";
   std::error_code ec;
   fs::create_directories(output_dir, ec);
   if (ec)
@@ -1014,6 +1034,7 @@ TrainingReport CvaeTrainer::run(bool resume, const TrainingProgressCallback& pro
   std::string trained_on;  // the checkpoint's metadata
   Cvae model = impl_->loadOrCreate(resuming, checkpoint, &trained_on);
   const std::string init_from = resuming ? impl_->resumeFrom(trained_on, out) : tc.init_from;
+  impl_->noteValidationTrainedByParent(init_from);
   torch::optim::Adam optimizer(model->parameters(), torch::optim::AdamOptions(tc.learning_rate));
   const int64_t start = resuming ? impl_->restore(model, optimizer, out) : 0;
   if (start > tc.steps)
