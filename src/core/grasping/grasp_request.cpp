@@ -175,7 +175,7 @@ std::string measuredOffTarget(const Points3& points, const SuperquadricShape& ta
   if (points.empty()) return {};
   const size_t stride = (points.size() + kMeasuredJudged - 1) / kMeasuredJudged;
   const Transform T_object_table = target.T_table_object.inverse();
-  const std::vector<Vec3> mesh = distanceMesh(target);
+  std::vector<Vec3> mesh;                       // made for the first point the ray leaves undecided
   const double radius = target.scale_m.norm();  // the box of the semi-axes holds the shape
   size_t judged = 0, near = 0;
   for (size_t i = 0; i < points.size(); i += stride, ++judged) {
@@ -187,6 +187,7 @@ std::string measuredOffTarget(const Points3& points, const SuperquadricShape& ta
     const Vec3 q = T_object_table * points[i];
     // Beyond the bounding sphere by more than the limit (another object's cloud): far, no search.
     if (q.norm() - radius > kMeasuredNearShapeM) continue;
+    if (mesh.empty()) mesh = distanceMesh(target);
     if (distanceOutside(target, q, mesh) <= kMeasuredNearShapeM) ++near;
   }
   if (near >= kMeasuredNearShare * static_cast<double>(judged)) return {};

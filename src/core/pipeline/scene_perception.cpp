@@ -269,6 +269,17 @@ int joinOverlappingFits(const PerceptionConfig& config, const FitConfig& fit,
   }
 }
 
+/// Pixel (u, v)'s depth point in the table frame, when it is valid and at least
+/// `min_height_m` above the table (the pile's pixels, not the table's).
+std::optional<Vec3> pilePoint(const DepthView& view, const Transform& T_table_camera, int u, int v,
+                              double min_height_m) {
+  const float d = view.depth.at(u, v);
+  if (!validDepth(d)) return std::nullopt;
+  const Vec3 p = T_table_camera * view.camera.backproject(u, v, d);
+  if (p.z() < min_height_m) return std::nullopt;
+  return p;
+}
+
 }  // namespace
 
 void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings* timings,
@@ -398,11 +409,9 @@ void markTruncated(SceneHypothesis* h, const DepthView& given, const DepthView& 
   if (any_left_out) cv::dilate(left_out, near_left_out, cv::Mat());
   const auto nextToLeftOut = [&](int u, int v) { return near_left_out(v, u) != 0; };
   const auto mark = [&](int u, int v) {
-    const float d = used.depth.at(u, v);
-    if (!validDepth(d)) return;
-    const Vec3 p = T_table_camera * used.camera.backproject(u, v, d);
-    if (p.z() < min_height_m) return;
-    const int i = nearestLabelledVoxel(labels, p);
+    const std::optional<Vec3> p = pilePoint(used, T_table_camera, u, v, min_height_m);
+    if (!p) return;
+    const int i = nearestLabelledVoxel(labels, *p);
     if (i >= 0 && labels.data[i] < static_cast<int>(h->instances.size()))
       h->instances[labels.data[i]].truncated = true;
   };
@@ -439,11 +448,8 @@ std::vector<int> outsideTiles(const DepthView& view, const Transform& T_table_ca
   };
   for (int v = 0; v < view.depth.height; ++v)
     for (int u = 0; u < view.depth.width; ++u) {
-      const float d = view.depth.at(u, v);
-      if (!validDepth(d)) continue;
-      const Vec3 p = T_table_camera * view.camera.backproject(u, v, d);
-      if (p.z() < min_height_m) continue;
-      if (p.z() < top_m ? plan.cropped && !held(p) : held(Vec3(p.x(), p.y(), middle_m)))
+      const std::optional<Vec3> p = pilePoint(view, T_table_camera, u, v, min_height_m);
+      if (p && (p->z() < top_m ? plan.cropped && !held(*p) : held(Vec3(p->x(), p->y(), middle_m))))
         out.push_back(v * view.depth.width + u);
     }
   return out;
@@ -527,11 +533,8 @@ Image<int> pixelInstances(const DepthView& view, const SceneEstimate& est, int h
   const Transform T_table_camera = view.T_table_camera.value_or(est.T_table_camera);
   for (int v = 0; v < view.depth.height; ++v)
     for (int u = 0; u < view.depth.width; ++u) {
-      const float d = view.depth.at(u, v);
-      if (!validDepth(d)) continue;
-      const Vec3 p = T_table_camera * view.camera.backproject(u, v, d);
-      if (p.z() < min_height_m) continue;
-      const int i = nearestLabelledVoxel(labels, p);
+      const std::optional<Vec3> p = pilePoint(view, T_table_camera, u, v, min_height_m);
+      const int i = p ? nearestLabelledVoxel(labels, *p) : -1;
       if (i >= 0) out.at(u, v) = labels.data[i];
     }
   followDepthEdges(view.depth, &out);

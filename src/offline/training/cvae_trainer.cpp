@@ -369,10 +369,9 @@ std::string writtenValue(const YAML::Node& n) {
 /// against key: b (config)" clauses; a list is compared whole.
 std::string differingLines(const std::string& checkpoint, const std::string& config) {
   const YAML::Node a = YAML::Load(checkpoint), b = YAML::Load(config);
-  const auto text = [](const YAML::Node& n) { return writtenValue(n); };
   std::string out;
   const auto differ = [&](const std::string& key) {
-    const std::string was = text(a[key]), is = text(b[key]);
+    const std::string was = writtenValue(a[key]), is = writtenValue(b[key]);
     if (was != is)
       out += (out.empty() ? "" : "; ") + key + ": " + was + " (checkpoint) against " + key + ": " +
              is + " (config)";
