@@ -714,31 +714,60 @@ std::filesystem::path twoPileDataset(const std::string& name) {
   return path;
 }
 
-// A method that places its grid itself, 10 cm off the first method's: the same voxel count,
-// so its voxels would be scored against a ground truth lying elsewhere. Refused, naming it.
+// Methods that place their grids themselves, 10 cm off the first method's or at half its side
+// (a network perceiving a view in a finer grid): each is scored in its own grid, where its
+// true answer is the ground truth, not voxel by voxel against a grid lying elsewhere.
 class Elsewhere : public KnownAnswer {
  public:
-  using KnownAnswer::KnownAnswer;
+  Elsewhere(std::string name, const DatasetReader& reader, Vec2 shift, double extent_m)
+      : KnownAnswer(std::move(name), reader, true), shift_(shift), extent_m_(extent_m) {}
   MethodEstimate estimate(const DepthView& view, const GridSpec*, const Vec2& pile_xy) override {
-    return KnownAnswer::estimate(view, nullptr, pile_xy + Vec2(0.1, 0.0));
+    const GridSpec own = GridSpec::sceneGrid(pile_xy + shift_, extent_m_, 32);
+    return KnownAnswer::estimate(view, &own, pile_xy);
   }
+
+ private:
+  Vec2 shift_;
+  double extent_m_;
 };
 
-TEST(Evaluator, AMethodOnAnotherGridThanTheGroundTruthsIsRefused) {
+// A method that takes the grid it is handed, as the classical baseline does, and records it.
+class TakesTheGrid : public KnownAnswer {
+ public:
+  using KnownAnswer::KnownAnswer;
+  MethodEstimate estimate(const DepthView& view, const GridSpec* grid,
+                          const Vec2& pile_xy) override {
+    handed.push_back(grid ? std::optional<GridSpec>(*grid) : std::nullopt);
+    return KnownAnswer::estimate(view, grid, pile_xy);
+  }
+  std::vector<std::optional<GridSpec>> handed;
+};
+
+TEST(Evaluator, AMethodOnAnotherGridIsScoredInItsOwn) {
   const std::filesystem::path path = twoPileDataset("simstack_evaluator_grid.h5");
   const DatasetReader reader(path.string());
   KnownAnswer truth("truth", reader, true);
-  Elsewhere shifted("shifted", reader, true);
+  Elsewhere shifted("shifted", reader, Vec2(0.1, 0.0), reader.info().extent_m);
+  Elsewhere finer("finer", reader, Vec2::Zero(), 0.5 * reader.info().extent_m);
+  TakesTheGrid taker("taker", reader, true);
   EvaluationOptions options;
   options.views = 2;
   options.stability = false;
-  try {
-    evaluateDataset(reader, {&truth, &shifted}, options);
-    ADD_FAILURE() << "a method on another grid was scored";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("method shifted estimated scene 0 on another grid"),
-              std::string::npos)
-        << e.what();
+  const EvaluationResults r = evaluateDataset(reader, {&truth, &shifted, &finer, &taker}, options);
+  ASSERT_EQ(r.methods.size(), 4u);
+  // The method that takes a grid is handed the first method's, not the last one scored.
+  ASSERT_EQ(taker.handed.size(), 4u);
+  for (const std::optional<GridSpec>& g : taker.handed) {
+    ASSERT_TRUE(g);
+    EXPECT_NEAR(g->voxel_size_m, reader.info().extent_m / reader.info().resolution, 1e-12);
+    EXPECT_NEAR(g->extent_m(), reader.info().extent_m, 1e-9);
+  }
+  for (const MethodResults& m : r.methods) {
+    ASSERT_EQ(m.rows.size(), 4u);
+    for (const Row& row : m.rows) {
+      EXPECT_DOUBLE_EQ(row.at("iou"), 1.0) << m.name;
+      EXPECT_DOUBLE_EQ(row.at("count_exact"), 1.0) << m.name;
+    }
   }
   std::filesystem::remove(path);
 }

@@ -893,6 +893,25 @@ TEST(ModelIntegrity, StampingADamagedFileLeavesTheCardAlone) {
   fs::remove(modelCardPath(path));
 }
 
+// A model of a 0.32 m grid (`simstack_generate --extent 0.32`, then training) proves itself
+// like the shipped ones: its self-test is one box in one tile, whatever the tile overlap a
+// 0.64 m grid takes; the network sees it in 1 cm voxels.
+TEST(ModelIntegrity, AModelOfASmallerGridIsStampedAndChecked) {
+  const std::string shipped = std::string(SIMSTACK_SOURCE_DIR) + "/models/simstack_r32_fc.pt";
+  CvaeConfig c = loadCvae(shipped)->config();
+  c.extent_m = 0.32;
+  Cvae small(c);
+  EXPECT_TRUE(warmStartCvae(small, shipped).empty()) << "the same network, every tensor";
+  const std::string path = tempPath("simstack_small_grid.pt");
+  fs::remove(modelCardPath(path));
+  saveCvae(path, small);
+  const ModelIntegrity m = stampModel(path);
+  EXPECT_EQ(m.self_test_objects, 1) << "the rendered box is one object";
+  EXPECT_EQ(checkModel(path).objects, 1);
+  fs::remove(path);
+  fs::remove(modelCardPath(path));
+}
+
 TEST(Cvae, TinyModelOverfitsOneScene) {
   torch::manual_seed(5);
   CvaeConfig c = tiny();

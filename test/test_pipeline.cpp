@@ -488,22 +488,20 @@ TEST(ScenePerception, PerceivesARenderedPile) {
   }
 }
 
-TEST(PerceptionConfig, TheClutterProfileIsTheDefaultWithItsThreeInstanceSettings) {
+TEST(PerceptionConfig, TheClutterProfileIsTheDefaultWithAFinerSecondPass) {
   const PerceptionConfig clutter = shippedConfig("perception_clutter");
   PerceptionConfig expected = shippedConfig();
-  EXPECT_EQ(clutter.model_path, expected.model_path);
-  EXPECT_LT(clutter.hough.bandwidth_m, expected.hough.bandwidth_m);
-  EXPECT_GT(clutter.segments.max_unseen_points, expected.segments.max_unseen_points);
-  expected.hough.bandwidth_m = 0.03;
-  expected.hough.min_instance_voxels = 15;
-  expected.segments.max_unseen_points = 100;
+  EXPECT_EQ(expected.grid.object_voxels, 0.0) << "the default perceives once";
+  EXPECT_GT(clutter.grid.object_voxels, 0.0);
+  expected.grid.object_voxels = clutter.grid.object_voxels;
   EXPECT_EQ(perceptionYaml(clutter), perceptionYaml(expected));
 }
 
 // Piles of 5-8 objects of 5-15 cm (more, and smaller, than training's 3-4 of 5-30 cm): with the
-// default radius the centres of small neighbours merge; the clutter profile keeps them apart.
-// The clutter profile counts crowded piles better than one split with the shipped settings; the
-// shipped config's second split (crowded:) takes the profile's count exactly where it is made.
+// default radius the centres of small neighbours merge. The shipped config's second split
+// (crowded:) takes the count of its settings where it is made; the clutter profile, which
+// perceives such piles again in a finer grid, counts them better still. A pile of the
+// training's objects it perceives once.
 TEST(ScenePerception, TheClutterProfileCountsSmallNeighboursTheDefaultMerges) {
   PerceptionConfig one_split_config = shippedConfig();
   ASSERT_TRUE(std::filesystem::exists(one_split_config.model_path))
@@ -512,35 +510,112 @@ TEST(ScenePerception, TheClutterProfileCountsSmallNeighboursTheDefaultMerges) {
   const ScenePerception shipped(one_split_config);
   one_split_config.crowded.min_objects = 0;
   const ScenePerception one_split(one_split_config);
+  PerceptionConfig crowded_config = one_split_config;  // the crowded: settings, split once
+  crowded_config.hough.bandwidth_m = one_split_config.crowded.bandwidth_m;
+  crowded_config.hough.min_instance_voxels = one_split_config.crowded.min_instance_voxels;
+  crowded_config.segments.max_unseen_points = one_split_config.crowded.max_unseen_points;
+  const ScenePerception crowded_split(crowded_config);
   const ScenePerception clutter(shippedConfig("perception_clutter"));
   PileConfig crowded;
   crowded.min_objects = 5;
   crowded.max_objects = 8;
   crowded.max_size_m = 0.15;
-  int one_error = 0, clutter_error = 0, shipped_error = 0, one_under = 0, split_again = 0;
+  int one_error = 0, shipped_error = 0, clutter_error = 0, one_under = 0, split_again = 0;
+  int finer = 0;
   for (uint64_t seed = 1; seed <= 6; ++seed) {
     const RenderedPile p = renderPile(seed, crowded);
     const DepthView view{p.view.depth, p.camera, p.T_table_camera};
     const int objects = static_cast<int>(p.scene.objects.size());
-    const SceneEstimate a = one_split.perceive(view), b = clutter.perceive(view);
-    const SceneEstimate c = shipped.perceive(view);
+    const SceneEstimate a = one_split.perceive(view), b = crowded_split.perceive(view);
+    const SceneEstimate c = shipped.perceive(view), d = clutter.perceive(view);
     const int na = static_cast<int>(a.instances().size()),
-              nb = static_cast<int>(b.instances().size()),
-              nc = static_cast<int>(c.instances().size());
+              nc = static_cast<int>(c.instances().size()),
+              nd = static_cast<int>(d.instances().size());
     one_error += std::abs(na - objects);
-    clutter_error += std::abs(nb - objects);
     shipped_error += std::abs(nc - objects);
+    clutter_error += std::abs(nd - objects);
     one_under += na < objects;
     const bool as_one = c.hypotheses[0].labels.data == a.hypotheses[0].labels.data;
-    const bool as_clutter = c.hypotheses[0].labels.data == b.hypotheses[0].labels.data;
-    EXPECT_TRUE(as_one || as_clutter)
+    const bool as_crowded = c.hypotheses[0].labels.data == b.hypotheses[0].labels.data;
+    EXPECT_TRUE(as_one || as_crowded)
         << "pile " << seed << ": the shipped labels are neither split's";
     split_again += !as_one;
+    EXPECT_EQ(d.object_voxels, c.object_voxels) << "pile " << seed << ": the same first pass";
+    if (d.tile_side_m < c.tile_side_m) {
+      ++finer;
+      EXPECT_GT(d.tiles, c.tiles) << "pile " << seed << ": both passes counted";
+      EXPECT_NEAR(d.grid.voxel_size_m, 0.4 / 32, 1e-12);
+    }
   }
   ASSERT_GE(one_under, 3) << "the premise: one split merges neighbours in most piles";
-  EXPECT_LT(clutter_error, one_error) << "count errors summed over the six piles";
   EXPECT_GE(split_again, 1) << "no pile was split again";
-  EXPECT_LT(shipped_error, one_error);
+  EXPECT_LT(shipped_error, one_error) << "count errors summed over the six piles";
+  EXPECT_GE(finer, 4) << "the piles' objects looked small in most piles";
+  EXPECT_LT(clutter_error, shipped_error);
+  const RenderedPile paper = renderPile(12);
+  const SceneEstimate e =
+      clutter.perceive(DepthView{paper.view.depth, paper.camera, paper.T_table_camera});
+  EXPECT_GE(e.object_voxels, clutter.config().grid.object_voxels);
+  EXPECT_EQ(e.tile_side_m, 0.64);
+  EXPECT_EQ(e.tiles, 1);
+}
+
+// A grid of half the side shows the network a pile of objects half the training's size as
+// the training's: the TSDF, the truncation and the Hough radius follow the side, and the
+// objects are found where they are.
+TEST(ScenePerception, AFinerGridPerceivesAPileOfSmallObjects) {
+  PerceptionConfig config = shippedConfig();
+  config.grid.side_m = 0.32;
+  const ScenePerception finer(config);
+  PileConfig small;
+  small.max_size_m = 0.15;
+  const RenderedPile p = renderPile(12, small);
+  const SceneEstimate est = finer.perceive(DepthView{p.view.depth, p.camera, p.T_table_camera});
+  EXPECT_DOUBLE_EQ(est.tile_side_m, 0.32);
+  EXPECT_NEAR(est.grid.voxel_size_m, 0.01, 1e-12);
+  EXPECT_GT(est.object_voxels, 0.0);
+  // The TSDF is truncated at the model's 3 voxels of this grid, 3 cm.
+  float largest = 0.0f;
+  for (size_t i = 0; i < est.partial_tsdf_m.data.size(); ++i)
+    if (est.partial_weight.data[i] > 0.0f)
+      largest = std::max(largest, std::abs(est.partial_tsdf_m.data[i]));
+  EXPECT_NEAR(largest, 0.03, 1e-4);
+  // Each object is found near its centre.
+  ASSERT_EQ(est.instances().size(), p.scene.objects.size());
+  for (const SceneObject& o : p.scene.objects) {
+    double nearest = 1e9;
+    for (const InstanceEstimate& e : est.instances())
+      nearest =
+          std::min(nearest, (e.superquadric.centroid() - o.T_table_object.translation()).norm());
+    EXPECT_LT(nearest, 0.05);
+  }
+  config.grid.side_m = 0.005;
+  EXPECT_THROW(ScenePerception{config}, std::invalid_argument);
+  // 2 cm: crowded:'s 3 cm radius for 0.64 m would be under a millimetre.
+  config.grid.side_m = 0.02;
+  EXPECT_THROW(ScenePerception{config}, std::invalid_argument);
+  // A finer pass at a quarter of 3 cm: under 1 cm.
+  config.grid.side_m = 0.03;
+  config.crowded.min_objects = 0;
+  config.crowded.bandwidth_m = 1.0;
+  config.hough.bandwidth_m = 1.0;
+  EXPECT_NO_THROW(ScenePerception{config});
+  config.grid.object_voxels = 7.0;
+  config.grid.fine_side_share = 0.25;
+  EXPECT_THROW(ScenePerception{config}, std::invalid_argument);
+  config = shippedConfig();
+  config.grid.side_m = 0.0;
+  config.grid.fine_side_share = 1.0;
+  EXPECT_THROW(ScenePerception{config}, std::invalid_argument);
+}
+
+TEST(ScenePerception, TheSecondPassIsTakenWhenTheObjectsLookSmall) {
+  GridConfig grid;
+  EXPECT_EQ(gridSideFor(grid, 0.64, 3.0), 0.64) << "off by default";
+  grid.object_voxels = 7.0;
+  EXPECT_DOUBLE_EQ(gridSideFor(grid, 0.64, 6.9), 0.4);
+  EXPECT_EQ(gridSideFor(grid, 0.64, 7.0), 0.64);
+  EXPECT_EQ(gridSideFor(grid, 0.64, 0.0), 0.64) << "nothing found: nothing to look at closer";
 }
 
 /// Index of the instance whose superquadric centre is nearest to `p` (-1 when none).

@@ -75,11 +75,13 @@ grep -q "the model's setting ($dir/m.yaml)" "$dir/m.log" ||
 grep -q "paste its perception: section into $dir/m.yaml" "$dir/m.log" || { cat "$dir/m.log"; exit 1; }
 cmp -s "$dir/m.yaml" "$dir/m.orig" || { echo "the tool changed a model card"; exit 1; }
 # A config whose hough: overrides the card's: its setting is the one in effect, and named so.
-clutter=$(dirname "$0")/../config/perception_clutter.yaml
+clutter=$dir/hough.yaml
+{ cat "$(dirname "$0")/../config/perception.yaml"
+  printf 'hough:\n  bandwidth_m: 0.03\n  min_instance_voxels: 15\n'; } > "$clutter"
 "$tune" --config "$clutter" --model "$dir/m.pt" --dataset "$dir/val.h5" --views 1 --threads 1 \
   --refinement 5 --min-traversals 2 --bandwidth 0.04 --min-instance-voxels 10 --min-vote-norm 0 \
   --output "$dir/c.tuned.yaml" > "$dir/c.log" 2> "$dir/err.txt" ||
-  { echo "simstack_tune_hough with the clutter profile failed:"; cat "$dir/err.txt"; exit 1; }
+  { echo "simstack_tune_hough with a config's hough: failed:"; cat "$dir/err.txt"; exit 1; }
 grep -q "the setting in effect (the hough: of $clutter" "$dir/c.log" ||
   { echo "the config's hough: was called the model's setting"; cat "$dir/c.log"; exit 1; }
 grep -q "remove the hough: of $clutter" "$dir/c.log" || { cat "$dir/c.log"; exit 1; }

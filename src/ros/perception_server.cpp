@@ -929,6 +929,7 @@ void PerceptionServer::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   status.add("fitting ms", last_timings_.fitting_ms);
   status.add("total ms", last_timings_.total_ms);
   status.add("tiles (network passes) of the last frame", last_scene_ ? last_scene_->tiles : 0);
+  status.add("grid side (m) of the last frame", last_scene_ ? last_scene_->tile_side_m : 0.0);
   status.add("workspace mask",
              mask_.empty() ? std::string("none")
                            : std::to_string(mask_.width) + "x" + std::to_string(mask_.height));

@@ -17,8 +17,8 @@ namespace simstack {
 
 /// A second split for crowded piles: a hypothesis in which the first split finds `min_objects`
 /// instances or more is split again with a smaller mean-shift radius, which keeps small
-/// neighbours' centres apart (config/perception_clutter.yaml's settings, applied where they
-/// help: docs/experiments.md, "Instances: Hough voting").
+/// neighbours' centres apart (applied where they help: docs/experiments.md, "Instances: Hough
+/// voting").
 struct CrowdedConfig {
   int min_objects = 5;           ///< 0: off
   double bandwidth_m = 0.03;     ///< in place of hough.bandwidth_m

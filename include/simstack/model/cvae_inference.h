@@ -61,6 +61,12 @@ void validateSymmetries(int symmetries);
 /// std::invalid_argument naming the bad field of `options` (CvaeInference::refine).
 void validateRefineOptions(const RefineOptions& options);
 
+/// The TSDF truncation (m) the network `model` reads and writes on `grid`: its truncation_vox
+/// voxels of that grid.
+inline double truncationIn(const CvaeConfig& model, const GridSpec& grid) {
+  return model.truncation_vox * grid.voxel_size_m;
+}
+
 /// Loads once; predict() is const but not thread-safe (torch state): use one per thread.
 class CvaeInference {
  public:
@@ -71,7 +77,9 @@ class CvaeInference {
   /// Training provenance stored in the file (YAML text, may be empty).
   const std::string& metadata() const;
   /// S = `samples` hypotheses for the partial TSDF (metres) and its weights, which must lie on
-  /// a grid of the model's resolution and extent (std::invalid_argument otherwise). Codes are
+  /// a grid of the model's resolution (std::invalid_argument otherwise), of any side: the
+  /// network works in voxels, and the truncation is the model's truncation_vox voxels of that
+  /// grid (truncationIn). Codes are
   /// drawn from N(0, I) with `seed`; with `zero_code_first` the first is the mean scene
   /// (z = 0). The FC baseline returns the same prediction for every sample.
   /// `symmetries` (1, 2, 4 or 8, else std::invalid_argument): the network also runs on the

@@ -22,6 +22,21 @@ namespace simstack {
 /// The most latent samples a frame may ask for.
 constexpr int kMaxSamples = 64;
 
+/// The scene grid's side. The network works in voxels: a grid of another side shows it the same
+/// scene scaled, so small objects seen in a finer grid look as large as the ones it was trained
+/// on. The Hough radii (hough.bandwidth_m, crowded.bandwidth_m) and workspace.tile_overlap_m
+/// scale with the side; every other length is the world's.
+struct GridConfig {
+  double side_m = 0.0;  ///< one tile's side (0 = the model's extent_m)
+  /// When the first pass's objects look smaller than this to the network (the median over
+  /// them of the cube root of their voxels), the frame is perceived again in a finer grid
+  /// (0 = off: one pass).
+  double object_voxels = 0.0;
+  double fine_side_share = 0.625;  ///< ... of this share of the first pass's side
+  /// Throws std::invalid_argument naming the field ("grid.side_m ...").
+  void validate() const;
+};
+
 struct PerceptionConfig {
   std::string model_path;       ///< a model written by simstack_train (required)
   std::string model_card_path;  ///< the card samples and hough came from ("" = defaults)
@@ -77,6 +92,7 @@ struct PerceptionConfig {
   }();
   TablePlaneConfig table;
   WorkspaceConfig workspace;  ///< where to look, and the tiles covering it
+  GridConfig grid;            ///< the scene grid's side
 };
 
 /// The sections of a perception config (maps at its top level), in file order.
@@ -97,8 +113,8 @@ void validatePerceptionConfig(const PerceptionConfig& config, bool latent = fals
 
 /// Reads a perception config: the pipeline's own fields at the top level (model, symmetries,
 /// ...) and the sections of perceptionConfigSections() (`hough:`, `segments:`,
-/// `surface_instances:`, `crowded:`, `fitting:`, `table:`, `workspace:`); absent fields keep
-/// their defaults, unknown fields are errors, so that a typo is not silently ignored.
+/// `surface_instances:`, `crowded:`, `fitting:`, `table:`, `workspace:`, `grid:`); absent fields
+/// keep their defaults, unknown fields are errors, so that a typo is not silently ignored.
 /// `model_path`, when given, replaces the file's `model`. A relative model path is taken
 /// relative to `base_dir` when given. Then the model's card is read (applyModelCard), and last
 /// the file's own `samples` and `hough:` section, which override the card's when present

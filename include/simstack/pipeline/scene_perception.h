@@ -70,8 +70,12 @@ struct SceneEstimate {
   Transform T_table_camera = Transform::Identity();  ///< of the first view
   bool table_estimated = false;  ///< true when the table came from RANSAC, not the caller
   GridSpec grid;  ///< the scene grid: one tile, or a cube holding all tiles (workspace.h)
-  int tiles = 1;  ///< network passes this frame took
+  int tiles = 0;  ///< network passes this frame took (tiles, over both grids of a second pass)
   bool tiles_cropped = false;  ///< the pile needed more than workspace.max_tiles tiles
+  double tile_side_m = 0.0;    ///< the side of the grid (or of each tile) perceived in
+  /// The median over the first pass's instances of the cube root of their voxels (0 without
+  /// instances): how large the objects looked to the network (GridConfig).
+  double object_voxels = 0.0;
   Grid3<float> partial_tsdf_m, partial_weight;  ///< the network's input, over the scene grid
   Grid3<float> occupancy_probability;           ///< share of hypotheses with tsdf <= 0, per voxel
   std::vector<SceneHypothesis> hypotheses;      ///< S of them; the decomposed ones first
@@ -170,9 +174,20 @@ class ScenePerception {
   const CvaeConfig& modelConfig() const;
 
  private:
+  /// One pass of perceive() over tiles of side `side_m` (`config` scaled to it), into
+  /// `estimate`, which holds the table pose; times and tiles add to what it has.
+  void perceiveInGrid(const std::vector<DepthView>& views,
+                      const std::vector<DepthView>& views_given, double side_m,
+                      const PerceptionConfig& config, SceneEstimate* estimate) const;
+
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// The tile side of perceive()'s last pass (GridConfig): `side_m`, the first pass's, unless the
+/// first pass's objects (`object_voxels`, the median over them of the cube root of their voxels;
+/// 0 without objects) look smaller than `grid.object_voxels`; then grid.fine_side_share of it.
+double gridSideFor(const GridConfig& grid, double side_m, double object_voxels);
 
 /// A model's self-test: what the pipeline's defaults (one sample, one network pass, the default
 /// Hough setting, none of the model card's) perceive with it on warmUp()'s rendered box.

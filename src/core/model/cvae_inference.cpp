@@ -117,11 +117,9 @@ void CvaeInference::checkInput(const Grid3<float>& partial_tsdf_m, const Grid3<f
                                int samples) const {
   const CvaeConfig& c = config();
   const GridSpec& g = partial_tsdf_m.spec;
-  if (g.resolution != c.resolution || std::abs(g.extent_m() - c.extent_m) > 1e-9) {
+  if (g.resolution != c.resolution) {
     throw std::invalid_argument("partial TSDF grid is " + std::to_string(g.resolution) +
-                                "^3 over " + std::to_string(g.extent_m()) + " m; the model wants " +
-                                std::to_string(c.resolution) + "^3 over " +
-                                std::to_string(c.extent_m) + " m");
+                                "^3; the model wants " + std::to_string(c.resolution) + "^3");
   }
   if (!(weight.spec == g)) throw std::invalid_argument("partial TSDF and weight grids differ");
   if (samples < 1) throw std::invalid_argument("need at least one sample");
@@ -160,7 +158,8 @@ std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_t
   validateSymmetries(symmetries);
   torch::NoGradGuard no_grad;
   const int r = c.resolution;
-  const std::vector<float> channels = partialChannels(partial_tsdf_m, weight, c.truncation_m());
+  const double tau = truncationIn(c, g);
+  const std::vector<float> channels = partialChannels(partial_tsdf_m, weight, tau);
   const torch::Tensor one =
       torch::from_blob(const_cast<float*>(channels.data()), {1, 2, r, r, r}).clone();
   torch::Generator gen = at::detail::createCPUGenerator(seed);
@@ -174,7 +173,7 @@ std::vector<CvaePrediction> CvaeInference::predict(const Grid3<float>& partial_t
     out.tsdf = out.tsdf.expand({samples, -1, -1, -1, -1});
     out.votes = out.votes.expand({samples, -1, -1, -1, -1});
   }
-  return toPredictions(out, g, samples, c.truncation_m());
+  return toPredictions(out, g, samples, tau);
 }
 
 std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_tsdf_m,
@@ -196,7 +195,7 @@ std::vector<CvaePrediction> CvaeInference::refine(const Grid3<float>& partial_ts
   const auto start = std::chrono::steady_clock::now();
   torch::AutoGradMode grad_mode(true);  // also when the caller turned gradients off
   const int r = c.resolution;
-  const double tau = c.truncation_m();
+  const double tau = truncationIn(c, g);
   const std::vector<float> channels = partialChannels(partial_tsdf_m, weight, tau);
   const torch::Tensor one =
       torch::from_blob(const_cast<float*>(channels.data()), {1, 2, r, r, r}).clone();

@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <type_traits>
 
+#include "simstack/io/config_fields.h"
 #include "simstack/io/yaml_file.h"
 #include "simstack/model/cvae_inference.h"
 
@@ -96,6 +97,12 @@ void crowdedFields(C& c, F&& f) {
   f("bandwidth_m", c.bandwidth_m);
   f("min_instance_voxels", c.min_instance_voxels);
   f("max_unseen_points", c.max_unseen_points);
+}
+template <class C, class F>
+void gridFields(C& c, F&& f) {
+  f("side_m", c.side_m);
+  f("object_voxels", c.object_voxels);
+  f("fine_side_share", c.fine_side_share);
 }
 template <class C, class F>
 void fitFields(C& c, F&& f) {
@@ -272,11 +279,25 @@ PerceptionConfig perceptionFromYaml(const YAML::Node& root, const std::string& p
       root, "table", &c.table, [](auto& x, auto&& f) { tableFields(x, f); }, path);
   readSection(
       root, "workspace", &c.workspace, [](auto& x, auto&& f) { workspaceFields(x, f); }, path);
+  readSection(
+      root, "grid", &c.grid, [](auto& x, auto&& f) { gridFields(x, f); }, path);
   c.source = path;
   return finishConfig(c, root, path, base_dir, model_path);
 }
 
 }  // namespace
+
+void GridConfig::validate() const {
+  if (!(side_m == 0.0 || (side_m >= 0.01 && side_m <= 10.0)))
+    throw std::invalid_argument("grid.side_m must be 0 (the model's) or lie in [0.01, 10] m" +
+                                gotValue(side_m));
+  if (!(object_voxels >= 0.0 && object_voxels <= 1000.0))
+    throw std::invalid_argument("grid.object_voxels must lie in [0, 1000] (0 = off)" +
+                                gotValue(object_voxels));
+  if (!(fine_side_share >= 0.25 && fine_side_share < 1.0))
+    throw std::invalid_argument("grid.fine_side_share must lie in [0.25, 1)" +
+                                gotValue(fine_side_share));
+}
 
 RefineOptions refineOptions(const PerceptionConfig& c) {
   return {c.refine_iterations, c.refine_learning_rate, c.symmetries,      c.refine_prior_weight,
@@ -324,6 +345,7 @@ void checkRanges(const PerceptionConfig& config, bool latent) {
   config.crowded.validate();
   config.hough.validate();
   config.table.validate();
+  config.grid.validate();
 }
 
 }  // namespace
@@ -343,7 +365,7 @@ void validatePerceptionConfig(const PerceptionConfig& config, bool latent) {
 
 const std::vector<std::string>& perceptionConfigSections() {
   static const std::vector<std::string> sections{
-      "hough", "segments", "surface_instances", "crowded", "fitting", "table", "workspace"};
+      "hough", "segments", "surface_instances", "crowded", "fitting", "table", "workspace", "grid"};
   return sections;
 }
 
@@ -432,6 +454,7 @@ std::string perceptionYaml(const PerceptionConfig& config) {
   writeSection(e, "fitting", c.fit, [](auto& x, auto&& f) { fitFields(x, f); });
   writeSection(e, "table", c.table, [](auto& x, auto&& f) { tableFields(x, f); });
   writeSection(e, "workspace", c.workspace, [](auto& x, auto&& f) { workspaceFields(x, f); });
+  writeSection(e, "grid", c.grid, [](auto& x, auto&& f) { gridFields(x, f); });
   e << YAML::EndMap;
   return e.c_str();
 }

@@ -22,6 +22,7 @@
 #include "simstack/geometry/superquadric.h"
 #include "simstack/instances/instance_finder.h"
 #include "simstack/instances/surface_instances.h"
+#include "simstack/io/config_fields.h"
 #include "simstack/mesh/marching_cubes.h"
 #include "simstack/mesh/mesh_ops.h"
 #include "simstack/model/cvae_inference.h"
@@ -560,6 +561,16 @@ int cappedThreads(int threads) {
 /// The most the hypotheses of one frame may take (GB): more is a setting no machine holds.
 constexpr double kMaxHypothesesGB = 4.0;
 
+/// `c` for a grid of side `side_m`, its Hough radii and tile overlap chosen for the model's
+/// side `model_side_m`: those lengths scaled with the side (GridConfig).
+PerceptionConfig scaledToSide(PerceptionConfig c, double side_m, double model_side_m) {
+  const double ratio = side_m / model_side_m;
+  c.hough.bandwidth_m *= ratio;
+  c.crowded.bandwidth_m *= ratio;
+  c.workspace.tile_overlap_m *= ratio;
+  return c;
+}
+
 /// `config` checked against the model it runs with: a tile overlap under half the grid, the
 /// widest tiled grid within the Hough voting's fine cells and its hypotheses within
 /// kMaxHypothesesGB, the thread count capped; a model
@@ -584,6 +595,24 @@ PerceptionConfig forModel(PerceptionConfig config, const CvaeConfig& model) {
                                 " voxels a side) times the "
                                 "refinement must be at most " +
                                 std::to_string(kMaxHoughFineCells) + "; lower one of them");
+  // The Hough radii in the grids a frame may be perceived in, scaled from the model's side.
+  const double first = config.grid.side_m > 0.0 ? config.grid.side_m : model.extent_m;
+  std::vector<double> sides{first};
+  if (config.grid.object_voxels > 0.0) sides.push_back(first * config.grid.fine_side_share);
+  for (const double side : sides) {
+    if (side < 0.01)
+      throw std::invalid_argument("grid: the finer pass's side, " + configValue(side) +
+                                  " m, is below 0.01 m; raise grid.fine_side_share or side_m");
+    try {
+      const PerceptionConfig scaled = scaledToSide(config, side, model.extent_m);
+      scaled.hough.validate();
+      scaled.crowded.validate();
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument("grid: in a grid of side " + configValue(side) +
+                                  " m, the Hough radii scaled from the model's " +
+                                  configValue(model.extent_m) + " m: " + e.what());
+    }
+  }
   config.threads = cappedThreads(config.threads);
   if (!model.hasLatentCode()) {
     // Its one scene would be decomposed once and handed on as if it were several hypotheses.
@@ -700,7 +729,7 @@ std::vector<CvaePrediction> predictTile(const CvaeInference& model,
   std::vector<ViewEvidence> evidence;
   for (size_t i = 0; i < views.size(); ++i) {
     auto [tsdf, weight] = partialTsdf(partial.first.spec, views, T_table_first,
-                                      model.config().truncation_m(), i, i + 1);
+                                      truncationIn(model.config(), partial.first.spec), i, i + 1);
     evidence.push_back({std::move(tsdf), std::move(weight)});
   }
   return model.refine(partial.first, partial.second, evidence, c.samples, c.seed, c.zero_code_first,
@@ -713,7 +742,7 @@ std::vector<SceneHypothesis> predictGroup(
     const CvaeInference& model, const TileGroup& group, const std::vector<DepthView>& views,
     const Transform& T_table_first, const std::pair<Grid3<float>, Grid3<float>>& scene_partial,
     const PerceptionConfig& c) {
-  const double truncation = model.config().truncation_m();
+  const double truncation = truncationIn(model.config(), group.grid);
   std::vector<std::vector<CvaePrediction>> tiles;
   for (const GridSpec& tile : group.tiles) {
     if (tile == scene_partial.first.spec) {  // the common case: computed already
@@ -850,10 +879,30 @@ void checkPerceivableView(const DepthView& view, const PerceptionConfig& config)
   withinSensorRange({view}, config);
 }
 
+namespace {
+
+/// The median over `instances` of the cube root of their voxels: how large the objects look to
+/// the network (0 without instances).
+double medianObjectVoxels(const std::vector<InstanceEstimate>& instances) {
+  std::vector<double> sizes;
+  for (const InstanceEstimate& e : instances)
+    if (e.voxels > 0) sizes.push_back(std::cbrt(static_cast<double>(e.voxels)));
+  if (sizes.empty()) return 0.0;
+  const auto middle = sizes.begin() + sizes.size() / 2;
+  std::nth_element(sizes.begin(), middle, sizes.end());
+  return *middle;
+}
+
+}  // namespace
+
+double gridSideFor(const GridConfig& grid, double side_m, double object_voxels) {
+  const bool small = object_voxels > 0.0 && object_voxels < grid.object_voxels;
+  return small ? grid.fine_side_share * side_m : side_m;
+}
+
 SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_given) const {
   std::lock_guard<std::mutex> lock(impl_->mutex);
   const PerceptionConfig& c = impl_->config;
-  const CvaeConfig& mc = impl_->model->config();
   if (views_given.empty()) throw std::invalid_argument("perceive: no depth view given");
   for (size_t i = 0; i < views_given.size(); ++i) {
     checkView(views_given[i], i);
@@ -872,23 +921,58 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
     cropToWorkspace(&views[i], i == 0 ? out.T_table_camera : *views[i].T_table_camera, c.workspace);
   out.timings.table_ms = msSince(t);
 
-  t = Clock::now();
+  const double model_side = impl_->model->config().extent_m;
+  const double first_side = c.grid.side_m > 0.0 ? c.grid.side_m : model_side;
+  perceiveInGrid(views, views_given, first_side, scaledToSide(c, first_side, model_side), &out);
+  out.object_voxels = medianObjectVoxels(out.instances());
+  const double side = gridSideFor(c.grid, first_side, out.object_voxels);
+  if (side != first_side) {
+    // The objects look small to the network: the frame again, in a finer grid. What the first
+    // pass found is dropped; its time and network passes are counted.
+    SceneEstimate finer;
+    finer.T_table_camera = out.T_table_camera;
+    finer.table_estimated = out.table_estimated;
+    finer.object_voxels = out.object_voxels;
+    finer.timings = out.timings;
+    finer.tiles = out.tiles;
+    perceiveInGrid(views, views_given, side, scaledToSide(c, side, model_side), &finer);
+    if (finer.tiles_cropped && !out.tiles_cropped) {
+      // The finer grid's tiles would leave part of the pile out (workspace.max_tiles): the
+      // first pass stands.
+      out.tiles = finer.tiles;
+      out.timings = finer.timings;
+    } else {
+      out = std::move(finer);
+    }
+  }
+  out.timings.total_ms = msSince(start);
+  return out;
+}
+
+void ScenePerception::perceiveInGrid(const std::vector<DepthView>& views,
+                                     const std::vector<DepthView>& views_given, double side_m,
+                                     const PerceptionConfig& c, SceneEstimate* estimate) const {
+  const CvaeConfig& mc = impl_->model->config();
+  SceneEstimate& out = *estimate;
+  const double tau = mc.truncation_vox * side_m / mc.resolution;
+  out.tile_side_m = side_m;
+  auto t = Clock::now();
   // Training's placement (visiblePileCentre near the median of the pile's points).
   const auto placement = [&](const Vec2& near) {
     return visiblePileCentre(views[0].depth, views[0].camera, out.T_table_camera, near,
-                             0.5 * mc.extent_m, c.min_pile_height_m);
+                             0.5 * side_m, c.min_pile_height_m);
   };
   const std::vector<Vec3> pile =
-      pilePoints(views[0], out.T_table_camera, c.workspace, c.min_pile_height_m, mc.extent_m);
+      pilePoints(views[0], out.T_table_camera, c.workspace, c.min_pile_height_m, side_m);
   const Vec2 centre =
       placement(pile.empty() ? bareTableCentre(views[0], out.T_table_camera, c) : medianXY(pile));
-  const TilePlan plan = planTiles(pile, centre, placement, mc.extent_m, mc.resolution, c.workspace);
+  const TilePlan plan = planTiles(pile, centre, placement, side_m, mc.resolution, c.workspace);
   out.grid = plan.scene;
-  out.tiles = plan.tileCount();
+  out.tiles += plan.tileCount();
   out.tiles_cropped = plan.cropped;
-  std::pair<Grid3<float>, Grid3<float>> partial = partialTsdf(
-      out.grid, views, out.T_table_camera, mc.truncation_m(), 0, conditioningViews(views, c));
-  out.timings.tsdf_ms = msSince(t);
+  std::pair<Grid3<float>, Grid3<float>> partial =
+      partialTsdf(out.grid, views, out.T_table_camera, tau, 0, conditioningViews(views, c));
+  out.timings.tsdf_ms += msSince(t);
 
   // Each group as a scene of its own; one group is the scene.
   std::vector<std::vector<SceneHypothesis>> groups;
@@ -904,7 +988,7 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
     for (size_t k = 0; k < groups.front().size(); ++k) {
       std::vector<SceneHypothesis> parts;
       for (auto& g : groups) parts.push_back(std::move(g[k]));
-      out.hypotheses.push_back(joinGroups(plan, parts, static_cast<float>(mc.truncation_m())));
+      out.hypotheses.push_back(joinGroups(plan, parts, static_cast<float>(tau)));
     }
   }
   out.occupancy_probability = Grid3<float>(out.grid, 0.0f);
@@ -929,8 +1013,6 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
                   c.min_pile_height_m);
   }
   out.timings.mesh_ms += msSince(t);
-  out.timings.total_ms = msSince(start);
-  return out;
 }
 
 SceneEstimate ScenePerception::warmUp() const {
@@ -963,6 +1045,9 @@ ModelSelfTest runModelSelfTest(const std::string& model_path) {
   config.model_path = model_path;
   config.samples = 1;
   config.symmetries = 1;
+  // One box in one grid: no tiles, so no overlap to fit into a smaller model's grid (the
+  // default overlap is half a 0.32 m grid).
+  config.workspace.tile_overlap_m = 0.0;
   const SceneEstimate estimate = ScenePerception(config).warmUp();
   ModelSelfTest out;
   out.objects = static_cast<int>(estimate.instances().size());

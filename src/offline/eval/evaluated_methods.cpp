@@ -87,6 +87,8 @@ MethodEstimate NetworkMethod::estimateViews(const std::vector<DepthView>& views,
         pixelInstances(views.front(), est, 0, labelMinHeight(perception_->config()));
   out.table_estimated = est.table_estimated;
   out.perceive_ms = est.timings.total_ms;
+  out.grid_side_m = est.tile_side_m;
+  out.object_voxels = est.object_voxels;
   return out;
 }
 

@@ -94,6 +94,8 @@ void scoreEstimate(const MethodEstimate& est, const SceneRecord& rec, const Scen
   (*row)["chamfer_full_m"] = full / est.surfaces.size();
   (*row)["chamfer_visible_m"] = visible / est.surfaces.size();
   if (std::isfinite(est.perceive_ms)) (*row)["perceive_ms"] = est.perceive_ms;
+  if (std::isfinite(est.grid_side_m)) (*row)["grid_side_m"] = est.grid_side_m;
+  if (std::isfinite(est.object_voxels)) (*row)["object_voxels"] = est.object_voxels;
   const OccupancyScores sc = scoreOccupancy(gt.tsdf.data, est.hypotheses_tsdf);
   (*row)["iou"] = sc.iou;
   (*row)["bce"] = sc.bce;
@@ -131,7 +133,7 @@ int objectsSeen(const RenderResult& r, int objects, int min_pixels) {
 /// are in the run.
 void evaluateView(const SceneRecord& rec, int k, int v, const SceneTruth& scene,
                   const DepthRenderer& renderer, uint64_t scene_seed, const PinholeCamera& camera,
-                  double truncation_m, const std::vector<EvaluatedMethod*>& methods,
+                  double truncation_vox, const std::vector<EvaluatedMethod*>& methods,
                   const EvaluationOptions& options, std::vector<MethodResults>* results) {
   std::mt19937_64 rng(scene_seed + 7919ull * static_cast<uint64_t>(v + 1));
   ViewTruth vt;
@@ -165,9 +167,9 @@ void evaluateView(const SceneRecord& rec, int k, int v, const SceneTruth& scene,
     for (size_t t = 0; t < seen.size(); ++t) seen[t] = seen[t] || also[t];
   }
   vt.visible_ratio = subMesh(scene.mesh, seen).area() / scene.mesh.area();
-  GridSpec grid;
+  std::optional<GridSpec> first;  // the first method's grid, handed to the others
+  GridSpec grid;                  // the ground truth's
   GroundTruthGrids gt;
-  bool have_gt = false;
   const uint64_t method_seed = rng();
   for (size_t i = 0; i < methods.size(); ++i) {
     std::mt19937_64 method_rng(method_seed ^ std::hash<std::string>{}(methods[i]->name()));
@@ -176,24 +178,16 @@ void evaluateView(const SceneRecord& rec, int k, int v, const SceneTruth& scene,
             {"visible_ratio", vt.visible_ratio},
             {"objects", static_cast<double>(rec.scene.objects.size())},
             {"objects_seen", static_cast<double>(vt.objects_seen)}};
-    const MethodEstimate est = methods[i]->estimateViews(vt.views, have_gt ? &grid : nullptr,
+    const MethodEstimate est = methods[i]->estimateViews(vt.views, first ? &*first : nullptr,
                                                          rec.scene.surfaceCentroid().head<2>());
-    if (!have_gt) {  // the first method's grid is the ground truth's
+    // Each estimate is scored on its own grid (a network may perceive a view in a finer grid,
+    // GridConfig); a method that takes the grid it is handed (the classical baseline) gets the
+    // first method's. The truncation keeps the dataset's voxels.
+    if (!first || !(est.grid == grid)) {
       grid = est.grid;
-      gt = computeGroundTruth(rec.scene, grid, truncation_m);
-      have_gt = true;
-    } else if (est.grid.resolution != grid.resolution ||
-               std::abs(est.grid.voxel_size_m - grid.voxel_size_m) > 1e-12 ||
-               (est.grid.origin_table - grid.origin_table).norm() > 1e-9) {
-      // A network of another extent or placement would be scored voxel by voxel against a
-      // ground truth that lies elsewhere.
-      throw std::runtime_error(
-          "method " + methods[i]->name() + " estimated scene " + std::to_string(k) +
-          " on another grid (" + std::to_string(est.grid.resolution) + " voxels of " +
-          std::to_string(est.grid.voxel_size_m) + " m) than " + methods[0]->name() + " (" +
-          std::to_string(grid.resolution) + " of " + std::to_string(grid.voxel_size_m) +
-          " m): evaluate them in separate runs");
+      gt = computeGroundTruth(rec.scene, grid, truncation_vox * grid.voxel_size_m);
     }
+    if (!first) first = est.grid;
     scoreEstimate(est, rec, scene, vt, gt, options, method_rng, &row);
     (*results)[i].rows.push_back(std::move(row));
   }
@@ -246,7 +240,8 @@ EvaluationResults evaluateDataset(const DatasetReader& reader,
     scene.full = samplePoints(scene.mesh, options.chamfer_points, scene_rng);
     const uint64_t scene_seed = scene_rng();
     for (int v = 0; v < options.views; ++v)
-      evaluateView(rec, k, v, scene, renderer, scene_seed, camera, reader.info().truncation_m,
+      evaluateView(rec, k, v, scene, renderer, scene_seed, camera,
+                   reader.info().truncation_m * reader.info().resolution / reader.info().extent_m,
                    methods, options, &out.methods);
     if (progress) progress(k + 1, out.scenes);
   }

@@ -143,6 +143,8 @@ std::vector<RealMethodResults> evaluateRealScenes(const std::string& dir,
       r.table_estimated = est.table_estimated;
       r.perceive_ms = est.perceive_ms;
       r.fits_at_bound = est.fits_at_bound;
+      if (std::isfinite(est.grid_side_m)) r.grid_side_m = est.grid_side_m;
+      if (std::isfinite(est.object_voxels)) r.object_voxels = est.object_voxels;
       out[k].scenes.push_back(r);
     }
     if (progress) progress(static_cast<int>(f + 1), static_cast<int>(files.size()));
@@ -200,7 +202,9 @@ json realScenesJson(const std::vector<RealMethodResults>& results) {
            {"detected_075", s.overlap.detected_075},
            {"table_estimated", s.table_estimated},
            {"perceive_ms", s.perceive_ms},
-           {"fits_at_bound", s.fits_at_bound ? json(*s.fits_at_bound) : json(nullptr)}});
+           {"fits_at_bound", s.fits_at_bound ? json(*s.fits_at_bound) : json(nullptr)},
+           {"grid_side_m", s.grid_side_m ? json(*s.grid_side_m) : json(nullptr)},
+           {"object_voxels", s.object_voxels ? json(*s.object_voxels) : json(nullptr)}});
     out[m.name] = j;
   }
   return out;

@@ -50,6 +50,8 @@ std::vector<TuningView> tuningViews(const DatasetReader& reader, const Perceptio
   pc.samples = 1;
   pc.zero_code_first = true;
   pc.decompose_samples = 0;
+  // A card's setting is the model's own grid's (GridConfig scales it to another side).
+  pc.grid = GridConfig();
   const ScenePerception perception(pc);
   const InstanceFinder finder(pc.hough, pc.segments);
   const int n = scenes > 0 ? std::min(scenes, reader.size()) : reader.size();

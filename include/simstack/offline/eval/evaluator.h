@@ -50,6 +50,10 @@ struct MethodEstimate {
   /// False for a method that finds no objects (TSDF fusion): no object metrics are scored.
   bool objects = true;
   double perceive_ms = std::numeric_limits<double>::quiet_NaN();
+  /// The network's grid side, and how large the first pass's objects looked in voxels
+  /// (SceneEstimate::tile_side_m, object_voxels); NaN for a method without a network.
+  double grid_side_m = std::numeric_limits<double>::quiet_NaN();
+  double object_voxels = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// Provenance of a method, for the results file.
@@ -65,10 +69,11 @@ class EvaluatedMethod {
   /// Unique within a run: it also seeds the method's Chamfer samples.
   virtual const std::string& name() const = 0;
   virtual MethodInfo info() const = 0;
-  /// The method's estimate for `view` (whose pose is known). `grid`: the grid of the view's
-  /// ground truth when an earlier method of the run fixed it (occupancy must then be given on
-  /// it), else nullptr: the method chooses and the ground truth follows. `pile_xy`: the true
-  /// pile's x/y centre, for a method that needs a grid without choosing one itself.
+  /// The method's estimate for `view` (whose pose is known). `grid`: the grid the run's first
+  /// method chose for the view, for a method that takes one (the classical baseline, TSDF
+  /// fusion), else nullptr. The ground truth follows the grid of each estimate, so a method may
+  /// also choose its own (a network's `grid:` side). `pile_xy`: the true pile's x/y centre, for
+  /// a method that needs a grid without choosing one itself.
   virtual MethodEstimate estimate(const DepthView& view, const GridSpec* grid,
                                   const Vec2& pile_xy) = 0;
   /// The estimate from several posed views of one scene, `views[0]` the reference view (the
