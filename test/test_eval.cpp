@@ -738,9 +738,11 @@ class TakesTheGrid : public KnownAnswer {
   MethodEstimate estimate(const DepthView& view, const GridSpec* grid,
                           const Vec2& pile_xy) override {
     handed.push_back(grid ? std::optional<GridSpec>(*grid) : std::nullopt);
+    piles.push_back(pile_xy);
     return KnownAnswer::estimate(view, grid, pile_xy);
   }
   std::vector<std::optional<GridSpec>> handed;
+  std::vector<Vec2> piles;
 };
 
 TEST(Evaluator, AMethodOnAnotherGridIsScoredInItsOwn) {
@@ -757,10 +759,11 @@ TEST(Evaluator, AMethodOnAnotherGridIsScoredInItsOwn) {
   ASSERT_EQ(r.methods.size(), 4u);
   // The method that takes a grid is handed the first method's, not the last one scored.
   ASSERT_EQ(taker.handed.size(), 4u);
-  for (const std::optional<GridSpec>& g : taker.handed) {
-    ASSERT_TRUE(g);
-    EXPECT_NEAR(g->voxel_size_m, reader.info().extent_m / reader.info().resolution, 1e-12);
-    EXPECT_NEAR(g->extent_m(), reader.info().extent_m, 1e-9);
+  for (size_t i = 0; i < taker.handed.size(); ++i) {
+    ASSERT_TRUE(taker.handed[i]);
+    const GridSpec truths =
+        GridSpec::sceneGrid(taker.piles[i], reader.info().extent_m, reader.info().resolution);
+    EXPECT_TRUE(*taker.handed[i] == truths) << "view " << i;
   }
   for (const MethodResults& m : r.methods) {
     ASSERT_EQ(m.rows.size(), 4u);

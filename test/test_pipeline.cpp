@@ -607,6 +607,44 @@ TEST(ScenePerception, AFinerGridPerceivesAPileOfSmallObjects) {
   config.grid.side_m = 0.0;
   config.grid.fine_side_share = 1.0;
   EXPECT_THROW(ScenePerception{config}, std::invalid_argument);
+  // A second pass needs the first pass's objects: grids alone (decompose_samples 0) find none.
+  config = shippedConfig("perception_clutter");
+  config.decompose_samples = 0;
+  EXPECT_THROW(ScenePerception{config}, std::invalid_argument);
+  config.grid.object_voxels = 0.0;
+  EXPECT_NO_THROW(ScenePerception{config});
+}
+
+// With one tile a frame, small objects spread wider than the finer grid would be cut by it:
+// the first pass stands, uncut, and the finer one is not perceived.
+TEST(ScenePerception, AFinerPassThatWouldCutThePileIsNotTaken) {
+  PerceptionConfig config = shippedConfig("perception_clutter");
+  config.workspace.max_tiles = 1;
+  const ScenePerception one_tile(config);
+  config.grid.object_voxels = 0.0;
+  const ScenePerception one_pass(config);
+  // Four 8 cm boxes in two pairs 0.44 m apart: one 0.64 m tile holds them, one 0.4 m tile not.
+  std::vector<SuperquadricShape> boxes;
+  for (const double x : {-0.22, 0.22})
+    for (const double y : {-0.05, 0.05}) {
+      SuperquadricShape box;
+      box.scale_m = Vec3(0.04, 0.04, 0.04);
+      box.exponents = Vec3(10.0, 10.0, 10.0);
+      box.T_table_object.translation() = Vec3(x, y, 0.04);
+      boxes.push_back(box);
+    }
+  const Scene scene = Scene::fromSuperquadrics(boxes);
+  PinholeCamera camera;
+  const Transform T = lookAt(Vec3(0.0, -0.6, 0.7), Vec3(0.0, 0.0, 0.0));
+  const DepthView view{DepthRenderer(scene).render(camera, T).depth, camera, T};
+  const SceneEstimate a = one_pass.perceive(view), b = one_tile.perceive(view);
+  ASSERT_FALSE(a.tiles_cropped) << "the premise: one 0.64 m tile holds the boxes";
+  ASSERT_LT(a.object_voxels, 7.0) << "the premise: the boxes look small";
+  EXPECT_FALSE(b.tiles_cropped);
+  EXPECT_EQ(b.tile_side_m, 0.64);
+  EXPECT_EQ(b.tiles, 1) << "the finer pass was not perceived";
+  EXPECT_EQ(b.instances().size(), a.instances().size());
+  EXPECT_EQ(a.instances().size(), 4u);
 }
 
 TEST(ScenePerception, TheSecondPassIsTakenWhenTheObjectsLookSmall) {

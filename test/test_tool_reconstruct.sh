@@ -50,7 +50,7 @@ assert len(total) >= 2, total
 for label, n in total.items():
     assert near.get(label, 0) >= 0.9 * n, "label %d: %d of %d pixels near object %d" % (label, near.get(label, 0), n, label - 1)
 PY
-grep -q "objects; 1 network pass, the last grid's side 0.64 m; timings" "$dir/log.txt"
+grep -q "objects in a grid of 0.64 m; 1 tile perceived; timings" "$dir/log.txt"
 grep -q "^model .*simstack_r32_fc.pt (card .*simstack_r32_fc.yaml)$" "$dir/log.txt" ||
   { echo "the model and its card not named"; cat "$dir/log.txt"; exit 1; }
 # same_shapes A B: the two superquadrics.yaml hold the same objects, in the same order, their

@@ -104,9 +104,8 @@ int main(int argc, char** argv) {
     std::cout
         << views.size() << (views.size() == 1 ? " view" : " views") << "; table "
         << (est.table_estimated ? "estimated by RANSAC" : "from " + pose_path) << "\n"
-        << est.instances().size() << " objects; " << est.tiles
-        << (est.tiles == 1 ? " network pass" : " network passes") << ", the last grid's side "
-        << est.tile_side_m << " m"
+        << est.instances().size() << " objects in a grid of " << est.tile_side_m << " m; "
+        << est.tiles << (est.tiles == 1 ? " tile" : " tiles") << " perceived"
         << (est.tiles_cropped ? " (workspace.max_tiles reached: the pile is cut)" : "")
         << std::fixed << std::setprecision(1)
         << "; timings (ms, one frame with the network's first pass, slower than a node's next "

@@ -128,6 +128,8 @@ void perceiveBenchPile(benchmark::State& state, PerceptionConfig pc) {
   StageTimings sum;
   for (auto _ : state) {
     const SceneEstimate e = perception.perceive(DepthView{r.depth, camera, T});
+    state.counters["grid_side_m"] = e.tile_side_m;
+    state.counters["tiles"] = e.tiles;
     sum.tsdf_ms += e.timings.tsdf_ms;
     sum.network_ms += e.timings.network_ms;
     sum.instances_ms += e.timings.instances_ms;

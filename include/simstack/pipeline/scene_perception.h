@@ -174,11 +174,14 @@ class ScenePerception {
   const CvaeConfig& modelConfig() const;
 
  private:
-  /// One pass of perceive() over tiles of side `side_m` (`config` scaled to it), into
+  /// One pass of perceive() over `plan`'s tiles of side `side_m` (`config` scaled to it), into
   /// `estimate`, which holds the table pose; times and tiles add to what it has.
+  /// The tiles of side `side_m` covering the pile `view` shows (`config` scaled to the side).
+  TilePlan planGrid(const DepthView& view, const Transform& T_table_camera, double side_m,
+                    const PerceptionConfig& config) const;
   void perceiveInGrid(const std::vector<DepthView>& views,
-                      const std::vector<DepthView>& views_given, double side_m,
-                      const PerceptionConfig& config, SceneEstimate* estimate) const;
+                      const std::vector<DepthView>& views_given, const TilePlan& plan,
+                      double side_m, const PerceptionConfig& config, SceneEstimate* estimate) const;
 
   struct Impl;
   std::unique_ptr<Impl> impl_;

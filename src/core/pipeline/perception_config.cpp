@@ -346,6 +346,11 @@ void checkRanges(const PerceptionConfig& config, bool latent) {
   config.hough.validate();
   config.table.validate();
   config.grid.validate();
+  if (config.grid.object_voxels > 0.0 && config.decompose_samples == 0)
+    throw std::invalid_argument(
+        "grid.object_voxels " + configValue(config.grid.object_voxels) +
+        " needs the first pass's objects, and decompose_samples 0 finds none: set "
+        "grid.object_voxels 0 for grids without objects");
 }
 
 }  // namespace

@@ -923,25 +923,30 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
 
   const double model_side = impl_->model->config().extent_m;
   const double first_side = c.grid.side_m > 0.0 ? c.grid.side_m : model_side;
-  perceiveInGrid(views, views_given, first_side, scaledToSide(c, first_side, model_side), &out);
+  const PerceptionConfig first_config = scaledToSide(c, first_side, model_side);
+  const TilePlan first_plan = planGrid(views[0], out.T_table_camera, first_side, first_config);
+  perceiveInGrid(views, views_given, first_plan, first_side, first_config, &out);
   out.object_voxels = medianObjectVoxels(out.instances());
   const double side = gridSideFor(c.grid, first_side, out.object_voxels);
   if (side != first_side) {
-    // The objects look small to the network: the frame again, in a finer grid. What the first
-    // pass found is dropped; its time and network passes are counted.
-    SceneEstimate finer;
-    finer.T_table_camera = out.T_table_camera;
-    finer.table_estimated = out.table_estimated;
-    finer.object_voxels = out.object_voxels;
-    finer.timings = out.timings;
-    finer.tiles = out.tiles;
-    perceiveInGrid(views, views_given, side, scaledToSide(c, side, model_side), &finer);
-    if (finer.tiles_cropped && !out.tiles_cropped) {
-      // The finer grid's tiles would leave part of the pile out (workspace.max_tiles): the
-      // first pass stands.
-      out.tiles = finer.tiles;
-      out.timings = finer.timings;
-    } else {
+    // The objects look small to the network: the frame again, in a finer grid, unless its
+    // tiles would leave out part of the pile the first held (workspace.max_tiles, or a pile
+    // taller than the finer grid). What the first pass found is dropped; its time and tiles
+    // are counted.
+    const PerceptionConfig fine_config = scaledToSide(c, side, model_side);
+    const TilePlan fine_plan = planGrid(views[0], out.T_table_camera, side, fine_config);
+    const auto leftOut = [&](const TilePlan& plan) {
+      return outsideTiles(views[0], out.T_table_camera, plan, c.min_pile_height_m).size();
+    };
+    if (!(fine_plan.cropped && !first_plan.cropped) && leftOut(fine_plan) <= leftOut(first_plan)) {
+      SceneEstimate finer;
+      finer.T_table_camera = out.T_table_camera;
+      finer.table_estimated = out.table_estimated;
+      finer.object_voxels = out.object_voxels;
+      finer.timings = out.timings;
+      finer.tiles = out.tiles;
+      out = SceneEstimate();  // its grids freed before the finer pass's are made
+      perceiveInGrid(views, views_given, fine_plan, side, fine_config, &finer);
       out = std::move(finer);
     }
   }
@@ -949,24 +954,29 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
   return out;
 }
 
+TilePlan ScenePerception::planGrid(const DepthView& view, const Transform& T_table_camera,
+                                   double side_m, const PerceptionConfig& c) const {
+  // Training's placement (visiblePileCentre near the median of the pile's points).
+  const auto placement = [&](const Vec2& near) {
+    return visiblePileCentre(view.depth, view.camera, T_table_camera, near, 0.5 * side_m,
+                             c.min_pile_height_m);
+  };
+  const std::vector<Vec3> pile =
+      pilePoints(view, T_table_camera, c.workspace, c.min_pile_height_m, side_m);
+  const Vec2 centre =
+      placement(pile.empty() ? bareTableCentre(view, T_table_camera, c) : medianXY(pile));
+  return planTiles(pile, centre, placement, side_m, impl_->model->config().resolution, c.workspace);
+}
+
 void ScenePerception::perceiveInGrid(const std::vector<DepthView>& views,
-                                     const std::vector<DepthView>& views_given, double side_m,
-                                     const PerceptionConfig& c, SceneEstimate* estimate) const {
+                                     const std::vector<DepthView>& views_given,
+                                     const TilePlan& plan, double side_m, const PerceptionConfig& c,
+                                     SceneEstimate* estimate) const {
   const CvaeConfig& mc = impl_->model->config();
   SceneEstimate& out = *estimate;
   const double tau = mc.truncation_vox * side_m / mc.resolution;
   out.tile_side_m = side_m;
   auto t = Clock::now();
-  // Training's placement (visiblePileCentre near the median of the pile's points).
-  const auto placement = [&](const Vec2& near) {
-    return visiblePileCentre(views[0].depth, views[0].camera, out.T_table_camera, near,
-                             0.5 * side_m, c.min_pile_height_m);
-  };
-  const std::vector<Vec3> pile =
-      pilePoints(views[0], out.T_table_camera, c.workspace, c.min_pile_height_m, side_m);
-  const Vec2 centre =
-      placement(pile.empty() ? bareTableCentre(views[0], out.T_table_camera, c) : medianXY(pile));
-  const TilePlan plan = planTiles(pile, centre, placement, side_m, mc.resolution, c.workspace);
   out.grid = plan.scene;
   out.tiles += plan.tileCount();
   out.tiles_cropped = plan.cropped;
