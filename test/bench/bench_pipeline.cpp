@@ -116,13 +116,13 @@ BENCHMARK(BM_JointFitFourObjects)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
-// perceive() on a rendered view of the bench pile, with the stage timings as counters.
-void perceiveBenchPile(benchmark::State& state, PerceptionConfig pc) {
-  const BenchScene& b = benchScene(32);
+// perceive() on a rendered view of `scene`, with the stage timings, the grid side and the
+// tiles as counters.
+void perceivePile(benchmark::State& state, PerceptionConfig pc, const Scene& scene) {
   PinholeCamera camera;
-  const Vec3 c = b.scene.surfaceCentroid();
+  const Vec3 c = scene.surfaceCentroid();
   const Transform T = lookAt(c + Vec3(0.55, -0.35, 0.55), Vec3(c.x(), c.y(), 0.05));
-  const RenderResult r = DepthRenderer(b.scene).render(camera, T, SensorNoiseConfig::kinect(1));
+  const RenderResult r = DepthRenderer(scene).render(camera, T, SensorNoiseConfig::kinect(1));
   pc.threads = 2;
   const ScenePerception perception(pc);
   StageTimings sum;
@@ -142,6 +142,11 @@ void perceiveBenchPile(benchmark::State& state, PerceptionConfig pc) {
   state.counters["instances_ms"] = sum.instances_ms / n;
   state.counters["mesh_ms"] = sum.mesh_ms / n;
   state.counters["fitting_ms"] = sum.fitting_ms / n;
+}
+
+// The same on the bench pile.
+void perceiveBenchPile(benchmark::State& state, const PerceptionConfig& pc) {
+  perceivePile(state, pc, benchScene(32).scene);
 }
 
 // perceive() with config/perception.yaml as shipped and `model` (empty: the config's) with its
@@ -221,24 +226,12 @@ static void BM_PerceiveSmallObjects(benchmark::State& state) {
   try {
     const std::string dir = SIMSTACK_SOURCE_DIR;
     const std::string name = state.range(0) ? "perception_clutter" : "perception";
-    PerceptionConfig pc = loadPerceptionYaml(dir + "/config/" + name + ".yaml", dir);
-    if (state.range(1) == 0) {
-      perceiveBenchPile(state, pc);
-      return;
-    }
+    const PerceptionConfig pc = loadPerceptionYaml(dir + "/config/" + name + ".yaml", dir);
     PileConfig small;
     small.min_objects = small.max_objects = 6;
     small.max_size_m = 0.15;
-    const Scene scene = PileGenerator(small).generate(3).scene;
-    PinholeCamera camera;
-    const Vec3 c = scene.surfaceCentroid();
-    const Transform T = lookAt(c + Vec3(0.55, -0.35, 0.55), Vec3(c.x(), c.y(), 0.05));
-    const RenderResult r = DepthRenderer(scene).render(camera, T, SensorNoiseConfig::kinect(1));
-    pc.threads = 2;
-    const ScenePerception perception(pc);
-    double side = 0.0;
-    for (auto _ : state) side = perception.perceive(DepthView{r.depth, camera, T}).tile_side_m;
-    state.counters["grid_side_m"] = side;
+    perceivePile(state, pc,
+                 state.range(1) ? PileGenerator(small).generate(3).scene : benchScene(32).scene);
   } catch (const std::exception& e) {
     state.SkipWithError(e.what());
   }

@@ -974,7 +974,7 @@ void ScenePerception::perceiveInGrid(const std::vector<DepthView>& views,
                                      SceneEstimate* estimate) const {
   const CvaeConfig& mc = impl_->model->config();
   SceneEstimate& out = *estimate;
-  const double tau = mc.truncation_vox * side_m / mc.resolution;
+  const double tau = truncationIn(mc, plan.scene);
   out.tile_side_m = side_m;
   auto t = Clock::now();
   out.grid = plan.scene;
