@@ -508,6 +508,67 @@ TEST(SurfaceInstances, AContainerMustGoRoundItsAxisAndBeSeenFromInside) {
   EXPECT_EQ(joinsOfHalves(0.09, near_from, -M_PI / 2, near_to, camera, any_side), 1);
 }
 
+/// A pot of radius 9 cm whose walls a finer grid parts: the outside of its near wall (label 0)
+/// and the inside of its far wall (label 1), both rippled by 6.5 mm about the circle (dents, a
+/// handle, a rim), so that they lie on one surface of revolution only within a few millimetres.
+static InstanceSegmentation rippledPot(Points3* outside, Points3* inside) {
+  InstanceSegmentation seg;
+  seg.labels = Grid3<int>(GridSpec::sceneGrid(Vec2(0.0, 0.0), 0.64, 32), -1);
+  seg.voxel_counts = {0, 0};
+  seg.centres_table = {Vec3(0, -0.05, 0.06), Vec3(0, 0.05, 0.06)};
+  const auto wall = [&](int label, double from, double to, Points3* out) {
+    for (double a = from; a <= to; a += 0.02)
+      for (double z = 0.0; z <= 0.12; z += 0.004) {
+        const double r = 0.09 + 0.0065 * std::sin(5.0 * a);
+        const Vec3 p(r * std::cos(a), r * std::sin(a), z);
+        out->push_back(p);
+        const Vec3i c = seg.labels.spec.voxelIndex(p);
+        int& l = seg.labels.at(c.x(), c.y(), c.z());
+        if (l < 0) ++seg.voxel_counts[label];
+        if (l < 0) l = label;
+      }
+  };
+  wall(0, -M_PI + 0.3, -0.3, outside);
+  wall(1, 0.35, M_PI - 0.35, inside);
+  return seg;
+}
+
+TEST(SurfaceInstances, AContainersPartedWallsAreJoinedWhereTheFirstPassHeldThemWhole) {
+  const Vec3 camera(0.0, -1.0, 0.8);  // the camera looks along +y
+  Points3 outside, inside;
+  const InstanceSegmentation seg = rippledPot(&outside, &inside);
+  Points3 points = outside;
+  points.insert(points.end(), inside.begin(), inside.end());
+  const RevolutionFit pot = fitCommonRevolution(outside, inside, camera.head<2>());
+  ASSERT_TRUE(pot.valid);
+  SurfaceInstanceConfig config;
+  // Within the held tolerance, not within the container tolerance.
+  EXPECT_GT(pot.median_residual_m, config.container_profile_m);
+  EXPECT_LT(pot.median_residual_m, config.held_container_profile_m);
+  EXPECT_GE(pot.arc_deg, config.container_min_arc_deg);
+  InstanceSegmentation alone = seg;
+  EXPECT_EQ(joinOpenContainers(points, camera, config, &alone), 0);
+
+  // The first pass held both walls as one object: they are joined.
+  InstanceSegmentation held_whole = seg;
+  EXPECT_EQ(joinHeldContainers(points, camera, {points}, config, &held_whole), 1);
+  EXPECT_EQ(held_whole.size(), 1);
+  EXPECT_EQ(held_whole.voxel_counts[0], seg.voxel_counts[0] + seg.voxel_counts[1]);
+  // As two objects, or not at all (no first pass, or its points 3 cm away), they stay apart.
+  InstanceSegmentation held_apart = seg;
+  EXPECT_EQ(joinHeldContainers(points, camera, {outside, inside}, config, &held_apart), 0);
+  EXPECT_EQ(joinHeldContainers(points, camera, {}, config, &held_apart), 0);
+  Points3 moved = points;
+  for (Vec3& p : moved) p.x() += 0.03;
+  EXPECT_EQ(joinHeldContainers(points, camera, {moved}, config, &held_apart), 0);
+  EXPECT_EQ(held_apart.size(), 2);
+  config.held_container_profile_m = 0;
+  EXPECT_EQ(joinHeldContainers(points, camera, {points}, config, &held_apart), 0);
+  config.held_container_profile_m = -0.001;
+  EXPECT_THROW(joinHeldContainers(points, camera, {points}, config, &held_apart),
+               std::invalid_argument);
+}
+
 /// A box (superquadric of exponent 10) of half extents `half` at `centre`.
 static SceneObject boxAt(const Vec3& half, const Vec3& centre) {
   SuperquadricShape sq;

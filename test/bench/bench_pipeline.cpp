@@ -218,15 +218,20 @@ BENCHMARK(BM_PerceiveDefaultConfig)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
-// The clutter profile (config/perception_clutter.yaml) against the default config on one frame
-// of a pile of 6 objects of 5-15 cm (`profile:1` / `profile:0`): the profile perceives it a
-// second time in a finer grid. On the bench pile, whose objects look ordinary to the network,
-// it takes one pass (`pile:0`; its peer BM_PerceiveDefaultConfig).
+// On one frame of a pile of 6 objects of 5-15 cm (`pile:1`), which the shipped config
+// (`config:1`) and the clutter profile (config/perception_clutter.yaml, `config:2`) perceive a
+// second time in a finer grid, and on the bench pile (`pile:0`), whose objects look ordinary
+// to the network: their peer is the shipped config perceiving once and joining no overlapping
+// fits (`config:0`; grid.object_voxels and surface_instances.fit_overlap_share 0).
 static void BM_PerceiveSmallObjects(benchmark::State& state) {
   try {
     const std::string dir = SIMSTACK_SOURCE_DIR;
-    const std::string name = state.range(0) ? "perception_clutter" : "perception";
-    const PerceptionConfig pc = loadPerceptionYaml(dir + "/config/" + name + ".yaml", dir);
+    const std::string name = state.range(0) == 2 ? "perception_clutter" : "perception";
+    PerceptionConfig pc = loadPerceptionYaml(dir + "/config/" + name + ".yaml", dir);
+    if (state.range(0) == 0) {
+      pc.grid.object_voxels = 0.0;
+      pc.surface_instances.fit_overlap_share = 0.0;
+    }
     PileConfig small;
     small.min_objects = small.max_objects = 6;
     small.max_size_m = 0.15;
@@ -237,10 +242,13 @@ static void BM_PerceiveSmallObjects(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_PerceiveSmallObjects)
-    ->ArgNames({"profile", "pile"})
+    ->ArgNames({"config", "pile"})
     ->Args({0, 1})
     ->Args({1, 1})
+    ->Args({2, 1})
+    ->Args({0, 0})
     ->Args({1, 0})
+    ->Args({2, 0})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

@@ -37,6 +37,11 @@ struct SurfaceInstanceConfig {
   double container_profile_m = 0.003;
   double container_min_arc_deg = 240;   ///< ... their points' angular cover about the axis
   double container_inside_share = 0.2;  ///< ... their share beyond the axis, seen from the camera
+  /// In a second, finer pass (grid: object_voxels): two instances the first pass held as one
+  /// object are one open container within this median distance (m), by the same arc and
+  /// inside share. Objects that look small part in the finer grid, and so may a container's
+  /// walls; the first pass vouches for the pair. 0 = off.
+  double held_container_profile_m = 0.006;
   /// Two instances are the two sides of one object seen past a nearer one (a box behind a
   /// bottle) when their largest planar faces (RANSAC inliers within this distance, m) lie on
   /// one plane (70 % of each face's points on the plane through both, normals within 20
@@ -56,7 +61,7 @@ struct SurfaceInstanceConfig {
   /// Two instances are one object when their own superquadrics (each fitted alone, before the
   /// joint refinement pushes them apart) overlap by this share of the smaller one's volume: two
   /// solid objects cannot. The joined instance is fitted again on both point sets. 0 = off.
-  double fit_overlap_share = 0.0;
+  double fit_overlap_share = 0.8;
   void validate() const;  ///< std::invalid_argument naming the field
 };
 
@@ -101,6 +106,14 @@ void joinInstances(InstanceSegmentation* seg, int keep, int drop);
 /// a joined centre is the two centres' mean weighted by their voxels. Returns the number of joins.
 int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
                        const SurfaceInstanceConfig& config, InstanceSegmentation* seg);
+
+/// joinOpenContainers for the pairs of instances that an earlier perception held as one object,
+/// within `config.held_container_profile_m`: `held` holds that perception's objects' depth
+/// points (table frame), one set per object, and an instance is an object's when more than half
+/// of its points lie within 1 cm of that object's points. Returns the number of joins.
+int joinHeldContainers(const Points3& points_table, const Vec3& camera_table,
+                       const std::vector<Points3>& held, const SurfaceInstanceConfig& config,
+                       InstanceSegmentation* seg);
 
 /// Joins, pair by pair (the best-fitting plane first), instances that are one object's faces
 /// seen on both sides of a nearer one, by the `occluded_*` fields: the points are given to the

@@ -96,10 +96,13 @@ struct MeasuredView {
 /// With `segments` (the first view's convex patches, surface_segments.h) and
 /// `config.segments.enabled`, instances are also split along the patches; with
 /// `config.observed_points` the part of each instance that one of `measured_views` saw is
-/// fitted to their depth points. Adds the time spent to `timings` when given.
+/// fitted to their depth points. `held`, in a second, finer pass, holds the first pass's
+/// objects' depth points (one set per object), which vouch for the open containers joined within
+/// surface_instances.held_container_profile_m. Adds the time spent to `timings` when given.
 void decompose(SceneHypothesis* hypothesis, const PerceptionConfig& config,
                StageTimings* timings = nullptr, const SurfaceSegments* segments = nullptr,
-               const std::vector<MeasuredView>& measured_views = {});
+               const std::vector<MeasuredView>& measured_views = {},
+               const std::vector<Points3>& held = {});
 
 /// The depth points of a view posed by `T_table_camera`, as the surface patches take them:
 /// every `segments.pixel_stride`-th pixel of each row and column, at least `min_pile_height_m`
@@ -174,14 +177,16 @@ class ScenePerception {
   const CvaeConfig& modelConfig() const;
 
  private:
-  /// One pass of perceive() over `plan`'s tiles of side `side_m` (`config` scaled to it), into
-  /// `estimate`, which holds the table pose; times and tiles add to what it has.
   /// The tiles of side `side_m` covering the pile `view` shows (`config` scaled to the side).
   TilePlan planGrid(const DepthView& view, const Transform& T_table_camera, double side_m,
                     const PerceptionConfig& config) const;
+  /// One pass of perceive() over `plan`'s tiles of side `side_m` (`config` scaled to it), into
+  /// `estimate`, which holds the table pose; times and tiles add to what it has. `held`: the
+  /// first pass's objects' depth points in a second pass (decompose), else empty.
   void perceiveInGrid(const std::vector<DepthView>& views,
                       const std::vector<DepthView>& views_given, const TilePlan& plan,
-                      double side_m, const PerceptionConfig& config, SceneEstimate* estimate) const;
+                      double side_m, const PerceptionConfig& config,
+                      const std::vector<Points3>& held, SceneEstimate* estimate) const;
 
   struct Impl;
   std::unique_ptr<Impl> impl_;

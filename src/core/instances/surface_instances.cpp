@@ -38,6 +38,7 @@ void SurfaceInstanceConfig::validate() const {
     fail("container_min_arc_deg must lie in [0, 360]");
   if (!(container_inside_share >= 0.0 && container_inside_share <= 1.0))
     fail("container_inside_share must lie in [0, 1]");
+  if (!(held_container_profile_m >= 0.0)) fail("held_container_profile_m must be >= 0");
   if (!(occluded_plane_m >= 0.0)) fail("occluded_plane_m must be >= 0");
   if (!(occluded_margin_m > 0.0)) fail("occluded_margin_m must be > 0");
   if (!(occluded_share > 0.0 && occluded_share <= 1.0)) fail("occluded_share must lie in (0, 1]");
@@ -489,21 +490,28 @@ void joinInstances(InstanceSegmentation* seg, int keep, int drop) {
   seg->voxel_counts.erase(seg->voxel_counts.begin() + drop);
 }
 
-int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
-                       const SurfaceInstanceConfig& config, InstanceSegmentation* seg) {
-  config.validate();
-  if (!config.enabled || config.container_profile_m <= 0.0) return 0;
+namespace {
+
+/// joinOpenContainers' loop within `profile_m`, for pairs of one group (`group`: one per
+/// instance, -1 none; any pair when empty).
+int joinContainers(const Points3& points_table, const Vec3& camera_table, double profile_m,
+                   std::vector<int> group, const SurfaceInstanceConfig& config,
+                   InstanceSegmentation* seg) {
   constexpr int kMaxPoints = 1500;     // per instance: the fit's cost stays small
   constexpr double kMaxRadiusM = 0.3;  // larger "containers" are rows of objects
   constexpr double kMaxGapM = 0.1;     // between the bounding boxes of a pot's two walls
   std::vector<Points3> points = pointsByInstance(points_table, *seg, kMaxPoints);
+  const auto grouped = [&](int a, int b) {
+    return group.empty() || (group[a] >= 0 && group[a] == group[b]);
+  };
   int joins = 0;
   for (;;) {
     int best_a = -1, best_b = -1;
-    double best = config.container_profile_m;
+    double best = profile_m;
     for (int a = 0; a < seg->size(); ++a)
       for (int b = a + 1; b < seg->size(); ++b) {
-        if (static_cast<int>(std::min(points[a].size(), points[b].size())) < config.min_points ||
+        if (!grouped(a, b) ||
+            static_cast<int>(std::min(points[a].size(), points[b].size())) < config.min_points ||
             !nearOnTable(points[a], points[b], kMaxGapM))
           continue;
         const RevolutionFit f = fitCommonRevolution(points[a], points[b], camera_table.head<2>());
@@ -516,8 +524,65 @@ int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
       }
     if (best_a < 0) return joins;
     joinInstancesAndPoints(seg, &points, best_a, best_b);
+    if (!group.empty()) group.erase(group.begin() + best_b);
     ++joins;
   }
+}
+
+/// Per instance of `seg`, the object of `held` holding more than half of its points (points
+/// given to the instance of their nearest labelled voxel; a point is an object's when one of
+/// the object's lies within `reach_m`), -1 for none.
+std::vector<int> heldObjects(const Points3& points_table, const std::vector<Points3>& held,
+                             double reach_m, const InstanceSegmentation& seg) {
+  Points3 all;
+  std::vector<int> owner;
+  for (size_t k = 0; k < held.size(); ++k)
+    for (const Vec3& p : held[k]) {
+      all.push_back(p);
+      owner.push_back(static_cast<int>(k));
+    }
+  std::vector<int> out(seg.size(), -1);
+  if (all.empty()) return out;
+  pcl::search::KdTree<pcl::PointXYZ> tree;
+  tree.setInputCloud(pointCloud(all));
+  std::vector<std::map<int, int>> votes(seg.size());
+  std::vector<int> counts(seg.size(), 0);
+  pcl::Indices nearest(1);
+  std::vector<float> squared(1);
+  for (const Vec3& p : points_table) {
+    const int v = nearestLabelledVoxel(seg.labels, p);
+    if (v < 0 || seg.labels.data[v] >= seg.size()) continue;
+    const int k = seg.labels.data[v];
+    ++counts[k];
+    if (tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, nearest, squared) == 1 &&
+        squared[0] <= reach_m * reach_m)
+      ++votes[k][owner[nearest[0]]];
+  }
+  for (int k = 0; k < seg.size(); ++k)
+    for (const auto& [object, n] : votes[k])
+      if (2 * n > counts[k]) out[k] = object;
+  return out;
+}
+
+}  // namespace
+
+int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
+                       const SurfaceInstanceConfig& config, InstanceSegmentation* seg) {
+  config.validate();
+  if (!config.enabled || config.container_profile_m <= 0.0) return 0;
+  return joinContainers(points_table, camera_table, config.container_profile_m, {}, config, seg);
+}
+
+int joinHeldContainers(const Points3& points_table, const Vec3& camera_table,
+                       const std::vector<Points3>& held, const SurfaceInstanceConfig& config,
+                       InstanceSegmentation* seg) {
+  config.validate();
+  if (!config.enabled || config.held_container_profile_m <= 0.0 || held.empty() || seg->size() < 2)
+    return 0;
+  constexpr double kReachM = 0.01;
+  std::vector<int> group = heldObjects(points_table, held, kReachM, *seg);
+  return joinContainers(points_table, camera_table, config.held_container_profile_m,
+                        std::move(group), config, seg);
 }
 
 int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,

@@ -85,6 +85,7 @@ void surfaceInstanceFields(C& c, F&& f) {
   f("container_profile_m", c.container_profile_m);
   f("container_min_arc_deg", c.container_min_arc_deg);
   f("container_inside_share", c.container_inside_share);
+  f("held_container_profile_m", c.held_container_profile_m);
   f("occluded_plane_m", c.occluded_plane_m);
   f("occluded_margin_m", c.occluded_margin_m);
   f("occluded_share", c.occluded_share);
@@ -346,11 +347,6 @@ void checkRanges(const PerceptionConfig& config, bool latent) {
   config.hough.validate();
   config.table.validate();
   config.grid.validate();
-  if (config.grid.object_voxels > 0.0 && config.decompose_samples == 0)
-    throw std::invalid_argument(
-        "grid.object_voxels " + configValue(config.grid.object_voxels) +
-        " needs the first pass's objects, and decompose_samples 0 finds none: set "
-        "grid.object_voxels 0 for grids without objects");
 }
 
 }  // namespace
