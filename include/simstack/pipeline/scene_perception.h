@@ -198,7 +198,8 @@ class ScenePerception {
 double gridSideFor(const GridConfig& grid, double side_m, double object_voxels);
 
 /// A model's self-test: what the pipeline's defaults (one sample, one network pass, the default
-/// Hough setting, none of the model card's) perceive with it on warmUp()'s rendered box.
+/// Hough setting, none of the model card's; one grid, no finer second pass) perceive with it on
+/// warmUp()'s rendered box.
 struct ModelSelfTest {
   int objects = 0;
   int occupied_voxels = 0;  ///< occupancy probability >= 0.5
