@@ -195,6 +195,7 @@ class ScenePerception {
 /// The tile side of perceive()'s last pass (GridConfig): `side_m`, the first pass's, unless the
 /// first pass's objects (`object_voxels`, the median over them of the cube root of their voxels;
 /// 0 without objects) look smaller than `grid.object_voxels`; then grid.fine_side_share of it.
+/// (perceive() takes the finer side only with segments.enabled.)
 double gridSideFor(const GridConfig& grid, double side_m, double object_voxels);
 
 /// A model's self-test: what the pipeline's defaults (one sample, one network pass, the default

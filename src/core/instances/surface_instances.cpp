@@ -492,17 +492,49 @@ void joinInstances(InstanceSegmentation* seg, int keep, int drop) {
 
 namespace {
 
-/// joinOpenContainers' loop within `profile_m`, for pairs of one group (`group`: one per
-/// instance, -1 none; any pair when empty).
+/// Per instance, the object of `held` holding more than half of its points (`points`, one set
+/// per instance; a point is an object's when one of the object's lies within `reach_m`), -1 for
+/// none.
+std::vector<int> heldObjects(const std::vector<Points3>& points, const std::vector<Points3>& held,
+                             double reach_m) {
+  Points3 all;
+  std::vector<int> owner;
+  for (size_t k = 0; k < held.size(); ++k)
+    for (const Vec3& p : held[k]) {
+      all.push_back(p);
+      owner.push_back(static_cast<int>(k));
+    }
+  std::vector<int> out(points.size(), -1);
+  if (all.empty()) return out;
+  pcl::search::KdTree<pcl::PointXYZ> tree;
+  tree.setInputCloud(pointCloud(all));
+  pcl::Indices nearest(1);
+  std::vector<float> squared(1);
+  for (size_t k = 0; k < points.size(); ++k) {
+    std::map<int, int> votes;
+    for (const Vec3& p : points[k])
+      if (tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, nearest, squared) == 1 &&
+          squared[0] <= reach_m * reach_m)
+        ++votes[owner[nearest[0]]];
+    for (const auto& [object, n] : votes)
+      if (2 * n > static_cast<int>(points[k].size())) out[k] = object;
+  }
+  return out;
+}
+
+/// joinOpenContainers' loop within `profile_m`; with `held`, only for pairs of one held object
+/// (heldObjects, within 1 cm).
 int joinContainers(const Points3& points_table, const Vec3& camera_table, double profile_m,
-                   std::vector<int> group, const SurfaceInstanceConfig& config,
+                   const std::vector<Points3>* held, const SurfaceInstanceConfig& config,
                    InstanceSegmentation* seg) {
   constexpr int kMaxPoints = 1500;     // per instance: the fit's cost stays small
   constexpr double kMaxRadiusM = 0.3;  // larger "containers" are rows of objects
   constexpr double kMaxGapM = 0.1;     // between the bounding boxes of a pot's two walls
+  constexpr double kHeldReachM = 0.01;
   std::vector<Points3> points = pointsByInstance(points_table, *seg, kMaxPoints);
+  std::vector<int> group = held ? heldObjects(points, *held, kHeldReachM) : std::vector<int>();
   const auto grouped = [&](int a, int b) {
-    return group.empty() || (group[a] >= 0 && group[a] == group[b]);
+    return !held || (group[a] >= 0 && group[a] == group[b]);
   };
   int joins = 0;
   for (;;) {
@@ -524,44 +556,9 @@ int joinContainers(const Points3& points_table, const Vec3& camera_table, double
       }
     if (best_a < 0) return joins;
     joinInstancesAndPoints(seg, &points, best_a, best_b);
-    if (!group.empty()) group.erase(group.begin() + best_b);
+    if (held) group.erase(group.begin() + best_b);
     ++joins;
   }
-}
-
-/// Per instance of `seg`, the object of `held` holding more than half of its points (points
-/// given to the instance of their nearest labelled voxel; a point is an object's when one of
-/// the object's lies within `reach_m`), -1 for none.
-std::vector<int> heldObjects(const Points3& points_table, const std::vector<Points3>& held,
-                             double reach_m, const InstanceSegmentation& seg) {
-  Points3 all;
-  std::vector<int> owner;
-  for (size_t k = 0; k < held.size(); ++k)
-    for (const Vec3& p : held[k]) {
-      all.push_back(p);
-      owner.push_back(static_cast<int>(k));
-    }
-  std::vector<int> out(seg.size(), -1);
-  if (all.empty()) return out;
-  pcl::search::KdTree<pcl::PointXYZ> tree;
-  tree.setInputCloud(pointCloud(all));
-  std::vector<std::map<int, int>> votes(seg.size());
-  std::vector<int> counts(seg.size(), 0);
-  pcl::Indices nearest(1);
-  std::vector<float> squared(1);
-  for (const Vec3& p : points_table) {
-    const int v = nearestLabelledVoxel(seg.labels, p);
-    if (v < 0 || seg.labels.data[v] >= seg.size()) continue;
-    const int k = seg.labels.data[v];
-    ++counts[k];
-    if (tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, nearest, squared) == 1 &&
-        squared[0] <= reach_m * reach_m)
-      ++votes[k][owner[nearest[0]]];
-  }
-  for (int k = 0; k < seg.size(); ++k)
-    for (const auto& [object, n] : votes[k])
-      if (2 * n > counts[k]) out[k] = object;
-  return out;
 }
 
 }  // namespace
@@ -570,7 +567,8 @@ int joinOpenContainers(const Points3& points_table, const Vec3& camera_table,
                        const SurfaceInstanceConfig& config, InstanceSegmentation* seg) {
   config.validate();
   if (!config.enabled || config.container_profile_m <= 0.0) return 0;
-  return joinContainers(points_table, camera_table, config.container_profile_m, {}, config, seg);
+  return joinContainers(points_table, camera_table, config.container_profile_m, nullptr, config,
+                        seg);
 }
 
 int joinHeldContainers(const Points3& points_table, const Vec3& camera_table,
@@ -579,10 +577,8 @@ int joinHeldContainers(const Points3& points_table, const Vec3& camera_table,
   config.validate();
   if (!config.enabled || config.held_container_profile_m <= 0.0 || held.empty() || seg->size() < 2)
     return 0;
-  constexpr double kReachM = 0.01;
-  std::vector<int> group = heldObjects(points_table, held, kReachM, *seg);
-  return joinContainers(points_table, camera_table, config.held_container_profile_m,
-                        std::move(group), config, seg);
+  return joinContainers(points_table, camera_table, config.held_container_profile_m, &held, config,
+                        seg);
 }
 
 int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,

@@ -937,8 +937,8 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
   if (side != first_side) {
     // The objects look small to the network: the frame again, in a finer grid, unless its
     // tiles would leave out part of the pile the first held (workspace.max_tiles, or a pile
-    // taller than the finer grid). What the first pass found is dropped; its time and tiles
-    // are counted.
+    // taller than the finer grid). What the first pass found is dropped, but for its objects'
+    // depth points; its time and tiles are counted.
     const PerceptionConfig fine_config = scaledToSide(c, side, model_side);
     const TilePlan fine_plan = planGrid(views[0], out.T_table_camera, side, fine_config);
     const auto leftOut = [&](const TilePlan& plan) {
