@@ -219,15 +219,14 @@ BENCHMARK(BM_PerceiveDefaultConfig)
     ->UseRealTime();
 
 // On one frame of a pile of 6 objects of 5-15 cm (`pile:1`), which the shipped config
-// (`config:1`) and the clutter profile (config/perception_clutter.yaml, `config:2`) perceive a
-// second time in a finer grid, and on the bench pile (`pile:0`), whose objects look ordinary
-// to the network: their peer is the shipped config perceiving once and joining no overlapping
-// fits (`config:0`; grid.object_voxels and surface_instances.fit_overlap_share 0).
+// (`config:1`) perceives a second time in a finer grid, and on the bench pile (`pile:0`), whose
+// objects look ordinary to the network: their peer is the shipped config perceiving once and
+// joining no overlapping fits (`config:0`; grid.object_voxels and
+// surface_instances.fit_overlap_share 0).
 static void BM_PerceiveSmallObjects(benchmark::State& state) {
   try {
     const std::string dir = SIMSTACK_SOURCE_DIR;
-    const std::string name = state.range(0) == 2 ? "perception_clutter" : "perception";
-    PerceptionConfig pc = loadPerceptionYaml(dir + "/config/" + name + ".yaml", dir);
+    PerceptionConfig pc = loadPerceptionYaml(dir + "/config/perception.yaml", dir);
     if (state.range(0) == 0) {
       pc.grid.object_voxels = 0.0;
       pc.surface_instances.fit_overlap_share = 0.0;
@@ -245,10 +244,8 @@ BENCHMARK(BM_PerceiveSmallObjects)
     ->ArgNames({"config", "pile"})
     ->Args({0, 1})
     ->Args({1, 1})
-    ->Args({2, 1})
     ->Args({0, 0})
     ->Args({1, 0})
-    ->Args({2, 0})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

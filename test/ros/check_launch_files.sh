@@ -69,13 +69,13 @@ expect "grasps.launch: 3 hypotheses from the C-VAE" 'perception/model: .*/simsta
   dump "$launch/grasps.launch"
 expect "grasps.launch hypotheses:=1: the config's model" 'perception/model: models/simstack_r32_fc.pt$' \
   dump "$launch/grasps.launch" hypotheses:=1
-# Another config keeps its own model and decompose_samples: the clutter profile's `fc` draws one
+# Another config keeps its own model and decompose_samples: own.yaml's `fc_plain` draws one
 # scene, and 3 hypotheses would stop it at start.
-expect "grasps.launch config:=clutter: its model" 'perception/model: models/simstack_r32_fc.pt$' \
-  dump "$launch/grasps.launch" config:="$source_dir/config/perception_clutter.yaml"
-absent "grasps.launch config:=clutter leaves decompose_samples to the config" \
-  'perception/decompose_samples' \
-  dump "$launch/grasps.launch" config:="$source_dir/config/perception_clutter.yaml"
+expect "grasps.launch config:=C: its model" 'perception/model: models/simstack_r32_fc_plain.pt$' \
+  dump "$launch/grasps.launch" config:="$ROS_HOME/own.yaml"
+expect "grasps.launch config:=C leaves decompose_samples to the config (1)" \
+  'perception/decompose_samples: 1$' \
+  dump "$launch/grasps.launch" config:="$ROS_HOME/own.yaml"
 # A model of the user's own keeps the config's decompose_samples: 3 would stop a model without
 # a latent code at start.
 expect "grasps.launch model:=M leaves decompose_samples to the config (1)" \

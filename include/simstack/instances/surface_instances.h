@@ -58,6 +58,11 @@ struct SurfaceInstanceConfig {
   /// ... and the faces' sides along the gap line up within this (m): across the gap, in the
   /// plane, their points' 5th and 95th percentiles differ by at most this much.
   double occluded_edge_m = 0.015;
+  /// In a second, finer pass: two instances the first pass held as one object are its sides
+  /// seen past a nearer one by the `occluded_*` tests with faces found within this distance
+  /// (m), even where the way between them lies in a third instance's voxels (the first pass
+  /// saw the object whole around it). 0 = off.
+  double held_occluded_plane_m = 0.006;
   /// Two instances are one object when their own superquadrics (each fitted alone, before the
   /// joint refinement pushes them apart) overlap by this share of the smaller one's volume: two
   /// solid objects cannot. The joined instance is fitted again on both point sets. 0 = off.
@@ -124,5 +129,13 @@ int joinHeldContainers(const Points3& points_table, const Vec3& camera_table,
 int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
                        const Transform& T_table_camera, int stride,
                        const SurfaceInstanceConfig& config, InstanceSegmentation* seg);
+
+/// joinOccludedPieces for the pairs of instances that an earlier perception held as one object
+/// (`held` as joinHeldContainers takes it), with faces within `config.held_occluded_plane_m` and
+/// without the third-instance test. Returns the number of joins.
+int joinHeldOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
+                           const Transform& T_table_camera, int stride,
+                           const std::vector<Points3>& held, const SurfaceInstanceConfig& config,
+                           InstanceSegmentation* seg);
 
 }  // namespace simstack

@@ -31,7 +31,7 @@ struct GridConfig {
   /// When the first pass's objects look smaller than this to the network (the median over
   /// them of the cube root of their voxels), the frame is perceived again in a finer grid
   /// (0 = off: one pass).
-  double object_voxels = 6.0;
+  double object_voxels = 7.0;
   double fine_side_share = 0.625;  ///< ... of this share of the first pass's side
   /// Throws std::invalid_argument naming the field ("grid.side_m ...").
   void validate() const;

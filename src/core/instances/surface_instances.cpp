@@ -40,6 +40,7 @@ void SurfaceInstanceConfig::validate() const {
     fail("container_inside_share must lie in [0, 1]");
   if (!(held_container_profile_m >= 0.0)) fail("held_container_profile_m must be >= 0");
   if (!(occluded_plane_m >= 0.0)) fail("occluded_plane_m must be >= 0");
+  if (!(held_occluded_plane_m >= 0.0)) fail("held_occluded_plane_m must be >= 0");
   if (!(occluded_margin_m > 0.0)) fail("occluded_margin_m must be > 0");
   if (!(occluded_share > 0.0 && occluded_share <= 1.0)) fail("occluded_share must lie in (0, 1]");
   if (!(occluded_edge_m > 0.0)) fail("occluded_edge_m must be > 0");
@@ -581,13 +582,16 @@ int joinHeldContainers(const Points3& points_table, const Vec3& camera_table,
                         seg);
 }
 
-int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
-                       const Transform& T_table_camera, int stride,
-                       const SurfaceInstanceConfig& config, InstanceSegmentation* seg) {
-  config.validate();
-  if (!config.enabled || config.occluded_plane_m <= 0.0 || seg->size() < 2 || camera.width <= 0 ||
-      camera.height <= 0)
-    return 0;
+namespace {
+
+/// joinOccludedPieces' loop with faces found within `plane_m`; with `held`, only for pairs of
+/// one held object (heldObjects, within 1 cm), and a third instance between them does not part
+/// them: the earlier perception saw the object whole around it.
+int joinOccluded(const Points3& points_table, const PinholeCamera& camera,
+                 const Transform& T_table_camera, int stride, double plane_m,
+                 const std::vector<Points3>* held, const SurfaceInstanceConfig& config,
+                 InstanceSegmentation* seg) {
+  constexpr double kHeldReachM = 0.01;
   constexpr int kMaxPoints = 1500;         // per instance: RANSAC's cost stays small
   constexpr double kMinGapM = 0.01;        // nearer faces touch: nothing hides a gap between them
   constexpr double kMaxGapM = 0.3;         // a face hidden over more is not one object's
@@ -599,8 +603,9 @@ int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
   const Transform T_camera_table = T_table_camera.inverse();
   const std::vector<float> depth = depthOfPoints(points_table, camera, T_camera_table, stride);
   std::vector<Points3> points = pointsByInstance(points_table, *seg, kMaxPoints);
+  std::vector<int> group = held ? heldObjects(points, *held, kHeldReachM) : std::vector<int>();
   const auto faceOf = [&](const Points3& p) {
-    Face face = largestFace(p, config.occluded_plane_m, config.min_points);
+    Face face = largestFace(p, plane_m, config.min_points);
     if (face.valid) {
       face.tree.reset(new pcl::search::KdTree<pcl::PointXYZ>);
       face.tree->setInputCloud(pointCloud(face.points));
@@ -618,6 +623,7 @@ int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
       for (int b = a + 1; b < seg->size(); ++b) {
         const Face& fa = faces[a];
         const Face& fb = faces[b];
+        if (held && (group[a] < 0 || group[a] != group[b])) continue;
         if (!fa.valid || !fb.valid || std::abs(fa.normal.dot(fb.normal)) < min_cos) continue;
         // The boxes' distance bounds the nearest points' from below: far apart, no gap test.
         if ((fb.lo - fa.hi).cwiseMax(fa.lo - fb.hi).cwiseMax(0.0).norm() > kMaxGapM) continue;
@@ -625,10 +631,10 @@ int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
                                     config.occluded_margin_m);
         // Hidden: `occluded_share` of the way where there is depth.
         if (gap.length_m < kMinGapM || gap.length_m > kMaxGapM || gap.none > kMaxHoleShare ||
-            gap.hidden < config.occluded_share * (1.0 - gap.none) || gap.other > kMaxOtherShare ||
-            gap.edge_offset_m > config.occluded_edge_m)
+            gap.hidden < config.occluded_share * (1.0 - gap.none) ||
+            (!held && gap.other > kMaxOtherShare) || gap.edge_offset_m > config.occluded_edge_m)
           continue;
-        const double common = commonPlaneShare(fa, fb, config.occluded_plane_m);
+        const double common = commonPlaneShare(fa, fb, plane_m);
         if (common < best) continue;
         best = common;
         best_a = a;
@@ -638,8 +644,34 @@ int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
     joinInstancesAndPoints(seg, &points, best_a, best_b);
     faces.erase(faces.begin() + best_b);
     faces[best_a] = faceOf(points[best_a]);
+    if (held) group.erase(group.begin() + best_b);
     ++joins;
   }
+}
+
+}  // namespace
+
+int joinOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
+                       const Transform& T_table_camera, int stride,
+                       const SurfaceInstanceConfig& config, InstanceSegmentation* seg) {
+  config.validate();
+  if (!config.enabled || config.occluded_plane_m <= 0.0 || seg->size() < 2 || camera.width <= 0 ||
+      camera.height <= 0)
+    return 0;
+  return joinOccluded(points_table, camera, T_table_camera, stride, config.occluded_plane_m,
+                      nullptr, config, seg);
+}
+
+int joinHeldOccludedPieces(const Points3& points_table, const PinholeCamera& camera,
+                           const Transform& T_table_camera, int stride,
+                           const std::vector<Points3>& held, const SurfaceInstanceConfig& config,
+                           InstanceSegmentation* seg) {
+  config.validate();
+  if (!config.enabled || config.held_occluded_plane_m <= 0.0 || held.empty() || seg->size() < 2 ||
+      camera.width <= 0 || camera.height <= 0)
+    return 0;
+  return joinOccluded(points_table, camera, T_table_camera, stride, config.held_occluded_plane_m,
+                      &held, config, seg);
 }
 
 }  // namespace simstack

@@ -87,6 +87,7 @@ void surfaceInstanceFields(C& c, F&& f) {
   f("container_inside_share", c.container_inside_share);
   f("held_container_profile_m", c.held_container_profile_m);
   f("occluded_plane_m", c.occluded_plane_m);
+  f("held_occluded_plane_m", c.held_occluded_plane_m);
   f("occluded_margin_m", c.occluded_margin_m);
   f("occluded_share", c.occluded_share);
   f("occluded_edge_m", c.occluded_edge_m);

@@ -303,6 +303,9 @@ void decompose(SceneHypothesis* h, const PerceptionConfig& config, StageTimings*
                        config.surface_instances, &seg);
     joinOccludedPieces(points, measured_views.front().camera, measured_views.front().T_table_camera,
                        std::max(1, config.segments.pixel_stride), config.surface_instances, &seg);
+    joinHeldOccludedPieces(
+        points, measured_views.front().camera, measured_views.front().T_table_camera,
+        std::max(1, config.segments.pixel_stride), held, config.surface_instances, &seg);
   }
   // An instance whose centre lies outside the workspace is not reported (its voxels are free),
   // unless the camera saw it inside: the depth points left are the workspace's, and an object
