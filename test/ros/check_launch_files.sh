@@ -73,7 +73,7 @@ expect "grasps.launch hypotheses:=1: the config's model" 'perception/model: mode
 # scene, and 3 hypotheses would stop it at start.
 expect "grasps.launch config:=C: its model" 'perception/model: models/simstack_r32_fc_plain.pt$' \
   dump "$launch/grasps.launch" config:="$ROS_HOME/own.yaml"
-expect "grasps.launch config:=C leaves decompose_samples to the config (1)" \
+expect "grasps.launch config:=C: the config's decompose_samples (1), not 3" \
   'perception/decompose_samples: 1$' \
   dump "$launch/grasps.launch" config:="$ROS_HOME/own.yaml"
 # A model of the user's own keeps the config's decompose_samples: 3 would stop a model without

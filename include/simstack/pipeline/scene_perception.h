@@ -98,7 +98,8 @@ struct MeasuredView {
 /// `config.observed_points` the part of each instance that one of `measured_views` saw is
 /// fitted to their depth points. `held`, in a second, finer pass, holds the first pass's
 /// objects' depth points (one set per object), which vouch for the open containers joined within
-/// surface_instances.held_container_profile_m. Adds the time spent to `timings` when given.
+/// surface_instances.held_container_profile_m and for the sides of an object seen past a nearer
+/// one (held_occluded_plane_m). Adds the time spent to `timings` when given.
 void decompose(SceneHypothesis* hypothesis, const PerceptionConfig& config,
                StageTimings* timings = nullptr, const SurfaceSegments* segments = nullptr,
                const std::vector<MeasuredView>& measured_views = {},

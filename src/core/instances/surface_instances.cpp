@@ -600,10 +600,17 @@ int joinOccluded(const Points3& points_table, const PinholeCamera& camera,
   constexpr double kMaxHoleShare = 0.4;    // of the gap with no depth: the camera's shadow beside
                                            // the hiding surface; more is the table seen through
   constexpr double kMinCommonShare = 0.7;  // of each face's points on the plane through both
-  const Transform T_camera_table = T_table_camera.inverse();
-  const std::vector<float> depth = depthOfPoints(points_table, camera, T_camera_table, stride);
   std::vector<Points3> points = pointsByInstance(points_table, *seg, kMaxPoints);
   std::vector<int> group = held ? heldObjects(points, *held, kHeldReachM) : std::vector<int>();
+  if (held) {  // no two instances of one held object: nothing to look at
+    std::vector<int> objects;
+    for (int g : group)
+      if (g >= 0) objects.push_back(g);
+    std::sort(objects.begin(), objects.end());
+    if (std::adjacent_find(objects.begin(), objects.end()) == objects.end()) return 0;
+  }
+  const Transform T_camera_table = T_table_camera.inverse();
+  const std::vector<float> depth = depthOfPoints(points_table, camera, T_camera_table, stride);
   const auto faceOf = [&](const Points3& p) {
     Face face = largestFace(p, plane_m, config.min_points);
     if (face.valid) {

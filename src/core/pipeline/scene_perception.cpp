@@ -954,7 +954,8 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
       finer.object_voxels = out.object_voxels;
       finer.timings = out.timings;
       finer.tiles = out.tiles;
-      // The first pass's objects vouch for a container's walls that the finer grid parts.
+      // The first pass's objects vouch for a container's walls, and for an object's sides seen
+      // past a nearer one, that the finer grid parts.
       std::vector<Points3> held;
       for (InstanceEstimate& e : out.hypotheses.front().instances)
         held.push_back(std::move(e.measured));
