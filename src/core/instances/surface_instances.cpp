@@ -523,27 +523,50 @@ std::vector<int> heldObjects(const std::vector<Points3>& points, const std::vect
   return out;
 }
 
+/// Which instances an earlier perception held as one object (heldObjects, within 1 cm; every
+/// pair is together without `held`), kept in step with the joins.
+class HeldGroups {
+ public:
+  HeldGroups(const std::vector<Points3>& points, const std::vector<Points3>* held)
+      : held_(held != nullptr),
+        group_(held ? heldObjects(points, *held, 0.01) : std::vector<int>()) {}
+  bool together(int a, int b) const { return !held_ || (group_[a] >= 0 && group_[a] == group_[b]); }
+  /// Some pair is together.
+  bool any() const {
+    if (!held_) return true;
+    std::vector<int> objects;
+    for (int g : group_)
+      if (g >= 0) objects.push_back(g);
+    std::sort(objects.begin(), objects.end());
+    return std::adjacent_find(objects.begin(), objects.end()) != objects.end();
+  }
+  void joined(int drop) {
+    if (held_) group_.erase(group_.begin() + drop);
+  }
+
+ private:
+  bool held_;
+  std::vector<int> group_;
+};
+
 /// joinOpenContainers' loop within `profile_m`; with `held`, only for pairs of one held object
-/// (heldObjects, within 1 cm).
+/// (HeldGroups).
 int joinContainers(const Points3& points_table, const Vec3& camera_table, double profile_m,
                    const std::vector<Points3>* held, const SurfaceInstanceConfig& config,
                    InstanceSegmentation* seg) {
   constexpr int kMaxPoints = 1500;     // per instance: the fit's cost stays small
   constexpr double kMaxRadiusM = 0.3;  // larger "containers" are rows of objects
   constexpr double kMaxGapM = 0.1;     // between the bounding boxes of a pot's two walls
-  constexpr double kHeldReachM = 0.01;
   std::vector<Points3> points = pointsByInstance(points_table, *seg, kMaxPoints);
-  std::vector<int> group = held ? heldObjects(points, *held, kHeldReachM) : std::vector<int>();
-  const auto grouped = [&](int a, int b) {
-    return !held || (group[a] >= 0 && group[a] == group[b]);
-  };
+  HeldGroups groups(points, held);
+  if (!groups.any()) return 0;
   int joins = 0;
   for (;;) {
     int best_a = -1, best_b = -1;
     double best = profile_m;
     for (int a = 0; a < seg->size(); ++a)
       for (int b = a + 1; b < seg->size(); ++b) {
-        if (!grouped(a, b) ||
+        if (!groups.together(a, b) ||
             static_cast<int>(std::min(points[a].size(), points[b].size())) < config.min_points ||
             !nearOnTable(points[a], points[b], kMaxGapM))
           continue;
@@ -557,7 +580,7 @@ int joinContainers(const Points3& points_table, const Vec3& camera_table, double
       }
     if (best_a < 0) return joins;
     joinInstancesAndPoints(seg, &points, best_a, best_b);
-    if (held) group.erase(group.begin() + best_b);
+    groups.joined(best_b);
     ++joins;
   }
 }
@@ -585,13 +608,12 @@ int joinHeldContainers(const Points3& points_table, const Vec3& camera_table,
 namespace {
 
 /// joinOccludedPieces' loop with faces found within `plane_m`; with `held`, only for pairs of
-/// one held object (heldObjects, within 1 cm), and a third instance between them does not part
-/// them: the earlier perception saw the object whole around it.
+/// one held object (HeldGroups), and a third instance between them does not part them: the
+/// earlier perception saw the object whole around it.
 int joinOccluded(const Points3& points_table, const PinholeCamera& camera,
                  const Transform& T_table_camera, int stride, double plane_m,
                  const std::vector<Points3>* held, const SurfaceInstanceConfig& config,
                  InstanceSegmentation* seg) {
-  constexpr double kHeldReachM = 0.01;
   constexpr int kMaxPoints = 1500;         // per instance: RANSAC's cost stays small
   constexpr double kMinGapM = 0.01;        // nearer faces touch: nothing hides a gap between them
   constexpr double kMaxGapM = 0.3;         // a face hidden over more is not one object's
@@ -601,14 +623,8 @@ int joinOccluded(const Points3& points_table, const PinholeCamera& camera,
                                            // the hiding surface; more is the table seen through
   constexpr double kMinCommonShare = 0.7;  // of each face's points on the plane through both
   std::vector<Points3> points = pointsByInstance(points_table, *seg, kMaxPoints);
-  std::vector<int> group = held ? heldObjects(points, *held, kHeldReachM) : std::vector<int>();
-  if (held) {  // no two instances of one held object: nothing to look at
-    std::vector<int> objects;
-    for (int g : group)
-      if (g >= 0) objects.push_back(g);
-    std::sort(objects.begin(), objects.end());
-    if (std::adjacent_find(objects.begin(), objects.end()) == objects.end()) return 0;
-  }
+  HeldGroups groups(points, held);
+  if (!groups.any()) return 0;  // no two instances of one held object: nothing to look at
   const Transform T_camera_table = T_table_camera.inverse();
   const std::vector<float> depth = depthOfPoints(points_table, camera, T_camera_table, stride);
   const auto faceOf = [&](const Points3& p) {
@@ -630,7 +646,7 @@ int joinOccluded(const Points3& points_table, const PinholeCamera& camera,
       for (int b = a + 1; b < seg->size(); ++b) {
         const Face& fa = faces[a];
         const Face& fb = faces[b];
-        if (held && (group[a] < 0 || group[a] != group[b])) continue;
+        if (!groups.together(a, b)) continue;
         if (!fa.valid || !fb.valid || std::abs(fa.normal.dot(fb.normal)) < min_cos) continue;
         // The boxes' distance bounds the nearest points' from below: far apart, no gap test.
         if ((fb.lo - fa.hi).cwiseMax(fa.lo - fb.hi).cwiseMax(0.0).norm() > kMaxGapM) continue;
@@ -651,7 +667,7 @@ int joinOccluded(const Points3& points_table, const PinholeCamera& camera,
     joinInstancesAndPoints(seg, &points, best_a, best_b);
     faces.erase(faces.begin() + best_b);
     faces[best_a] = faceOf(points[best_a]);
-    if (held) group.erase(group.begin() + best_b);
+    groups.joined(best_b);
     ++joins;
   }
 }
