@@ -565,7 +565,8 @@ TEST(ScenePerception, AFinerGridPerceivesAPileOfSmallObjects) {
   const SceneEstimate est = finer.perceive(DepthView{p.view.depth, p.camera, p.T_table_camera});
   EXPECT_DOUBLE_EQ(est.tile_side_m, 0.32);
   EXPECT_NEAR(est.grid.voxel_size_m, 0.01, 1e-12);
-  EXPECT_GT(est.object_voxels, 0.0);
+  EXPECT_GT(est.smallest_object_voxels, 0.0);
+  EXPECT_LE(est.smallest_object_voxels, est.object_voxels) << "the smallest, and the median";
   // The TSDF is truncated at the model's 3 voxels of this grid, 3 cm.
   float largest = 0.0f;
   for (size_t i = 0; i < est.partial_tsdf_m.data.size(); ++i)
@@ -651,14 +652,23 @@ TEST(ScenePerception, AFinerPassThatWouldCutThePileIsNotTaken) {
 
 TEST(ScenePerception, TheSecondPassIsTakenWhenTheObjectsLookSmall) {
   GridConfig grid;
-  EXPECT_DOUBLE_EQ(gridSideFor(grid, 0.64, 6.9), 0.4) << "the default, 7 voxels";
-  EXPECT_EQ(gridSideFor(grid, 0.64, 7.0), 0.64);
+  EXPECT_DOUBLE_EQ(gridSideFor(grid, 0.64, 6.9, 6.0), 0.4) << "the default, 7 voxels";
+  EXPECT_EQ(gridSideFor(grid, 0.64, 7.0, 6.0), 0.64);
+  EXPECT_DOUBLE_EQ(gridSideFor(grid, 0.64, 9.0, 4.4), 0.4)
+      << "the smallest object under 4.5 voxels, the median over 7: merges hide small ones";
+  EXPECT_EQ(gridSideFor(grid, 0.64, 9.0, 4.5), 0.64);
+  grid.smallest_object_voxels = 0.0;
+  EXPECT_EQ(gridSideFor(grid, 0.64, 9.0, 2.0), 0.64) << "the median alone";
+  EXPECT_DOUBLE_EQ(gridSideFor(grid, 0.64, 6.9, 2.0), 0.4);
+  grid.smallest_object_voxels = 4.5;
   grid.object_voxels = 0.0;
-  EXPECT_EQ(gridSideFor(grid, 0.64, 3.0), 0.64) << "off";
+  EXPECT_EQ(gridSideFor(grid, 0.64, 3.0, 2.0), 0.64) << "off, whatever the smallest";
   grid.object_voxels = 6.0;
-  EXPECT_DOUBLE_EQ(gridSideFor(grid, 0.64, 5.9), 0.4);
-  EXPECT_EQ(gridSideFor(grid, 0.64, 6.0), 0.64);
-  EXPECT_EQ(gridSideFor(grid, 0.64, 0.0), 0.64) << "nothing found: nothing to look at closer";
+  EXPECT_DOUBLE_EQ(gridSideFor(grid, 0.64, 5.9, 5.9), 0.4);
+  EXPECT_EQ(gridSideFor(grid, 0.64, 6.0, 6.0), 0.64);
+  EXPECT_EQ(gridSideFor(grid, 0.64, 0.0, 0.0), 0.64) << "nothing found: nothing to look at closer";
+  grid.smallest_object_voxels = -1.0;
+  EXPECT_THROW(grid.validate(), std::invalid_argument);
 }
 
 /// Index of the instance whose superquadric centre is nearest to `p` (-1 when none).

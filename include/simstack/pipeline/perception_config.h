@@ -32,6 +32,11 @@ struct GridConfig {
   /// them of the cube root of their voxels), the frame is perceived again in a finer grid
   /// (0 = off: one pass).
   double object_voxels = 7.0;
+  /// ... or when the smallest of them looks smaller than this (0 = only the median; used only
+  /// with object_voxels above 0). The first pass's merges make the median object look larger,
+  /// so a pile of small neighbours can hide behind it; an object near the grid's resolution
+  /// cannot.
+  double smallest_object_voxels = 4.5;
   double fine_side_share = 0.625;  ///< ... of this share of the first pass's side
   /// Throws std::invalid_argument naming the field ("grid.side_m ...").
   void validate() const;

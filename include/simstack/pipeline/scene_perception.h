@@ -76,6 +76,7 @@ struct SceneEstimate {
   /// The median over the first pass's instances of the cube root of their voxels (0 without
   /// instances): how large the objects looked to the network (GridConfig).
   double object_voxels = 0.0;
+  double smallest_object_voxels = 0.0;          ///< the smallest of them (0 without instances)
   Grid3<float> partial_tsdf_m, partial_weight;  ///< the network's input, over the scene grid
   Grid3<float> occupancy_probability;           ///< share of hypotheses with tsdf <= 0, per voxel
   std::vector<SceneHypothesis> hypotheses;      ///< S of them; the decomposed ones first
@@ -195,9 +196,11 @@ class ScenePerception {
 
 /// The tile side of perceive()'s last pass (GridConfig): `side_m`, the first pass's, unless the
 /// first pass's objects (`object_voxels`, the median over them of the cube root of their voxels;
-/// 0 without objects) look smaller than `grid.object_voxels`; then grid.fine_side_share of it.
-/// (perceive() takes the finer side only with segments.enabled.)
-double gridSideFor(const GridConfig& grid, double side_m, double object_voxels);
+/// 0 without objects) look smaller than `grid.object_voxels`, or the smallest of them
+/// (`smallest_voxels`) smaller than `grid.smallest_object_voxels`; then grid.fine_side_share of
+/// it. (perceive() takes the finer side only with segments.enabled.)
+double gridSideFor(const GridConfig& grid, double side_m, double object_voxels,
+                   double smallest_voxels);
 
 /// A model's self-test: what the pipeline's defaults (one sample, one network pass, the default
 /// Hough setting, none of the model card's; one grid, no finer second pass) perceive with it on

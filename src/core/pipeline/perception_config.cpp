@@ -104,6 +104,7 @@ template <class C, class F>
 void gridFields(C& c, F&& f) {
   f("side_m", c.side_m);
   f("object_voxels", c.object_voxels);
+  f("smallest_object_voxels", c.smallest_object_voxels);
   f("fine_side_share", c.fine_side_share);
 }
 template <class C, class F>
@@ -296,6 +297,9 @@ void GridConfig::validate() const {
   if (!(object_voxels >= 0.0 && object_voxels <= 1000.0))
     throw std::invalid_argument("grid.object_voxels must lie in [0, 1000] (0 = off)" +
                                 gotValue(object_voxels));
+  if (!(smallest_object_voxels >= 0.0 && smallest_object_voxels <= 1000.0))
+    throw std::invalid_argument("grid.smallest_object_voxels must lie in [0, 1000] (0 = off)" +
+                                gotValue(smallest_object_voxels));
   if (!(fine_side_share >= 0.25 && fine_side_share < 1.0))
     throw std::invalid_argument("grid.fine_side_share must lie in [0.25, 1)" +
                                 gotValue(fine_side_share));

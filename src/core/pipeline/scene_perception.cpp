@@ -887,22 +887,23 @@ void checkPerceivableView(const DepthView& view, const PerceptionConfig& config)
 
 namespace {
 
-/// The median over `instances` of the cube root of their voxels: how large the objects look to
-/// the network (0 without instances).
-double medianObjectVoxels(const std::vector<InstanceEstimate>& instances) {
+/// The cube roots of the voxels of `instances`, ascending: how large the objects look to the
+/// network.
+std::vector<double> objectVoxels(const std::vector<InstanceEstimate>& instances) {
   std::vector<double> sizes;
   for (const InstanceEstimate& e : instances)
     if (e.voxels > 0) sizes.push_back(std::cbrt(static_cast<double>(e.voxels)));
-  if (sizes.empty()) return 0.0;
-  const auto middle = sizes.begin() + sizes.size() / 2;
-  std::nth_element(sizes.begin(), middle, sizes.end());
-  return *middle;
+  std::sort(sizes.begin(), sizes.end());
+  return sizes;
 }
 
 }  // namespace
 
-double gridSideFor(const GridConfig& grid, double side_m, double object_voxels) {
-  const bool small = object_voxels > 0.0 && object_voxels < grid.object_voxels;
+double gridSideFor(const GridConfig& grid, double side_m, double object_voxels,
+                   double smallest_voxels) {
+  if (grid.object_voxels <= 0.0 || object_voxels <= 0.0) return side_m;
+  const bool small = object_voxels < grid.object_voxels ||
+                     (smallest_voxels > 0.0 && smallest_voxels < grid.smallest_object_voxels);
   return small ? grid.fine_side_share * side_m : side_m;
 }
 
@@ -932,11 +933,16 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
   const PerceptionConfig first_config = scaledToSide(c, first_side, model_side);
   const TilePlan first_plan = planGrid(views[0], out.T_table_camera, first_side, first_config);
   perceiveInGrid(views, views_given, first_plan, first_side, first_config, {}, &out);
-  out.object_voxels = medianObjectVoxels(out.instances());
+  const std::vector<double> sizes = objectVoxels(out.instances());
+  if (!sizes.empty()) {
+    out.object_voxels = sizes[sizes.size() / 2];
+    out.smallest_object_voxels = sizes.front();
+  }
   // Without the regrouping along the observed surface the finer grid's fragments stay apart
   // (two 3-object piles: 66 and 125 instances), so the first pass stands.
-  const double side =
-      c.segments.enabled ? gridSideFor(c.grid, first_side, out.object_voxels) : first_side;
+  const double side = c.segments.enabled ? gridSideFor(c.grid, first_side, out.object_voxels,
+                                                       out.smallest_object_voxels)
+                                         : first_side;
   if (side != first_side) {
     // The objects look small to the network: the frame again, in a finer grid, unless its
     // tiles would leave out part of the pile the first held (workspace.max_tiles, or a pile
@@ -952,6 +958,7 @@ SceneEstimate ScenePerception::perceive(const std::vector<DepthView>& views_give
       finer.T_table_camera = out.T_table_camera;
       finer.table_estimated = out.table_estimated;
       finer.object_voxels = out.object_voxels;
+      finer.smallest_object_voxels = out.smallest_object_voxels;
       finer.timings = out.timings;
       finer.tiles = out.tiles;
       // The first pass's objects vouch for a container's walls, and for an object's sides seen

@@ -89,6 +89,7 @@ MethodEstimate NetworkMethod::estimateViews(const std::vector<DepthView>& views,
   out.perceive_ms = est.timings.total_ms;
   out.grid_side_m = est.tile_side_m;
   out.object_voxels = est.object_voxels;
+  out.smallest_object_voxels = est.smallest_object_voxels;
   return out;
 }
 

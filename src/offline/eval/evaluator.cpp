@@ -96,6 +96,8 @@ void scoreEstimate(const MethodEstimate& est, const SceneRecord& rec, const Scen
   if (std::isfinite(est.perceive_ms)) (*row)["perceive_ms"] = est.perceive_ms;
   if (std::isfinite(est.grid_side_m)) (*row)["grid_side_m"] = est.grid_side_m;
   if (std::isfinite(est.object_voxels)) (*row)["object_voxels"] = est.object_voxels;
+  if (std::isfinite(est.smallest_object_voxels))
+    (*row)["smallest_object_voxels"] = est.smallest_object_voxels;
   const OccupancyScores sc = scoreOccupancy(gt.tsdf.data, est.hypotheses_tsdf);
   (*row)["iou"] = sc.iou;
   (*row)["bce"] = sc.bce;

@@ -145,6 +145,8 @@ std::vector<RealMethodResults> evaluateRealScenes(const std::string& dir,
       r.fits_at_bound = est.fits_at_bound;
       if (std::isfinite(est.grid_side_m)) r.grid_side_m = est.grid_side_m;
       if (std::isfinite(est.object_voxels)) r.object_voxels = est.object_voxels;
+      if (std::isfinite(est.smallest_object_voxels))
+        r.smallest_object_voxels = est.smallest_object_voxels;
       out[k].scenes.push_back(r);
     }
     if (progress) progress(static_cast<int>(f + 1), static_cast<int>(files.size()));
@@ -204,7 +206,9 @@ json realScenesJson(const std::vector<RealMethodResults>& results) {
            {"perceive_ms", s.perceive_ms},
            {"fits_at_bound", s.fits_at_bound ? json(*s.fits_at_bound) : json(nullptr)},
            {"grid_side_m", s.grid_side_m ? json(*s.grid_side_m) : json(nullptr)},
-           {"object_voxels", s.object_voxels ? json(*s.object_voxels) : json(nullptr)}});
+           {"object_voxels", s.object_voxels ? json(*s.object_voxels) : json(nullptr)},
+           {"smallest_object_voxels",
+            s.smallest_object_voxels ? json(*s.smallest_object_voxels) : json(nullptr)}});
     out[m.name] = j;
   }
   return out;

@@ -50,10 +50,12 @@ struct MethodEstimate {
   /// False for a method that finds no objects (TSDF fusion): no object metrics are scored.
   bool objects = true;
   double perceive_ms = std::numeric_limits<double>::quiet_NaN();
-  /// The network's grid side, and how large the first pass's objects looked in voxels
-  /// (SceneEstimate::tile_side_m, object_voxels); NaN for a method without a network.
+  /// The network's grid side, and how large the first pass's objects looked in voxels, at the
+  /// median and the smallest (SceneEstimate::tile_side_m, object_voxels,
+  /// smallest_object_voxels); NaN for a method without a network.
   double grid_side_m = std::numeric_limits<double>::quiet_NaN();
   double object_voxels = std::numeric_limits<double>::quiet_NaN();
+  double smallest_object_voxels = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// Provenance of a method, for the results file.

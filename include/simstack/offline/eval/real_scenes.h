@@ -46,8 +46,9 @@ struct RealSceneResult {
   OverlapScores overlap;       ///< over the valid pixels
   bool table_estimated = false;
   double perceive_ms = 0;
-  std::optional<int> fits_at_bound;                  ///< MethodEstimate::fits_at_bound
-  std::optional<double> grid_side_m, object_voxels;  ///< MethodEstimate's, for a network
+  std::optional<int> fits_at_bound;  ///< MethodEstimate::fits_at_bound
+  std::optional<double> grid_side_m, object_voxels,
+      smallest_object_voxels;  ///< MethodEstimate's, for a network
 };
 
 struct RealMethodResults {
