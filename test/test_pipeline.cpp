@@ -547,6 +547,7 @@ TEST(ScenePerception, AFinerSecondPassCountsSmallNeighboursTheFirstMerges) {
   const SceneEstimate e =
       twice.perceive(DepthView{paper.view.depth, paper.camera, paper.T_table_camera});
   EXPECT_GE(e.object_voxels, twice.config().grid.object_voxels);
+  EXPECT_GE(e.smallest_object_voxels, twice.config().grid.smallest_object_voxels);
   EXPECT_EQ(e.tile_side_m, 0.64);
   EXPECT_EQ(e.tiles, 1);
 }

@@ -256,9 +256,9 @@ TEST(Tiles, TwoPilesFarApartAreEachPerceivedAsAlone) {
   ASSERT_TRUE(std::filesystem::exists(kModel)) << kModel << " is missing (the models are in git)";
   PerceptionConfig config;
   config.model_path = kModel;
-  // One grid: whether a frame is perceived again in a finer one is decided for the whole frame
-  // (its smallest object may lie in either pile), so a pile alone and the two together could
-  // be perceived in grids of different sides, which is not what this compares.
+  // One grid: whether a frame is perceived again in a finer one is decided over the whole
+  // frame (the median, or the smallest object, of both piles), so a pile alone and the two
+  // together could be perceived in grids of different sides, which is not what this compares.
   config.grid.object_voxels = 0.0;
   const ScenePerception perception(config);
   const PinholeCamera camera = test::wideCamera();

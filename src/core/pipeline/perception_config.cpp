@@ -298,8 +298,9 @@ void GridConfig::validate() const {
     throw std::invalid_argument("grid.object_voxels must lie in [0, 1000] (0 = off)" +
                                 gotValue(object_voxels));
   if (!(smallest_object_voxels >= 0.0 && smallest_object_voxels <= 1000.0))
-    throw std::invalid_argument("grid.smallest_object_voxels must lie in [0, 1000] (0 = off)" +
-                                gotValue(smallest_object_voxels));
+    throw std::invalid_argument(
+        "grid.smallest_object_voxels must lie in [0, 1000] (0 = only the median)" +
+        gotValue(smallest_object_voxels));
   if (!(fine_side_share >= 0.25 && fine_side_share < 1.0))
     throw std::invalid_argument("grid.fine_side_share must lie in [0.25, 1)" +
                                 gotValue(fine_side_share));
