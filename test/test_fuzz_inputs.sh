@@ -88,6 +88,19 @@ expect "PNG header claiming 100000x100000" "100000x100000" "$reconstruct" --dept
 expect "mask PNG header claiming 100000x100000" "claims_huge.png: 100000x100000" "$reconstruct" \
   --depth "$good" --intrinsics $K --mask "$dir/claims_huge.png" --output "$dir/o"
 
+# A PNG whose text chunk, after the image, declares 800 MB in a file of a few kB: refused
+# before libpng allocates the chunk.
+/usr/bin/python3 - "$good" "$dir/long_chunk.png" <<'PY'
+import struct, sys
+data = open(sys.argv[1], "rb").read()
+end = data.rfind(b"IEND") - 4
+chunk = struct.pack(">I", 805306405) + b"tEXt" + b"Comment\0" + b"x" * 29
+open(sys.argv[2], "wb").write(data[:end] + chunk)
+PY
+expect "PNG chunk declaring 800 MB" "past the file's end" "$reconstruct" --depth "$dir/long_chunk.png" --intrinsics $K --output "$dir/o"
+expect "mask PNG chunk declaring 800 MB" "long_chunk.png: its PNG chunk 'tEXt'" "$reconstruct" \
+  --depth "$good" --intrinsics $K --mask "$dir/long_chunk.png" --output "$dir/o"
+
 # Peak memory (maximum resident set, kB) of a run, whatever it ends with.
 peak_kb() {
   /usr/bin/python3 -c 'import resource, subprocess, sys
@@ -95,7 +108,7 @@ subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNUL
 print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)' "$@"
 }
 good_kb=$(peak_kb "$reconstruct" --depth "$good" --intrinsics $K --output "$dir/mem_good")
-for f in huge.pcd short.pcd claims_huge.png wide.png; do
+for f in huge.pcd short.pcd claims_huge.png long_chunk.png wide.png; do
   kb=$(peak_kb "$reconstruct" --depth "$dir/$f" --intrinsics $K --output "$dir/mem")
   # A measurement that failed (a run past 300 s, a crash of the probe) is a failure, not a pass.
   if ! [[ "$kb" =~ ^[0-9]+$ && "$good_kb" =~ ^[0-9]+$ ]]; then

@@ -3,6 +3,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
@@ -76,8 +77,42 @@ std::pair<uint32_t, uint32_t> declaredSize(const std::string& path) {
   return {width, height};
 }
 
-/// Throws naming the file when its header declares a side over kMaxDepthImageSide.
+// Throws naming the file and the chunk when a PNG chunk declares more bytes than the file
+// holds after it: libpng allocates a chunk's declared length before reading it (a 1.6 kB file
+// whose text chunk declares 800 MB takes 800 MB before it is refused). Not a PNG: nothing.
+void requirePngChunksInFile(const std::string& path) {
+  std::ifstream f(path, std::ios::binary | std::ios::ate);
+  if (!f) return;
+  const uint64_t size = static_cast<uint64_t>(f.tellg());
+  unsigned char h[8] = {};
+  f.seekg(0);
+  if (!f.read(reinterpret_cast<char*>(h), sizeof h) || h[0] != 0x89 || h[1] != 'P' || h[2] != 'N' ||
+      h[3] != 'G')
+    return;
+  // Each chunk: its data's length (4 bytes, big-endian), its type (4), the data, a CRC (4).
+  for (uint64_t at = 8; at + 8 <= size;) {
+    unsigned char c[8] = {};
+    f.seekg(static_cast<std::streamoff>(at));
+    if (!f.read(reinterpret_cast<char*>(c), sizeof c)) return;
+    const uint64_t length =
+        uint64_t(c[0]) << 24 | uint64_t(c[1]) << 16 | uint64_t(c[2]) << 8 | c[3];
+    std::string type(reinterpret_cast<const char*>(c + 4), 4);
+    for (char& ch : type)
+      if (!std::isalpha(static_cast<unsigned char>(ch))) ch = '?';  // a corrupt type, printed
+    if (at + 12 + length > size)
+      throw std::runtime_error(path + ": its PNG chunk '" + type + "' at byte " +
+                               std::to_string(at) + " declares " + std::to_string(length) +
+                               " bytes, past the file's end (" + std::to_string(size) +
+                               " bytes): a truncated or corrupt PNG");
+    if (type == "IEND") return;
+    at += 12 + length;
+  }
+}
+
+/// Throws naming the file when its header declares a side over kMaxDepthImageSide, or a PNG
+/// chunk longer than the file.
 void requireDeclaredSide(const std::string& path, const std::string& what) {
+  requirePngChunksInFile(path);
   const auto [width, height] = declaredSize(path);
   if (width > static_cast<uint32_t>(kMaxDepthImageSide) ||
       height > static_cast<uint32_t>(kMaxDepthImageSide))
